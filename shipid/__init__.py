@@ -1,0 +1,10 @@
+"""shipid: identify ship manoeuvring coefficients from free-running trial logs,
+validate the identified models and use them for control, routing and studies."""
+from __future__ import annotations
+
+__version__ = "0.1.0"
+
+from .models import Model, available_models, get_model, register_model  # noqa: E402
+from .simulate import SimulationResult, simulate  # noqa: E402
+
+__all__ = ["__version__", "Model", "available_models", "get_model", "register_model", "simulate", "SimulationResult"]

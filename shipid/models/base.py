@@ -1,0 +1,288 @@
+"""The one model protocol every dynamics model in shipid implements.
+
+A model is a first-order ODE ``dx/dt = f(t, x, u, p)`` with named states ``x``,
+inputs ``u`` and parameters ``p``.  Everything in the package -- the EKF
+identifier, the simulator, the manoeuvre metrics, the optimal-control solvers,
+routing and the glider study -- talks to models only through this class, so
+each model's equations exist exactly once (in :meth:`Model._rhs`).
+
+Conventions
+-----------
+* Arrays are 1-D per sample, with an optional leading batch axis:
+  ``x`` has shape ``(..., nx)``, ``u`` ``(..., nu)``, ``p`` ``(..., np)``; the
+  leading axes broadcast against each other.
+* SI units and radians inside.
+* Jacobians: ``jac_x`` -> ``(..., nx, nx)``, ``jac_p`` -> ``(..., nx, np)``,
+  ``jac_u`` -> ``(..., nx, nu)``.  The base class provides central finite
+  differences; models override them analytically where that is cheap.
+"""
+from __future__ import annotations
+
+import copy
+import json
+from dataclasses import dataclass, field
+from importlib import resources
+from typing import Any, ClassVar, Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+
+__all__ = ["Model", "ParameterSet", "as_batch"]
+
+
+@dataclass(frozen=True)
+class ParameterSet:
+    """A published or documented parameter set for a model.
+
+    Attributes
+    ----------
+    model : str
+        Registered model name the set belongs to.
+    name : str
+        Short name of the set (``"table3"``, ``"synthetic-truth"``...).
+    values : dict
+        Parameter name -> value (SI units unless ``units`` says otherwise).
+    source : str
+        Citation of where the numbers come from.
+    caveat : str
+        What the user must know before trusting the numbers.
+    extra : dict
+        Anything else stored with the set (units, particulars, notes).
+    """
+
+    model: str
+    name: str
+    values: dict
+    source: str = ""
+    caveat: str = ""
+    extra: dict = field(default_factory=dict)
+
+
+def as_batch(a: Any) -> np.ndarray:
+    """Return ``a`` as a float array (no copy when already float64)."""
+    return np.asarray(a, dtype=float)
+
+
+class Model:
+    """Base class of the model protocol.
+
+    Subclasses set the class attributes ``name``, ``state_names``,
+    ``input_names`` and ``param_names`` (or set the instance attributes of the
+    same names in ``__init__`` for configurable models) and implement
+    :meth:`_rhs`.  They may override :meth:`_jac_x`, :meth:`_jac_p` and
+    :meth:`_jac_u` with analytic Jacobians.
+
+    Parameters
+    ----------
+    params : mapping, array-like, str or None
+        Parameter values: a ``{name: value}`` mapping (unnamed parameters take
+        their defaults), an array in ``param_names`` order, the name of a
+        parameter set shipped with the model, or ``None`` for the model's
+        default parameter set.
+    """
+
+    name: ClassVar[str] = "model"
+    state_names: tuple[str, ...] = ()
+    input_names: tuple[str, ...] = ()
+    param_names: tuple[str, ...] = ()
+    #: Units of states/inputs/params for tables and reports (name -> unit).
+    units: ClassVar[dict[str, str]] = {}
+    #: Name of the parameter set used when ``params`` is None.
+    default_parameter_set: ClassVar[str | None] = None
+    #: Package-relative folder of parameter-set JSON files.
+    _parameter_dir: ClassVar[str] = "shipid.models.parameters"
+
+    def __init__(self, params: Mapping[str, float] | Sequence[float] | np.ndarray | str | None = None):
+        self.params = self._coerce_params(params)
+
+    # ------------------------------------------------------------------ sizes
+    @property
+    def nx(self) -> int:
+        """Number of states."""
+        return len(self.state_names)
+
+    @property
+    def nu(self) -> int:
+        """Number of inputs."""
+        return len(self.input_names)
+
+    @property
+    def np(self) -> int:
+        """Number of parameters."""
+        return len(self.param_names)
+
+    def state_index(self, name: str) -> int:
+        """Index of state ``name`` (``ValueError`` naming the known states otherwise)."""
+        return _index(self.state_names, name, "state", self.name)
+
+    def input_index(self, name: str) -> int:
+        """Index of input ``name``."""
+        return _index(self.input_names, name, "input", self.name)
+
+    def param_index(self, name: str) -> int:
+        """Index of parameter ``name``."""
+        return _index(self.param_names, name, "parameter", self.name)
+
+    # ------------------------------------------------------------- parameters
+    @classmethod
+    def parameter_sets(cls) -> dict[str, ParameterSet]:
+        """Parameter sets shipped for this model, keyed by set name."""
+        out: dict[str, ParameterSet] = {}
+        folder = resources.files(cls._parameter_dir)
+        for entry in sorted(folder.iterdir(), key=lambda e: e.name):
+            if not entry.name.endswith(".json"):
+                continue
+            doc = json.loads(entry.read_text(encoding="utf-8"))
+            if doc.get("model") != cls.name:
+                continue
+            extra = {k: v for k, v in doc.items() if k not in ("model", "name", "params", "source", "caveat")}
+            out[doc["name"]] = ParameterSet(
+                model=doc["model"], name=doc["name"], values=dict(doc["params"]),
+                source=doc.get("source", ""), caveat=doc.get("caveat", ""), extra=extra,
+            )
+        return out
+
+    @classmethod
+    def parameter_set(cls, name: str) -> ParameterSet:
+        """One shipped parameter set by name."""
+        sets = cls.parameter_sets()
+        if name not in sets:
+            raise ValueError(
+                f"model '{cls.name}' has no parameter set '{name}'; available: {sorted(sets) or 'none'}"
+            )
+        return sets[name]
+
+    def _default_params(self) -> np.ndarray:
+        if self.default_parameter_set is not None:
+            vals = self.parameter_set(self.default_parameter_set).values
+            return np.array([float(vals.get(k, 0.0)) for k in self.param_names])
+        return np.zeros(self.np)
+
+    def _coerce_params(self, params) -> np.ndarray:
+        if params is None:
+            return self._default_params()
+        if isinstance(params, str):
+            vals = self.parameter_set(params).values
+            return np.array([float(vals.get(k, 0.0)) for k in self.param_names])
+        if isinstance(params, (Mapping, pd.Series)):
+            items = dict(params.items())
+            unknown = sorted(set(items) - set(self.param_names))
+            if unknown:
+                raise ValueError(
+                    f"model '{self.name}' has no parameter(s) {unknown}; its parameters are {list(self.param_names)}"
+                )
+            base = self._default_params()
+            for k, v in items.items():
+                base[self.param_index(k)] = float(v)
+            return base
+        arr = np.array(params, dtype=float).reshape(-1)
+        if arr.shape != (self.np,):
+            raise ValueError(
+                f"model '{self.name}' expects {self.np} parameters {list(self.param_names)}, got an array of shape {np.shape(params)}"
+            )
+        return arr
+
+    def with_params(self, params) -> "Model":
+        """A copy of this model with other parameter values (same forms as ``__init__``).
+
+        A mapping updates only the named parameters of *this* model's values.
+        """
+        new = copy.copy(self)
+        if isinstance(params, (Mapping, pd.Series)):
+            vals = self.params.copy()
+            for k, v in dict(params.items()).items():
+                vals[self.param_index(k)] = float(v)
+            new.params = vals
+        else:
+            new.params = self._coerce_params(params)
+        return new
+
+    def params_series(self) -> pd.Series:
+        """Current parameters as a named :class:`pandas.Series`."""
+        return pd.Series(self.params, index=list(self.param_names), name=self.name)
+
+    # --------------------------------------------------------------- dynamics
+    def _p(self, params) -> np.ndarray:
+        return self.params if params is None else as_batch(params)
+
+    def rhs(self, t, x, u, params=None) -> np.ndarray:
+        """State derivative ``dx/dt``.
+
+        Parameters
+        ----------
+        t : float or array
+            Time [s] (models here are time-invariant unless stated).
+        x : array, shape (..., nx)
+        u : array, shape (..., nu)
+        params : array, shape (..., np), optional
+            Defaults to the model's own parameters.
+
+        Returns
+        -------
+        array, shape (broadcast(...), nx)
+        """
+        return self._rhs(t, as_batch(x), as_batch(u), self._p(params))
+
+    def jac_x(self, t, x, u, params=None) -> np.ndarray:
+        """``d rhs / d x``, shape ``(..., nx, nx)``."""
+        return self._jac_x(t, as_batch(x), as_batch(u), self._p(params))
+
+    def jac_p(self, t, x, u, params=None) -> np.ndarray:
+        """``d rhs / d params``, shape ``(..., nx, np)``."""
+        return self._jac_p(t, as_batch(x), as_batch(u), self._p(params))
+
+    def jac_u(self, t, x, u, params=None) -> np.ndarray:
+        """``d rhs / d u``, shape ``(..., nx, nu)``."""
+        return self._jac_u(t, as_batch(x), as_batch(u), self._p(params))
+
+    def _rhs(self, t, x, u, p) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError(f"{type(self).__name__} must implement _rhs")
+
+    # finite-difference defaults -------------------------------------------
+    def _fd(self, t, x, u, p, which: str) -> np.ndarray:
+        args = [x, u, p]
+        k = {"x": 0, "u": 1, "p": 2}[which]
+        base = args[k]
+        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
+        n = base.shape[-1]
+        cols = []
+        for j in range(n):
+            h = 1e-6 * (1.0 + np.abs(base[..., j]))
+            plus, minus = base.copy(), base.copy()
+            plus[..., j] += h
+            minus[..., j] -= h
+            a_p = list(args)
+            a_m = list(args)
+            a_p[k], a_m[k] = plus, minus
+            d = (self._rhs(t, *a_p) - self._rhs(t, *a_m)) / (2 * h)[..., None]
+            cols.append(np.broadcast_to(d, shape + (self.nx,)))
+        if not cols:
+            return np.zeros(shape + (self.nx, 0))
+        return np.stack(cols, axis=-1)
+
+    def _jac_x(self, t, x, u, p):
+        return self._fd(t, x, u, p, "x")
+
+    def _jac_p(self, t, x, u, p):
+        return self._fd(t, x, u, p, "p")
+
+    def _jac_u(self, t, x, u, p):
+        return self._fd(t, x, u, p, "u")
+
+    # ------------------------------------------------------------ conveniences
+    def describe(self) -> pd.DataFrame:
+        """Table of the parameters: name, value, unit."""
+        return pd.DataFrame(
+            {"value": self.params, "unit": [self.units.get(k, "") for k in self.param_names]},
+            index=pd.Index(list(self.param_names), name="parameter"),
+        )
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} '{self.name}': states {list(self.state_names)}, inputs {list(self.input_names)}, {self.np} parameters>"
+
+
+def _index(names: Sequence[str], name: str, kind: str, model: str) -> int:
+    try:
+        return list(names).index(name)
+    except ValueError:
+        raise ValueError(f"model '{model}' has no {kind} '{name}'; its {kind}s are {list(names)}") from None

@@ -1,0 +1,119 @@
+"""KCS 3-DOF response model of seed 002 (SPEC.md section 1, eq. (3)).
+
+States ``x, y, psi, u, v, r`` (earth-fixed position [m], heading [rad],
+body-axis surge/sway [m/s], yaw rate [rad/s]); inputs ``delta`` [rad] (positive
+turns the ship to starboard, i.e. produces positive r with the synthetic set)
+and ``n`` [rps]; 16 parameters::
+
+    du/dt = a1 u + a2 v^2 + a3 r^2 + a4 delta^2 + a5 v r + a6 v delta
+            + a7 r delta + a8 u n + a9 n^2
+    dv/dt = b1 v + b2 r + b3 delta + b4 u r
+    dr/dt = c1 v + c2 r + c3 delta
+
+plus kinematics ``x' = u cos psi - v sin psi``, ``y' = u sin psi + v cos psi``,
+``psi' = r``.  The equations are linear in the parameters, so ``jac_p`` is the
+regressor matrix; both Jacobians are analytic.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .base import Model
+
+__all__ = ["KCSResponseModel", "RESPONSE_REGRESSORS"]
+
+#: Regressor of each coefficient, for tables and identifiability messages.
+RESPONSE_REGRESSORS = {
+    "a1": "u", "a2": "v^2", "a3": "r^2", "a4": "delta^2", "a5": "v*r", "a6": "v*delta",
+    "a7": "r*delta", "a8": "u*n", "a9": "n^2",
+    "b1": "v", "b2": "r", "b3": "delta", "b4": "u*r",
+    "c1": "v", "c2": "r", "c3": "delta",
+}
+
+
+class KCSResponseModel(Model):
+    """The seed-002 KCS response model (16 coefficients a1..a9, b1..b4, c1..c3).
+
+    Parameter sets shipped: ``"synthetic-truth"`` (default; the documented set
+    the bundled synthetic logs were generated with, see ``data/README.md``) and
+    ``"table3"`` (the paper's Table 3 as printed -- units unstated, does not
+    close a turning circle; never use it as a validation truth).
+    """
+
+    name = "kcs-response"
+    state_names = ("x", "y", "psi", "u", "v", "r")
+    input_names = ("delta", "n")
+    param_names = ("a1", "a2", "a3", "a4", "a5", "a6", "a7", "a8", "a9",
+                   "b1", "b2", "b3", "b4", "c1", "c2", "c3")
+    units = {
+        "x": "m", "y": "m", "psi": "rad", "u": "m/s", "v": "m/s", "r": "rad/s",
+        "delta": "rad", "n": "rps",
+        "a1": "1/s", "a2": "1/m", "a3": "m", "a4": "m/s^2", "a5": "1", "a6": "1/s",
+        "a7": "m/s", "a8": "1", "a9": "m", "b1": "1/s", "b2": "m/s", "b3": "m/s^2", "b4": "1",
+        "c1": "1/(m s)", "c2": "1/s", "c3": "1/s^2",
+    }
+    default_parameter_set = "synthetic-truth"
+
+    def _rhs(self, t, x, u, p):
+        psi, uu, v, r = x[..., 2], x[..., 3], x[..., 4], x[..., 5]
+        d, n = u[..., 0], u[..., 1]
+        a = [p[..., i] for i in range(16)]
+        a1, a2, a3, a4, a5, a6, a7, a8, a9, b1, b2, b3, b4, c1, c2, c3 = a
+        c, s = np.cos(psi), np.sin(psi)
+        du = a1 * uu + a2 * v**2 + a3 * r**2 + a4 * d**2 + a5 * v * r + a6 * v * d + a7 * r * d + a8 * uu * n + a9 * n**2
+        dv = b1 * v + b2 * r + b3 * d + b4 * uu * r
+        dr = c1 * v + c2 * r + c3 * d
+        out = [uu * c - v * s, uu * s + v * c, r + 0 * uu, du, dv, dr]
+        shape = np.broadcast_shapes(*[o.shape for o in out])
+        return np.stack([np.broadcast_to(o, shape) for o in out], axis=-1)
+
+    def _regressors(self, x, u):
+        uu, v, r = x[..., 3], x[..., 4], x[..., 5]
+        d, n = u[..., 0], u[..., 1]
+        return uu, v, r, d, n
+
+    def _jac_x(self, t, x, u, p):
+        psi, uu, v, r = x[..., 2], x[..., 3], x[..., 4], x[..., 5]
+        d, n = u[..., 0], u[..., 1]
+        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
+        J = np.zeros(shape + (6, 6))
+        c, s = np.cos(psi), np.sin(psi)
+        P = lambda i: p[..., i]  # noqa: E731
+        J[..., 0, 2] = -uu * s - v * c
+        J[..., 0, 3] = c
+        J[..., 0, 4] = -s
+        J[..., 1, 2] = uu * c - v * s
+        J[..., 1, 3] = s
+        J[..., 1, 4] = c
+        J[..., 2, 5] = 1.0
+        J[..., 3, 3] = P(0) + P(7) * n
+        J[..., 3, 4] = 2 * P(1) * v + P(4) * r + P(5) * d
+        J[..., 3, 5] = 2 * P(2) * r + P(4) * v + P(6) * d
+        J[..., 4, 3] = P(12) * r
+        J[..., 4, 4] = P(9)
+        J[..., 4, 5] = P(10) + P(12) * uu
+        J[..., 5, 4] = P(13)
+        J[..., 5, 5] = P(14)
+        return J
+
+    def _jac_p(self, t, x, u, p):
+        uu, v, r, d, n = self._regressors(x, u)
+        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
+        J = np.zeros(shape + (6, 16))
+        for j, reg in enumerate((uu, v**2, r**2, d**2, v * r, v * d, r * d, uu * n, n**2)):
+            J[..., 3, j] = reg
+        for j, reg in enumerate((v, r, d, uu * r)):
+            J[..., 4, 9 + j] = reg
+        for j, reg in enumerate((v, r, d)):
+            J[..., 5, 13 + j] = reg
+        return J
+
+    def _jac_u(self, t, x, u, p):
+        uu, v, r, d, n = self._regressors(x, u)
+        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
+        J = np.zeros(shape + (6, 2))
+        J[..., 3, 0] = 2 * p[..., 3] * d + p[..., 5] * v + p[..., 6] * r
+        J[..., 3, 1] = p[..., 7] * uu + 2 * p[..., 8] * n
+        J[..., 4, 0] = p[..., 11]
+        J[..., 5, 0] = p[..., 15]
+        return J
