@@ -228,11 +228,15 @@ class EKFIdentifier:
         used_eq: list[str] = []
         if self.init == "equation-error":
             given_prior = _as_dict(self.prior, model.param_names, "prior")
-            theta_ee, used_eq = equation_error_fit(model, arrays, meas, est_idx, p_base, prior_std_abs)
+            theta_ee, se_ee, used_eq = equation_error_fit(model, arrays, meas, est_idx, p_base, prior_std_abs)
             for j, n in enumerate(est_names):
                 if n not in given_prior:
                     theta0[j] = theta_ee[j]
-            prior_std_abs = np.maximum(prior_std_abs, self._prior_std(est_names, theta0))
+            # The start values come from the same data, so they must not narrow the
+            # prior: keep the width set by the model's values, widen it to the start
+            # values' magnitude and to 3x their (optimistic) standard errors.
+            se_ee = np.where(np.isfinite(se_ee), se_ee, 0.0)
+            prior_std_abs = np.maximum.reduce([prior_std_abs, self._prior_std(est_names, theta0), 3.0 * se_ee])
         scale = np.array([max(abs(th), 1e-12) for th in theta0])
         for k, v in _as_dict(self.scale, model.param_names, "scale").items():
             if k in est_names:

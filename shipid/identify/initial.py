@@ -44,6 +44,8 @@ def equation_error_fit(
     Returns
     -------
     theta : (ne,) estimate (``p0[est_idx]`` where the data do not inform it)
+    se : (ne,) its standard errors (white-residual approximation; optimistic
+        because numerical derivatives are correlated in time)
     used_equations : list of state names whose equations were used
     """
     nx = model.nx
@@ -95,7 +97,7 @@ def equation_error_fit(
         if measured_state[i] and Jp[i, est_idx].max() > 0 and all(measured_state[j] or Jx[i, j] == 0 for j in range(nx))
     ]
     if not use:
-        return p0[est_idx].copy(), []
+        return p0[est_idx].copy(), np.full(est_idx.size, np.inf), []
     w = np.array([1.0 / max(np.std(dX[:, i]), 1e-12) for i in use])
 
     def resid(theta):
@@ -115,4 +117,11 @@ def equation_error_fit(
         return np.vstack([J, np.diag(1e-3 * np.sqrt(T.size) / prior_std)])
 
     sol = least_squares(resid, p0[est_idx], jac=jac, x_scale=prior_std, method="trf", max_nfev=50)
-    return sol.x, [model.state_names[i] for i in use]
+    J = sol.jac
+    dof = max(J.shape[0] - J.shape[1], 1)
+    s2 = float(np.sum(sol.fun**2) / dof)
+    try:
+        se = np.sqrt(np.clip(np.diag(np.linalg.pinv(J.T @ J)) * s2, 0, None))
+    except np.linalg.LinAlgError:
+        se = np.full(est_idx.size, np.inf)
+    return sol.x, se, [model.state_names[i] for i in use]
