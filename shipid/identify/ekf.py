@@ -174,8 +174,7 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKF
     """
     B, N, nx, ne, nm = prob.shape
     nz = nx + ne
-    H = np.zeros((nm, nz))
-    H[np.arange(nm), prob.meas_idx] = 1.0
+    mi = np.asarray(prob.meas_idx)
     eye = np.eye(nz)
     z = prob.z0.copy()
     P = prob.P0.copy()
@@ -194,42 +193,49 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKF
     diverged_at = np.full(B, -1)
     message = ["ok"] * B
     R = prob.R
+    logR = np.log(R)
     Rfull = R[:, :, None] * np.eye(nm)
     for k in range(N):
         # ---- update with the measurements of sample k
         y = prob.Y[:, k]
         m = np.isfinite(y) & ~diverged[:, None]
         if m.any():
-            Hk = H[None] * m[:, :, None]  # (B, nm, nz); rows of missing channels zeroed
-            Hz = z[:, prob.meas_idx]
-            e = np.where(m, y - Hz, 0.0)
-            PHt = P @ Hk.transpose(0, 2, 1)  # (B, nz, nm)
-            S = Hk @ PHt + Rfull
-            # K = P H^T S^-1  (S symmetric): solve S K^T = H P
-            Kt = np.linalg.solve(S, PHt.transpose(0, 2, 1))
+            full = bool(m.all())
+            # H selects states, so P H^T and H P H^T are column/row picks of P
+            PHt = P[:, :, mi]  # (B, nz, nm)
+            if not full:
+                PHt = PHt * m[:, None, :]
+            S = PHt[:, mi, :] if full else PHt[:, mi, :] * m[:, :, None]
+            S = S + Rfull
+            e = y - z[:, mi]
+            if not full:
+                e = np.where(m, e, 0.0)
+            # one solve for the gain and the normalised innovation: S [K^T, a] = [H P, e]
+            sol = np.linalg.solve(S, np.concatenate([PHt.transpose(0, 2, 1), e[:, :, None]], axis=2))
+            Kt, Sinv_e = sol[:, :, :nz], sol[:, :, nz]
             K = Kt.transpose(0, 2, 1)
-            z = z + (K @ e[:, :, None])[:, :, 0]
-            IKH = eye - K @ Hk
-            P = IKH @ P @ IKH.transpose(0, 2, 1) + (K * R[:, None, :]) @ K.transpose(0, 2, 1)
+            z = z + np.einsum("bij,bj->bi", K, e)
+            KH = np.zeros((B, nz, nz))
+            KH[:, :, mi] = K if full else K * m[:, None, :]
+            IKH = eye - KH
+            P = IKH @ P @ IKH.transpose(0, 2, 1) + (K * R[:, None, :]) @ Kt
             P = 0.5 * (P + P.transpose(0, 2, 1))
-            Sinv_e = np.linalg.solve(S, e[:, :, None])[:, :, 0]
             d2 = np.einsum("bi,bi->b", e, Sinv_e)
             sign, logdet = np.linalg.slogdet(S)
-            # remove the masked channels' R from det(S) (they carry no information)
-            logdet = logdet - np.sum(np.where(m, 0.0, np.log(R)), axis=1)
             cnt = m.sum(axis=1)
+            if not full:
+                # remove the masked channels' R from det(S) (they carry no information)
+                logdet = logdet - np.sum(np.where(m, 0.0, logR), axis=1)
             ll = -0.5 * (d2 + logdet + cnt * _LOG2PI)
             loglik += np.where(cnt > 0, ll, 0.0)
             nis[:, k] = np.where(cnt > 0, d2, np.nan)
-            innov[:, k] = np.where(m, e, np.nan)
-            S_diag[:, k] = np.where(m, np.diagonal(S, axis1=1, axis2=2), np.nan)
-            # ---- divergence checks
-            diag = np.diagonal(P, axis1=1, axis2=2)
-            bad = ~diverged & (
-                ~np.all(np.isfinite(z), axis=1) | ~np.all(np.isfinite(diag), axis=1)
-                | np.any(diag < -1e-9 * (1 + np.abs(diag).max(axis=1, keepdims=True)), axis=1)
-                | (d2 > nis_limit) | (sign <= 0)
-            )
+            innov[:, k] = e if full else np.where(m, e, np.nan)
+            Sd = np.diagonal(S, axis1=1, axis2=2)
+            S_diag[:, k] = Sd if full else np.where(m, Sd, np.nan)
+            # ---- divergence checks (NaN fails every comparison)
+            tr = np.einsum("bii->b", P)
+            bad = ~diverged & ~((d2 <= nis_limit) & (tr > 0) & (tr < np.inf) & (sign > 0)
+                                & np.isfinite(z).all(axis=1))
             if bad.any():
                 for b in np.flatnonzero(bad):
                     diverged[b] = True
