@@ -216,3 +216,76 @@ def test_particulars_and_dimensional_conversion(kvlcc2):
         MMGParticulars.from_mapping({**P.to_dict(), "bogus": 1.0})
     with pytest.raises(ValueError, match="no parameter set 'nope'"):
         get_model("mmg", "nope")
+
+
+# ------------------------------------------------------------------ manoeuvres with the MMG model
+@pytest.fixture(scope="module")
+def kvlcc2_turns(kvlcc2):
+    from shipid.manoeuvres import turning_circle
+
+    return turning_circle(kvlcc2, 35.0, side="both")
+
+
+def test_froude_scaling_keeps_nondimensional_turning_metrics(kvlcc2, kvlcc2_turns):
+    """L7 model (7 m) and the full-scale KVLCC2 (320 m) with the same coefficients: identical advance/L, TD/L...
+    and times scaling with sqrt(lambda)."""
+    from shipid.manoeuvres import turning_circle
+
+    full = turning_circle(kvlcc2.scaled(320.0), 35.0, side="both")
+    lam = 320.0 / 7.0
+    assert full.settings["speed"].iloc[0] == pytest.approx(U0 * math.sqrt(lam), rel=1e-12)
+    assert full.settings["n"].iloc[0] == pytest.approx(kvlcc2_turns.settings["n"].iloc[0] / math.sqrt(lam), rel=1e-9)
+    for a, b in zip(kvlcc2_turns.metrics, full.metrics):
+        for key in ("advance_L", "transfer_L", "tactical_diameter_L", "steady_diameter_L", "speed_loss"):
+            assert getattr(b, key) == pytest.approx(getattr(a, key), rel=1e-7), key
+        assert b.time_90 == pytest.approx(a.time_90 * math.sqrt(lam), rel=1e-7)
+
+
+def test_scaling_helpers():
+    from shipid.scaling import froude_factors, scale_inputs, scale_states, scale_time
+
+    lam = 4.0
+    x = scale_states([10.0, 1.0, 0.3, 2.0, 0.1, 0.05], ("x", "y", "psi", "u", "v", "r"), lam)
+    np.testing.assert_allclose(x, [40.0, 4.0, 0.3, 4.0, 0.2, 0.025])
+    np.testing.assert_allclose(scale_inputs([0.1, 10.0], ("delta", "n"), lam), [0.1, 5.0])
+    np.testing.assert_allclose(scale_time([0.0, 3.0], lam), [0.0, 6.0])
+    assert froude_factors(lam)["force"] == 64.0
+    with pytest.raises(ValueError, match="don't know how 'q' scales"):
+        scale_states([1.0], ("q",), lam)
+
+
+MARIN = __import__("pathlib").Path(__file__).parents[1] / ".." / "shared" / "data" / "kvlcc2_marin"
+# MARIN README (measured, logged point): tc_35 turns to port, tc_-35 to starboard
+MEASURED_TURN = {"starboard": {"advance_L": 3.09, "transfer_L": 1.35, "tactical_diameter_L": 3.33},
+                 "port": {"advance_L": 3.02, "transfer_L": 1.20, "tactical_diameter_L": 3.07}}
+MEASURED_ZZ = {(10, "starboard"): 8.1, (10, "port"): 9.4, (20, "starboard"): 12.7, (20, "port"): 15.6}
+
+
+def test_kvlcc2_35deg_turn_against_marin_measurements(kvlcc2_turns):
+    """Published-coefficient MMG prediction vs the MARIN free-running KVLCC2 turns (README values).
+
+    Yasukawa & Yoshimura (2015) show their KVLCC2 simulations only as plots, so the check is against the
+    measured values, with a 12 % tolerance (typical MMG-vs-free-running agreement in SIMMAN 2008);
+    the actual differences are printed and quoted in docs/validation.md.
+    """
+    if not MARIN.is_dir():
+        pytest.skip(f"MARIN KVLCC2 data not found at {MARIN.resolve()}")
+    for m in kvlcc2_turns.metrics:
+        ref = MEASURED_TURN[m.side]
+        for key, val in ref.items():
+            got = getattr(m, key)
+            print(f"{m.side} {key}: MMG {got:.3f} measured {val:.2f} ({100 * (got / val - 1):+.1f} %)")
+            assert got == pytest.approx(val, rel=0.12), f"{m.side} {key}"
+
+
+def test_kvlcc2_zigzags_against_marin_measurements(kvlcc2):
+    """First overshoots of the published-coefficient MMG vs MARIN: the MMG set under-predicts them by 1.5-3 deg
+    (printed; docs/validation.md).  The bound here is that measured gap, not a goal."""
+    from shipid.manoeuvres import zigzag
+
+    for amp in (10, 20):
+        res = zigzag(kvlcc2, float(amp), first="both")
+        for m in res.metrics:
+            meas = MEASURED_ZZ[(amp, m.first_side)]
+            print(f"{amp}/{amp} {m.first_side} first: overshoot1 MMG {m.overshoot1_deg:.2f} measured {meas}")
+            assert m.overshoot1_deg == pytest.approx(meas, abs=3.5)
