@@ -824,6 +824,11 @@ def _split_header(cell: str) -> tuple[str, str | None]:
 
 
 def _decode(raw: bytes, p: Path) -> str:
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):  # UTF-16 with BOM (Excel "Unicode text")
+        try:
+            return raw.decode("utf-16")
+        except UnicodeDecodeError:
+            pass
     nul = raw.find(b"\x00")
     if nul >= 0:
         line = raw.count(b"\n", 0, nul) + 1
@@ -995,18 +1000,19 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
     if delimiter is None:
         delim = ","
         if "," not in header_line:
-            sample = [header_line] + [lines[k] for k in data_idx[:5]]
-            for cand, label in ((";", "semicolon"), ("\t", "tab")):
-                if all(cand in s for s in sample):
+            # the header decides: a comma-free header holding ';' or a tab is a delimiter mistake
+            shown = _fmt_value(header_line.strip())
+            for cand, label, cli in ((";", "semicolon", ";"), ("\t", "tab", "tab")):
+                if cand in header_line:
                     raise LogError(f"`{p.name}` row {h + 1}: the header has no commas but is {label}-separated "
-                                   f"({_fmt_value(header_line.strip())}); pass delimiter="
-                                   f"{cand!r} (CLI: --delimiter {'tab' if cand == chr(9) else cand}) or save as "
-                                   "comma-separated CSV", path=p, row=h + 1, value=header_line.strip())
-            if len(header_line.split()) > 1 and all(len(s.split()) == len(header_line.split()) for s in sample):
+                                   f"({shown}); pass delimiter={cand!r} (CLI: --delimiter {cli}) or save the file "
+                                   "as comma-separated CSV", path=p, row=h + 1, value=header_line.strip())
+            first = lines[data_idx[0]].split() if data_idx else []
+            ntok = len(header_line.split())
+            if ntok > 1 and len(first) == ntok and "," not in lines[data_idx[0]]:
                 raise LogError(f"`{p.name}` row {h + 1}: the header has no commas but is whitespace-separated "
-                               f"({_fmt_value(header_line.strip())}); pass delimiter='whitespace' (CLI: --delimiter "
-                               "whitespace) or save as comma-separated CSV", path=p, row=h + 1,
-                               value=header_line.strip())
+                               f"({shown}); pass delimiter='whitespace' (CLI: --delimiter whitespace) or save the "
+                               "file as comma-separated CSV", path=p, row=h + 1, value=header_line.strip())
     else:
         delim = {"tab": "\t", "\\t": "\t", "space": "whitespace", "spaces": "whitespace"}.get(delimiter, delimiter)
         if delim not in _DELIMS:
@@ -1060,11 +1066,12 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
     missing_cols = [c for c in required if c not in colmap]
     if missing_cols:
         c = missing_cols[0]
+        single = " (the header is a single column: is the file comma-separated?)" if len(hdr) == 1 else ""
         raise LogError(f"`{p.name}` row {h + 1}: required column '{c}' not found; header has "
-                       f"{', '.join(repr(x) for x in hdr)}; rename the column or map it with "
+                       f"{', '.join(repr(x) for x in hdr)}{single}; rename the column or map it with "
                        f"columns={{'{c}': 'your name'}} (CLI: --column {c}=NAME)", path=p, column=c, row=h + 1)
     header_units = {ours: parsed[j][1] for ours, j in colmap.items() if parsed[j][1] is not None}
-    file_col = {ours: hdr[j] for ours, j in colmap.items()}
+    file_col = {ours: names[j] or hdr[j] for ours, j in colmap.items()}
     # --- data rows -----------------------------------------------------------------
     if not data_idx:
         raise LogError(f"`{p.name}`: header only, no data rows; the log needs samples below the header",
@@ -1077,9 +1084,9 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
         if s.lstrip().startswith("#"):
             continue
         cells = split(s)
+        if all(not c.strip() for c in cells):  # a row of bare delimiters: a blank line
+            continue
         if len(cells) != ncol:
-            if all(not c.strip() for c in cells):  # a row of bare delimiters: blank line
-                continue
             other = [d for d in (";", "\t") if d != delim and d in s]
             extra = f"; the row contains {_DELIMS[other[0]]}s: wrong delimiter?" if other and len(cells) == 1 else ""
             raise LogError(f"`{p.name}` row {k + 1}: {len(cells)} field(s) but the header has {ncol}{extra}; "
@@ -1095,7 +1102,7 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
     cols = list(zip(*rows_txt))
     arrays: dict[str, np.ndarray] = {}
     for ours, j in colmap.items():
-        arrays[ours] = _to_float(cols[j], ours, hdr[j], where)
+        arrays[ours] = _to_float(cols[j], ours, names[j] or hdr[j], where)
     if "time" not in arrays:
         raise LogError(f"`{p.name}` row {h + 1}: no 'time' column; header has {', '.join(repr(x) for x in hdr)}; "
                        "map it with columns={'time': 'your name'}", path=p, column="time", row=h + 1)
@@ -1108,7 +1115,7 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
             continue
         label = nm or f"column {j + 1}"
         try:
-            a = _to_float(cols[j], label, hdr[j], where)
+            a = _to_float(cols[j], label, label, where)
         except LogError:
             notes.append(f"column '{hdr[j]}' is not numeric; ignored")
             warnings.warn(f"`{p.name}`: column '{hdr[j]}' is not numeric; ignored", stacklevel=3)
@@ -1119,7 +1126,7 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
         arrays[label] = a
         if parsed[j][1] is not None:
             header_units[label] = parsed[j][1]
-            file_col[label] = hdr[j]
+            file_col[label] = label
     t, ch, units_in = _convert_units(arrays, units, header_units, where, file_col)
     return t, ch, where, units_in, notes, meta
 
