@@ -46,14 +46,15 @@ __all__ = ["LogError", "ShipParticulars", "TrialLog", "read_log", "read_ship", "
 
 #: unit name -> (dimension, factor to SI).  Aliases are lower-case.
 UNITS: dict[str, tuple[str, float]] = {
-    "s": ("time", 1.0), "sec": ("time", 1.0),
-    "m": ("length", 1.0),
+    "s": ("time", 1.0), "sec": ("time", 1.0), "ms": ("time", 1e-3), "min": ("time", 60.0), "h": ("time", 3600.0),
+    "m": ("length", 1.0), "km": ("length", 1000.0), "nm": ("length", 1852.0), "nmi": ("length", 1852.0),
     "rad": ("angle", 1.0), "deg": ("angle", math.pi / 180.0), "degree": ("angle", math.pi / 180.0),
     "degrees": ("angle", math.pi / 180.0),
     "m/s": ("speed", 1.0), "knots": ("speed", 1852.0 / 3600.0), "knot": ("speed", 1852.0 / 3600.0),
     "kn": ("speed", 1852.0 / 3600.0), "kt": ("speed", 1852.0 / 3600.0), "kts": ("speed", 1852.0 / 3600.0),
     "rad/s": ("rate", 1.0), "deg/s": ("rate", math.pi / 180.0),
     "rps": ("revs", 1.0), "hz": ("revs", 1.0), "1/s": ("revs", 1.0), "rpm": ("revs", 1.0 / 60.0),
+    "1/min": ("revs", 1.0 / 60.0),
 }
 
 #: SI unit written for each dimension.
@@ -80,6 +81,7 @@ _GENERIC_ABSURD = 1e15
 _CONTROL_ANGLES = ("delta", "fin")   # |value| > pi/2 rad looks like degrees
 _ATTITUDE_ANGLES = ("phi", "theta")  # |value| > pi/2 rad looks like degrees
 _RATE_DEG_LIMIT = 3.0                 # |rate| > 3 rad/s looks like deg/s
+_RPM_SCORE = 200.0                    # n sqrt(Lpp) [rps m^0.5] above this looks like rpm
 
 
 # --------------------------------------------------------------------------------------
@@ -601,7 +603,8 @@ def _convert_units(arrays: dict[str, np.ndarray], units: Mapping[str, str], head
         if key not in UNITS:
             col = (columns_in_file or {}).get(name, name)
             raise LogError(f"{where.label} column '{col}': unknown unit {unit!r}; use one of "
-                           "s, m, rad, deg, m/s, knots (kn), rad/s, deg/s, rps, rpm, Hz", column=name, value=unit)
+                           "s, ms, min, h, m, km, nm (nautical mile), rad, deg, m/s, knots (kn), rad/s, deg/s, rps, rpm, Hz",
+                           column=name, value=unit)
         udim, factor = UNITS[key]
         if dim is not None and udim != dim:
             col = (columns_in_file or {}).get(name, name)
@@ -652,6 +655,16 @@ def _finish(t: np.ndarray, ch: dict[str, np.ndarray], *, where: _Where, name: st
         _check_channel(c, a, where, unit_checks)
     if unit_checks and "psi" in ch:
         _check_heading(t, ch, where)
+    if unit_checks and ship is not None and "n" in ch and np.isfinite(ch["n"]).any():
+        # Froude scaling keeps n sqrt(Lpp) of ships and their models within ~10..100 rps m^0.5
+        # (KVLCC2 1.5 rps x sqrt(320 m) = 27; KCS model 10 rps x sqrt(4.36 m) = 21); rpm gives 60x that
+        score = np.abs(ch["n"]) * math.sqrt(ship.lpp)
+        if np.nanmax(score) > _RPM_SCORE:
+            i = int(np.argmax(score > _RPM_SCORE))
+            raise where.error(f"value {_fmt_value(ch['n'][i])} looks like rpm (n sqrt(Lpp) = {score[i]:.0f} "
+                              f"rps m^0.5 for Lpp {ship.lpp:g} m; ships and models stay below {_RPM_SCORE:g}); "
+                              + _deg_hint("n", "rpm") + " (or unit_checks=False if it really is rps)", "n", i,
+                              value=ch["n"][i])
     # --- inputs ------------------------------------------------------------------
     for c in inputs:
         if c not in ch:
@@ -1044,22 +1057,18 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
                            f"column; header: {', '.join(hdr)}", path=p, column=ours, row=h + 1, value=theirs)
         colmap[ours] = j
         taken.add(j)
-    for j, nm in enumerate(names):
-        if j in taken or not nm:
+    known = set(SHIP_CHANNELS) | set(required)
+    for j, nm in enumerate(names):  # exact names of known channels
+        if j in taken or nm not in known or nm in colmap:
             continue
-        ours = nm if nm not in colmap else None
-        if ours is None:
-            continue
-        colmap.setdefault(ours, j)
+        colmap[nm] = j
         taken.add(j)
-    # case-insensitive fallback for required/schema names
-    lower = {}
-    for j, nm in enumerate(names):
-        lower.setdefault(nm.lower(), []).append(j)
+    # case-insensitive fallback ("Time", "PSI") for known names, never stealing a known name ("U" stays U)
     for want in list(dict.fromkeys([*required, *SCHEMA])):
         if want in colmap:
             continue
-        cands = [j for j in lower.get(want.lower(), []) if j not in taken]
+        cands = [j for j, nm in enumerate(names)
+                 if j not in taken and nm.lower() == want.lower() and nm not in SHIP_CHANNELS]
         if len(cands) == 1:
             colmap[want] = cands[0]
             taken.add(cands[0])
@@ -1079,11 +1088,13 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
     ncol = len(hdr)
     rows_txt: list[list[str]] = []
     keep_rows: list[int] = []
-    for k in data_idx:
+    data_idx = [k for k in data_idx if not lines[k].lstrip().startswith("#")]
+    if delim == "whitespace":
+        split_rows = (lines[k].split() for k in data_idx)
+    else:
+        split_rows = csv.reader((lines[k] for k in data_idx), delimiter=delim)
+    for k, cells in zip(data_idx, split_rows):
         s = lines[k]
-        if s.lstrip().startswith("#"):
-            continue
-        cells = split(s)
         if all(not c.strip() for c in cells):  # a row of bare delimiters: a blank line
             continue
         if len(cells) != ncol:
@@ -1114,12 +1125,11 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
         if j in taken:
             continue
         label = nm or f"column {j + 1}"
-        try:
-            a = _to_float(cols[j], label, label, where)
-        except LogError:
+        if not _mostly_numeric(cols[j]):
             notes.append(f"column '{hdr[j]}' is not numeric; ignored")
             warnings.warn(f"`{p.name}`: column '{hdr[j]}' is not numeric; ignored", stacklevel=3)
             continue
+        a = _to_float(cols[j], label, label, where)  # a mostly numeric column: a bad cell is an error
         if label in arrays:
             notes.append(f"column '{hdr[j]}' duplicates '{label}'; ignored")
             continue
@@ -1139,6 +1149,13 @@ def _find_col(theirs: str, hdr: list[str], names: list[str]) -> int | None:
             return hits[0]
     hits = [j for j, c in enumerate(names) if c.lower() == t.lower()]
     return hits[0] if len(hits) == 1 else None
+
+
+def _mostly_numeric(cells: Sequence[str]) -> bool:
+    vals = [c.strip() for c in cells if c.strip().lower() not in _MISSING_TOKENS]
+    if not vals:
+        return True
+    return sum(_is_number(c) for c in vals[:200]) >= 0.5 * min(len(vals), 200)
 
 
 def _is_number(s: str) -> bool:

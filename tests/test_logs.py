@@ -707,3 +707,37 @@ def test_marin_format_errors(tmp_path):
     bad = rows[:5] + [rows[5].replace("1.00E+00", "abc", 1)] + rows[6:]
     p2 = write(tmp_path, "bad_cell.dat", head + "\n".join(bad) + "\n")
     raises_unchanged(p2, r"`bad_cell.dat` column 'x' row 9: value 'abc' is not a number")
+
+
+def test_propeller_in_rpm_declared_rps_when_lpp_known(tmp_path):
+    df = frame()
+    df["n"] = df.n * 60   # 600 rpm of a 4.36 m model, declared rps
+    p = write(tmp_path, "trial.csv", csv_text(df))
+    raises_unchanged(p, r"`trial.csv` column 'n' row 2: value 600.\d+ looks like rpm \(n sqrt\(Lpp\) = 125\\d rps m\^0.5 "
+                        r"for Lpp 4.36 m.*pass units=\{'n': 'rpm'\}", lpp=4.36)
+    np.testing.assert_allclose(read_log(p, lpp=4.36, units={"n": "rpm"})["n"], frame().n)
+    assert read_log(p)["n"][0] > 500   # without Lpp there is no scale to judge by
+
+
+def test_case_insensitive_names_and_non_numeric_extra_column(tmp_path):
+    df = frame()
+    hdr = "Time [s],X [m],Y [m],PSI [rad],u [m/s],v [m/s],r [rad/s],Delta [rad],n [rps],U [m/s],remark"
+    lines = csv_text(df.assign(U=1.5), header=hdr.rsplit(",", 1)[0]).splitlines()
+    lines = [lines[0] + ",remark"] + [ln + (",ok" if i % 2 else ",rudder hard over") for i, ln in enumerate(lines[1:])]
+    p = write(tmp_path, "caps.csv", "\n".join(lines) + "\n")
+    with pytest.warns(UserWarning, match=r"column 'remark' is not numeric; ignored"):
+        log = read_log(p)
+    assert log.channels == ["x", "y", "psi", "u", "v", "r", "delta", "n", "U"]
+    np.testing.assert_allclose(log["psi"], df.psi)
+    # a mostly numeric extra column with one bad cell is an error, not silently dropped
+    lines2 = csv_text(df.assign(wave=0.2), header=HEADER + ",wave [m]").splitlines()
+    lines2[33] = lines2[33].rsplit(",", 1)[0] + ",0.2m"
+    p2 = write(tmp_path, "wave.csv", "\n".join(lines2) + "\n")
+    raises_unchanged(p2, r"`wave.csv` column 'wave' row 34: value '0.2m' is not a number")
+
+
+def test_time_units(tmp_path):
+    df = frame()
+    conv = df.assign(time=df.time * 1000)
+    log = read_log(write(tmp_path, "ms.csv", csv_text(conv, header=HEADER.replace("time [s]", "time [ms]"))))
+    np.testing.assert_allclose(log.time, df.time)
