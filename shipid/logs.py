@@ -833,7 +833,8 @@ def _split_header(cell: str) -> tuple[str, str | None]:
     m = _HEADER_RE.match(cell)
     name = m.group("name").strip().strip('"').strip()
     unit = m.group("unit")
-    return name, (unit.strip() if unit is not None and unit.strip() else None)
+    unit = unit.strip() if unit is not None else None
+    return name, (unit if unit and unit != "-" else None)  # "[-]": no unit given
 
 
 def _decode(raw: bytes, p: Path) -> str:
@@ -1112,13 +1113,20 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
     where = _Where(p, p.stem, rows)
     cols = list(zip(*rows_txt))
     arrays: dict[str, np.ndarray] = {}
+    first_stamp = None
     for ours, j in colmap.items():
-        arrays[ours] = _to_float(cols[j], ours, names[j] or hdr[j], where)
+        if ours == "time" and cols[j] and _ISO_RE.match(cols[j][0].strip()):
+            arrays[ours] = _iso_seconds(cols[j], names[j] or hdr[j], where)
+            first_stamp = cols[j][0].strip()
+            continue
+        arrays[ours] = _to_float(cols[j], ours, names[j] or hdr[j], where, decimal_comma=delim != ",")
     if "time" not in arrays:
         raise LogError(f"`{p.name}` row {h + 1}: no 'time' column; header has {', '.join(repr(x) for x in hdr)}; "
                        "map it with columns={'time': 'your name'}", path=p, column="time", row=h + 1)
     # unknown extra columns: keep when numeric, else ignore with a warning
     notes: list[str] = []
+    if first_stamp is not None:
+        notes.append(f"time given as date-time stamps; t = 0 s at {first_stamp}")
     order = ["time"] + [c for c in SCHEMA[1:] if c in arrays] + [c for c in arrays if c not in SCHEMA]
     arrays = {c: arrays[c] for c in order}
     for j, nm in enumerate(names):
@@ -1129,7 +1137,8 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
             notes.append(f"column '{hdr[j]}' is not numeric; ignored")
             warnings.warn(f"`{p.name}`: column '{hdr[j]}' is not numeric; ignored", stacklevel=3)
             continue
-        a = _to_float(cols[j], label, label, where)  # a mostly numeric column: a bad cell is an error
+        # a mostly numeric column: a bad cell is an error
+        a = _to_float(cols[j], label, label, where, decimal_comma=delim != ",")
         if label in arrays:
             notes.append(f"column '{hdr[j]}' duplicates '{label}'; ignored")
             continue
@@ -1166,7 +1175,26 @@ def _is_number(s: str) -> bool:
         return False
 
 
-def _to_float(cells: Sequence[str], ours: str, col: str, where: _Where) -> np.ndarray:
+_ISO_RE = re.compile(r"^\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}")
+_DECIMAL_COMMA_RE = re.compile(r"^[-+]?\d*,\d+([eE][-+]?\d+)?$")
+
+
+def _iso_seconds(cells: Sequence[str], col: str, where: _Where) -> np.ndarray:
+    """ISO 8601 date-time stamps -> seconds after the first one."""
+    stamps = pd.to_datetime(pd.Series([c.strip() for c in cells]), format="ISO8601", errors="coerce")
+    bad = stamps.isna().to_numpy()
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise where.error(f"value {cells[i].strip()!r} is not a date-time stamp like the first one "
+                          f"({cells[0].strip()!r}); fix the cell (every sample needs a time)", col, i,
+                          value=cells[i].strip())
+    if getattr(stamps.dt, "tz", None) is not None:
+        stamps = stamps.dt.tz_convert("UTC")
+    ns = stamps.to_numpy().astype("datetime64[ns]").astype(np.int64)
+    return (ns - ns[0]) * 1e-9
+
+
+def _to_float(cells: Sequence[str], ours: str, col: str, where: _Where, decimal_comma: bool = False) -> np.ndarray:
     try:
         return np.asarray(cells, dtype=float)  # fast path: no blanks, all numbers
     except ValueError:
@@ -1180,6 +1208,9 @@ def _to_float(cells: Sequence[str], ours: str, col: str, where: _Where) -> np.nd
         try:
             out[i] = float(s)
         except ValueError:
+            if decimal_comma and _DECIMAL_COMMA_RE.match(s):
+                out[i] = float(s.replace(",", "."))
+                continue
             hint = ""
             if re.fullmatch(r"[-+]?\d+,\d+", s):
                 hint = " (decimal comma? save the file with decimal points)"

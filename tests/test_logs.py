@@ -741,3 +741,28 @@ def test_time_units(tmp_path):
     conv = df.assign(time=df.time * 1000)
     log = read_log(write(tmp_path, "ms.csv", csv_text(conv, header=HEADER.replace("time [s]", "time [ms]"))))
     np.testing.assert_allclose(log.time, df.time)
+
+
+def test_semicolon_with_decimal_comma(tmp_path):
+    df = frame()
+    text = csv_text(df, sep=";").replace(".", ",")
+    text = text.replace("time [s]", "time [s]")
+    p = write(tmp_path, "excel.csv", text)
+    raises_unchanged(p, r"semicolon-separated")
+    log = read_log(p, delimiter=";")
+    for c in df.columns[1:]:
+        np.testing.assert_allclose(log[c], df[c], rtol=1e-14, atol=1e-15)
+
+
+def test_iso_time_stamps(tmp_path):
+    df = frame()
+    stamps = pd.Timestamp("2024-05-01T12:00:00") + pd.to_timedelta(df.time, unit="s")
+    lines = csv_text(df).splitlines()
+    out = [lines[0]] + [f"{s.isoformat()},{ln.split(',', 1)[1]}" for s, ln in zip(stamps, lines[1:])]
+    p = write(tmp_path, "iso.csv", "\n".join(out) + "\n")
+    log = read_log(p)
+    np.testing.assert_allclose(log.time, df.time, atol=1e-9)
+    assert "t = 0 s at 2024-05-01T12:00:00" in log.notes[0]
+    out[20] = "yesterday," + out[20].split(",", 1)[1]
+    p2 = write(tmp_path, "iso_bad.csv", "\n".join(out) + "\n")
+    raises_unchanged(p2, r"`iso_bad.csv` column 'time' row 21: value 'yesterday' is not a date-time stamp")
