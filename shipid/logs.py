@@ -1096,7 +1096,7 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
         split_rows = csv.reader((lines[k] for k in data_idx), delimiter=delim)
     for k, cells in zip(data_idx, split_rows):
         s = lines[k]
-        if all(not c.strip() for c in cells):  # a row of bare delimiters: a blank line
+        if (not cells or not cells[0].strip()) and all(not c.strip() for c in cells):  # bare delimiters
             continue
         if len(cells) != ncol:
             other = [d for d in (";", "\t") if d != delim and d in s]
