@@ -629,6 +629,10 @@ def _finish(t: np.ndarray, ch: dict[str, np.ndarray], *, where: _Where, name: st
     if missing_req:
         raise where.error(f"required channel(s) {missing_req} missing; channels present: "
                           f"{', '.join(['time', *ch]) }", column=missing_req[0])
+    for c in required:
+        if c != "time" and not np.isfinite(ch[c]).any():
+            raise where.error(f"required channel is entirely blank/NaN; give a column with values, or leave it "
+                              f"out of required=", c, 0, value=ch[c][0] if n else None)
     # --- time --------------------------------------------------------------------
     bad = ~np.isfinite(t)
     if bad.any():
@@ -1052,7 +1056,14 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
     colmap: dict[str, int] = {}   # our name -> column index
     taken: set[int] = set()
     for ours, theirs in columns.items():
-        j = _find_col(str(theirs), hdr, names)
+        if isinstance(theirs, (int, np.integer)) and not isinstance(theirs, bool):
+            if not 1 <= theirs <= len(hdr):
+                raise LogError(f"`{p.name}` row {h + 1}: columns maps '{ours}' to column number {theirs} but the "
+                               f"header has {len(hdr)} columns (numbers count from 1)", path=p, column=ours,
+                               row=h + 1, value=theirs)
+            j = int(theirs) - 1
+        else:
+            j = _find_col(str(theirs), hdr, names)
         if j is None:
             raise LogError(f"`{p.name}` row {h + 1}: columns maps '{ours}' to '{theirs}' but the header has no such "
                            f"column; header: {', '.join(hdr)}", path=p, column=ours, row=h + 1, value=theirs)
@@ -1077,6 +1088,8 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
     if missing_cols:
         c = missing_cols[0]
         single = " (the header is a single column: is the file comma-separated?)" if len(hdr) == 1 else ""
+        if _looks_marin(header_line):
+            single = " (this looks like a MARIN .dat file: pass fmt='marin')"
         raise LogError(f"`{p.name}` row {h + 1}: required column '{c}' not found; header has "
                        f"{', '.join(repr(x) for x in hdr)}{single}; rename the column or map it with "
                        f"columns={{'{c}': 'your name'}} (CLI: --column {c}=NAME)", path=p, column=c, row=h + 1)
@@ -1133,15 +1146,22 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
         if j in taken:
             continue
         label = nm or f"column {j + 1}"
+        if not nm and all(not c.strip() for c in cols[j]):  # trailing delimiter: an empty unnamed column
+            continue
         if not _mostly_numeric(cols[j]):
             notes.append(f"column '{hdr[j]}' is not numeric; ignored")
             warnings.warn(f"`{p.name}`: column '{hdr[j]}' is not numeric; ignored", stacklevel=3)
             continue
         # a mostly numeric column: a bad cell is an error
-        a = _to_float(cols[j], label, label, where, decimal_comma=delim != ",")
-        if label in arrays:
-            notes.append(f"column '{hdr[j]}' duplicates '{label}'; ignored")
+        if label in arrays and label in columns:
+            notes.append(f"column '{hdr[j]}' ignored: columns= maps '{label}' to '{columns[label]}'")
             continue
+        if label in arrays:
+            first = next(jj for jj, nn in enumerate(names) if jj in taken and (nn == label or colmap.get(label) == jj))
+            raise LogError(f"`{p.name}` row {h + 1}: column '{label}' appears twice (columns {first + 1} and "
+                           f"{j + 1} of the header); rename one, or pick one by number with columns={{'{label}': {first + 1}}}",
+                           path=p, column=label, row=h + 1, value=hdr[j])
+        a = _to_float(cols[j], label, label, where, decimal_comma=delim != ",")
         arrays[label] = a
         if parsed[j][1] is not None:
             header_units[label] = parsed[j][1]

@@ -766,3 +766,28 @@ def test_iso_time_stamps(tmp_path):
     out[20] = "yesterday," + out[20].split(",", 1)[1]
     p2 = write(tmp_path, "iso_bad.csv", "\n".join(out) + "\n")
     raises_unchanged(p2, r"`iso_bad.csv` column 'time' row 21: value 'yesterday' is not a date-time stamp")
+
+
+def test_duplicate_column_trailing_delimiter_and_blank_required(tmp_path):
+    df = frame()
+    lines = csv_text(df).splitlines()
+    # trailing commas (an empty unnamed column) are harmless
+    p = write(tmp_path, "trail.csv", "\n".join(ln + "," for ln in lines) + "\n")
+    assert read_log(p).channels == ["x", "y", "psi", "u", "v", "r", "delta", "n"]
+    # two 'u' columns are ambiguous
+    p2 = write(tmp_path, "dup.csv", "\n".join([lines[0] + ",u [m/s]"] + [ln + ",1.0" for ln in lines[1:]]) + "\n")
+    raises_unchanged(p2, r"`dup.csv` row 1: column 'u' appears twice \(columns 5 and 10 of the header\)")
+    # ... unless columns= says which one is meant
+    log = read_log(p2, columns={"u": 5})
+    np.testing.assert_allclose(log["u"], df.u)
+    np.testing.assert_allclose(read_log(p2, columns={"u": 10})["u"], 1.0)
+    assert any("ignored: columns= maps 'u'" in n for n in log.notes)
+    # a required channel without a single value
+    p3 = write(tmp_path, "blank_r.csv", csv_text(df, cells={(k, "r"): "" for k in range(2, 62)}))
+    raises_unchanged(p3, r"`blank_r.csv` column 'r' row 2: required channel is entirely blank/NaN")
+
+
+@needs_marin
+def test_marin_file_read_as_csv_says_so():
+    raises_unchanged(_marin("zz_10"), r"required column 'time' not found.*this looks like a MARIN .dat file: "
+                                      r"pass fmt='marin'", fmt="csv")
