@@ -904,7 +904,8 @@ def read_log(
         CSV file (default schema below) or MARIN SIMMAN ``.dat`` file.
     columns : dict, optional
         Our channel name -> the file's column name (with or without its
-        bracketed unit), e.g. ``{"psi": "heading", "n": "prop_rpm"}``.
+        bracketed unit), e.g. ``{"psi": "heading", "n": "prop_rpm"}``, or the
+        column's 1-based number (``{"u": 5}``) when names are ambiguous.
     units : dict, optional
         Our channel name -> unit of the values in the file; one of s, m, rad,
         deg, m/s, knots (kn), rad/s, deg/s, rps, rpm, Hz.  Overrides a unit in
@@ -1064,6 +1065,8 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
             j = int(theirs) - 1
         else:
             j = _find_col(str(theirs), hdr, names)
+            if j is None and str(theirs).strip().isdigit() and 1 <= int(theirs) <= len(hdr):
+                j = int(theirs) - 1  # a column number given as text (CLI --column u=5)
         if j is None:
             raise LogError(f"`{p.name}` row {h + 1}: columns maps '{ours}' to '{theirs}' but the header has no such "
                            f"column; header: {', '.join(hdr)}", path=p, column=ours, row=h + 1, value=theirs)

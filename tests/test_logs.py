@@ -791,3 +791,65 @@ def test_duplicate_column_trailing_delimiter_and_blank_required(tmp_path):
 def test_marin_file_read_as_csv_says_so():
     raises_unchanged(_marin("zz_10"), r"required column 'time' not found.*this looks like a MARIN .dat file: "
                                       r"pass fmt='marin'", fmt="csv")
+
+
+# ------------------------------------------------------------------------------------
+# `shipid log`: summary, conversion, one-line errors with exit code 2
+# ------------------------------------------------------------------------------------
+
+
+def test_cli_log_summary_and_convert(tmp_path, capsys):
+    from shipid.cli import main
+
+    df = frame()
+    conv = df.assign(psi=np.degrees(df.psi), n=df.n * 60)
+    p = write(tmp_path, "trial.csv", csv_text(conv, cells={(10, "u"): ""}))
+    out = tmp_path / "clean.csv"
+    code = main(["log", str(p), "--units", "psi=deg,n=rpm", "--lpp", "4.36", "-o", str(out)])
+    text = capsys.readouterr().out
+    assert code == 0
+    assert "TrialLog 'trial' (trial.csv" in text and "missing samples: u 1 (rows 10)" in text
+    assert "converted from: psi deg, n rpm" in text and f"wrote {out}" in text
+    with pytest.warns(UserWarning):
+        back = read_log(out)
+    np.testing.assert_allclose(back["psi"], df.psi, rtol=1e-12, atol=1e-15)
+    assert back.ship.lpp == 4.36
+    assert main(["log", str(p), "--units", "psi=deg,n=rpm", "-o", str(out)]) == 2
+    assert "output exists" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("case", ["missing", "nonnumeric", "time", "empty", "header", "short", "semicolon",
+                                  "binary", "absurd", "degrees", "inputgap", "dir"])
+def test_cli_bad_input_exit_2_one_line_file_unchanged(tmp_path, capsys, case):
+    from shipid.cli import main
+
+    df = frame()
+    files = {
+        "missing": (csv_text(df.drop(columns="v"), header=HEADER.replace(",v [m/s]", "")), r"column 'v' not found"),
+        "nonnumeric": (csv_text(df, cells={(9, "r"): "n/a?"}), r"column 'r' row 9: value 'n/a\?' is not a number"),
+        "time": (csv_text(df.assign(time=np.r_[df.time[:20], df.time[19:59]])), r"column 'time' row 22: time"),
+        "empty": (b"", r"file is empty"),
+        "header": (HEADER + "\n", r"header only"),
+        "short": (csv_text(frame(n=5)), r"only 5 sample"),
+        "semicolon": (csv_text(df, sep=";"), r"row 1: the header has no commas but is semicolon-separated"),
+        "binary": (b"\x1f\x8b\x08\x00" + bytes(200), r"binary file"),
+        "absurd": (csv_text(df, cells={(30, "u"): "1e308"}), r"column 'u' row 30: value 1e\+308 m/s is absurd"),
+        "degrees": (csv_text(df.assign(delta=np.degrees(df.delta))), r"column 'delta' row 7: value 20.05\d+ looks "
+                                                                      r"like degrees"),
+        "inputgap": (csv_text(df, cells={(33, "n"): ""}), r"column 'n' row 33: input value is blank"),
+    }
+    if case == "dir":
+        p, pattern = tmp_path, "is a directory"
+    else:
+        content, pattern = files[case]
+        p = write(tmp_path, f"{case}.csv", content)
+    before = p.read_bytes() if p.is_file() else None
+    code = main(["log", str(p)])
+    err = capsys.readouterr().err
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("shipid log: error: ")
+    assert re.search(pattern, lines[0]), lines[0]
+    if before is not None:
+        assert p.read_bytes() == before
+    assert "Traceback" not in err
