@@ -797,17 +797,21 @@ def _check_heading(t: np.ndarray, ch: dict[str, np.ndarray], where: _Where) -> N
             den = float(np.dot(rdt, rdt))
             if turned > 0.2 and den > 0:  # at least ~11 deg of turning to judge
                 slope = float(np.dot(dpsi, rdt) / den)
-                if 20.0 < abs(slope) < 200.0:
+                # standard error of the slope: flag only slopes clearly away from both 0 (noise) and 1
+                m = int(good.sum())
+                se = math.sqrt(max(float(np.sum((dpsi - slope * rdt) ** 2)) / (m - 1), 0.0) / den)
+                clear = abs(slope) > 5 * se and abs(abs(slope) - 1.0) > 5 * se
+                if clear and 20.0 < abs(slope) < 200.0:
                     i = int(ok[np.nanargmax(np.abs(psi[ok]))])
                     raise where.error(f"value {_fmt_value(psi[i])} looks like degrees (heading changes "
                                       f"{abs(slope):.1f} x faster than the integral of r; 57.3 = deg/rad); "
                                       + hint, "psi", i, value=psi[i])
-                if 1 / 200.0 < abs(slope) < 1 / 20.0:
+                if clear and 1 / 200.0 < abs(slope) < 1 / 20.0:
                     i = int(np.nanargmax(np.abs(r)))
                     raise where.error(f"value {_fmt_value(r[i])} looks like deg/s (the integral of r changes "
                                       f"{1 / abs(slope):.1f} x faster than the heading; 57.3 = deg/rad); "
                                       + _deg_hint("r", "deg/s") + " (or unit_checks=False)", "r", i, value=r[i])
-                if slope < -0.5:
+                if slope < -0.5 and clear:
                     warnings.warn(f"{where.label}: heading psi and yaw rate r have opposite signs "
                                   f"(d psi/dt = {slope:.2f} r); check the sign conventions", stacklevel=4)
 

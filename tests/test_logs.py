@@ -853,3 +853,27 @@ def test_cli_bad_input_exit_2_one_line_file_unchanged(tmp_path, capsys, case):
     if before is not None:
         assert p.read_bytes() == before
     assert "Traceback" not in err
+
+
+def test_heading_heuristic_not_fooled_by_noise():
+    """Noisy compass and gyro on a straight course: no 'looks like degrees' from noise alone."""
+    rng = np.random.default_rng(3)
+    t = np.arange(6000) * 0.1
+    for s_psi, s_r in [(0.05, 0.002), (1e-4, 0.01), (0.02, 0.02)]:
+        psi = 0.3 + rng.normal(0, s_psi, t.size)
+        r = rng.normal(0, s_r, t.size)
+        log = TrialLog.from_arrays(t, psi=psi, r=r)
+        assert len(log) == 6000
+    # a case where the raw slope alone (-22 +- 22) would have said "degrees": the standard error saves it
+    rng6 = np.random.default_rng(6)
+    t2 = np.arange(2000) * 0.1
+    psi = 0.3 + rng6.normal(0, 0.1, t2.size)
+    r = rng6.normal(0, 0.002, t2.size)
+    rdt = 0.5 * (r[1:] + r[:-1]) * 0.1
+    assert 20 < abs(np.diff(psi) @ rdt / (rdt @ rdt)) < 200 and np.abs(rdt).sum() > 0.2
+    assert len(TrialLog.from_arrays(t2, psi=psi, r=r)) == 2000
+    # while a real zigzag in degrees with the same noise is caught
+    psi_true = 0.2 * np.sin(2 * np.pi * t / 60)
+    with pytest.raises(LogError, match="looks like degrees"):
+        TrialLog.from_arrays(t, psi=np.degrees(psi_true) + rng.normal(0, 0.05, t.size),
+                             r=np.gradient(psi_true, t) + rng.normal(0, 0.002, t.size))
