@@ -877,3 +877,44 @@ def test_heading_heuristic_not_fooled_by_noise():
     with pytest.raises(LogError, match="looks like degrees"):
         TrialLog.from_arrays(t, psi=np.degrees(psi_true) + rng.normal(0, 0.05, t.size),
                              r=np.gradient(psi_true, t) + rng.normal(0, 0.002, t.size))
+
+
+@needs_marin
+def test_marin_standard_manoeuvre_values_match_data_readme():
+    """Advance/transfer/tactical diameter and first overshoots from our logs vs ../shared/data/kvlcc2_marin/README.md.
+
+    Same definitions as the README: rudder execute at the first |delta - delta0| > 0.5 deg, positions of
+    the logged reference point, distances along/across the heading at execute.  The README prints 2-3
+    digits; the heading in the file has 0.1 deg resolution between 10 and 100 deg.
+    """
+    lpp = 320.0
+    readme_tc = {"tc_35": (3.02, 1.20, 3.07), "tc_-35": (3.09, 1.35, 3.33)}
+    for tag, (adv, tra, tac) in readme_tc.items():
+        log = read_log(_marin(tag))
+        d = np.degrees(log["delta"])
+        i0 = int(np.argmax(np.abs(d - d[0]) > 0.5))
+        p0 = log["psi"][i0]
+        dx, dy = log["x"] - log["x"][i0], log["y"] - log["y"][i0]
+        along = dx * np.cos(p0) + dy * np.sin(p0)
+        lat = -dx * np.sin(p0) + dy * np.cos(p0)
+        change = np.abs(log["psi"] - p0)
+
+        def at(deg, a):
+            j = int(np.argmax(change >= np.radians(deg)))
+            f = (np.radians(deg) - change[j - 1]) / (change[j] - change[j - 1])
+            return a[j - 1] + f * (a[j] - a[j - 1])
+
+        assert at(90, along) / lpp == pytest.approx(adv, abs=0.006), tag
+        assert abs(at(90, lat)) / lpp == pytest.approx(tra, abs=0.006), tag
+        assert abs(at(180, lat)) / lpp == pytest.approx(tac, abs=0.006), tag
+    readme_zz = {"zz_10": 9.4, "zz_-10": 8.1, "zz_20": 15.6, "zz_-20": 12.7}
+    for tag, overshoot in readme_zz.items():
+        log = read_log(_marin(tag))
+        d = np.degrees(log["delta"])
+        i0 = int(np.argmax(np.abs(d - d[0]) > 0.5))
+        amp = abs(float(tag.split("_")[1]))
+        # a positive rudder angle turns the ship to port (heading decreases): ITTC sign convention
+        h = -np.sign(d[i0] - d[0]) * np.degrees(log["psi"] - log["psi"][i0])
+        j = i0 + int(np.argmax(h[i0:] >= amp))       # first rudder reversal: heading change reaches amp
+        k = j + int(np.argmax(h[j:] < amp))          # heading back through amp
+        assert h[j:k].max() - amp == pytest.approx(overshoot, abs=0.15), tag
