@@ -31,7 +31,7 @@ import re
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -603,7 +603,8 @@ def _convert_units(arrays: dict[str, np.ndarray], units: Mapping[str, str], head
         if key not in UNITS:
             col = (columns_in_file or {}).get(name, name)
             raise LogError(f"{where.label} column '{col}': unknown unit {unit!r}; use one of "
-                           "s, ms, min, h, m, km, nm (nautical mile), rad, deg, m/s, knots (kn), rad/s, deg/s, rps, rpm, Hz",
+                           "s, ms, min, h, m, km, nm (nautical mile), rad, deg, m/s, knots (kn), rad/s, deg/s, "
+                           "rps, rpm, Hz",
                            column=name, value=unit)
         udim, factor = UNITS[key]
         if dim is not None and udim != dim:
@@ -1166,7 +1167,8 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
         if label in arrays:
             first = next(jj for jj, nn in enumerate(names) if jj in taken and (nn == label or colmap.get(label) == jj))
             raise LogError(f"`{p.name}` row {h + 1}: column '{label}' appears twice (columns {first + 1} and "
-                           f"{j + 1} of the header); rename one, or pick one by number with columns={{'{label}': {first + 1}}}",
+                           f"{j + 1} of the header); rename one, or pick one by number with "
+                           f"columns={{'{label}': {first + 1}}}",
                            path=p, column=label, row=h + 1, value=hdr[j])
         a = _to_float(cols[j], label, label, where, decimal_comma=delim != ",")
         arrays[label] = a

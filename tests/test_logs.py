@@ -713,7 +713,8 @@ def test_propeller_in_rpm_declared_rps_when_lpp_known(tmp_path):
     df = frame()
     df["n"] = df.n * 60   # 600 rpm of a 4.36 m model, declared rps
     p = write(tmp_path, "trial.csv", csv_text(df))
-    raises_unchanged(p, r"`trial.csv` column 'n' row 2: value 600.\d+ looks like rpm \(n sqrt\(Lpp\) = 125\d rps m\^0.5 "
+    raises_unchanged(p, r"`trial.csv` column 'n' row 2: value 600.\d+ looks like rpm "
+                        r"\(n sqrt\(Lpp\) = 125\d rps m\^0.5 "
                         r"for Lpp 4.36 m.*pass units=\{'n': 'rpm'\}", lpp=4.36)
     np.testing.assert_allclose(read_log(p, lpp=4.36, units={"n": "rpm"})["n"], frame().n)
     assert read_log(p)["n"][0] > 500   # without Lpp there is no scale to judge by
