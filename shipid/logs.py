@@ -795,9 +795,9 @@ def _check_heading(t: np.ndarray, ch: dict[str, np.ndarray], where: _Where) -> N
             rdt = 0.5 * (r[a] + r[b])[good] * dt[a][good]
             dpsi = jump[good]
             turned = float(np.sum(np.abs(rdt)))
-            den = float(np.dot(rdt, rdt))
+            den = float(np.sum(rdt * rdt))
             if turned > 0.2 and den > 0:  # at least ~11 deg of turning to judge
-                slope = float(np.dot(dpsi, rdt) / den)
+                slope = float(np.sum(dpsi * rdt) / den)
                 # standard error of the slope: flag only slopes clearly away from both 0 (noise) and 1
                 m = int(good.sum())
                 se = math.sqrt(max(float(np.sum((dpsi - slope * rdt) ** 2)) / (m - 1), 0.0) / den)
@@ -1108,9 +1108,15 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
         raise LogError(f"`{p.name}`: header only, no data rows; the log needs samples below the header",
                        path=p, row=h + 1)
     ncol = len(hdr)
-    rows_txt: list[list[str]] = []
+    rows_txt: list = []
     keep_rows: list[int] = []
     data_idx = [k for k in data_idx if not lines[k].lstrip().startswith("#")]
+    fast = _fast_table(lines, data_idx, delim, ncol)
+    if fast is not None:  # all cells numeric or blank, every row complete: pandas' C parser did the work
+        table, keep = fast
+        rows_txt = [None] * int(keep.sum())
+        keep_rows = [k + 1 for k, ok in zip(data_idx, keep) if ok]
+        data_idx = []
     if delim == "whitespace":
         split_rows = (lines[k].split() for k in data_idx)
     else:
@@ -1132,11 +1138,11 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
                        path=p, row=h + 1)
     rows = np.asarray(keep_rows, dtype=np.int64)
     where = _Where(p, p.stem, rows)
-    cols = list(zip(*rows_txt))
+    cols = list(table.T) if fast is not None else list(zip(*rows_txt))
     arrays: dict[str, np.ndarray] = {}
     first_stamp = None
     for ours, j in colmap.items():
-        if ours == "time" and cols[j] and _ISO_RE.match(cols[j][0].strip()):
+        if ours == "time" and fast is None and _ISO_RE.match(cols[j][0].strip()):
             arrays[ours] = _iso_seconds(cols[j], names[j] or hdr[j], where)
             first_stamp = cols[j][0].strip()
             continue
@@ -1154,7 +1160,9 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
         if j in taken:
             continue
         label = nm or f"column {j + 1}"
-        if not nm and all(not c.strip() for c in cols[j]):  # trailing delimiter: an empty unnamed column
+        empty = (np.isnan(cols[j]).all() if isinstance(cols[j], np.ndarray)
+                 else all(not c.strip() for c in cols[j]))
+        if not nm and empty:  # trailing delimiter: an empty unnamed column
             continue
         if not _mostly_numeric(cols[j]):
             notes.append(f"column '{hdr[j]}' is not numeric; ignored")
@@ -1189,7 +1197,54 @@ def _find_col(theirs: str, hdr: list[str], names: list[str]) -> int | None:
     return hits[0] if len(hits) == 1 else None
 
 
-def _mostly_numeric(cells: Sequence[str]) -> bool:
+_NA_TOKENS = ["", "nan", "NaN", "NAN", "na", "NA", "n/a", "N/A", "null", "NULL", "Null", "none", "None", "NONE",
+              "-nan", "-NaN"]
+
+
+# pandas < 3 parses floats with "high" precision by default (last-digit differences possible);
+# pandas 3 deprecates the argument and parses exactly by default
+_EXACT_FLOATS = {"float_precision": "round_trip"} if int(pd.__version__.split(".")[0]) < 3 else {}
+
+
+def _fast_table(lines: list[str], data_idx: list[int], delim: str, ncol: int):
+    """Parse the data rows with pandas' C parser when that is unambiguous, else None.
+
+    Used only when no cell is quoted, every row has ``ncol`` fields and every cell is a
+    number or a missing-value token; any irregularity returns None and the careful
+    row-by-row path (which names the offending row and value) takes over.  Values are
+    parsed exactly as Python's ``float`` does (round-trip precision).
+    Returns (table (n_rows, ncol) float, keep mask dropping all-blank rows).
+    """
+    if len(data_idx) < 50:
+        return None
+    body = [lines[k] for k in data_idx]
+    text = "\n".join(body)
+    if '"' in text or "'" in text:
+        return None
+    if delim == "whitespace":
+        if any(len(b.split()) != ncol for b in body):
+            return None
+        sep = r"\s+"
+    else:
+        if any(b.count(delim) != ncol - 1 for b in body):
+            return None
+        sep = delim
+    try:
+        df = pd.read_csv(io.StringIO(text), sep=sep, header=None, names=list(range(ncol)), dtype=float,
+                         na_values=_NA_TOKENS, keep_default_na=False, skip_blank_lines=False, engine="c",
+                         **_EXACT_FLOATS)
+    except (ValueError, TypeError, pd.errors.ParserError):
+        return None
+    if len(df) != len(body):
+        return None
+    table = df.to_numpy(dtype=float)
+    keep = ~np.isnan(table).all(axis=1)
+    return table[keep], keep
+
+
+def _mostly_numeric(cells) -> bool:
+    if isinstance(cells, np.ndarray):
+        return True
     vals = [c.strip() for c in cells if c.strip().lower() not in _MISSING_TOKENS]
     if not vals:
         return True
@@ -1224,6 +1279,8 @@ def _iso_seconds(cells: Sequence[str], col: str, where: _Where) -> np.ndarray:
 
 
 def _to_float(cells: Sequence[str], ours: str, col: str, where: _Where, decimal_comma: bool = False) -> np.ndarray:
+    if isinstance(cells, np.ndarray) and cells.dtype.kind == "f":
+        return cells.copy()
     try:
         return np.asarray(cells, dtype=float)  # fast path: no blanks, all numbers
     except ValueError:
@@ -1276,27 +1333,14 @@ def _read_marin(text: str, p: Path, units: Mapping[str, str], marin_time: str):
     if start is None:
         raise LogError(f"`{p.name}`: no data rows after the MARIN title lines; expected two title lines, a blank "
                        "line and rows of 11 numbers", path=p)
-    rows_l, vals = [], []
-    for k in range(start, len(lines)):
-        parts = lines[k].split()
-        if not parts:
-            continue
-        if len(parts) != 11:
-            raise LogError(f"`{p.name}` row {k + 1}: {len(parts)} number(s), a MARIN row has 11 (time x0 y0 phi psi "
-                           "u v p r delta rev); fix or delete the row", path=p, row=k + 1, value=lines[k].strip()[:60])
-        rows_l.append(k + 1)
-        vals.append(parts)
-    rows = np.asarray(rows_l, dtype=np.int64)
-    where = _Where(p, p.stem, rows)
-    try:
-        a = np.asarray(vals, dtype=float)
-    except ValueError:
-        cols = list(zip(*vals))
-        for j, c in enumerate(_MARIN_COLS):
-            _to_float(cols[j], c, c, where)
-        raise  # pragma: no cover (_to_float raised)
-    if a.shape[0] == 0:
-        raise LogError(f"`{p.name}`: no data rows", path=p)
+    idx = [k for k in range(start, len(lines)) if lines[k].strip()]
+    fast = _fast_table(lines, idx, "whitespace", 11)
+    if fast is not None and fast[1].all():
+        a = fast[0]
+        rows = np.asarray(idx, dtype=np.int64) + 1
+        where = _Where(p, p.stem, rows)
+    else:
+        a, rows, where = _marin_rows(lines, idx, p)
     notes: list[str] = []
     t = a[:, 0].copy()
     # --- repeated (rounded) time stamps ------------------------------------------------
@@ -1339,6 +1383,28 @@ def _read_marin(text: str, p: Path, units: Mapping[str, str], marin_time: str):
     return t2, ch_out, where, units_in, notes
 
 
+def _marin_rows(lines: list[str], idx: list[int], p: Path):
+    """Careful row-by-row parse of MARIN data lines (names the row of any irregularity)."""
+    rows_l, vals = [], []
+    for k in idx:
+        parts = lines[k].split()
+        if len(parts) != 11:
+            raise LogError(f"`{p.name}` row {k + 1}: {len(parts)} number(s), a MARIN row has 11 (time x0 y0 phi psi "
+                           "u v p r delta rev); fix or delete the row", path=p, row=k + 1, value=lines[k].strip()[:60])
+        rows_l.append(k + 1)
+        vals.append(parts)
+    rows = np.asarray(rows_l, dtype=np.int64)
+    where = _Where(p, p.stem, rows)
+    try:
+        a = np.asarray(vals, dtype=float)
+    except ValueError:
+        cols = list(zip(*vals))
+        for j, c in enumerate(_MARIN_COLS):
+            _to_float(cols[j], c, c, where)
+        raise  # pragma: no cover (_to_float raised)
+    return a, rows, where
+
+
 def _uniform_time(t: np.ndarray) -> tuple[np.ndarray | None, float]:
     """Fit t0 + k dt to stamps rounded to 3 significant digits; None when inconsistent."""
     k = np.arange(t.size, dtype=float)
@@ -1346,11 +1412,16 @@ def _uniform_time(t: np.ndarray) -> tuple[np.ndarray | None, float]:
     w = 1.0 / ulp
     # two candidates: anchored at the first stamp (dt by weighted least squares), and t0, dt both
     # fitted; keep the one that deviates least from the printed stamps
-    dt = float(np.dot(k * w, (t - t[0]) * w) / np.dot(k * w, k * w))
+    dt = float(np.sum(k * w * (t - t[0]) * w) / np.sum((k * w) ** 2))
     cands = [t[0] + k * dt]
-    A = np.stack([np.ones_like(k), k], axis=1)
-    coef = np.linalg.lstsq(A * w[:, None], t * w, rcond=None)[0]
-    cands.append(A @ coef)
+    # weighted least squares for (t0, dt) in closed form (no BLAS: threaded BLAS stalls on a busy machine)
+    w2 = w * w
+    sw, sk, skk = np.sum(w2), np.sum(w2 * k), np.sum(w2 * k * k)
+    st, skt = np.sum(w2 * t), np.sum(w2 * k * t)
+    det = sw * skk - sk * sk
+    dt_free = (sw * skt - sk * st) / det
+    t0_free = (st - dt_free * sk) / sw
+    cands.append(t0_free + k * dt_free)
     devs = [float(np.max(np.abs(c - t) / ulp)) for c in cands]
     j = int(np.argmin(devs))
     tu, dev = cands[j], devs[j]

@@ -919,3 +919,25 @@ def test_marin_standard_manoeuvre_values_match_data_readme():
         j = i0 + int(np.argmax(h[i0:] >= amp))       # first rudder reversal: heading change reaches amp
         k = j + int(np.argmax(h[j:] < amp))          # heading back through amp
         assert h[j:k].max() - amp == pytest.approx(overshoot, abs=0.15), tag
+
+
+def test_fast_and_careful_parsers_agree_bit_for_bit(tmp_path):
+    """Large clean files go through pandas' C parser; the result equals Python's float() cell by cell."""
+    rng = np.random.default_rng(5)
+    n = 500
+    df = frame(n=n, dt=0.1)
+    df["u"] = df.u + rng.standard_normal(n) * 10.0 ** rng.integers(-12, 0, n)
+    text = csv_text(df, cells={(40, "v"): "", (41, "v"): "NaN"})
+    p = write(tmp_path, "big.csv", text)
+    with pytest.warns(UserWarning, match="missing measured samples"):
+        log = read_log(p)
+    cells = [line.split(",") for line in text.splitlines()[1:]]
+    u_ref = np.array([float(c[4]) for c in cells])
+    np.testing.assert_array_equal(log["u"], u_ref)
+    assert log.missing == {"v": [40, 41]}
+    # one quoted cell sends the file down the careful path: same numbers
+    assert "\n0.5," in text
+    p2 = write(tmp_path, "quoted.csv", text.replace("\n0.5,", '\n"0.5",', 1))
+    with pytest.warns(UserWarning, match="missing measured samples"):
+        log2 = read_log(p2)
+    pd.testing.assert_frame_equal(log2.data, log.data, check_exact=True)
