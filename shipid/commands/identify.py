@@ -2,27 +2,12 @@
 from __future__ import annotations
 
 import sys
-import warnings
 from datetime import datetime
 from pathlib import Path
 
 import numpy as np
 
-
-def _kv(items, what: str, convert=str) -> dict:
-    out = {}
-    for item in items or []:
-        for part in item.split(","):
-            if not part.strip():
-                continue
-            if "=" not in part:
-                raise ValueError(f"{what} entry '{part}' must look like NAME=VALUE")
-            k, v = part.split("=", 1)
-            try:
-                out[k.strip()] = convert(v.strip())
-            except ValueError:
-                raise ValueError(f"{what} entry '{part}': '{v}' is not a valid value") from None
-    return out
+from ._common import add_log_options, read_logs
 
 
 def _names(items) -> list[str]:
@@ -39,13 +24,7 @@ def register(sub) -> None:
                    help="start values: a parameter set of the model or an earlier result JSON")
     p.add_argument("-o", "--output", required=True, help="result JSON to write")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
-    p.add_argument("--lpp", type=float, default=None, help="ship length between perpendiculars [m]")
-    p.add_argument("--ship", default=None, help="ship particulars file (JSON or YAML)")
-    p.add_argument("--units", action="append", metavar="CH=UNIT", help="declare units, e.g. psi=deg,n=rpm")
-    p.add_argument("--columns", "--column", dest="columns", action="append", metavar="CH=COLUMN",
-                   help="map channel names to file columns, e.g. psi=Heading")
-    p.add_argument("--delimiter", default=None, help="CSV delimiter if not a comma (';', '\\t' or 'whitespace')")
-    p.add_argument("--interpolate-inputs", action="store_true", help="fill gaps in delta/n by interpolation")
+    add_log_options(p)
     p.add_argument("--estimate", action="append", metavar="NAMES", help="comma-separated parameters to estimate")
     p.add_argument("--fixed", action="append", metavar="NAME[=VALUE]", help="parameters to hold fixed")
     p.add_argument("--passes", type=int, default=2, help="EKF passes (default 2)")
@@ -58,20 +37,6 @@ def register(sub) -> None:
     d.add_argument("-o", "--output-dir", default=None, help="new folder for the outputs (default: shipid-demo-<time>)")
     d.add_argument("--passes", type=int, default=2, help="EKF passes (default 2)")
     d.set_defaults(handler=_demo)
-
-
-def _read_logs(paths, args):
-    from ..logs import read_log
-
-    units = _kv(args.units, "--units")
-    columns = _kv(args.columns, "--columns")
-    logs = []
-    for p in paths:
-        with warnings.catch_warnings():  # gaps are reported by `fit` itself, once, as a note
-            warnings.simplefilter("ignore", UserWarning)
-            logs.append(read_log(p, units=units or None, columns=columns or None, lpp=args.lpp, ship=args.ship,
-                                 interpolate_inputs=args.interpolate_inputs, delimiter=args.delimiter))
-    return logs
 
 
 def _start_model(args):
@@ -120,7 +85,7 @@ def _fit(args) -> int:
     if args.passes < 1:
         raise ValueError(f"--passes must be >= 1, got {args.passes}")
     model = _start_model(args)
-    logs = _read_logs(args.logs, args)
+    logs = read_logs(args.logs, args)
     for lg in logs:
         if lg.missing or lg.dropouts:
             print(f"note: {lg.summary()}", file=sys.stderr)
