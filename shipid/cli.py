@@ -18,6 +18,7 @@ COMMAND_MODULES: list[str] = [
     "shipid.commands.core",
     "shipid.commands.identify",
     "shipid.commands.logs",
+    "shipid.commands.manoeuvre",
 ]
 
 
