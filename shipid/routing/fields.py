@@ -549,7 +549,10 @@ def as_field(obj) -> Field:
         return UniformField(0.0, 0.0)
     if callable(obj):
         return FunctionField(obj)
-    arr = np.asarray(obj, dtype=float)
-    if arr.shape == (2,):
+    try:
+        arr = np.asarray(obj, dtype=float)
+    except (TypeError, ValueError):
+        arr = None
+    if arr is not None and arr.shape == (2,):
         return UniformField(*arr)
     raise ValueError(f"cannot use {type(obj).__name__} {obj!r} as a field; pass a Field, a (wx, wy) pair [m/s] or a callable(t, xy)")

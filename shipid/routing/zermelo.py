@@ -412,7 +412,7 @@ def solve_transcription(problem: ZermeloProblem, *, n: int = 40, guess: ZermeloR
         w0 = fld.velocity(problem.t0, A)
         along = float(e @ w0)
         # heading that cancels the cross-track current where possible
-        cross = float(np.cross(e, w0))
+        cross = float(e[0] * w0[1] - e[1] * w0[0])
         ang = np.arctan2(e[1], e[0]) - np.arcsin(np.clip(cross / V, -1, 1))
         U0 = np.full(2 * N + 1, ang)
         T0 = d / max(V + along, 0.2 * V)
