@@ -35,8 +35,12 @@ c_cross^2)`` (infeasible when the cross current exceeds ``w``).  See
 ``docs/routing.md`` for why the choice matters.
 
 The optimiser :func:`pso` is a plain global-best PSO on numpy (inertia
-decreasing linearly 0.9 -> 0.4, ``c1 = c2 = 2``, velocity clamp at 20 % of the
-range), vectorised over the swarm and seeded by a :class:`numpy.random.Generator`.
+decreasing linearly 0.7298 -> 0.4, ``c1 = c2 = 1.5``, velocity clamp at 20 % of
+the range; the paper gives no settings), vectorised over the swarm and seeded
+by a :class:`numpy.random.Generator`.  The planners run one swarm per
+left/right class of passing the obstacles (:func:`stratified_init`): the
+feasible set falls apart into such classes, and one swarm over the whole box
+(the paper's set-up, ``stratify=False``) often settles in the wrong one.
 """
 from __future__ import annotations
 
@@ -52,7 +56,8 @@ from .fields import Field, PiecewiseTimeField, UniformField, as_field, math_from
 __all__ = [
     "Obstacle", "USVProblem", "PSOResult", "pso", "PathCost", "PlanResult", "plan", "plan_dopso", "plan_eopso",
     "Voyage", "sail", "OCPSOResult", "plan_ocpso", "forbidden_arcs", "differential_evolution_check",
-    "lonlat_to_local", "local_to_lonlat", "paper_scenario",
+    "lonlat_to_local", "local_to_lonlat", "paper_scenario", "compare_planners", "side_classes", "class_bounds",
+    "stratified_init",
 ]
 
 EARTH_RADIUS = 6371008.8  # mean Earth radius [m] (IUGG)
@@ -147,7 +152,12 @@ class USVProblem:
                     raise ValueError(f"obstacle {i} at ({o.x:.1f}, {o.y:.1f}) m, radius {o.radius} m, covers the {name}; move it or shrink it")
         self.axis_angle = float(np.arctan2(*(self.goal - self.start)[::-1]))
         r = np.array([np.hypot(*(o.center - self.start)) for o in self.obstacles])
-        self.radii = np.sort(r[r < D])
+        order = [i for i in np.argsort(r, kind="stable") if r[i] < D]
+        self.radii = r[order]
+        #: polar angle [rad] of the obstacle centre that defines each dimension circle
+        self.dim_center_angles = np.array([
+            np.angle(np.exp(1j * (np.arctan2(*(self.obstacles[i].center - self.start)[::-1]) - self.axis_angle)))
+            for i in order])
         if self.radii.size == 0:
             raise ValueError("no obstacle is nearer to the start than the goal, so there is no dimension circle; the straight line is the plan")
         self.centers = np.array([o.center for o in self.obstacles]).reshape(-1, 2)
@@ -324,19 +334,30 @@ class PSOResult:
 
 
 def pso(cost: Callable[[np.ndarray], np.ndarray], lb, ub, *, n_particles: int = 40, max_iter: int = 150,
-        inertia: tuple[float, float] = (0.9, 0.4), c1: float = 2.0, c2: float = 2.0, vmax: float = 0.2,
-        rng: np.random.Generator | int | None = None, init: np.ndarray | None = None,
+        n_swarms: int = 1, inertia: tuple[float, float] = (0.7298, 0.4), c1: float = 1.5, c2: float = 1.5,
+        vmax: float = 0.2, rng: np.random.Generator | int | None = None, init: np.ndarray | None = None,
         feasible: Callable[[np.ndarray], np.ndarray] | None = None, f_tol: float = 0.0, patience: int = 0,
         max_init_tries: int = 200) -> PSOResult:
     """Global-best particle swarm minimisation of a vectorised ``cost(X (B, D)) -> (B,)``.
+
+    ``n_swarms`` independent swarms (each with its own global best and,
+    optionally, its own box) are advanced together in one vectorised cost
+    call per iteration; the best of them is returned.  The planners give each
+    swarm one left/right class of passing the obstacles: the feasible set is
+    split into such disconnected pieces, and a single swarm collapses onto
+    the first piece it finds (often not the best one).
 
     Parameters
     ----------
     cost : callable
         Vectorised objective; ``inf`` marks infeasible particles.
-    lb, ub : (D,) arrays
-        Box bounds; positions are clipped and the clipped velocity components zeroed.
+    lb, ub : (D,) or (n_swarms, D) arrays
+        Box bounds (one per swarm if 2-D); positions are clipped and the
+        clipped velocity components zeroed.
     n_particles, max_iter : int
+        Particles per swarm and iterations.
+    n_swarms : int
+        Independent swarms.
     inertia : (float, float)
         Inertia weight at the first and last iteration (linear schedule).
     c1, c2 : float
@@ -346,7 +367,8 @@ def pso(cost: Callable[[np.ndarray], np.ndarray], lb, ub, *, n_particles: int = 
     rng : Generator or seed
         Source of randomness (results are reproducible for a given seed).
     init : (k, D), optional
-        Particles to start with (the rest are random).
+        Particles to start with (particle ``j`` belongs to swarm ``j // n_particles``;
+        the rest are random).
     feasible : callable, optional
         ``feasible(X) -> bool (B,)``; random initial particles are re-drawn
         until feasible (up to ``max_init_tries`` rounds), as the paper's
@@ -356,55 +378,67 @@ def pso(cost: Callable[[np.ndarray], np.ndarray], lb, ub, *, n_particles: int = 
         over ``patience`` iterations (``patience=0``: run ``max_iter``).
     """
     rng = np.random.default_rng(rng)
+    S, Pn = int(n_swarms), int(n_particles)
+    N = S * Pn
+    swarm = np.repeat(np.arange(S), Pn)
     lb, ub = np.asarray(lb, dtype=float), np.asarray(ub, dtype=float)
-    D = lb.size
+    D = lb.shape[-1]
+    if lb.ndim == 2:  # one box per swarm
+        lb, ub = lb[swarm], ub[swarm]
+    else:
+        lb, ub = np.broadcast_to(lb, (N, D)), np.broadcast_to(ub, (N, D))
     span = ub - lb
-    X = lb + rng.random((n_particles, D)) * span
+    X = lb + rng.random((N, D)) * span
+    k0 = 0
     if init is not None:
-        init = np.atleast_2d(np.asarray(init, dtype=float))[:n_particles]
-        X[: init.shape[0]] = np.clip(init, lb, ub)
-    k0 = 0 if init is None else init.shape[0]
+        init = np.atleast_2d(np.asarray(init, dtype=float))[:N]
+        k0 = init.shape[0]
+        X[:k0] = np.clip(init, lb, ub)
     if feasible is not None:
         for _ in range(max_init_tries):
             bad = ~feasible(X)
             bad[:k0] = False
             if not bad.any():
                 break
-            X[bad] = lb + rng.random((int(bad.sum()), D)) * span
-    V = (rng.random((n_particles, D)) * 2 - 1) * vmax * span
+            X[bad] = lb[bad] + rng.random((int(bad.sum()), D)) * span[bad]
+    V = (rng.random((N, D)) * 2 - 1) * vmax * span
     f = np.asarray(cost(X), dtype=float)
-    nfev = n_particles
+    nfev = N
     pbest, pf = X.copy(), f.copy()
-    g = int(np.argmin(pf))
-    gbest, gf = pbest[g].copy(), float(pf[g])
-    hist = [gf]
+
+    def bests():
+        pfs = pf.reshape(S, Pn)
+        g = np.argmin(pfs, axis=1) + np.arange(S) * Pn
+        return pbest[g], pf[g]
+
+    gbest, gf = bests()
+    hist = [float(np.min(gf))]
     status, msg = 1, "maximum number of iterations reached"
     it = 0
     for it in range(1, max_iter + 1):
         w = inertia[0] + (inertia[1] - inertia[0]) * (it - 1) / max(max_iter - 1, 1)
-        r1, r2 = rng.random((n_particles, D)), rng.random((n_particles, D))
-        V = w * V + c1 * r1 * (pbest - X) + c2 * r2 * (gbest - X)
+        r1, r2 = rng.random((N, D)), rng.random((N, D))
+        V = w * V + c1 * r1 * (pbest - X) + c2 * r2 * (gbest[swarm] - X)
         V = np.clip(V, -vmax * span, vmax * span)
         Xn = np.clip(X + V, lb, ub)
         V = np.where((Xn == lb) | (Xn == ub), 0.0, V)
         X = Xn
         f = np.asarray(cost(X), dtype=float)
-        nfev += n_particles
+        nfev += N
         better = f < pf
         pbest[better], pf[better] = X[better], f[better]
-        g = int(np.argmin(pf))
-        if pf[g] < gf:
-            gbest, gf = pbest[g].copy(), float(pf[g])
-        hist.append(gf)
-        if patience and it > patience and np.isfinite(gf):
+        gbest, gf = bests()
+        hist.append(float(np.min(gf)))
+        if patience and it > patience and np.isfinite(hist[-1]):
             old = hist[-1 - patience]
-            if np.isfinite(old) and old - gf <= f_tol * abs(gf):
+            if np.isfinite(old) and old - hist[-1] <= f_tol * abs(hist[-1]):
                 status, msg = 0, f"best cost changed by <= {f_tol:g} (relative) over {patience} iterations"
                 break
-    success = bool(np.isfinite(gf))
+    k = int(np.argmin(gf))
+    success = bool(np.isfinite(gf[k]))
     if not success:
         status, msg = 2, "no feasible particle found"
-    return PSOResult(gbest, gf, it, nfev, success, status, msg, np.array(hist))
+    return PSOResult(gbest[k].copy(), float(gf[k]), it, nfev, success, status, msg, np.array(hist))
 
 
 # ------------------------------------------------------------------ plans
@@ -443,14 +477,84 @@ class PlanResult:
         return df
 
 
-def plan(problem: USVProblem, objective: str = "energy", *, rng=None, t_env: float = 0.0, n_particles: int = 40,
-         max_iter: int = 150, patience: int = 0, f_tol: float = 0.0) -> PlanResult:
-    """Plan with the fields frozen at ``t_env``: DOPSO (``objective="distance"``) or EOPSO (``"energy"``)."""
+def side_classes(problem: USVProblem, dims=None) -> list[tuple[int, ...]]:
+    """All left/right combinations (+1: polar angle above the obstacle centre's, -1: below) of ``dims``."""
+    import itertools
+
+    k = problem.n_dims if dims is None else len(dims)
+    return list(itertools.product((-1, 1), repeat=k))
+
+
+def class_bounds(problem: USVProblem, signs, dims=None):
+    """Box ``(lb, ub)`` of polar angles passing each defining obstacle on the side ``signs``."""
+    dims = np.arange(problem.n_dims) if dims is None else np.asarray(dims, dtype=int)
+    c = problem.dim_center_angles[dims]
+    b = problem.angle_bound
+    signs = np.asarray(signs)
+    lb = np.where(signs > 0, np.clip(c, -b, b), -b)
+    ub = np.where(signs > 0, b, np.clip(c, -b, b))
+    return lb, ub
+
+
+def stratified_init(problem: USVProblem, cost: "PathCost", n_particles: int, rng, tries: int = 50):
+    """Feasible initial particles, ``n_particles`` per left/right class that has any.
+
+    Returns ``(X (S * n_particles, k), lb (S, k), ub (S, k))`` for the ``S``
+    classes with a feasible sample after ``tries`` rounds, or ``None``.
+    """
+    blocks, lbs, ubs = [], [], []
+    for signs in side_classes(problem, cost.dims):
+        lb, ub = class_bounds(problem, signs, cost.dims)
+        good = np.zeros((0, lb.size))
+        for _ in range(tries):
+            X = lb + rng.random((4 * n_particles, lb.size)) * (ub - lb)
+            good = np.vstack([good, X[cost.feasible(X)]])
+            if good.shape[0] >= n_particles:
+                break
+        if good.shape[0] == 0:
+            continue
+        if good.shape[0] < n_particles:  # a narrow class: repeat its samples
+            good = good[rng.integers(0, good.shape[0], n_particles)]
+        blocks.append(good[:n_particles])
+        lbs.append(lb)
+        ubs.append(ub)
+    if not blocks:
+        return None
+    return np.vstack(blocks), np.array(lbs), np.array(ubs)
+
+
+def plan(problem: USVProblem, objective: str = "energy", *, rng=None, t_env: float = 0.0, n_particles: int = 25,
+         max_iter: int = 120, patience: int = 0, f_tol: float = 0.0, stratify: bool = True) -> PlanResult:
+    """Plan with the fields frozen at ``t_env``: DOPSO (``objective="distance"``) or EOPSO (``"energy"``).
+
+    With ``stratify`` (default) one swarm of ``n_particles`` searches each
+    left/right class of passing the obstacles (``2^m`` swarms for ``m``
+    dimension circles, fewer when a class is infeasible), each in its own
+    box; otherwise one swarm searches the whole box from a uniform random
+    start, as in the paper.
+    """
+    rng = np.random.default_rng(rng)
     cost = PathCost(problem, objective, t_env=t_env)
-    lb = np.full(problem.n_dims, -problem.angle_bound)
-    res = pso(cost, lb, -lb, rng=rng, n_particles=n_particles, max_iter=max_iter, feasible=cost.feasible,
-              patience=patience, f_tol=f_tol)
+    res = _run_pso(problem, cost, rng, n_particles, max_iter, stratify, patience=patience, f_tol=f_tol)
     return _plan_result(problem, cost, res, objective, t_env)
+
+
+def _run_pso(problem, cost, rng, n_particles, max_iter, stratify, *, start=None, patience=0, f_tol=0.0):
+    strat = stratified_init(problem, cost, n_particles, rng) if stratify else None
+    if strat is None:
+        lb = np.full(cost.n_free, -problem.angle_bound)
+        ub = -lb
+        init, n_sw = (None if start is None else start[None]), 1
+    else:
+        init, lb, ub = strat
+        n_sw = lb.shape[0]
+    res = pso(cost, lb, ub, rng=rng, n_particles=n_particles, n_swarms=n_sw, max_iter=max_iter, init=init,
+              feasible=cost.feasible, patience=patience, f_tol=f_tol)
+    if start is not None:  # never return something worse than the incumbent
+        f0 = float(cost(start[None])[0])
+        if f0 <= res.fun:
+            res.x, res.fun = start.copy(), f0
+    return res
 
 
 def _plan_result(problem, cost, res, objective, t_env):
@@ -471,12 +575,13 @@ def plan_eopso(problem: USVProblem, **kw) -> PlanResult:
 
 
 def differential_evolution_check(problem: USVProblem, objective: str = "energy", *, seed: int = 0,
-                                 t_env: float = 0.0, popsize: int = 30, maxiter: int = 300, tol: float = 1e-10):
+                                 t_env: float = 0.0, popsize: int = 30, maxiter: int = 300, tol: float = 1e-10,
+                                 signs=None):
     """The same cost minimised by :func:`scipy.optimize.differential_evolution` (an independent oracle).
 
     Infeasible particles get a finite penalty (1e30) because DE needs finite
-    values; the result is polished by L-BFGS-B only if feasible.  Returns the
-    scipy ``OptimizeResult``.
+    values; no gradient polish.  ``signs`` restricts the search to one
+    left/right class (:func:`class_bounds`).  Returns scipy's ``OptimizeResult``.
     """
     from scipy.optimize import differential_evolution
 
@@ -486,7 +591,10 @@ def differential_evolution_check(problem: USVProblem, objective: str = "energy",
         c = cost(np.asarray(X).T)
         return np.where(np.isfinite(c), c, 1e30)
 
-    b = [(-problem.angle_bound, problem.angle_bound)] * problem.n_dims
+    if signs is None:
+        b = [(-problem.angle_bound, problem.angle_bound)] * problem.n_dims
+    else:
+        b = list(zip(*class_bounds(problem, signs)))
     return differential_evolution(f, b, seed=seed, popsize=popsize, maxiter=maxiter, tol=tol, atol=0,
                                   vectorized=True, updating="deferred", polish=False)
 
@@ -605,7 +713,7 @@ class OCPSOResult:
 
 
 def plan_ocpso(problem: USVProblem, *, replan_times: Sequence[float] | None = None, rng=None,
-               n_particles: int = 40, max_iter: int = 150) -> OCPSOResult:
+               n_particles: int = 25, max_iter: int = 120, stratify: bool = True) -> OCPSOResult:
     """OCPSO: EOPSO at the start, then replanning whenever the measured environment changes.
 
     At each replanning time the boat's position, its target waypoint ``P_i``
@@ -625,7 +733,8 @@ def plan_ocpso(problem: USVProblem, *, replan_times: Sequence[float] | None = No
     rng = np.random.default_rng(rng)
     if replan_times is None:
         replan_times = sorted(set(problem.current.breakpoints) | set(problem.wind.breakpoints))
-    first = plan(problem, "energy", rng=rng, t_env=0.0, n_particles=n_particles, max_iter=max_iter)
+    first = plan(problem, "energy", rng=rng, t_env=0.0, n_particles=n_particles, max_iter=max_iter,
+                 stratify=stratify)
     rho = first.rho.copy()
     events = []
     for te in replan_times:
@@ -644,9 +753,7 @@ def plan_ocpso(problem: USVProblem, *, replan_times: Sequence[float] | None = No
         ev = {"time": float(te), "x": float(Q[0]), "y": float(Q[1]), "target_waypoint": int(target),
               "energy_spent_J": spent, "old_predicted_total_J": spent + old_rem, "replanned": False}
         if free.size:
-            lb = np.full(free.size, -problem.angle_bound)
-            res = pso(cost, lb, -lb, rng=rng, n_particles=n_particles, max_iter=max_iter, init=rho[free][None],
-                      feasible=cost.feasible)
+            res = _run_pso(problem, cost, rng, n_particles, max_iter, stratify, start=rho[free])
             ev["new_predicted_total_J"] = spent + float(res.fun)
             if res.fun < old_rem * (1 - 1e-9):
                 rho = rho.copy()
@@ -712,7 +819,7 @@ PAPER_GOAL_LONLAT = (110.422070, 21.260650)
 
 
 def paper_scenario(*, time_scale: float = 0.1, kinematics: str = "paper",
-                   current_courses_deg: tuple[float, float, float] = (0.0, 270.0, 180.0)) -> USVProblem:
+                   current_courses_deg: tuple[float, float, float] = (90.0, 0.0, 270.0)) -> USVProblem:
     """The seed-003 scenario with our stated obstacles and current directions.
 
     Start/goal are the paper's (305 m apart, goal almost due south).  Wind
@@ -720,12 +827,14 @@ def paper_scenario(*, time_scale: float = 0.1, kinematics: str = "paper",
     current directions are given only in the paper's figures, so we state ours
     (module-level, in the local frame with the start at the origin):
 
-    * obstacles (centre along / across the start-goal axis, +across = east of
-      the axis when heading south ... i.e. to the left of travel, radius):
-      (80 m, +12 m, 22 m), (160 m, -15 m, 25 m), (235 m, +10 m, 20 m);
+    * obstacles as (distance along the start-goal axis, offset to the left of
+      the direction of travel -- i.e. east, since the route runs south --,
+      radius): (80 m, +12 m, 22 m), (160 m, -15 m, 25 m), (235 m, +10 m, 20 m);
     * current flowing towards the nautical directions ``current_courses_deg``
-      (default north, i.e. against the route; then west; then south,
-      following), turning at minutes 8 and 32 **times** ``time_scale``.
+      (default east, then north -- against the route --, then west: a current
+      rotating anticlockwise in 90 deg steps, chosen before comparing
+      outcomes; ``docs/routing.md`` reports all 64 combinations of N/E/S/W),
+      turning at minutes 8 and 32 **times** ``time_scale``.
 
     Why ``time_scale``: with the paper's own thrust/drag curves the USV makes
     1.78 m/s through the water, so the 305 m voyage lasts about 3-6 min and
@@ -744,3 +853,20 @@ def paper_scenario(*, time_scale: float = 0.1, kinematics: str = "paper",
     wind = UniformField.from_speed_direction(7.0, np.radians(90.0), convention="from")
     return USVProblem(S, G, obstacles, current=current, wind=wind, kinematics=kinematics,
                       origin=(lon0, lat0))
+
+
+def compare_planners(problem: USVProblem, *, rng=0, n_particles: int = 25, max_iter: int = 120) -> dict:
+    """DOPSO (sailed through the time-varying fields), EOPSO at t = 0 and OCPSO; the paper's comparison.
+
+    Returns a dict with the three paths, their voyages and
+    ``saving_vs_distance_optimal = 1 - W_OCPSO / W_DOPSO`` (both sailed).
+    """
+    rng = np.random.default_rng(rng)
+    do = plan_dopso(problem, rng=rng, n_particles=n_particles, max_iter=max_iter)
+    eo = plan_eopso(problem, rng=rng, n_particles=n_particles, max_iter=max_iter)
+    oc = plan_ocpso(problem, rng=rng, n_particles=n_particles, max_iter=max_iter)
+    vd, ve = sail(problem, do.points), sail(problem, eo.points)
+    ok = vd.arrived and oc.voyage.arrived
+    return {"dopso": do, "eopso": eo, "ocpso": oc, "dopso_voyage": vd, "eopso_voyage": ve,
+            "saving_vs_distance_optimal": (1.0 - oc.energy / vd.total_energy) if ok else float("nan"),
+            "success": bool(ok and do.success and oc.initial.success)}
