@@ -832,8 +832,9 @@ def paper_scenario(*, time_scale: float = 0.1, kinematics: str = "paper",
       radius): (80 m, +12 m, 22 m), (160 m, -15 m, 25 m), (235 m, +10 m, 20 m);
     * current flowing towards the nautical directions ``current_courses_deg``
       (default east, then north -- against the route --, then west: a current
-      rotating anticlockwise in 90 deg steps, chosen before comparing
-      outcomes; ``docs/routing.md`` reports all 64 combinations of N/E/S/W),
+      rotating anticlockwise in 90 deg steps; the outcome depends strongly
+      on this unknown choice, so ``docs/routing.md`` reports all 64
+      combinations of N/E/S/W),
       turning at minutes 8 and 32 **times** ``time_scale``.
 
     Why ``time_scale``: with the paper's own thrust/drag curves the USV makes
