@@ -194,6 +194,8 @@ class AffineField(Field):
         return _bcast(w, t)
 
     def _gradient(self, t, xy):
+        if np.ndim(t) == 0:
+            return np.broadcast_to(self.G, xy.shape[:-1] + (2, 2))
         shape = np.broadcast_shapes(xy.shape[:-1], np.shape(t))
         return np.broadcast_to(self.G, shape + (2, 2))
 

@@ -191,13 +191,15 @@ class _Extremal(Model):
         super().__init__([speed])
 
     def _rhs(self, s, z, u, p):
-        xy, pp = z[..., :2], z[..., 2:]
-        V = p[..., 0]
-        norm = np.sqrt(np.sum(pp * pp, axis=-1, keepdims=True))
+        xy = z[..., :2]
+        p1, p2 = z[..., 2], z[..., 3]
+        Vn = p[0] / np.hypot(p1, p2)
         w = self.field._velocity(s, xy)
         J = self.field._gradient(s, xy)
         out = np.empty(np.broadcast_shapes(z.shape, w.shape[:-1] + (4,)))
-        out[..., :2] = -(V[..., None] * pp / norm + w)
+        out[..., 0] = -(Vn * p1 + w[..., 0])
+        out[..., 1] = -(Vn * p2 + w[..., 1])
+        pp = z[..., 2:]
         out[..., 2] = J[..., 0, 0] * pp[..., 0] + J[..., 1, 0] * pp[..., 1]
         out[..., 3] = J[..., 0, 1] * pp[..., 0] + J[..., 1, 1] * pp[..., 1]
         return out
@@ -233,8 +235,8 @@ def extremal(problem: ZermeloProblem, theta_f: float, duration: float, n: int = 
                          message=sol.message, method="extremal", info={"theta_f": float(theta_f)})
 
 
-def solve_pmp(problem: ZermeloProblem, *, n_scan: int = 48, t_max: float | None = None, n_steps: int = 120,
-              n_candidates: int = 3, tol: float = 1e-9, rtol: float = 1e-11, max_iter: int = 30,
+def solve_pmp(problem: ZermeloProblem, *, n_scan: int = 36, t_max: float | None = None, n_steps: int = 60,
+              n_candidates: int = 3, tol: float = 1e-9, rtol: float = 1e-10, max_iter: int = 30,
               n_out: int = 201) -> ZermeloResult:
     """Time-optimal route by Pontryagin's principle and shooting on the final heading (seed 001).
 
