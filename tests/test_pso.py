@@ -203,3 +203,20 @@ def test_problem_validation():
         USVProblem((0, 0), (0, -300), [Obstacle(0, -100, 10)], kinematics="drift")
     with pytest.raises(ValueError, match="objective"):
         PathCost(paper_scenario(), "time")
+
+
+def test_plans_are_reproducible_for_a_seed():
+    pr = paper_scenario()
+    a, b = plan_eopso(pr, rng=11, max_iter=40), plan_eopso(pr, rng=11, max_iter=40)
+    np.testing.assert_array_equal(a.rho, b.rho)
+    assert a.energy == b.energy and a.success and a.status == 1
+
+
+def test_plots_return_axes():
+    import matplotlib
+    matplotlib.use("Agg")
+    pr = paper_scenario()
+    r = plan_dopso(pr, rng=0, max_iter=20)
+    ax = pr.plot()
+    assert r.plot(ax=ax) is ax
+    assert sail(pr, r.points).plot() is not None

@@ -56,6 +56,23 @@ def test_pso_json_problem_with_model_vessel(tmp_path):
     assert set(df.planner) == {"ocpso", "dopso", "eopso"}
 
 
+def test_pso_vessel_from_a_fit_result_json(tmp_path):
+    from shipid.models import get_model
+
+    m = get_model("kcs-response")
+    coef = dict(zip(m.param_names, m.params))
+    coef["a9"] = coef["a9"] * 1.1  # steady speed -a9 n^2 / (a1 + a8 n) = 1.1 * 1.7 m/s at 10 rps
+    (tmp_path / "fit.json").write_text(json.dumps({"model": "kcs-response", "coef": coef, "coef_std": {}}))
+    spec = {"type": "pso", "start": [0, 0], "goal": [0, -300], "obstacles": [{"x": 10, "y": -100, "radius": 25}],
+            "vessel": {"type": "model", "result": "fit.json", "n": 10, "power_coefficient": 0.04},
+            "seed": 1, "max_iter": 40}
+    (tmp_path / "p.json").write_text(json.dumps(spec))
+    assert main(["route", str(tmp_path / "p.json"), "-o", str(tmp_path / "r.json")]) == 0
+    doc = json.loads((tmp_path / "r.json").read_text())
+    # still water: time = distance / (1.1 * 1.7 m/s)
+    assert doc["time_s"] == pytest.approx(doc["distance_m"] / (1.1 * 1.7), rel=1e-9)
+
+
 @pytest.mark.slow
 def test_pso_paper(tmp_path):
     out = tmp_path / "p.json"

@@ -175,6 +175,21 @@ class USVProblem:
         ang = self.axis_angle + rho
         return self.start + radii[..., :, None] * np.stack([np.cos(ang), np.sin(ang)], axis=-1)
 
+    def plot(self, ax=None, circles: bool = True):
+        """Obstacles, dimension circles (dotted), start and goal; returns the axes."""
+        import matplotlib.pyplot as plt
+
+        ax = ax or plt.gca()
+        for o in self.obstacles:
+            ax.add_patch(plt.Circle((o.x, o.y), o.radius, color="0.85"))
+        if circles:
+            for r in self.radii:
+                ax.add_patch(plt.Circle(tuple(self.start), r, fill=False, ls=":", color="0.6"))
+        ax.plot(*self.start, "k^")
+        ax.plot(*self.goal, "k*")
+        ax.set_aspect("equal")
+        return ax
+
     def path(self, rho) -> np.ndarray:
         """Full path ``(..., m + 2, 2)``: start, waypoints, goal."""
         wp = self.waypoints(rho)
@@ -469,6 +484,23 @@ class PlanResult:
     def success(self) -> bool:
         return bool(self.opt.success and np.isfinite(self.length))
 
+    @property
+    def status(self) -> int:
+        return int(self.opt.status)
+
+    @property
+    def message(self) -> str:
+        return self.opt.message
+
+    def plot(self, ax=None, **kw):
+        """Plot the path (north against east); returns the axes."""
+        import matplotlib.pyplot as plt
+
+        ax = ax or plt.gca()
+        ax.plot(self.points[:, 0], self.points[:, 1], "-s", label=kw.pop("label", self.objective), **kw)
+        ax.set_aspect("equal")
+        return ax
+
     def to_pandas(self, origin=None) -> pd.DataFrame:
         df = pd.DataFrame({"x": self.points[:, 0], "y": self.points[:, 1]})
         if origin is not None:
@@ -631,9 +663,23 @@ class Voyage:
     def duration(self) -> float:
         return float(self.t[-1] - self.t[0])
 
+    @property
+    def success(self) -> bool:
+        return bool(self.arrived)
+
     def to_pandas(self) -> pd.DataFrame:
         return pd.DataFrame({"t": self.t, "x": self.xy[:, 0], "y": self.xy[:, 1], "energy_J": self.energy,
                              "leg": self.leg})
+
+    def plot(self, ax=None, **kw):
+        """Energy spent [J] against time [s]; returns the axes."""
+        import matplotlib.pyplot as plt
+
+        ax = ax or plt.gca()
+        ax.plot(self.t, self.energy, **kw)
+        ax.set_xlabel("t [s]")
+        ax.set_ylabel("energy [J]")
+        return ax
 
 
 def sail(problem: USVProblem, points, *, t0: float = 0.0, e0: float = 0.0, stop_time: float | None = None) -> Voyage:
@@ -705,6 +751,15 @@ class OCPSOResult:
     @property
     def energy(self) -> float:
         return self.voyage.total_energy
+
+    @property
+    def success(self) -> bool:
+        return bool(self.voyage.arrived and self.initial.success)
+
+    @property
+    def message(self) -> str:
+        n = sum(e["replanned"] for e in self.events)
+        return f"{self.voyage.message}; {len(self.events)} replanning event(s), {n} changed the plan"
 
     @property
     def length(self) -> float:
