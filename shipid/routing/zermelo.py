@@ -31,7 +31,7 @@ closed-form time ``(cot(u0 - pi) - cot(alpha)) / k`` of the extremal with the
 *rounded* angles ``u(0) = 345 deg, alpha = 30 deg``: exactly ``4 (1 + sqrt 3) =
 10.9282 h``.  That extremal does not start at the printed ``A = (-1.86, 3.66)``
 but about 0.01 nm away from it; the extremal through the printed A takes
-10.9157 h with ``u(0) = 344.96 deg`` (see ``docs/routing.md``).
+10.9157 h with ``u(0) = 344.98 deg`` (see ``docs/routing.md``).
 """
 from __future__ import annotations
 
