@@ -19,6 +19,7 @@ COMMAND_MODULES: list[str] = [
     "shipid.commands.identify",
     "shipid.commands.logs",
     "shipid.commands.manoeuvre",
+    "shipid.commands.routing",
 ]
 
 
