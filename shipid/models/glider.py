@@ -163,38 +163,64 @@ class GliderModel(Model):
         out["delta_e"] = np.arctan2(sde, cde)
         return out
 
-    def _forces(self, x, u_in, p):
+    def _constants(self, p):
+        """Parameter-derived constants, cached for the last parameter array seen."""
+        key = (p.shape, p.tobytes())
+        cache = self.__dict__.get("_kcache")
+        if cache is not None and cache[0] == key:
+            return cache[1]
         P = self._split(p)
+        m, xg, zg, rho, g = P["m"], P["x_g"], P["z_g"], P["rho"], P["g"]
+        W = m * g
+        K = {"a": P["a"], "b": P["b"], "c": P["c"], "x_fin": P["x_fin"], "m": m, "x_g": xg, "z_g": zg}
+        K["WB"] = W - rho * P["volume"] * g
+        K["zgW"], K["xgW"] = zg * W, xg * W
+        half = 0.5 * rho * (np.pi / 4.0) * P["diameter"] ** 2        # 1/2 rho A_f
+        K["half"] = half
+        K["CLh"] = half * P["CL_alpha"]
+        K["CMh"] = half * P["length"] * P["CM_alpha"]
+        span, chord = P["fin_span"], P["fin_chord"]
+        lam = span / chord                                           # aspect ratio
+        cl = 6.13 * lam / (2.25 + lam)                               # paper eq. (17)
+        qf = 0.5 * rho * span * chord
+        K["qcl"] = qf * cl
+        K["qcd"] = qf * cl * cl / (np.pi * lam)                      # paper eq. (18)
+        Xu, Zw, Mq = P["X_udot"], P["Z_wdot"], P["M_qdot"]
+        K["m_Zw"], K["m_Xu"], K["Zw_Xu"] = m - Zw, m - Xu, Zw - Xu
+        # mass matrix [[m11, 0, m13], [0, m22, m23], [m13, m23, m33]]: inverse by its adjugate
+        m11, m22, m33 = m - Xu, m - Zw, P["Iy"] - Mq
+        m13, m23 = m * zg, -m * xg
+        i11 = m22 * m33 - m23 * m23
+        i13 = -m22 * m13
+        det = m11 * i11 + m13 * i13
+        K["i11"], K["i12"], K["i13"] = i11 / det, m13 * m23 / det, i13 / det
+        K["i22"], K["i23"], K["i33"] = (m11 * m33 - m13 * m13) / det, -m11 * m23 / det, m11 * m22 / det
+        self.__dict__["_kcache"] = (key, K)
+        return K
+
+    def _forces(self, x, u_in, p):
+        K = self._constants(p)
         _, _, th, uu, w, q = np.ascontiguousarray(np.moveaxis(x, -1, 0))
         delta = u_in[..., 0]
-        rho, g = P["rho"], P["g"]
-        W = P["m"] * g
-        B = rho * P["volume"] * g
         out = {}
         sth, cth = np.sin(th), np.cos(th)
-        out["X_G"] = -(W - B) * sth
-        out["Z_G"] = (W - B) * cth
-        out["M_G"] = -P["z_g"] * W * sth - P["x_g"] * W * cth
+        out["X_G"] = -K["WB"] * sth
+        out["Z_G"] = K["WB"] * cth
+        out["M_G"] = -K["zgW"] * sth - K["xgW"] * cth
         # hull: drag along -velocity, lift perpendicular, moment; cos(alpha) = u/V, sin(alpha) = w/V
         V2 = uu * uu + w * w
         V = np.sqrt(V2)
         alpha = np.arctan2(w, uu)
-        half = 0.5 * rho * (np.pi / 4.0) * P["diameter"] ** 2
-        cd = (P["a"] * alpha + P["b"] * np.sign(alpha)) * alpha + P["c"]
-        hv = half * V
-        out["X_D"] = -hv * cd * uu
-        out["Z_D"] = -hv * cd * w
-        lift = hv * P["CL_alpha"] * alpha          # L / V
+        cd = (K["a"] * alpha + K["b"] * np.sign(alpha)) * alpha + K["c"]
+        hv = K["half"] * V * cd
+        out["X_D"] = -hv * uu
+        out["Z_D"] = -hv * w
+        lift = K["CLh"] * V * alpha                # L / V
         out["X_L"] = lift * w                      # L sin(alpha)
         out["Z_L"] = -lift * uu                    # -L cos(alpha)
-        out["M_H"] = half * P["length"] * P["CM_alpha"] * alpha * V2
+        out["M_H"] = K["CMh"] * alpha * V2
         # fins at x_fin: local flow angle delta_h, effective angle delta_e = delta + delta_h
-        span, chord = P["fin_span"], P["fin_chord"]
-        lam = span / chord
-        cl = 6.13 * lam / (2.25 + lam)
-        cdf = cl * cl / (np.pi * lam)
-        qf = 0.5 * rho * span * chord
-        wf = w - q * P["x_fin"]
+        wf = w - q * K["x_fin"]
         vf2 = uu * uu + wf * wf
         vf = np.sqrt(vf2)
         pos = vf > 0
@@ -204,45 +230,33 @@ class GliderModel(Model):
         sd, cdl = np.sin(delta), np.cos(delta)
         sde = sd * cdh + cdl * sdh                  # sin(delta_e)
         cde = cdl * cdh - sd * sdh                  # cos(delta_e)
-        lf = qf * cl * sde * cde * vf2
-        df = qf * cdf * sde * sde * vf2
+        sv = sde * vf2
+        lf = K["qcl"] * cde * sv
+        df = K["qcd"] * sde * sv
         out["X_F"] = lf * sdh - df * cdh
         out["Z_F"] = -lf * cdh - df * sdh
-        out["M_F"] = -P["x_fin"] * out["Z_F"]
+        out["M_F"] = -K["x_fin"] * out["Z_F"]
         out["alpha"] = alpha
         out["_sde_cde"] = (sde, cde)
-        out["_state"] = (th, uu, w, q)
-        return out, P
+        out["_state"] = (th, uu, w, q, sth, cth)
+        return out, K
 
     def _rhs(self, t, x, u, p):
-        F, P = self._forces(x, u, p)
-        th, uu, w, q = F["_state"]
-        m, xg, zg = P["m"], P["x_g"], P["z_g"]
-        Xu, Zw, Mq = P["X_udot"], P["Z_wdot"], P["M_qdot"]
+        F, K = self._forces(x, u, p)
+        th, uu, w, q, sth, cth = F["_state"]
+        m, xg, zg = K["m"], K["x_g"], K["z_g"]
         mq = m * q
-        X = F["X_G"] + F["X_D"] + F["X_L"] + F["X_F"] + (xg * mq - w * (m - Zw)) * q
-        Z = F["Z_G"] + F["Z_D"] + F["Z_L"] + F["Z_F"] + (uu * (m - Xu) + zg * mq) * q
-        M = F["M_G"] + F["M_H"] + F["M_F"] - (zg * w + xg * uu) * mq - (Zw - Xu) * uu * w
-        # mass matrix [[m11, 0, m13], [0, m22, m23], [m13, m23, m33]] solved in closed form
-        m11, m22, m33 = m - Xu, m - Zw, P["Iy"] - Mq
-        m13, m23 = m * zg, -m * xg
-        # adjugate of the symmetric matrix over its determinant
-        i11 = m22 * m33 - m23 * m23
-        i12 = m13 * m23
-        i13 = -m22 * m13
-        i22 = m11 * m33 - m13 * m13
-        i23 = -m11 * m23
-        i33 = m11 * m22
-        det = m11 * i11 + m13 * i13
-        shape = np.broadcast_shapes(np.shape(X), np.shape(Z), np.shape(M), np.shape(th), np.shape(det))
+        X = F["X_G"] + F["X_D"] + F["X_L"] + F["X_F"] + (xg * mq - w * K["m_Zw"]) * q
+        Z = F["Z_G"] + F["Z_D"] + F["Z_L"] + F["Z_F"] + (uu * K["m_Xu"] + zg * mq) * q
+        M = F["M_G"] + F["M_H"] + F["M_F"] - (zg * w + xg * uu) * mq - K["Zw_Xu"] * uu * w
+        shape = np.broadcast_shapes(np.shape(X), np.shape(Z), np.shape(M), np.shape(th))
         out = np.empty(shape + (6,))
-        sth, cth = np.sin(th), np.cos(th)
         out[..., 0] = uu * cth + w * sth
         out[..., 1] = w * cth - uu * sth
         out[..., 2] = q
-        out[..., 3] = (i11 * X + i12 * Z + i13 * M) / det
-        out[..., 4] = (i12 * X + i22 * Z + i23 * M) / det
-        out[..., 5] = (i13 * X + i23 * Z + i33 * M) / det
+        out[..., 3] = K["i11"] * X + K["i12"] * Z + K["i13"] * M
+        out[..., 4] = K["i12"] * X + K["i22"] * Z + K["i23"] * M
+        out[..., 5] = K["i13"] * X + K["i23"] * Z + K["i33"] * M
         return out
 
     # ------------------------------------------------ vectorised Jacobians
