@@ -270,6 +270,15 @@ class Model:
         return self._fd(t, x, u, p, "u")
 
     # ------------------------------------------------------------ conveniences
+    def identifiability_notes(self, arrays, estimated) -> list[str]:
+        """Model-specific identifiability warnings for a set of logs.
+
+        ``arrays`` are :class:`shipid.identify.data.LogArrays` (inputs in
+        ``.U`` columns ordered as ``input_names``); ``estimated`` the names
+        of the estimated parameters.  The base model has none.
+        """
+        return []
+
     def describe(self) -> pd.DataFrame:
         """Table of the parameters: name, value, unit."""
         return pd.DataFrame(

@@ -1,0 +1,941 @@
+"""Standard manoeuvres (turning circle, zigzag) for any model, and their metrics.
+
+Simulation
+----------
+:func:`turning_circle`, :func:`zigzag` and :func:`turning_sweep` run the
+standard manoeuvres of ITTC 7.5-04-02-01 / IMO MSC.137(76) for **any**
+protocol model with states ``x, y, psi, u, v, r`` and inputs ``delta, n``,
+as one vectorised batch through :func:`shipid.simulate.simulate`:
+steady approach (the propeller rps that holds the approach speed with the
+rudder amidships is solved through the model's own ``rhs``), rudder moved at
+the ship's steering rate to the ordered angle (turning circle: held until the
+heading has changed by at least 540 deg; zigzag: reversed each time the
+heading deviation reaches the switch angle -- a batch-aware feedback law).
+
+Sign convention: positive ``delta`` is the model's own positive rudder; the
+side of a turn is taken from the heading change (positive psi change =
+starboard for the shipped models).  Logs may use the opposite rudder sign
+(the MARIN files do: +35 deg there turns to port); the metrics never use the
+rudder sign, only the execute time and the heading.
+
+Metrics
+-------
+:func:`turning_metrics`, :func:`zigzag_metrics` and :func:`metrics` work on
+plain arrays, on a DataFrame/TrialLog (columns ``time, x, y, psi, u, [v],
+delta``) and on a simulation, with the same code:
+
+* execute: the first sample with ``|delta - delta[0]| > 0.5 deg`` (as in the
+  MARIN README), unless the execute time is known (simulations pass it);
+* advance / transfer: position change along / across the heading at the
+  execute when the heading has changed by 90 deg (linear interpolation
+  between samples); tactical diameter: across-distance at 180 deg;
+* steady turning diameter: least-squares circle through the track after the
+  heading change has passed 360 deg (270 deg when the run is shorter), speed
+  loss ``1 - U_steady/U_approach`` over the same part;
+* zigzag: first / second overshoot angle and their times from the first
+  execute, time to second execute, and the initial turning ability (track
+  length from the first to the second execute, IMO's 10 deg heading change);
+* IMO MSC.137(76) criteria with the L/V-dependent overshoot limits.
+
+The results state the reference point of the positions they used: the
+model's origin (midship for ``mmg``) for simulations, the logged point for
+logs unless ``reference_offset`` moves it to midship.
+"""
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import asdict, dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+import pandas as pd
+
+from .models.base import Model
+from .simulate import SimulationResult, simulate
+
+__all__ = [
+    "TurningMetrics", "ZigzagMetrics", "ManoeuvreResult", "turning_metrics", "zigzag_metrics", "metrics",
+    "detect_manoeuvre", "detect_execute", "imo_limits", "turning_circle", "zigzag", "turning_sweep",
+    "steady_rps", "ship_info",
+]
+
+EXECUTE_THRESHOLD_DEG = 0.5
+_REQUIRED_STATES = ("x", "y", "psi", "u", "v", "r")
+_REQUIRED_INPUTS = ("delta", "n")
+#: Ship facts of models that do not carry them (SPEC.md section 1: the KCS model of seed 002).
+_KNOWN_SHIPS = {"kcs-response": {"lpp": 4.36, "rudder_rate": math.radians(16.8), "design_speed": 1.7}}
+
+
+# --------------------------------------------------------------------------- results
+@dataclass
+class TurningMetrics:
+    """Turning-circle metrics (ITTC 7.5-04-02-01 / IMO MSC.137(76)).
+
+    Lengths in metres and in ship lengths (``*_L``); angles in degrees;
+    times [s] from the execute; speeds [m/s].  NaN where the run did not
+    reach the heading change a metric needs (see ``message``).
+    """
+
+    lpp: float
+    side: str                     # "starboard" (heading increasing) or "port"
+    rudder_deg: float             # ordered rudder angle (signed, as logged / simulated)
+    approach_speed: float
+    advance: float = math.nan
+    transfer: float = math.nan
+    tactical_diameter: float = math.nan
+    steady_diameter: float = math.nan
+    steady_speed: float = math.nan
+    speed_loss: float = math.nan  # 1 - U_steady / U_approach
+    time_90: float = math.nan
+    time_180: float = math.nan
+    max_heading_change_deg: float = math.nan
+    track_reach_10deg: float = math.nan  # track length to a 10 deg heading change (IMO initial turning, 10 deg rudder)
+    execute_time: float = math.nan
+    reference: str = "logged point"
+    success: bool = True
+    message: str = ""
+
+    def __post_init__(self):
+        self.manoeuvre = "turning"
+
+    @property
+    def advance_L(self) -> float:
+        return self.advance / self.lpp
+
+    @property
+    def transfer_L(self) -> float:
+        return self.transfer / self.lpp
+
+    @property
+    def tactical_diameter_L(self) -> float:
+        return self.tactical_diameter / self.lpp
+
+    @property
+    def steady_diameter_L(self) -> float:
+        return self.steady_diameter / self.lpp
+
+    def imo(self) -> dict:
+        """IMO MSC.137(76) turning criteria: advance < 4.5 L, tactical diameter < 5 L (and initial turning
+        track reach <= 2.5 L when the rudder is 10 deg).  ``None`` where not applicable/unavailable."""
+        out = {
+            "advance_limit_L": 4.5, "advance_pass": _le(self.advance_L, 4.5),
+            "tactical_diameter_limit_L": 5.0, "tactical_diameter_pass": _le(self.tactical_diameter_L, 5.0),
+        }
+        if abs(abs(self.rudder_deg) - 10.0) < 1.0:
+            out["initial_turning_limit_L"] = 2.5
+            out["initial_turning_pass"] = _le(self.track_reach_10deg / self.lpp, 2.5)
+        return out
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able dict (keys ``manoeuvre``, ``advance_L``, ``transfer_L``, ``tactical_diameter_L``,
+        ``steady_diameter_L``, ``speed_loss`` ... and the IMO checks under ``imo``)."""
+        d = asdict(self)
+        d = {"manoeuvre": "turning", "advance_L": self.advance_L, "transfer_L": self.transfer_L,
+             "tactical_diameter_L": self.tactical_diameter_L, "steady_diameter_L": self.steady_diameter_L,
+             "speed_loss": self.speed_loss, "initial_turning_L": self.track_reach_10deg / self.lpp, **d}
+        d["imo"] = self.imo()
+        return _jsonable(d)
+
+
+@dataclass
+class ZigzagMetrics:
+    """Zigzag metrics (ITTC 7.5-04-02-01 / IMO MSC.137(76)); angles [deg], times [s] from the first execute."""
+
+    lpp: float
+    rudder_deg: float            # rudder amplitude (positive)
+    switch_deg: float            # heading deviation at which the rudder is reversed (positive)
+    first_side: str              # side of the first heading change: "starboard" or "port"
+    approach_speed: float
+    overshoot1_deg: float = math.nan
+    overshoot2_deg: float = math.nan
+    overshoot1_time: float = math.nan
+    overshoot2_time: float = math.nan
+    time_second_execute: float = math.nan
+    time_third_execute: float = math.nan
+    initial_turning: float = math.nan  # track length first -> second execute [m]
+    execute_time: float = math.nan
+    reference: str = "logged point"
+    success: bool = True
+    message: str = ""
+
+    def __post_init__(self):
+        self.manoeuvre = "zigzag"
+
+    @property
+    def initial_turning_L(self) -> float:
+        return self.initial_turning / self.lpp
+
+    @property
+    def l_over_v(self) -> float:
+        """L/V [s] with the approach speed."""
+        return self.lpp / self.approach_speed
+
+    def imo(self) -> dict:
+        """IMO MSC.137(76) checks that apply to this zigzag (10/10: first and second overshoot with the
+        L/V-dependent limits and initial turning <= 2.5 L; 20/20: first overshoot <= 25 deg)."""
+        lim = imo_limits(self.lpp, self.approach_speed)
+        out: dict[str, Any] = {"L_over_V_s": self.l_over_v}
+        if abs(self.rudder_deg - 10) < 1 and abs(self.switch_deg - 10) < 1:
+            out.update(overshoot1_limit_deg=lim["zz10_overshoot1_deg"], overshoot1_pass=_le(self.overshoot1_deg, lim["zz10_overshoot1_deg"]),
+                       overshoot2_limit_deg=lim["zz10_overshoot2_deg"], overshoot2_pass=_le(self.overshoot2_deg, lim["zz10_overshoot2_deg"]),
+                       initial_turning_limit_L=2.5, initial_turning_pass=_le(self.initial_turning_L, 2.5))
+        elif abs(self.rudder_deg - 20) < 1 and abs(self.switch_deg - 20) < 1:
+            out.update(overshoot1_limit_deg=lim["zz20_overshoot1_deg"], overshoot1_pass=_le(self.overshoot1_deg, lim["zz20_overshoot1_deg"]))
+        return out
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able dict (keys ``manoeuvre``, ``overshoot1_deg``, ``overshoot2_deg``, ... ``imo``)."""
+        d = {"manoeuvre": "zigzag", **asdict(self), "initial_turning_L": self.initial_turning_L}
+        d["imo"] = self.imo()
+        return _jsonable(d)
+
+
+def _le(value, limit):
+    return None if not np.isfinite(value) else bool(value <= limit)
+
+
+def _jsonable(d):
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out[k] = _jsonable(v)
+        elif isinstance(v, (np.floating, float)):
+            out[k] = None if not np.isfinite(v) else float(v)
+        elif isinstance(v, np.bool_):
+            out[k] = bool(v)
+        elif isinstance(v, np.integer):
+            out[k] = int(v)
+        else:
+            out[k] = v
+    return out
+
+
+def imo_limits(lpp: float, speed: float) -> dict:
+    """IMO MSC.137(76) limits for a ship of length ``lpp`` [m] at test speed ``speed`` [m/s].
+
+    10/10 first overshoot: 10 deg if L/V < 10 s, 20 deg if L/V >= 30 s, 5 + L/V/2 between;
+    10/10 second overshoot: 25 / 40 / 17.5 + 0.75 L/V; 20/20 first overshoot 25 deg;
+    advance 4.5 L, tactical diameter 5 L, initial turning 2.5 L.
+    """
+    if not (lpp > 0 and speed > 0):
+        raise ValueError(f"imo_limits: lpp and speed must be positive, got lpp={lpp}, speed={speed}")
+    lv = lpp / speed
+    if lv < 10:
+        o1, o2 = 10.0, 25.0
+    elif lv >= 30:
+        o1, o2 = 20.0, 40.0
+    else:
+        o1, o2 = 5.0 + 0.5 * lv, 17.5 + 0.75 * lv
+    return {"L_over_V_s": lv, "zz10_overshoot1_deg": o1, "zz10_overshoot2_deg": o2, "zz20_overshoot1_deg": 25.0,
+            "advance_L": 4.5, "tactical_diameter_L": 5.0, "initial_turning_L": 2.5}
+
+
+# --------------------------------------------------------------------------- metric helpers
+def detect_execute(t, delta, threshold_deg: float = EXECUTE_THRESHOLD_DEG) -> tuple[int, float]:
+    """Index and time of the rudder execute: first sample with ``|delta - delta[0]| > threshold``.
+
+    ``delta`` in radians.  Raises ValueError when the rudder never moves.
+    """
+    delta = np.asarray(delta, dtype=float)
+    moved = np.abs(delta - delta[0]) > math.radians(threshold_deg)
+    if not moved.any():
+        raise ValueError(f"no rudder execute found: |delta - delta[0]| never exceeds {threshold_deg} deg")
+    i = int(np.argmax(moved))
+    return i, float(np.asarray(t)[i])
+
+
+def _crossing(t, h, level, start):
+    """First time after index ``start`` where ``h`` reaches ``level`` (upwards), linearly interpolated.
+
+    Returns (index_after, fraction, time) or None.
+    """
+    hh = h[start:]
+    idx = np.nonzero(hh >= level)[0]
+    if idx.size == 0:
+        return None
+    k = start + int(idx[0])
+    if k == start:
+        return k, 1.0, float(t[k])
+    f = (level - h[k - 1]) / (h[k] - h[k - 1])
+    return k, float(f), float(t[k - 1] + f * (t[k] - t[k - 1]))
+
+
+def _interp_at(a, k, f):
+    return a[k - 1] + f * (a[k] - a[k - 1]) if f < 1.0 or k == 0 else a[k]
+
+
+def _circle_fit(x, y):
+    """Least-squares (Kasa) circle through points; returns (xc, yc, radius)."""
+    A = np.stack([x, y, np.ones_like(x)], axis=1)
+    b = -(x * x + y * y)
+    (D, E, F), *_ = np.linalg.lstsq(A, b, rcond=None)
+    xc, yc = -D / 2, -E / 2
+    return xc, yc, math.sqrt(max(xc * xc + yc * yc - F, 0.0))
+
+
+def _side(sign):
+    return "starboard" if sign > 0 else "port"
+
+
+def turning_metrics(t, x, y, psi, u, delta, *, lpp: float, v=None, execute_time: float | None = None,
+                    reference: str = "logged point") -> TurningMetrics:
+    """Turning-circle metrics from time series.
+
+    Parameters
+    ----------
+    t : array (n,)  time [s]
+    x, y : array (n,)  earth-fixed position [m] of the reference point
+    psi : array (n,)  heading [rad], unwrapped (it is unwrapped again here)
+    u : array (n,)  surge speed [m/s]; ``v`` (sway) optional, U = hypot(u, v)
+    delta : array (n,)  rudder angle [rad] (any sign convention)
+    lpp : float  ship length [m] for the non-dimensional values
+    execute_time : float, optional  known execute time (else detected from ``delta``)
+    reference : str  what the positions refer to (copied into the result)
+    """
+    t, x, y, u, delta = (np.asarray(a, dtype=float) for a in (t, x, y, u, delta))
+    psi = np.unwrap(np.asarray(psi, dtype=float))
+    U = np.abs(u) if v is None else np.hypot(u, np.asarray(v, dtype=float))
+    if not lpp or lpp <= 0:
+        raise ValueError(f"turning_metrics: lpp must be a positive length in metres, got {lpp}")
+    ie, te = _execute(t, delta, execute_time)
+    psi_e = _at_time(t, psi, te)
+    xe, ye = _at_time(t, x, te), _at_time(t, y, te)
+    dpsi = psi - psi_e
+    after = t >= te
+    s = 1.0 if dpsi[after][np.argmax(np.abs(dpsi[after]))] >= 0 else -1.0
+    h = s * dpsi
+    rud = float(delta[np.argmax(np.abs(delta - delta[0]))])
+    U_app = float(np.mean(U[: ie + 1][-max(1, min(ie + 1, 20)):]))
+    res = TurningMetrics(lpp=float(lpp), side=_side(s), rudder_deg=math.degrees(rud), approach_speed=U_app,
+                         execute_time=te, reference=reference, max_heading_change_deg=float(np.degrees(h[after].max())))
+    cos_e, sin_e = math.cos(psi_e), math.sin(psi_e)
+    along = (x - xe) * cos_e + (y - ye) * sin_e
+    across = s * (-(x - xe) * sin_e + (y - ye) * cos_e)
+    msgs = []
+    c10 = _crossing(t, h, math.radians(10), ie)
+    if c10:
+        k, f, _ = c10
+        seg = np.hypot(np.diff(x[ie:k + 1]), np.diff(y[ie:k + 1]))
+        res.track_reach_10deg = float(seg[:-1].sum() + f * seg[-1]) if seg.size else 0.0
+    c90 = _crossing(t, h, math.pi / 2, ie)
+    if c90:
+        k, f, res.time_90 = c90
+        res.advance = float(_interp_at(along, k, f))
+        res.transfer = float(_interp_at(across, k, f))
+        res.time_90 -= te
+    else:
+        msgs.append("heading change never reached 90 deg")
+    c180 = _crossing(t, h, math.pi, ie)
+    if c180:
+        k, f, res.time_180 = c180
+        res.tactical_diameter = float(_interp_at(across, k, f))
+        res.time_180 -= te
+    else:
+        msgs.append("heading change never reached 180 deg")
+    # the steady part ends where the rudder leaves its held angle (pull-out at the end of MARIN's tc runs)
+    held_end = t.size
+    if c90:
+        held = delta[c90[0]]
+        moved = np.nonzero(np.abs(delta[c90[0]:] - held) > math.radians(1.0))[0]
+        if moved.size:
+            held_end = c90[0] + int(moved[0])
+            msgs.append(f"rudder left its held angle at t = {t[held_end]:.1f} s; metrics use the track before it")
+    in_hold = np.arange(t.size) < held_end
+    hmax = h[after & in_hold].max()
+    start = math.radians(360) if hmax >= math.radians(450) else math.radians(270)
+    steady = after & in_hold & (h >= start)
+    if steady.sum() >= 10 and hmax - start >= math.radians(90):
+        _, _, R = _circle_fit(x[steady], y[steady])
+        res.steady_diameter = 2 * R
+        res.steady_speed = float(np.mean(U[steady]))
+        res.speed_loss = 1.0 - res.steady_speed / U_app
+        if start < math.radians(360):
+            msgs.append("steady part taken from 270 deg heading change (run shorter than 450 deg)")
+    else:
+        msgs.append("run too short for the steady turning diameter (needs >= 360 deg heading change)")
+    res.success = bool(c90 and c180)
+    res.message = "; ".join(msgs) if msgs else "ok"
+    return res
+
+
+def zigzag_metrics(t, psi, delta, *, lpp: float, u=None, v=None, x=None, y=None, execute_time: float | None = None,
+                   switch_deg: float | None = None, rudder_deg: float | None = None,
+                   reference: str = "logged point") -> ZigzagMetrics:
+    """Zigzag metrics from time series.
+
+    Parameters
+    ----------
+    t, psi, delta : arrays (n,)  time [s], heading [rad], rudder [rad] (any sign convention)
+    lpp : float  ship length [m]
+    u, v : arrays, optional  speeds [m/s] (approach speed for the IMO L/V limits)
+    x, y : arrays, optional  positions [m] (initial turning track length)
+    execute_time : float, optional  known first-execute time (else detected)
+    switch_deg, rudder_deg : float, optional  nominal switch heading and rudder amplitude [deg];
+        default: the rudder amplitude rounded to a whole degree, and switch = rudder (an x/x zigzag).
+    """
+    t, delta = np.asarray(t, dtype=float), np.asarray(delta, dtype=float)
+    psi = np.unwrap(np.asarray(psi, dtype=float))
+    ie, te = _execute(t, delta, execute_time)
+    psi_e = _at_time(t, psi, te)
+    dpsi = psi - psi_e
+    da = delta[t >= te]
+    # amplitude about zero from the peak-to-peak swing (the approach rudder delta[0] is not the zero of the
+    # zigzag: MARIN zz_10 starts at -0.8 deg and swings -9.95 .. +10.7)
+    amp = float((da.max() - da.min()) / 2) if (da.max() > 0 > da.min()) else float(np.max(np.abs(da)))
+    rud = float(round(math.degrees(amp))) if rudder_deg is None else float(rudder_deg)
+    sw = rud if switch_deg is None else float(switch_deg)
+    if sw <= 0:
+        raise ValueError(f"zigzag_metrics: switch angle must be positive, got {sw}")
+    after = np.nonzero(t >= te)[0]
+    # side of the first heading change: first time |dpsi| reaches half the switch angle
+    big = after[np.abs(dpsi[after]) >= math.radians(sw) / 2]
+    if big.size == 0:
+        raise ValueError(f"zigzag_metrics: the heading never changed by {sw / 2:g} deg after the execute; not a zigzag")
+    s = 1.0 if dpsi[big[0]] > 0 else -1.0
+    h = s * dpsi
+    U_app = math.nan
+    if u is not None:
+        uu = np.asarray(u, dtype=float)
+        U = np.abs(uu) if v is None else np.hypot(uu, np.asarray(v, dtype=float))
+        U_app = float(np.mean(U[: ie + 1][-max(1, min(ie + 1, 20)):]))
+    res = ZigzagMetrics(lpp=float(lpp), rudder_deg=rud, switch_deg=sw, first_side=_side(s), approach_speed=U_app,
+                        execute_time=te, reference=reference)
+    lev = math.radians(sw)
+    msgs = []
+    c2 = _crossing(t, h, lev, ie)
+    if not c2:
+        res.success, res.message = False, f"heading deviation never reached the switch angle {sw:g} deg"
+        return res
+    k2, f2, t2 = c2
+    res.time_second_execute = t2 - te
+    if x is not None and y is not None:
+        xx, yy = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+        seg = np.hypot(np.diff(xx[ie:k2 + 1]), np.diff(yy[ie:k2 + 1]))
+        res.initial_turning = float(seg[:-1].sum() + f2 * seg[-1]) if seg.size else 0.0
+    c3 = _crossing(t, -h, lev, k2)
+    end1 = c3[0] if c3 else h.size
+    seg1 = slice(k2, end1)
+    j = k2 + int(np.argmax(h[seg1]))
+    if c3:
+        res.overshoot1_deg = float(np.degrees(h[j]) - sw)
+        res.overshoot1_time = float(t[j] - te)
+        res.time_third_execute = c3[2] - te
+        c4 = _crossing(t, h, lev, c3[0])
+        end2 = c4[0] if c4 else h.size
+        j2 = c3[0] + int(np.argmax(-h[c3[0]:end2]))
+        # the extreme counts when the heading turned back after it (fourth execute, or > 0.5 deg recovery)
+        if c4 or (j2 < h.size - 1 and h[end2 - 1] - h[j2] > math.radians(0.5)):
+            res.overshoot2_deg = float(np.degrees(-h[j2]) - sw)
+            res.overshoot2_time = float(t[j2] - te)
+            if not c4:
+                msgs.append("run ends before the fourth execute; second overshoot from the turned-back heading")
+        else:
+            msgs.append("run ends before the heading turned back after the third execute: no second overshoot")
+    else:
+        if j < h.size - 1 and h[-1] < h[j] - math.radians(0.5):
+            res.overshoot1_deg = float(np.degrees(h[j]) - sw)
+            res.overshoot1_time = float(t[j] - te)
+        msgs.append("run ends before the third execute: second overshoot not available")
+    res.success = bool(np.isfinite(res.overshoot1_deg))
+    res.message = "; ".join(msgs) if msgs else "ok"
+    return res
+
+
+def _execute(t, delta, execute_time):
+    if execute_time is None:
+        return detect_execute(t, delta)
+    te = float(execute_time)
+    if not (t[0] <= te <= t[-1]):
+        raise ValueError(f"execute_time {te} s is outside the time range [{t[0]}, {t[-1]}] s")
+    return int(np.searchsorted(t, te, side="left")), te
+
+
+def _at_time(t, a, te):
+    return float(np.interp(te, t, a))
+
+
+def detect_manoeuvre(delta, threshold_deg: float = 2.0) -> str:
+    """``"zigzag"`` when the rudder goes both ways from its initial value by more than ``threshold_deg``
+    after the execute, else ``"turning"``."""
+    d = np.degrees(np.asarray(delta, dtype=float) - float(np.asarray(delta)[0]))
+    up, down = d.max() > threshold_deg, d.min() < -threshold_deg
+    if not (up or down):
+        raise ValueError("no manoeuvre: the rudder never moves more than "
+                         f"{threshold_deg} deg from its initial value")
+    return "zigzag" if (up and down) else "turning"
+
+
+def _frame(data) -> tuple[pd.DataFrame, Any]:
+    """Normalise a TrialLog / DataFrame / SimulationResult to a frame with column ``time``."""
+    ship = getattr(data, "ship", None)
+    if hasattr(data, "data") and isinstance(getattr(data, "data"), pd.DataFrame):
+        df = data.data
+    elif isinstance(data, pd.DataFrame):
+        df = data
+        if "time" not in df.columns:
+            if "t" in df.columns:
+                df = df.rename(columns={"t": "time"})
+            elif df.index.name in ("time", "t"):
+                df = df.reset_index().rename(columns={df.index.name: "time"})
+    else:
+        raise ValueError(f"metrics(): expected a TrialLog, a pandas DataFrame or a SimulationResult, got {type(data).__name__}")
+    return df, ship
+
+
+def metrics(data, *, lpp: float | None = None, kind: str = "auto", reference_offset: float | None = None,
+            execute_time: float | None = None, switch_deg: float | None = None, name: str | None = None):
+    """Standard-manoeuvre metrics of a log or a simulated run.
+
+    Parameters
+    ----------
+    data : TrialLog, DataFrame or SimulationResult (single member)
+        Needs ``time`` (column or index), ``psi`` [rad], ``delta`` [rad]; turning circles also
+        ``x, y`` [m] and ``u`` [m/s] (``v`` optional).
+    lpp : float, optional
+        Ship length [m]; defaults to the log's ship particulars (``data.ship.lpp``) or the model's ``lpp``.
+    kind : {"auto", "turning", "zigzag"}
+    reference_offset : float, optional
+        Distance [m] of the logged point forward of midship; positions are moved to midship
+        (``reference="midship"``).  Without it the logged point is used as it is.
+    execute_time, switch_deg : optional overrides (see :func:`turning_metrics`, :func:`zigzag_metrics`).
+
+    Returns
+    -------
+    TurningMetrics or ZigzagMetrics
+    """
+    reference = "logged point"
+    if isinstance(data, SimulationResult):
+        if data.batched:
+            raise ValueError("metrics(): batched simulation; pass result.to_pandas(member=i) or use the manoeuvre result's metrics")
+        lpp = lpp if lpp is not None else getattr(data.model, "lpp", None) or ship_info(data.model).get("lpp")
+        data = data.to_pandas()
+        reference = "model origin (midship for mmg)"
+    df, ship = _frame(data)
+    label = name or getattr(data, "name", None) or "data"
+    if lpp is None:
+        lpp = getattr(ship, "lpp", None)
+    if lpp is None or not lpp > 0:
+        raise ValueError(f"{label}: ship length unknown; pass lpp= (or --lpp on the command line)")
+    for col in ("time", "psi", "delta"):
+        if col not in df.columns:
+            raise ValueError(f"{label}: column '{col}' missing; metrics need time, psi [rad] and delta [rad]"
+                             f" (have {list(df.columns)})")
+    sub = df.dropna(subset=["time", "psi", "delta"])
+    t = sub["time"].to_numpy(float)
+    psi = sub["psi"].to_numpy(float)
+    if np.nanmax(np.abs(np.diff(psi))) > 1.0 and np.nanmax(np.abs(psi)) > 2 * math.pi + 1:
+        raise ValueError(f"{label}: column 'psi' jumps by more than 1 rad between samples and exceeds 2 pi; "
+                         "it looks like degrees -- convert to radians")
+    delta = sub["delta"].to_numpy(float)
+    kind = detect_manoeuvre(delta) if kind == "auto" else kind
+    x = sub["x"].to_numpy(float) if "x" in sub else None
+    y = sub["y"].to_numpy(float) if "y" in sub else None
+    if x is not None and reference_offset is not None:
+        x = x - reference_offset * np.cos(psi)
+        y = y - reference_offset * np.sin(psi)
+        reference = "midship"
+    u = sub["u"].to_numpy(float) if "u" in sub else None
+    v = sub["v"].to_numpy(float) if "v" in sub else None
+    if kind == "turning":
+        missing = [c for c, a in (("x", x), ("y", y), ("u", u)) if a is None]
+        if missing:
+            raise ValueError(f"{label}: turning-circle metrics need column(s) {missing}")
+        return turning_metrics(t, x, y, psi, u, delta, lpp=lpp, v=v, execute_time=execute_time, reference=reference)
+    if kind == "zigzag":
+        return zigzag_metrics(t, psi, delta, lpp=lpp, u=u, v=v, x=x, y=y, execute_time=execute_time,
+                              switch_deg=switch_deg, reference=reference)
+    raise ValueError(f"kind={kind!r}: use 'auto', 'turning' or 'zigzag'")
+
+
+# --------------------------------------------------------------------------- simulation
+def ship_info(model: Model) -> dict:
+    """Ship facts a manoeuvre needs: ``lpp`` [m], ``rudder_rate`` [rad/s], ``design_speed`` [m/s].
+
+    Taken from model attributes of those names, then from the default parameter set's
+    ``operating_point`` (``lpp_m``, ``u0_m_s``, ``rudder_rate_deg_s``), then from the known
+    ships of SPEC.md; missing ones are absent from the dict.
+    """
+    info: dict[str, float] = {}
+    for k in ("lpp", "rudder_rate", "design_speed"):
+        val = getattr(model, k, None)
+        if val is not None:
+            info[k] = float(val)
+    try:
+        op = type(model).parameter_set(type(model).default_parameter_set).extra.get("operating_point", {}) \
+            if getattr(type(model), "default_parameter_set", None) else {}
+    except (ValueError, OSError):
+        op = {}
+    for key, name, conv in (("lpp_m", "lpp", 1.0), ("u0_m_s", "design_speed", 1.0), ("rudder_rate_deg_s", "rudder_rate", math.pi / 180)):
+        if name not in info and key in op:
+            info[name] = float(op[key]) * conv
+    for k, val in _KNOWN_SHIPS.get(model.name, {}).items():
+        info.setdefault(k, val)
+    return info
+
+
+def _check_model(model: Model):
+    miss = [s for s in _REQUIRED_STATES if s not in model.state_names] + \
+           [s for s in _REQUIRED_INPUTS if s not in model.input_names]
+    if miss:
+        raise ValueError(f"model '{model.name}' lacks {miss}; standard manoeuvres need states {_REQUIRED_STATES} "
+                         f"and inputs {_REQUIRED_INPUTS}")
+
+
+def _approach_state(model, speeds):
+    B = speeds.shape[0]
+    x0 = np.zeros((B, model.nx))
+    x0[:, model.state_index("u")] = speeds
+    return x0
+
+
+def steady_rps(model: Model, speed, *, params=None, n_max: float = 1e3, xtol: float = 1e-10) -> np.ndarray:
+    """Propeller rps holding ``speed`` [m/s] in a straight run (du/dt = 0, delta = 0, v = r = 0).
+
+    Vectorised bisection over a batch of speeds through ``model.rhs``; works for any protocol model
+    with states ``u`` and input ``n``.  Raises ValueError when no rps in (0, n_max] gives du/dt = 0.
+    """
+    _check_model(model)
+    speeds = np.atleast_1d(np.asarray(speed, dtype=float))
+    if np.any(speeds <= 0):
+        raise ValueError(f"approach speed must be positive, got {speeds[speeds <= 0][0]}")
+    p = model.params if params is None else np.asarray(params, dtype=float)
+    iu, idl, inn = model.state_index("u"), model.input_index("delta"), model.input_index("n")
+    x0 = _approach_state(model, speeds)
+
+    def acc(n):
+        uin = np.zeros((speeds.size, model.nu))
+        uin[:, inn] = n
+        return model.rhs(0.0, x0, uin, p)[:, iu]
+
+    grid = np.concatenate([[0.0], np.geomspace(1e-3, n_max, 120)])
+    vals = np.stack([acc(np.full(speeds.size, g)) for g in grid], axis=1)  # (B, G)
+    lo = np.full(speeds.size, np.nan)
+    hi = np.full(speeds.size, np.nan)
+    for b in range(speeds.size):
+        k = np.nonzero((vals[b, :-1] < 0) & (vals[b, 1:] >= 0))[0]
+        if k.size == 0:
+            raise ValueError(f"model '{model.name}': no propeller rps in (0, {n_max}] holds {speeds[b]:.4g} m/s "
+                             "(du/dt never changes sign); pass n= explicitly")
+        lo[b], hi[b] = grid[k[0]], grid[k[0] + 1]
+    del idl
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        a = acc(mid)
+        lo = np.where(a < 0, mid, lo)
+        hi = np.where(a < 0, hi, mid)
+        if np.all(hi - lo < xtol * np.maximum(1.0, hi)):
+            break
+    return 0.5 * (lo + hi)
+
+
+@dataclass
+class ManoeuvreResult:
+    """A batch of simulated standard manoeuvres.
+
+    Attributes
+    ----------
+    kind : "turning" or "zigzag"
+    simulation : SimulationResult
+        The batched run (``x`` shape (B, n_t, nx)).
+    settings : DataFrame
+        One row per member: rudder_deg, speed, n, side/first side, switch_deg (zigzag).
+    metrics : list of TurningMetrics / ZigzagMetrics
+    success : bool
+    message : str
+    """
+
+    kind: str
+    simulation: SimulationResult
+    settings: pd.DataFrame
+    metrics: list
+    success: bool = True
+    message: str = "ok"
+
+    def to_pandas(self) -> pd.DataFrame:
+        """Settings and metrics, one row per member (the flat keys of ``to_dict``)."""
+        rows = []
+        for i, m in enumerate(self.metrics):
+            d = {k: v for k, v in m.to_dict().items() if not isinstance(v, dict)}
+            rows.append({**self.settings.iloc[i].to_dict(), **d})
+        return pd.DataFrame(rows)
+
+    def member(self, i: int) -> pd.DataFrame:
+        """Time series of member ``i`` (states and inputs)."""
+        return self.simulation.to_pandas(member=i)
+
+
+def _resolve(model, speed, n, rudder_rate, lpp, params):
+    _check_model(model)
+    info = ship_info(model)
+    L = lpp if lpp is not None else info.get("lpp")
+    if L is None:
+        raise ValueError(f"model '{model.name}': ship length unknown; pass lpp=")
+    rate = rudder_rate if rudder_rate is not None else info.get("rudder_rate")
+    if rate is None:
+        raise ValueError(f"model '{model.name}': rudder rate unknown; pass rudder_rate= [rad/s]")
+    if speed is None:
+        speed = info.get("design_speed")
+        if speed is None and n is None:
+            raise ValueError(f"model '{model.name}': approach speed unknown; pass speed= [m/s]")
+    return float(L), float(rate), speed
+
+
+def _run_batched(model, x0, t_step, controller_factory, done, params, t_max, chunk):
+    """Integrate in chunks until ``done(X_all, t_all)`` or ``t_max``; returns a SimulationResult."""
+    ctrl = controller_factory()
+    ts, Xs, Us = [], [], []
+    t0 = 0.0
+    x = x0
+    ok, msg = True, "integration finished"
+    while True:
+        n_steps = int(round(chunk / t_step))
+        t = t0 + t_step * np.arange(n_steps + 1)
+        res = simulate(model, x, t, controller=ctrl, params=params)
+        ts.append(t if not ts else t[1:])
+        Xs.append(res.x if not Xs else res.x[:, 1:])
+        Us.append(res.u if not Us else res.u[:, 1:])
+        if not res.success:
+            ok, msg = False, res.message
+            break
+        x = res.x[:, -1]
+        t0 = t[-1]
+        T, X = np.concatenate(ts), np.concatenate(Xs, axis=1)
+        if done(T, X) or t0 >= t_max - 1e-9:
+            if not done(T, X):
+                ok, msg = False, f"t_max = {t_max:g} s reached before every member finished the manoeuvre"
+            break
+    T, X, Uo = np.concatenate(ts), np.concatenate(Xs, axis=1), np.concatenate(Us, axis=1)
+    # the last input sample of a chunk is re-evaluated by the next chunk: keep the later value
+    p = model.params if params is None else np.asarray(params, dtype=float)
+    return SimulationResult(t=T, x=X, u=Uo, model=model, params=np.array(p), success=ok, message=msg)
+
+
+def _time_step(L, speeds, dt):
+    if dt is not None:
+        return float(dt)
+    return 0.05 * L / float(np.max(speeds))  # 20 RK4 steps per ship length travelled
+
+
+def turning_circle(model: Model, rudder_deg: float | Sequence[float] = 35.0, *, speed=None, n=None,
+                   side: str = "both", rudder_rate: float | None = None, heading_change_deg: float = 540.0,
+                   execute_time: float | None = None, dt: float | None = None, t_max: float | None = None,
+                   lpp: float | None = None, params=None) -> ManoeuvreResult:
+    """Simulate turning circles as one batch.
+
+    Parameters
+    ----------
+    model : Model  with states x, y, psi, u, v, r and inputs delta, n
+    rudder_deg : float or sequence  ordered rudder angle(s) [deg], magnitudes (``side`` sets the sign)
+        or signed values with ``side="given"``.
+    speed : float or sequence, optional  approach speed(s) [m/s]; default the model's design speed
+    n : float or sequence, optional  propeller rps; default: the steady rps at ``speed``
+    side : {"both", "starboard", "port", "given"}  starboard = positive rudder.
+    rudder_rate : float, optional  [rad/s]; default the model's (``ship_info``)
+    heading_change_deg : float  run until every member has turned this much (default 540)
+    execute_time : float, optional  time of the rudder order [s]; default 2 L/U of steady approach
+    dt : float, optional  RK4 step [s]; default L/(50 U)
+    t_max : float, optional  safety limit [s]; default 60 L/U
+    lpp : float, optional  ship length for the metrics (default the model's)
+    params : array, optional  model parameters (default ``model.params``)
+
+    Returns
+    -------
+    ManoeuvreResult
+        Members ordered as (rudder, speed, side) with side fastest.
+    """
+    L, rate, speed = _resolve(model, speed, n, rudder_rate, lpp, params)
+    rud = np.atleast_1d(np.asarray(rudder_deg, dtype=float))
+    sides = {"both": [1.0, -1.0], "starboard": [1.0], "port": [-1.0], "given": [1.0]}.get(side)
+    if sides is None:
+        raise ValueError(f"side={side!r}: use 'both', 'starboard', 'port' or 'given'")
+    if side != "given" and np.any(rud <= 0):
+        raise ValueError(f"rudder_deg must be positive magnitudes with side={side!r} (got {rud.tolist()}); use side='given' for signed angles")
+    spd = np.atleast_1d(np.asarray(speed, dtype=float)) if speed is not None else None
+    nn = np.atleast_1d(np.asarray(n, dtype=float)) if n is not None else None
+    if spd is None:
+        spd = np.full(nn.shape, np.nan)
+    if nn is None:
+        nn = steady_rps(model, spd, params=params)
+    if spd.shape != nn.shape:
+        raise ValueError(f"speed and n must have the same length, got {spd.size} and {nn.size}")
+    if np.any(np.isnan(spd)):  # n given without speed: run to the steady speed of that n
+        spd = _speed_for_rps(model, nn, params)
+    R, S, Sd = np.meshgrid(rud, np.arange(spd.size), sides, indexing="ij")
+    R, S, Sd = R.ravel(), S.ravel(), Sd.ravel()
+    delta_t = np.radians(R) * Sd
+    speeds, ns = spd[S], nn[S]
+    return _simulate_turns(model, delta_t, speeds, ns, rate, L, heading_change_deg, execute_time, dt, t_max, params)
+
+
+def _speed_for_rps(model, n, params):
+    lo, hi = np.full(n.shape, 1e-3), np.full(n.shape, 1e3)
+    iu, inn = model.state_index("u"), model.input_index("n")
+    p = model.params if params is None else params
+    for _ in range(100):
+        mid = np.sqrt(lo * hi)
+        x0 = _approach_state(model, mid)
+        uin = np.zeros((n.size, model.nu))
+        uin[:, inn] = n
+        a = model.rhs(0.0, x0, uin, p)[:, iu]
+        lo, hi = np.where(a > 0, mid, lo), np.where(a > 0, hi, mid)
+    return np.sqrt(lo * hi)
+
+
+def _simulate_turns(model, delta_target, speeds, ns, rate, L, heading_change_deg, execute_time, dt, t_max, params):
+    B = delta_target.size
+    te = 2.0 * L / float(np.min(speeds)) if execute_time is None else float(execute_time)
+    h = _time_step(L, speeds, dt)
+    te = h * round(te / h)
+    t_max = 60.0 * L / float(np.min(speeds)) + te if t_max is None else float(t_max)
+    idl, inn, ipsi = model.input_index("delta"), model.input_index("n"), model.state_index("psi")
+    target = math.radians(heading_change_deg)
+
+    def factory():
+        def ctrl(t, x):
+            tm = t + 0.5 * h  # rudder at the middle of the step: second-order accurate ramp
+            mag = np.clip(rate * (tm - te), 0.0, np.abs(delta_target))
+            uin = np.zeros((B, model.nu))
+            uin[:, idl] = np.sign(delta_target) * mag
+            uin[:, inn] = ns
+            return uin
+        return ctrl
+
+    def done(T, X):
+        ke = int(np.searchsorted(T, te))
+        if ke >= T.size:
+            return False
+        dpsi = np.abs(X[:, ke:, ipsi] - X[:, ke:ke + 1, ipsi])
+        return bool(np.all(dpsi.max(axis=1) >= target))
+
+    chunk = max(10 * L / float(np.min(speeds)), te + h)
+    sim = _run_batched(model, _approach_state(model, speeds), h, factory, done, params, t_max, chunk)
+    settings = pd.DataFrame({"rudder_deg": np.degrees(delta_target), "speed": speeds, "n": ns})
+    mets = []
+    ref = "midship" if model.name == "mmg" else f"model origin of '{model.name}'"
+    for b in range(B):
+        X = sim.x[b]
+        ok = np.all(np.isfinite(X))
+        last = X.shape[0] if ok else int(np.argmax(~np.all(np.isfinite(X), axis=1)))
+        Xb = X[:last]
+        m = turning_metrics(sim.t[:last], Xb[:, 0], Xb[:, 1], Xb[:, ipsi], Xb[:, model.state_index("u")],
+                            sim.u[b, :last, idl], lpp=L, v=Xb[:, model.state_index("v")], execute_time=te, reference=ref)
+        m.rudder_deg = float(np.degrees(delta_target[b]))
+        m.approach_speed = float(speeds[b])
+        if not ok:
+            m.success, m.message = False, "simulation became non-finite; " + m.message
+        mets.append(m)
+    success = sim.success and all(m.success for m in mets)
+    return ManoeuvreResult("turning", sim, settings, mets, success, sim.message)
+
+
+def zigzag(model: Model, rudder_deg: float = 10.0, switch_deg: float | None = None, *, speed=None, n=None,
+           first: str = "both", rudder_rate: float | None = None, n_executes: int = 4,
+           execute_time: float | None = None, dt: float | None = None, t_max: float | None = None,
+           lpp: float | None = None, params=None) -> ManoeuvreResult:
+    """Simulate zigzag manoeuvres (delta/psi, e.g. 10/10, 20/20) as one batch.
+
+    Parameters
+    ----------
+    rudder_deg, switch_deg : float  rudder amplitude and switch heading deviation [deg] (switch defaults to rudder)
+    speed, n : optional  approach speed(s) [m/s] / rps (see :func:`turning_circle`)
+    first : {"both", "starboard", "port"}  side of the first rudder execute
+    n_executes : int  run until this many rudder executes have happened (>= 4 gives the second overshoot)
+
+    The rudder logic is a batch-aware feedback law: each member reverses its rudder order when its own
+    heading deviation reaches the switch angle on the side it is turning to; the rudder moves at the
+    ship's rudder rate.
+    """
+    L, rate, speed = _resolve(model, speed, n, rudder_rate, lpp, params)
+    sw = float(rudder_deg if switch_deg is None else switch_deg)
+    if rudder_deg <= 0 or sw <= 0:
+        raise ValueError(f"zigzag: rudder_deg and switch_deg must be positive, got {rudder_deg}/{sw}")
+    firsts = {"both": [1.0, -1.0], "starboard": [1.0], "port": [-1.0]}.get(first)
+    if firsts is None:
+        raise ValueError(f"first={first!r}: use 'both', 'starboard' or 'port'")
+    spd = np.atleast_1d(np.asarray(speed, dtype=float)) if speed is not None else None
+    nn = np.atleast_1d(np.asarray(n, dtype=float)) if n is not None else None
+    if nn is None:
+        nn = steady_rps(model, spd, params=params)
+    if spd is None:
+        spd = _speed_for_rps(model, nn, params)
+    S, F = np.meshgrid(np.arange(spd.size), firsts, indexing="ij")
+    S, F = S.ravel(), F.ravel()
+    speeds, ns = spd[S], nn[S]
+    B = F.size
+    te = 2.0 * L / float(np.min(speeds)) if execute_time is None else float(execute_time)
+    h = _time_step(L, speeds, dt)
+    te = h * round(te / h)
+    t_max = 80.0 * L / float(np.min(speeds)) + te if t_max is None else float(t_max)
+    idl, inn, ipsi = model.input_index("delta"), model.input_index("n"), model.state_index("psi")
+    amp, lev = math.radians(rudder_deg), math.radians(sw)
+    state: dict = {}
+
+    def factory():
+        state.update(cmd=F * amp, delta=np.zeros(B), psi0=None, count=np.ones(B, dtype=int), last_t=-np.inf)
+
+        def ctrl(t, x):
+            if t <= state["last_t"]:  # simulate() re-evaluates the law at the final time: no state change
+                return state["last_u"]
+            state["last_t"] = t
+            uin = np.zeros((B, model.nu))
+            uin[:, inn] = ns
+            if t + 1e-12 < te:
+                state["last_u"] = uin
+                return uin
+            if state["psi0"] is None:
+                state["psi0"] = x[:, ipsi].copy()
+            dpsi = x[:, ipsi] - state["psi0"]
+            cmd = state["cmd"]
+            flip = np.sign(cmd) * dpsi >= lev
+            state["cmd"] = np.where(flip, -cmd, cmd)
+            state["count"] = state["count"] + flip
+            step = np.clip(state["cmd"] - state["delta"], -rate * h, rate * h)
+            mid = state["delta"] + 0.5 * step
+            state["delta"] = state["delta"] + step
+            uin[:, idl] = mid
+            state["last_u"] = uin
+            return uin
+        return ctrl
+
+    def done(T, X):
+        return bool(np.all(state["count"] >= n_executes + 1)) and T[-1] > te
+
+    chunk = max(10 * L / float(np.min(speeds)), te + h)
+    sim = _run_batched(model, _approach_state(model, speeds), h, factory, done, params, t_max, chunk)
+    settings = pd.DataFrame({"rudder_deg": rudder_deg, "switch_deg": sw, "first": [_side(f) for f in F],
+                             "speed": speeds, "n": ns})
+    ref = "midship" if model.name == "mmg" else f"model origin of '{model.name}'"
+    mets = []
+    for b in range(B):
+        X = sim.x[b]
+        good = np.all(np.isfinite(X), axis=1)
+        last = X.shape[0] if good.all() else int(np.argmax(~good))
+        m = zigzag_metrics(sim.t[:last], X[:last, ipsi], sim.u[b, :last, idl], lpp=L, u=X[:last, model.state_index("u")],
+                           v=X[:last, model.state_index("v")], x=X[:last, 0], y=X[:last, 1], execute_time=te,
+                           switch_deg=sw, rudder_deg=rudder_deg, reference=ref)
+        m.approach_speed = float(speeds[b])
+        mets.append(m)
+    success = sim.success and all(m.success for m in mets)
+    return ManoeuvreResult("zigzag", sim, settings, mets, success, sim.message)
+
+
+def turning_sweep(model: Model, rudder_deg: Sequence[float] = (10.0, 15.0, 25.0), speeds: Sequence[float] = (1.7, 2.0, 2.2),
+                  *, side: str = "starboard", rudder_rate: float | None = None, heading_change_deg: float = 540.0,
+                  dt: float | None = None, lpp: float | None = None, params=None) -> pd.DataFrame:
+    """Turning diameters over rudder angle x approach speed, simulated as ONE batch (seed 002 studies).
+
+    The rps of each approach speed is the steady rps of the model at that speed (:func:`steady_rps`).
+
+    Returns
+    -------
+    DataFrame
+        One row per (rudder, speed[, side]): rudder_deg, speed, n, advance_L, transfer_L,
+        tactical_diameter_L, steady_diameter_L, tactical_diameter [m], steady_diameter [m], speed_loss, success.
+    """
+    res = turning_circle(model, list(rudder_deg), speed=list(speeds), side=side, rudder_rate=rudder_rate,
+                         heading_change_deg=heading_change_deg, dt=dt, lpp=lpp, params=params)
+    df = res.to_pandas()
+    cols = ["rudder_deg", "speed", "n", "side", "advance_L", "transfer_L", "tactical_diameter_L", "steady_diameter_L",
+            "tactical_diameter", "steady_diameter", "speed_loss", "success"]
+    return df[cols]

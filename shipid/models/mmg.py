@@ -1,0 +1,471 @@
+"""MMG standard model for ship manoeuvring (Yasukawa & Yoshimura 2015).
+
+Reference
+---------
+H. Yasukawa, Y. Yoshimura (2015), "Introduction of MMG standard method for
+ship maneuvering predictions", J Mar Sci Technol 20:37-52,
+doi:10.1007/s00773-014-0293-y.  Equation numbers below refer to that paper.
+
+States and inputs (same names and meaning as ``kcs-response``)
+--------------------------------------------------------------
+``x, y`` [m] earth-fixed position of **midship**, ``psi`` [rad] heading,
+``u`` [m/s] surge and ``v`` [m/s] sway velocity **at midship** (body axes,
+``v`` positive to starboard), ``r`` [rad/s] yaw rate (positive turning to
+starboard).  Inputs ``delta`` [rad] rudder angle (positive = starboard turn,
+as in the paper) and ``n`` [rps] propeller revolutions.
+
+Equations (one copy, in :meth:`MMGModel._forces` and :meth:`MMGModel._rhs`)
+-------------------------------------------------------------------------
+Motion at midship, eq. (4)::
+
+    (m + m_x) u' - (m + m_y) v r - x_G m r^2          = X_H + X_R + X_P
+    (m + m_y) v' + x_G m r' + (m + m_x) u r           = Y_H + Y_R
+    (I_zG + x_G^2 m + J_z) r' + x_G m (v' + u r)      = N_H + N_R
+
+Hull, eqs. (7)-(10), with ``U = sqrt(u^2 + v^2)``, ``v' = v/U``,
+``r' = r L/U``, ``beta = asin(-v/U)`` (= atan(-v/u) for u > 0)::
+
+    X_H = 1/2 rho L d U^2 (-R'_0 + X'_vv v'^2 + X'_vr v' r' + X'_rr r'^2 + X'_vvvv v'^4)
+    Y_H = 1/2 rho L d U^2 (Y'_v v' + Y'_r r' + Y'_vvv v'^3 + Y'_vvr v'^2 r' + Y'_vrr v' r'^2 + Y'_rrr r'^3)
+    N_H = 1/2 rho L^2 d U^2 (N'_v v' + ... same pattern ...)
+
+Propeller, eqs. (11)-(16): ``X_P = (1 - t_P) T``,
+``T = rho n^2 D_P^4 K_T(J_P)``, ``K_T = k_0 + k_1 J_P + k_2 J_P^2``,
+``J_P = u (1 - w_P)/(n D_P)``, wake in manoeuvring
+``(1 - w_P) = (1 - w_P0) [1 + (1 - exp(-C_1 |beta_P|)) (C_2 - 1)]``,
+``beta_P = beta - x'_P r'``, ``C_2`` taking the values ``C2p`` (beta_P > 0)
+and ``C2m`` (beta_P < 0).  The thrust is evaluated as the polynomial
+``rho D_P^2 (k_0 n^2 D_P^2 + k_1 n D_P u_P + k_2 u_P^2)`` with
+``u_P = u (1 - w_P)`` -- identical to the paper for n > 0 and free of the
+1/n singularity.
+
+Rudder, eqs. (17)-(28): ``X_R = -(1 - t_R) F_N sin(delta)``,
+``Y_R = -(1 + a_H) F_N cos(delta)``,
+``N_R = -(x_R + a_H x_H) F_N cos(delta)`` with **dimensional**
+``x_R = x'_R L`` and ``x_H = x'_H L`` (this is where the ``shipmmg`` package
+was wrong, its issue #31), ``F_N = 1/2 rho A_R U_R^2 f_alpha sin(alpha_R)``,
+``alpha_R = delta - atan(v_R/u_R)``, ``v_R = U gamma_R beta_R``,
+``beta_R = beta - l'_R r'`` (``gamma_R`` = ``gammaR_m`` for beta_R < 0,
+``gammaR_p`` otherwise),
+``u_R = eps u_P sqrt(eta {1 + kappa (sqrt(1 + 8 K_T/(pi J_P^2)) - 1)}^2 + 1 - eta)``,
+``eta = D_P/H_R`` (written without the 1/J_P singularity).
+
+Parameters and particulars
+--------------------------
+The *parameters* (``param_names``, what an identifier estimates) are the
+non-dimensional prime-system coefficients: hull derivatives, added masses
+``mx, my, Jz`` (made non-dimensional by 1/2 rho L^2 d and 1/2 rho L^4 d),
+propeller and rudder interaction coefficients.  They do not change with
+scale (Froude similarity; ``R0`` is Reynolds dependent in reality -- see
+docs/validation.md).  The *particulars* (:class:`MMGParticulars`: lengths,
+areas, displacement, density, rudder rate) fix the scale and are model
+attributes, not parameters; :meth:`MMGModel.scaled` returns the geometrically
+similar ship at another length.
+
+Validity: forward speed (U > 0, u > 0) and n > 0; the model is a
+manoeuvring model, not a crash-stop or harbour model.
+
+Jacobians are exact to rounding: complex-step differentiation, vectorised over
+all columns in one evaluation of the (complex-safe) equations.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Mapping
+
+import numpy as np
+
+from .base import Model
+
+__all__ = ["MMGModel", "MMGParticulars", "MMG_PARAM_NAMES"]
+
+#: Non-dimensional (prime-system) parameters, in order.
+MMG_PARAM_NAMES = (
+    "R0", "Xvv", "Xvr", "Xrr", "Xvvvv",
+    "Yv", "Yr", "Yvvv", "Yvvr", "Yvrr", "Yrrr",
+    "Nv", "Nr", "Nvvv", "Nvvr", "Nvrr", "Nrrr",
+    "mx", "my", "Jz",
+    "tP", "wP0", "k0", "k1", "k2", "xP", "C1", "C2p", "C2m",
+    "tR", "aH", "xH", "gammaR_m", "gammaR_p", "lR", "eps", "kappa", "f_alpha",
+)
+
+_PARAM_DOC = {
+    "R0": "resistance coefficient R'_0 = R/(1/2 rho L d U^2)",
+    "mx": "surge added mass m'_x (by 1/2 rho L^2 d)", "my": "sway added mass m'_y",
+    "Jz": "yaw added moment of inertia J'_z (by 1/2 rho L^4 d)",
+    "tP": "thrust deduction t_P", "wP0": "propeller wake fraction in straight run w_P0",
+    "k0": "K_T polynomial k_0", "k1": "K_T polynomial k_1", "k2": "K_T polynomial k_2",
+    "xP": "x'_P, effective propeller position in beta_P", "C1": "wake correction C_1",
+    "C2p": "wake correction C_2 for beta_P > 0", "C2m": "wake correction C_2 for beta_P < 0",
+    "tR": "steering resistance deduction t_R", "aH": "rudder force increase factor a_H",
+    "xH": "x'_H, position of the additional lateral force", "gammaR_m": "flow straightening gamma_R for beta_R < 0",
+    "gammaR_p": "flow straightening gamma_R for beta_R > 0", "lR": "l'_R, effective rudder position in beta_R",
+    "eps": "wake ratio epsilon = (1 - w_R)/(1 - w_P)", "kappa": "propeller-slipstream constant kappa",
+    "f_alpha": "rudder lift gradient f_alpha [1/rad]",
+}
+
+
+@dataclass(frozen=True)
+class MMGParticulars:
+    """Principal particulars of the ship an :class:`MMGModel` describes (SI units).
+
+    Attributes
+    ----------
+    lpp : float
+        Length between perpendiculars L [m].
+    breadth : float
+        Breadth B [m] (informative; not used by the equations).
+    draught : float
+        Draught d [m].
+    displacement : float
+        Displacement volume [m^3]; mass m = rho * displacement.
+    x_G : float
+        Longitudinal centre of gravity forward of midship [m].
+    kzz : float
+        Yaw radius of gyration as a fraction of L; I_zG = m (kzz L)^2.
+    D_p : float
+        Propeller diameter [m].
+    H_R : float
+        Rudder span [m]; eta = D_p/H_R.
+    A_R : float
+        Movable rudder profile area [m^2].
+    x_R : float
+        Non-dimensional rudder position x'_R = x_R/L (-0.5 by the MMG standard).
+    rho : float
+        Water density [kg/m^3].
+    rudder_rate : float
+        Steering-gear rate [rad/s] used by the standard manoeuvres.
+    design_speed : float
+        Approach speed used when none is given [m/s].
+    """
+
+    lpp: float
+    breadth: float
+    draught: float
+    displacement: float
+    x_G: float
+    kzz: float
+    D_p: float
+    H_R: float
+    A_R: float
+    x_R: float = -0.5
+    rho: float = 1025.0
+    rudder_rate: float = math.radians(2.32)
+    design_speed: float = 7.97
+
+    @classmethod
+    def from_mapping(cls, doc: Mapping) -> "MMGParticulars":
+        """Build from a ``{field: value}`` mapping (rudder rate may be given as ``rudder_rate_deg_s``)."""
+        doc = dict(doc)
+        if "rudder_rate_deg_s" in doc:
+            doc["rudder_rate"] = math.radians(float(doc.pop("rudder_rate_deg_s")))
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(doc) - known)
+        if unknown:
+            raise ValueError(f"MMG particulars: unknown field(s) {unknown}; known fields are {sorted(known)}")
+        missing = sorted(f.name for f in fields(cls) if f.name not in doc and _no_default(f))
+        if missing:
+            raise ValueError(f"MMG particulars: missing field(s) {missing}")
+        return cls(**{k: float(v) for k, v in doc.items()})
+
+    def to_dict(self) -> dict:
+        """Fields as a plain dict (SI)."""
+        return asdict(self)
+
+    def scaled(self, lpp_new: float) -> "MMGParticulars":
+        """Geometrically similar ship of length ``lpp_new`` (Froude scaling).
+
+        Lengths scale by lambda = lpp_new/lpp, areas by lambda^2, volume by
+        lambda^3, speeds by sqrt(lambda), rates (rudder rate) by 1/sqrt(lambda).
+        Density is kept.
+        """
+        lam = float(lpp_new) / self.lpp
+        if not lam > 0:
+            raise ValueError(f"scaled(): lpp_new must be positive, got {lpp_new}")
+        return replace(
+            self, lpp=self.lpp * lam, breadth=self.breadth * lam, draught=self.draught * lam,
+            displacement=self.displacement * lam**3, x_G=self.x_G * lam, D_p=self.D_p * lam,
+            H_R=self.H_R * lam, A_R=self.A_R * lam**2, rudder_rate=self.rudder_rate / math.sqrt(lam),
+            design_speed=self.design_speed * math.sqrt(lam),
+        )
+
+
+def _no_default(f) -> bool:
+    import dataclasses
+
+    return f.default is dataclasses.MISSING
+
+
+class _NP:
+    """numpy backend of the equations (batched, complex-step safe)."""
+
+    sqrt, exp, arcsin, arctan, sin, cos, where, real = (
+        np.sqrt, np.exp, np.arcsin, np.arctan, np.sin, np.cos, np.where, np.real)
+
+
+class _MATH:
+    """Python-float backend of the same equations (one real sample)."""
+
+    sqrt, exp, arcsin, arctan, sin, cos = math.sqrt, math.exp, math.asin, math.atan, math.sin, math.cos
+
+    @staticmethod
+    def where(cond, a, b):
+        return a if cond else b
+
+    @staticmethod
+    def real(z):
+        return z
+
+
+class MMGModel(Model):
+    """MMG standard manoeuvring model (Yasukawa & Yoshimura 2015), 3 DOF at midship.
+
+    Parameters
+    ----------
+    params : mapping, array, str or None
+        Non-dimensional coefficients (see :data:`MMG_PARAM_NAMES`); a string
+        names a shipped parameter set (``"kvlcc2"`` -- the default -- or
+        ``"kcs"``), whose particulars are then used too.
+    particulars : MMGParticulars, mapping or str, optional
+        The ship's particulars, or the name of a parameter set to take them
+        from.  Defaults to the particulars of the named/default set.
+    lpp : float, optional
+        Rescale the particulars (Froude, geometric similarity) to this
+        length [m]; e.g. ``MMGModel("kvlcc2", lpp=320.0)`` is the full-scale
+        KVLCC2 with the L7 model's coefficients.
+
+    Attributes
+    ----------
+    particulars : MMGParticulars
+    lpp, rudder_rate, design_speed : float
+        Shortcuts used by :mod:`shipid.manoeuvres`.
+    """
+
+    name = "mmg"
+    state_names = ("x", "y", "psi", "u", "v", "r")
+    input_names = ("delta", "n")
+    param_names = MMG_PARAM_NAMES
+    units = {"x": "m", "y": "m", "psi": "rad", "u": "m/s", "v": "m/s", "r": "rad/s", "delta": "rad", "n": "rps",
+             **{k: "-" for k in MMG_PARAM_NAMES}, "f_alpha": "1/rad"}
+    default_parameter_set = "kvlcc2"
+
+    def __init__(self, params=None, *, particulars=None, lpp: float | None = None):
+        super().__init__(params)
+        if particulars is None:
+            particulars = params if isinstance(params, str) else self.default_parameter_set
+        if isinstance(particulars, str):
+            extra = self.parameter_set(particulars).extra
+            if "particulars" not in extra:
+                raise ValueError(f"parameter set '{particulars}' of model 'mmg' has no 'particulars'")
+            particulars = MMGParticulars.from_mapping(extra["particulars"])
+        elif isinstance(particulars, Mapping):
+            particulars = MMGParticulars.from_mapping(particulars)
+        elif not isinstance(particulars, MMGParticulars):
+            raise ValueError(f"particulars must be MMGParticulars, a mapping or a parameter-set name, got {type(particulars).__name__}")
+        if lpp is not None:
+            particulars = particulars.scaled(lpp)
+        self.particulars = particulars
+        self._idx = {k: i for i, k in enumerate(self.param_names)}
+        if self._idx["mx"] != 17 or self._idx["Jz"] != 19:  # _rhs unpacks by position
+            raise RuntimeError("MMG_PARAM_NAMES order changed; update MMGModel._rhs")
+
+    # ----------------------------------------------------------- conveniences
+    @property
+    def lpp(self) -> float:
+        """Length between perpendiculars [m]."""
+        return self.particulars.lpp
+
+    @property
+    def rudder_rate(self) -> float:
+        """Steering-gear rate [rad/s]."""
+        return self.particulars.rudder_rate
+
+    @property
+    def design_speed(self) -> float:
+        """Default approach speed [m/s]."""
+        return self.particulars.design_speed
+
+    def scaled(self, lpp_new: float) -> "MMGModel":
+        """The same (non-dimensional) model for the geometrically similar ship of length ``lpp_new``.
+
+        Under Froude scaling (speeds x sqrt(lambda), time x sqrt(lambda),
+        propeller rps / sqrt(lambda)) the scaled model's trajectories are the
+        original ones multiplied by lambda; see :mod:`shipid.scaling`.
+        """
+        new = self.with_params(self.params)
+        new.particulars = self.particulars.scaled(lpp_new)
+        return new
+
+    def mass_properties(self) -> dict:
+        """Dimensional mass, inertia and added masses [kg, kg m^2] with the current parameters."""
+        P = self.particulars
+        m = P.rho * P.displacement
+        q2 = 0.5 * P.rho * P.lpp**2 * P.draught
+        q4 = 0.5 * P.rho * P.lpp**4 * P.draught
+        p = self.params
+        return {"m": m, "I_zG": m * (P.kzz * P.lpp) ** 2, "m_x": p[self._idx["mx"]] * q2,
+                "m_y": p[self._idx["my"]] * q2, "J_z": p[self._idx["Jz"]] * q4,
+                "m_prime": m / q2, "x_G": P.x_G}
+
+    def to_dimensional(self, speed: float | None = None) -> dict:
+        """Dimensional hull derivatives at speed ``speed`` [m/s] (default design speed).
+
+        Returns a dict of SI derivatives in the usual convention: e.g.
+        ``Yv`` [N s/m] = Y'_v 1/2 rho L d U, ``Nr`` [N m s] = N'_r 1/2 rho L^4 d U / L ...
+        (force derivative with respect to the velocity it multiplies, at U).
+        Non-linear terms are the corresponding coefficients of the
+        dimensional polynomial, e.g. ``Yvvv`` [N s^3/m^3] = Y'_vvv 1/2 rho L d / U.
+        Also the mass properties of :meth:`mass_properties`.
+        """
+        P = self.particulars
+        U = float(self.design_speed if speed is None else speed)
+        L, d, rho = P.lpp, P.draught, P.rho
+        out = {}
+        for k in MMG_PARAM_NAMES[:17]:
+            c = self.params[self._idx[k]]
+            if k == "R0":
+                out["R0"] = c * 0.5 * rho * L * d * U**2
+                continue
+            nv, nr = k[1:].count("v"), k[1:].count("r")
+            base = 0.5 * rho * L * d * (L if k[0] == "N" else 1.0)
+            # F = base U^2 v'^nv r'^nr = base U^(2-nv-nr) L^nr v^nv r^nr
+            out[k] = c * base * U ** (2 - nv - nr) * L**nr
+        out.update(self.mass_properties())
+        return out
+
+    # -------------------------------------------------------------- equations
+    def _forces(self, x, u, p, xp=None) -> dict:
+        """Forces/moments at midship and intermediate quantities.
+
+        The equations are written once against a small math backend ``xp``:
+        numpy (batched, complex-step safe; the default) or, for a single real
+        sample, Python's ``math`` (the same formulas, about 10x less overhead
+        per call).  Shapes: leading axes of ``x (..., 6)``, ``u (..., 2)``,
+        ``p (..., np)`` broadcast.  Returns a dict: X_H, Y_H, N_H, X_P, X_R,
+        Y_R, N_R, F_N, T, w_P, u_R, v_R, alpha_R, beta, U.
+        """
+        if xp is None:
+            xp = _NP
+            x, u, p = np.moveaxis(x, -1, 0), np.moveaxis(u, -1, 0), np.moveaxis(p, -1, 0)
+        P = self.particulars
+        L, d, rho, Dp = P.lpp, P.draught, P.rho, P.D_p
+        (R0, Xvv, Xvr, Xrr, Xvvvv, Yv, Yr, Yvvv, Yvvr, Yvrr, Yrrr, Nv, Nr, Nvvv, Nvvr, Nvrr, Nrrr,
+         _mx, _my, _Jz, tP, wP0, k0, k1, k2, xP, C1, C2p, C2m,
+         tR, aH, xH, gRm, gRp, lR, eps, kappa, f_alpha) = p
+        uu, v, r = x[3], x[4], x[5]
+        delta, n = u[0], u[1]
+        U2 = uu * uu + v * v
+        U = xp.sqrt(U2)
+        vp = v / U
+        rp = r * L / U
+        beta = xp.arcsin(-vp)
+        q = 0.5 * rho * L * d * U2
+        vp2, rp2 = vp * vp, rp * rp
+        XH = q * (-R0 + Xvv * vp2 + Xvr * vp * rp + Xrr * rp2 + Xvvvv * vp2 * vp2)
+        YH = q * (Yv * vp + Yr * rp + Yvvv * vp2 * vp + Yvvr * vp2 * rp + Yvrr * vp * rp2 + Yrrr * rp2 * rp)
+        NH = q * L * (Nv * vp + Nr * rp + Nvvv * vp2 * vp + Nvvr * vp2 * rp + Nvrr * vp * rp2 + Nrrr * rp2 * rp)
+        # propeller (eqs. 11-16)
+        betaP = beta - xP * rp
+        C2 = xp.where(xp.real(betaP) > 0, C2p, C2m)
+        abs_bP = xp.where(xp.real(betaP) >= 0, betaP, -betaP)
+        one_m_wP = (1.0 - wP0) * (1.0 + (1.0 - xp.exp(-C1 * abs_bP)) * (C2 - 1.0))
+        uP = uu * one_m_wP
+        KTn2D2 = k0 * (n * Dp) ** 2 + k1 * n * Dp * uP + k2 * uP * uP  # K_T n^2 D_P^2
+        T = rho * Dp * Dp * KTn2D2
+        XP = (1.0 - tP) * T
+        # rudder (eqs. 17-28)
+        S = uP * uP + (8.0 / math.pi) * KTn2D2
+        sq = xp.sqrt(xp.where(xp.real(S) > 0, S, 0.0 * S))
+        eta = Dp / P.H_R
+        uR = eps * xp.sqrt(eta * (uP + kappa * (sq - uP)) ** 2 + (1.0 - eta) * uP * uP)
+        betaR = beta - lR * rp
+        gR = xp.where(xp.real(betaR) < 0, gRm, gRp)
+        vR = U * gR * betaR
+        alphaR = delta - xp.arctan(vR / uR)
+        FN = 0.5 * rho * P.A_R * f_alpha * (uR * uR + vR * vR) * xp.sin(alphaR)
+        cd = xp.cos(delta)
+        XR = -(1.0 - tR) * FN * xp.sin(delta)
+        YR = -(1.0 + aH) * FN * cd
+        NR = -(P.x_R + aH * xH) * L * FN * cd
+        return {"X_H": XH, "Y_H": YH, "N_H": NH, "X_P": XP, "X_R": XR, "Y_R": YR, "N_R": NR,
+                "F_N": FN, "T": T, "w_P": 1.0 - one_m_wP, "u_R": uR, "v_R": vR, "alpha_R": alphaR,
+                "beta": beta, "U": U}
+
+    def forces(self, x, u, params=None) -> dict:
+        """Public view of :meth:`_forces` (forces [N], moments [N m], speeds [m/s], angles [rad])."""
+        return self._forces(np.asarray(x, dtype=float), np.asarray(u, dtype=float), self._p(params))
+
+    def _rhs(self, t, x, u, p):
+        scalar = x.ndim == 1 and u.ndim == 1 and p.ndim == 1 and not (
+            np.iscomplexobj(x) or np.iscomplexobj(u) or np.iscomplexobj(p))
+        if scalar:
+            xp = _MATH
+            x, u, p = x.tolist(), u.tolist(), p.tolist()
+        else:
+            xp = _NP
+            x, u, p = np.moveaxis(x, -1, 0), np.moveaxis(u, -1, 0), np.moveaxis(p, -1, 0)
+        P = self.particulars
+        L, d, rho = P.lpp, P.draught, P.rho
+        F = self._forces(x, u, p, xp)
+        X = F["X_H"] + F["X_R"] + F["X_P"]
+        Y = F["Y_H"] + F["Y_R"]
+        N = F["N_H"] + F["N_R"]
+        m = rho * P.displacement
+        q2 = 0.5 * rho * L * L * d
+        mx = p[17] * q2
+        my = p[18] * q2
+        Jz = p[19] * q2 * L * L
+        xG = P.x_G
+        IzG = m * (P.kzz * L) ** 2
+        psi, uu, v, r = x[2], x[3], x[4], x[5]
+        du = (X + (m + my) * v * r + xG * m * r * r) / (m + mx)
+        A = m + my
+        B = xG * m
+        C = IzG + xG * xG * m + Jz
+        fy = Y - (m + mx) * uu * r
+        fn = N - xG * m * uu * r
+        det = A * C - B * B
+        dv = (C * fy - B * fn) / det
+        dr = (A * fn - B * fy) / det
+        cs, sn = xp.cos(psi), xp.sin(psi)
+        out = [uu * cs - v * sn, uu * sn + v * cs, r, du, dv, dr]
+        if scalar:
+            return np.array(out)
+        shape = np.broadcast_shapes(*[np.shape(o) for o in out])
+        return np.stack([np.broadcast_to(o, shape) for o in out], axis=-1)
+
+    # ------------------------------------------------------------- Jacobians
+    _H_CS = 1e-30
+
+    def _cstep(self, t, x, u, p, which: str):
+        """Complex-step Jacobian of ``_rhs`` w.r.t. ``which`` in one vectorised call."""
+        args = {"x": x, "u": u, "p": p}
+        base = args[which]
+        k = base.shape[-1]
+        pert = base[..., None, :] + 1j * self._H_CS * np.eye(k)
+        a = {w: (pert if w == which else arr[..., None, :]) for w, arr in args.items()}
+        f = self._rhs(t, a["x"], a["u"], a["p"])  # (..., k, nx)
+        J = np.imag(f) / self._H_CS
+        return np.swapaxes(J, -1, -2)
+
+    def _jac_x(self, t, x, u, p):
+        return self._cstep(t, x, u, p, "x")
+
+    def _jac_u(self, t, x, u, p):
+        return self._cstep(t, x, u, p, "u")
+
+    def _jac_p(self, t, x, u, p):
+        return self._cstep(t, x, u, p, "p")
+
+    @classmethod
+    def sample_point(cls, rng, batch=()):
+        """A valid random (x, u) for protocol tests: forward speed, moderate drift and yaw rate."""
+        x = np.zeros(batch + (6,))
+        x[..., 0:2] = rng.normal(size=batch + (2,)) * 10
+        x[..., 2] = rng.normal(size=batch)
+        x[..., 3] = 1.0 + 0.1 * rng.normal(size=batch)
+        x[..., 4] = 0.1 * rng.normal(size=batch)
+        x[..., 5] = 0.05 * rng.normal(size=batch)
+        u = np.stack([0.3 * rng.normal(size=batch), 15.0 + rng.normal(size=batch)], axis=-1)
+        return x, u

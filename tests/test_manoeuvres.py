@@ -1,0 +1,242 @@
+"""Standard manoeuvres and their metrics (shipid.manoeuvres): analytic truths, IMO limits,
+the six MARIN KVLCC2 logs against the values in their README, batch consistency."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.integrate import quad
+from scipy.optimize import brentq
+
+from shipid.manoeuvres import (
+    detect_manoeuvre, imo_limits, metrics, steady_rps, turning_circle, turning_metrics, turning_sweep, zigzag,
+    zigzag_metrics,
+)
+from shipid.models import get_model
+from shipid.models.base import Model
+
+MARIN = Path(__file__).parents[1] / ".." / "shared" / "data" / "kvlcc2_marin"
+
+
+class FirstOrderShip(Model):
+    """Constant speed U, yaw rate lagging K delta with time constant tau (psi' = r, r' = (K delta - r)/tau).
+
+    Its track has a closed form up to quadrature: psi(t) = r_s (t - tau (1 - exp(-t/tau))) after a rudder step,
+    steady circle radius U / r_s.  Used as an independent truth for the whole turning-circle pipeline.
+    """
+
+    name = "first-order-test-ship"
+    state_names = ("x", "y", "psi", "u", "v", "r")
+    input_names = ("delta", "n")
+    param_names = ("K", "tau")
+    lpp = 100.0
+    rudder_rate = 1e6  # a rudder step
+    design_speed = 5.0
+
+    def _rhs(self, t, x, u, p):
+        psi, uu, v, r = x[..., 2], x[..., 3], x[..., 4], x[..., 5]
+        K, tau = p[..., 0], p[..., 1]
+        out = [uu * np.cos(psi) - v * np.sin(psi), uu * np.sin(psi) + v * np.cos(psi), r,
+               0.0 * uu, 0.0 * v, (K * u[..., 0] - r) / tau]
+        shape = np.broadcast_shapes(*[np.shape(o) for o in out])
+        return np.stack([np.broadcast_to(o, shape) for o in out], axis=-1)
+
+
+def _first_order_truth(U, r_s, tau):
+    psi = lambda t: r_s * (t - tau * (1 - math.exp(-t / tau)))  # noqa: E731
+    t90 = brentq(lambda t: psi(t) - math.pi / 2, 0, 1e4)
+    t180 = brentq(lambda t: psi(t) - math.pi, 0, 1e4)
+    adv = quad(lambda t: U * math.cos(psi(t)), 0, t90, epsabs=1e-11, epsrel=1e-12)[0]
+    tra = quad(lambda t: U * math.sin(psi(t)), 0, t90, epsabs=1e-11, epsrel=1e-12)[0]
+    td = quad(lambda t: U * math.sin(psi(t)), 0, t180, epsabs=1e-11, epsrel=1e-12)[0]
+    return adv, tra, td, 2 * U / r_s
+
+
+def test_turning_circle_of_a_first_order_ship_matches_quadrature():
+    model = FirstOrderShip([0.05, 8.0])
+    res = turning_circle(model, 20.0, speed=5.0, n=10.0, side="both", dt=0.2)
+    r_s = 0.05 * math.radians(20)
+    adv, tra, td, diam = _first_order_truth(5.0, r_s, 8.0)
+    for m in res.metrics:
+        assert m.advance == pytest.approx(adv, rel=2e-4)
+        assert m.transfer == pytest.approx(tra, rel=2e-4)
+        assert m.tactical_diameter == pytest.approx(td, rel=2e-4)
+        assert m.steady_diameter == pytest.approx(diam, rel=1e-6)
+        assert m.speed_loss == pytest.approx(0.0, abs=1e-12)
+        assert m.max_heading_change_deg >= 540.0
+        assert m.reference.startswith("model origin")
+    assert [m.side for m in res.metrics] == ["starboard", "port"]
+
+
+def test_metrics_of_an_exact_circle_from_arrays():
+    """Straight approach then an exact circle of radius R: advance = transfer = R, TD = steady diameter = 2R."""
+    R, U, dt = 250.0, 6.0, 0.0125
+    te = 2400 * dt  # execute on a sample (the track has a kink there)
+    t = dt * np.arange(2400 + int(3 * 2 * math.pi * R / U / dt))
+    s = np.clip(t - te, 0, None) * U / R
+    x = np.where(t < te, U * (t - te), R * np.sin(s))
+    y = np.where(t < te, 0.0, R * (1 - np.cos(s)))
+    psi = s.copy()
+    delta = np.where(t < te, 0.0, math.radians(35))
+    m = turning_metrics(t, x, y, psi, np.full(t.size, U), delta, lpp=100.0, execute_time=te)
+    assert m.advance == pytest.approx(R, rel=1e-8) and m.transfer == pytest.approx(R, rel=1e-8)
+    assert m.tactical_diameter == pytest.approx(2 * R, rel=1e-8)
+    assert m.steady_diameter == pytest.approx(2 * R, rel=1e-10)
+    assert m.time_90 == pytest.approx(math.pi / 2 * R / U, rel=1e-8)
+    assert m.track_reach_10deg == pytest.approx(math.radians(10) * R, rel=1e-6)
+    d = m.to_dict()
+    assert d["manoeuvre"] == "turning" and d["advance_L"] == pytest.approx(2.5, rel=1e-8)
+    assert d["imo"]["advance_pass"] is True and d["imo"]["tactical_diameter_pass"] is True
+    # the same track mirrored is a port turn with the same metrics
+    mp = turning_metrics(t, x, -y, -psi, np.full(t.size, U), -delta, lpp=100.0, execute_time=te)
+    assert mp.side == "port" and mp.transfer == pytest.approx(R, rel=1e-8)
+
+
+def _sine_zigzag(T=120.0, amp=20.0, switch=10.0, te=10.0, dt=1e-3):
+    """Heading amp sin(2 pi (t - te)/T) after te; rudder reversed exactly when |psi| reaches the switch angle."""
+    k_e = int(round(te / dt))
+    t = dt * np.arange(k_e + int(1.2 * T / dt))
+    te = t[k_e]  # execute on a sample
+    ph = 2 * math.pi * np.clip(t - te, 0, None) / T
+    psi = np.radians(amp) * np.sin(ph)
+    delta = np.zeros(t.size)
+    sign = 1.0
+    for k in range(t.size):
+        if k < k_e:
+            continue
+        if sign * psi[k] >= math.radians(switch):
+            sign = -sign
+        delta[k] = sign * math.radians(switch)
+    return t, psi, delta
+
+
+def test_zigzag_metrics_of_a_sine_heading_are_exact():
+    T, te = 120.0, 10.0
+    t, psi, delta = _sine_zigzag(T=T, te=te)
+    m = zigzag_metrics(t, psi, delta, lpp=100.0)
+    assert m.first_side == "starboard" and m.rudder_deg == 10 and m.switch_deg == 10
+    assert m.execute_time == pytest.approx(te, abs=1e-2)
+    assert m.overshoot1_deg == pytest.approx(10.0, abs=1e-6)
+    assert m.overshoot2_deg == pytest.approx(10.0, abs=1e-6)
+    assert m.time_second_execute == pytest.approx(T / 12, abs=2e-3)   # asin(1/2) / (2 pi) T
+    assert m.overshoot1_time == pytest.approx(T / 4, abs=2e-3)
+    assert m.overshoot2_time == pytest.approx(3 * T / 4, abs=2e-3)
+    assert detect_manoeuvre(delta) == "zigzag"
+    mp = zigzag_metrics(t, -psi, -delta, lpp=100.0)
+    assert mp.first_side == "port" and mp.overshoot1_deg == pytest.approx(10.0, abs=1e-6)
+
+
+@pytest.mark.parametrize("lv, o1, o2", [(5.0, 10.0, 25.0), (20.0, 15.0, 32.5), (30.0, 20.0, 40.0), (45.0, 20.0, 40.0)])
+def test_imo_overshoot_limits(lv, o1, o2):
+    lim = imo_limits(100.0, 100.0 / lv)
+    assert lim["zz10_overshoot1_deg"] == pytest.approx(o1) and lim["zz10_overshoot2_deg"] == pytest.approx(o2)
+    assert lim["zz20_overshoot1_deg"] == 25.0 and lim["advance_L"] == 4.5 and lim["tactical_diameter_L"] == 5.0
+
+
+def test_imo_pass_fail_flags():
+    t, psi, delta = _sine_zigzag(amp=25.0)  # overshoots 15 deg
+    slow = zigzag_metrics(t, psi, delta, lpp=100.0, u=np.full(t.size, 10.0))   # L/V = 10 s: limit 10 deg
+    fast = zigzag_metrics(t, psi, delta, lpp=100.0, u=np.full(t.size, 4.0))    # L/V = 25 s: limit 17.5 deg
+    assert slow.imo()["overshoot1_pass"] is False and slow.imo()["overshoot1_limit_deg"] == 10.0
+    assert fast.imo()["overshoot1_pass"] is True and fast.imo()["overshoot1_limit_deg"] == 17.5
+    assert fast.imo()["overshoot2_limit_deg"] == pytest.approx(17.5 + 0.75 * 25)
+
+
+def test_steady_rps_of_the_response_model_is_the_quadratic_root():
+    m = get_model("kcs-response")
+    c = m.params_series()
+    U = np.array([1.5, 1.7, 2.2])
+    n = steady_rps(m, U)
+    # a1 U + a8 U n + a9 n^2 = 0
+    disc = (c.a8 * U) ** 2 - 4 * c.a9 * c.a1 * U
+    truth = (-c.a8 * U + np.sqrt(disc)) / (2 * c.a9)
+    np.testing.assert_allclose(n, truth, rtol=1e-9)
+
+
+def test_batch_equals_separate_runs():
+    m = get_model("mmg")
+    both = turning_circle(m, 35.0, speed=[1.0, 1.179], side="starboard", heading_change_deg=200)
+    for i, U in enumerate([1.0, 1.179]):
+        one = turning_circle(m, 35.0, speed=U, side="starboard", heading_change_deg=200, dt=0.05 * m.lpp / 1.179)
+        assert both.metrics[i].tactical_diameter == pytest.approx(one.metrics[0].tactical_diameter, rel=1e-12)
+
+
+def test_zigzag_controller_reverses_at_the_switch_heading():
+    m = get_model("mmg")
+    z = zigzag(m, 20.0, first="port")
+    met = z.metrics[0]
+    assert z.success and met.first_side == "port" and met.rudder_deg == 20
+    sim = z.member(0)
+    t = sim.index.to_numpy()
+    t2 = met.execute_time + met.time_second_execute
+    k = np.searchsorted(t, t2)
+    # rudder at -20 deg until the heading reached -20 deg, then moving towards +20 deg
+    assert sim["delta"].iloc[k - 2] == pytest.approx(-math.radians(20))
+    assert sim["delta"].iloc[k + 2] > -math.radians(20) + 1e-6
+    assert math.degrees(sim["psi"].iloc[k] - sim["psi"].iloc[0]) == pytest.approx(-20.0, abs=0.3)
+    assert 5 < met.overshoot1_deg < 25 and 5 < met.overshoot2_deg < 30
+
+
+def test_sweep_is_one_batch_with_monotone_diameters():
+    m = get_model("mmg", "kcs")
+    df = turning_sweep(m, rudder_deg=[10, 15, 25], speeds=[1.7, 2.0, 2.2])
+    assert len(df) == 9 and df["success"].all()
+    for _, g in df.groupby("speed"):
+        assert np.all(np.diff(g.sort_values("rudder_deg")["tactical_diameter_L"].to_numpy()) < 0)
+    assert np.all(np.diff(df[df.rudder_deg == 15].sort_values("speed")["n"].to_numpy()) > 0)
+
+
+def test_metrics_errors_are_clear():
+    df = pd.DataFrame({"time": [0, 1, 2], "psi": [0, 0, 0], "delta": [0, 0.1, 0.1]})
+    with pytest.raises(ValueError, match="ship length unknown"):
+        metrics(df)
+    with pytest.raises(ValueError, match=r"need column\(s\) \['x', 'y', 'u'\]"):
+        metrics(df, lpp=100.0, kind="turning")
+    with pytest.raises(ValueError, match="no manoeuvre"):
+        metrics(df.assign(delta=0.0), lpp=100.0)
+    deg = pd.DataFrame({"time": np.arange(5.0), "psi": [0, 90, 180, 270, 360], "delta": [0, .5, .5, .5, .5]})
+    with pytest.raises(ValueError, match="looks like degrees"):
+        metrics(deg, lpp=100.0)
+    class NoSway(FirstOrderShip):
+        state_names = ("x", "y", "psi", "u", "r")
+
+    with pytest.raises(ValueError, match=r"lacks \['v'\]"):
+        turning_circle(NoSway([0.05, 8.0]), 35.0)
+
+
+# ------------------------------------------------------------------ MARIN KVLCC2 measured logs
+README_VALUES = {
+    "tc_35": {"advance_L": 3.02, "transfer_L": 1.20, "tactical_diameter_L": 3.07},
+    "tc_-35": {"advance_L": 3.09, "transfer_L": 1.35, "tactical_diameter_L": 3.33},
+    "zz_10": {"overshoot1_deg": 9.4}, "zz_-10": {"overshoot1_deg": 8.1},
+    "zz_20": {"overshoot1_deg": 15.6}, "zz_-20": {"overshoot1_deg": 12.7},
+}
+
+
+@pytest.fixture(scope="module")
+def marin_logs():
+    if not MARIN.is_dir():
+        pytest.skip(f"MARIN KVLCC2 data not found at {MARIN.resolve()} (../shared/data/kvlcc2_marin beside the repo)")
+    from shipid.logs import read_log
+
+    return {k: read_log(MARIN / f"MARIN_FREE_KVLCC2_{k}_m.dat", fmt="marin") for k in README_VALUES}
+
+
+@pytest.mark.parametrize("name", list(README_VALUES))
+def test_marin_metrics_agree_with_readme(marin_logs, name):
+    """Lengths within 0.01 L (the README's rounding is 0.005 L), overshoots within 0.15 deg
+    (README: execute at |delta - delta0| > 0.5 deg, logged reference point, as here)."""
+    m = metrics(marin_logs[name], lpp=320.0)
+    d = m.to_dict()
+    assert d["manoeuvre"] == ("turning" if name.startswith("tc") else "zigzag")
+    assert d["reference"] == "logged point"
+    for key, val in README_VALUES[name].items():
+        tol = 0.15 if key.endswith("deg") else 0.01
+        assert d[key] == pytest.approx(val, abs=tol), f"{name} {key}: {d[key]:.3f} vs README {val}"
+    if name.startswith("tc"):
+        # +35 deg in the MARIN files turns the ship to port (their rudder sign is opposite to MMG's)
+        assert d["side"] == ("port" if name == "tc_35" else "starboard")
+        assert 0.0 < d["steady_diameter_L"] < d["tactical_diameter_L"] and 0.5 < d["speed_loss"] < 0.75
