@@ -118,3 +118,29 @@ def test_plot_draws_trajectories():
     r = launch([3.0, 5.0], [30.0, 45.0])
     ax = r.plot()
     assert len(ax.lines) == 3 and ax.yaxis_inverted()
+
+
+@pytest.mark.parametrize("speed,angle,fin,cg", [(5.0, 45.0, 0.0, 0.01), (3.0, 30.0, 5.0, -0.03)])
+def test_event_agrees_with_an_adaptive_integrator(speed, angle, fin, cg):
+    """Oracle: scipy's DOP853 at rtol 1e-10 with a terminal z = 0 event, on the same model.rhs."""
+    from scipy.integrate import solve_ivp
+
+    from shipid.glider import launch_state
+
+    m = get_model("glider").with_params({"x_g": cg})
+    u = np.array([np.deg2rad(fin)])
+    ev = lambda t, x: x[1]  # noqa: E731
+    ev.terminal, ev.direction = True, -1
+    x0 = launch_state(speed, angle)
+    t0 = 1e-6
+    sol = solve_ivp(lambda t, x: m.rhs(t, x, u), (0.0, t0), x0, method="DOP853", rtol=1e-12, atol=1e-14)
+    sol = solve_ivp(lambda t, x: m.rhs(t, x, u), (t0, 30.0), sol.y[:, -1], method="DOP853", rtol=1e-10,
+                    atol=1e-12, events=ev, dense_output=True)
+    te, xe = sol.t_events[0][0], sol.y_events[0][0]
+    tt = np.linspace(t0, te, 20001)
+    zmax = sol.sol(tt)[1].max()
+    r = launch(speed, angle, fin, cg)
+    assert r.duration_s == pytest.approx(te, abs=2e-4)
+    assert r.horizontal_m == pytest.approx(xe[0], abs=2e-4)
+    assert r.max_depth_m == pytest.approx(zmax, abs=1e-3)
+    assert np.deg2rad(r.exit_pitch_deg) == pytest.approx(xe[2], abs=1e-4)
