@@ -20,6 +20,7 @@ COMMAND_MODULES: list[str] = [
     "shipid.commands.logs",
     "shipid.commands.manoeuvre",
     "shipid.commands.routing",
+    "shipid.commands.glider",
 ]
 
 
