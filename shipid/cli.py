@@ -17,6 +17,7 @@ __all__ = ["main", "COMMAND_MODULES"]
 COMMAND_MODULES: list[str] = [
     "shipid.commands.core",
     "shipid.commands.identify",
+    "shipid.commands.validate",
 ]
 
 

@@ -135,11 +135,15 @@ def _section_coefficients(result) -> str:
     for name, r in tab.iterrows():
         rows.append((_e(name), _f(r["value"], "{:.5g}"), _f(r["std"], "{:.3g}"), _f(r["ci95_low"], "{:.5g}"),
                      _f(r["ci95_high"], "{:.5g}"), _f(r["rel_std_%"], "{:.1f}")))
-    out = ("<h2 id=\"coefficients\">Identified coefficients</h2>"
-           "<p class=\"note\">95 % confidence interval = value &plusmn; 1.96 &sigma; (Gaussian approximation of the "
-           "posterior); relative &sigma; = &sigma; / |value|.</p>")
-    out += _table(["coefficient", "value", "&sigma;", "95 % CI low", "95 % CI high", "relative &sigma; [%]"], rows)
+    out = "<h2 id=\"coefficients\">Identified coefficients</h2>"
     fixed = {k: v for k, v in result.coef.items() if k not in est}
+    if not est:
+        return out + ("<p>No coefficient was estimated (the result carries no covariance, e.g. a published "
+                      "parameter set): values used:</p>" +
+                      _table(["coefficient", "value"], [(_e(k), _f(v, "{:.5g}")) for k, v in fixed.items()]))
+    out += ("<p class=\"note\">95 % confidence interval = value &plusmn; 1.96 &sigma; (Gaussian approximation of the "
+            "posterior); relative &sigma; = &sigma; / |value|.</p>")
+    out += _table(["coefficient", "value", "&sigma;", "95 % CI low", "95 % CI high", "relative &sigma; [%]"], rows)
     if fixed:
         out += ("<p class=\"note\">Held fixed (not estimated): " +
                 ", ".join(f"{_e(k)} = {_f(v, '{:.5g}')}" for k, v in fixed.items()) + "</p>")
