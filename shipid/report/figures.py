@@ -146,6 +146,12 @@ def innovation_figure(innov: pd.DataFrame, title: str) -> Figure:
         band = 2 * f * np.sqrt(np.clip(innov[f"{ch}_S"].to_numpy(float), 0, None))
         ax.fill_between(t, -band, band, color="C1", alpha=0.25, lw=0, label="+-2 sqrt(S)")
         ax.plot(t, e, "-", lw=0.7, color="C0", label="innovation")
+        # the first samples (filter start-up) can be far larger than the rest: scale to the bulk
+        fin = np.abs(e[np.isfinite(e)])
+        bnd = band[np.isfinite(band)]
+        lim = max(np.percentile(fin, 99.5) if fin.size else 0.0, np.percentile(bnd, 99.5) if bnd.size else 0.0)
+        if lim > 0:
+            ax.set_ylim(-1.3 * lim, 1.3 * lim)
         ax.set_ylabel(f"{ch} [{unit}]", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
