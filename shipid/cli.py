@@ -21,6 +21,7 @@ COMMAND_MODULES: list[str] = [
     "shipid.commands.manoeuvre",
     "shipid.commands.routing",
     "shipid.commands.glider",
+    "shipid.commands.validate",
 ]
 
 
