@@ -14,6 +14,7 @@ __all__ = ["Model", "ParameterSet", "register_model", "get_model", "model_class"
 
 _REGISTRY: dict[str, str] = {
     "kcs-response": "shipid.models.response:KCSResponseModel",
+    "planing-boat": "shipid.models.planing:PlaningBoatModel",
 }
 
 
