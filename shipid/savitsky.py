@@ -299,26 +299,66 @@ class ResistanceCurve:
         if s[0] > 0:  # R(0) = 0 at rest
             s, r = np.r_[0.0, s], np.r_[0.0, r]
         self.speed, self.resistance = s, r
-        self._pchip = PchipInterpolator(s, r, extrapolate=True)
-        self._dpchip = self._pchip.derivative()
+        pch = PchipInterpolator(s, r, extrapolate=True)
+        # Hermite data for a fast evaluation (np.searchsorted instead of scipy's call overhead)
+        self._y = r
+        self._d = pch.derivative()(s)
+
+    def _hermite(self, a):
+        s, y, d = self.speed, self._y, self._d
+        i = np.clip(np.searchsorted(s, a, side="right") - 1, 0, len(s) - 2)
+        h = s[i + 1] - s[i]
+        t = (a - s[i]) / h
+        t2, t3 = t * t, t * t * t
+        val = (2 * t3 - 3 * t2 + 1) * y[i] + (t3 - 2 * t2 + t) * h * d[i] + (-2 * t3 + 3 * t2) * y[i + 1] + (t3 - t2) * h * d[i + 1]
+        der = ((6 * t2 - 6 * t) * y[i] + (3 * t2 - 4 * t + 1) * h * d[i] + (-6 * t2 + 6 * t) * y[i + 1]
+               + (3 * t2 - 2 * t) * h * d[i + 1]) / h
+        return val, der
+
+    def _scalar(self, V: float):
+        """Value and derivative at one speed with Python floats (fast path of the same Hermite cubic)."""
+        import bisect
+
+        a = abs(V)
+        sgn = 1.0 if V > 0 else (-1.0 if V < 0 else 0.0)
+        s = self.speed
+        vmax = float(s[-1])
+        if a > vmax:
+            rmax = float(self._y[-1])
+            return sgn * rmax * (a / vmax) ** 2, 2 * rmax * a / vmax**2
+        if not hasattr(self, "_lists"):
+            self._lists = (s.tolist(), self._y.tolist(), self._d.tolist())
+        sl, yl, dl = self._lists
+        i = min(max(bisect.bisect_right(sl, a) - 1, 0), len(sl) - 2)
+        h = sl[i + 1] - sl[i]
+        t = (a - sl[i]) / h
+        t2, t3 = t * t, t * t * t
+        val = (2 * t3 - 3 * t2 + 1) * yl[i] + (t3 - 2 * t2 + t) * h * dl[i] + (-2 * t3 + 3 * t2) * yl[i + 1] + (t3 - t2) * h * dl[i + 1]
+        der = ((6 * t2 - 6 * t) * yl[i] + (3 * t2 - 4 * t + 1) * h * dl[i] + (-6 * t2 + 6 * t) * yl[i + 1]
+               + (3 * t2 - 2 * t) * h * dl[i + 1]) / h
+        return sgn * val, der
 
     def __call__(self, V):
         """``R_T`` [N] at speed(s) ``V``; odd in V (resistance opposes motion), quadratic beyond the table."""
+        if np.ndim(V) == 0:
+            return self._scalar(float(V))[0]
         V = np.asarray(V, dtype=float)
         a = np.abs(V)
         vmax = self.speed[-1]
         inside = np.minimum(a, vmax)
-        r = self._pchip(inside)
+        r = self._hermite(inside)[0]
         rmax = self.resistance[-1]
         r = np.where(a > vmax, rmax * (a / vmax) ** 2, r)
         return np.sign(V) * r
 
     def derivative(self, V):
         """``dR_T/dV`` [N s/m]."""
+        if np.ndim(V) == 0:
+            return self._scalar(float(V))[1]
         V = np.asarray(V, dtype=float)
         a = np.abs(V)
         vmax = self.speed[-1]
-        d = self._dpchip(np.minimum(a, vmax))
+        d = self._hermite(np.minimum(a, vmax))[1]
         d = np.where(a > vmax, 2 * self.resistance[-1] * a / vmax**2, d)
         return d
 

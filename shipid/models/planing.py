@@ -181,6 +181,18 @@ class PlaningBoatModel(Model):
         return x, u
 
     # ------------------------------------------------------------------ helpers
+    def _minv(self, p):
+        """Inverse of the sway-roll-yaw mass matrix (cached for 1-D parameter vectors)."""
+        if p.ndim == 1:
+            key = p.tobytes()
+            cache = self.__dict__.setdefault("_minv_cache", {})
+            if key not in cache:
+                if len(cache) > 64:
+                    cache.clear()
+                cache[key] = np.linalg.inv(self._mass_matrix(p))
+            return cache[key]
+        return np.linalg.inv(self._mass_matrix(p))
+
     @staticmethod
     def _mass_matrix(p):
         P = lambda i: p[..., i]  # noqa: E731
@@ -200,7 +212,7 @@ class PlaningBoatModel(Model):
     def _forces(self, x, u, p):
         phi, uu, v, pp, r = x[..., 3], x[..., 4], x[..., 5], x[..., 6], x[..., 7]
         T, ang = u[..., 0], u[..., 1]
-        P = lambda i: p[..., i]  # noqa: E731
+        P = p.T.__getitem__ if p.ndim <= 1 else (lambda i: p[..., i])  # noqa: E731
         s = np.sin(ang)
         av = np.sqrt(v**2 + _SMOOTH_V2)
         Y = T * s + P(13) * uu * v + P(14) * uu * r + P(15) * pp + P(16) * phi + P(17) * v * av - P(0) * uu * r
@@ -213,16 +225,16 @@ class PlaningBoatModel(Model):
     def _rhs(self, t, x, u, p):
         psi, phi, uu, v, pp, r = (x[..., i] for i in range(2, 8))
         X, Y, K, N = self._forces(x, u, p)
-        M = self._mass_matrix(p)
+        Mi = self._minv(p)
         F = np.stack(np.broadcast_arrays(Y, K, N), axis=-1)
-        shape = np.broadcast_shapes(M.shape[:-2], F.shape[:-1])
-        acc = np.linalg.solve(np.broadcast_to(M, shape + (3, 3)), np.broadcast_to(F, shape + (3,))[..., None])[..., 0]
+        acc = (Mi @ F[..., None])[..., 0]
         du = X / (p[..., 0] - p[..., 3])
         cps, sps, cph = np.cos(psi), np.sin(psi), np.cos(phi)
         out = [uu * cps - v * sps * cph, uu * sps + v * cps * cph, r * cph, pp + 0 * uu, du,
                acc[..., 0], acc[..., 1], acc[..., 2]]
-        shape = np.broadcast_shapes(*[np.shape(o) for o in out])
-        return np.stack([np.broadcast_to(o, shape) for o in out], axis=-1)
+        if x.ndim == 1 and u.ndim == 1 and p.ndim == 1:
+            return np.array(out, dtype=float)
+        return np.stack(np.broadcast_arrays(*out), axis=-1)
 
     def _jac_x(self, t, x, u, p):
         psi, phi, uu, v, pp, r = (x[..., i] for i in range(2, 8))
@@ -266,8 +278,7 @@ class PlaningBoatModel(Model):
         dF[..., 2, 2] = P(22) * uu
         dF[..., 2, 3] = P(24)
         dF[..., 2, 4] = P(23) * uu
-        M = np.broadcast_to(self._mass_matrix(p), shape + (3, 3))
-        J[..., 5:8, 3:8] = np.linalg.solve(M, dF)
+        J[..., 5:8, 3:8] = self._minv(p) @ dF
         return J
 
     def _jac_u(self, t, x, u, p):
@@ -286,6 +297,5 @@ class PlaningBoatModel(Model):
         dF[..., 1, 1] = P(27) * T * c
         dF[..., 2, 0] = -P(26) * s
         dF[..., 2, 1] = -P(26) * T * c
-        M = np.broadcast_to(self._mass_matrix(p), shape + (3, 3))
-        J[..., 5:8, :] = np.linalg.solve(M, dF)
+        J[..., 5:8, :] = self._minv(p) @ dF
         return J
