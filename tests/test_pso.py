@@ -220,3 +220,22 @@ def test_plots_return_axes():
     ax = pr.plot()
     assert r.plot(ax=ax) is ax
     assert sail(pr, r.points).plot() is not None
+
+
+def test_spatially_varying_current_prediction_matches_voyage_and_converges_in_n_sub():
+    from shipid.routing.fields import AffineField
+
+    cur = AffineField([[0.0, 0.004], [0.0, 0.0]], w0=(0.0, 0.3))  # east component grows northwards
+    pts = np.array([[0.0, 0.0], [60.0, -150.0], [0.0, -300.0]])
+    energies = []
+    for n_sub in (16, 32, 64):
+        pr = USVProblem((0, 0), (0, -300), [Obstacle(5, -150, 20)], current=cur, n_sub=n_sub)
+        cost = PathCost(pr, "energy", prefix=pts[:2], dims=[])
+        _, ok, L, E, T = cost.evaluate(np.zeros((1, 0)))
+        v = sail(pr, pts)
+        assert ok[0] and v.arrived
+        assert v.total_energy == pytest.approx(E[0], rel=1e-12)  # steady field: prediction = voyage
+        energies.append(E[0])
+    # midpoint rule: error ~ 1/n_sub^2
+    e1, e2 = abs(energies[0] - energies[2]), abs(energies[1] - energies[2])
+    assert e2 < 0.4 * e1 and e2 / energies[2] < 1e-4

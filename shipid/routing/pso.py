@@ -51,7 +51,7 @@ import numpy as np
 import pandas as pd
 
 from .energy import PaperUSVModel
-from .fields import Field, PiecewiseTimeField, UniformField, as_field, math_from_course
+from .fields import Field, PiecewiseTimeField, UniformField, as_field
 
 __all__ = [
     "Obstacle", "USVProblem", "PSOResult", "pso", "PathCost", "PlanResult", "plan", "plan_dopso", "plan_eopso",
@@ -227,9 +227,9 @@ def _turns_ok(points, r_min, incoming_length=None) -> np.ndarray:
     return np.all(ok, axis=-1)
 
 
-def _legs_speed_power(problem: USVProblem, P0, P1, t_env):
-    """Per-piece (ds, us, P) of legs P0->P1 (..., 2) cut into n_sub pieces; fields at time t_env."""
-    n = max(int(problem.n_sub), 1)
+def _legs_speed_power(problem: USVProblem, P0, P1, t_env, n_sub: int | None = None):
+    """Per-piece (ds, us, P) of legs P0->P1 (..., 2) cut into n_sub pieces (default problem.n_sub); fields at t_env."""
+    n = max(int(problem.n_sub if n_sub is None else n_sub), 1)
     d = P1 - P0
     L = np.hypot(d[..., 0], d[..., 1])
     e = d / np.where(L > 0, L, 1.0)[..., None]
@@ -705,7 +705,7 @@ def sail(problem: USVProblem, points, *, t0: float = 0.0, e0: float = 0.0, stop_
                 rem = np.hypot(*(b - pos))
                 if rem <= 1e-12:
                     break
-                ds, us, P = _legs_speed_power(problem, pos, b, t)
+                ds, us, P = _legs_speed_power(problem, a, b, t, n_sub=1)  # the piece's mid-point
                 us, P = float(us[0]), float(P[0])
                 if not us > 1e-9:
                     return Voyage(np.array(T), np.array(XY), np.array(EN), np.array(LEG), False, pts,
