@@ -609,7 +609,10 @@ def steady_rps(model: Model, speed, *, params=None, n_max: float = 1e3, xtol: fl
         return model.rhs(0.0, x0, uin, p)[:, iu]
 
     grid = np.concatenate([[0.0], np.geomspace(1e-3, n_max, 120)])
-    vals = np.stack([acc(np.full(speeds.size, g)) for g in grid], axis=1)  # (B, G)
+    G = grid.size
+    ug = np.zeros((speeds.size, G, model.nu))
+    ug[..., inn] = grid
+    vals = model.rhs(0.0, np.repeat(x0[:, None, :], G, axis=1), ug, p)[..., iu]  # (B, G), one batched call
     lo = np.full(speeds.size, np.nan)
     hi = np.full(speeds.size, np.nan)
     for b in range(speeds.size):

@@ -197,6 +197,11 @@ def _no_default(f) -> bool:
     return f.default is dataclasses.MISSING
 
 
+def _components(a):
+    """View of ``a (..., k)`` with the component axis first (cheap for 1-D and 2-D arrays)."""
+    return a.T if a.ndim <= 2 else np.moveaxis(a, -1, 0)
+
+
 class _NP:
     """numpy backend of the equations (batched, complex-step safe)."""
 
@@ -347,7 +352,7 @@ class MMGModel(Model):
         """
         if xp is None:
             xp = _NP
-            x, u, p = np.moveaxis(x, -1, 0), np.moveaxis(u, -1, 0), np.moveaxis(p, -1, 0)
+            x, u, p = _components(x), _components(u), _components(p)
         P = self.particulars
         L, d, rho, Dp = P.lpp, P.draught, P.rho, P.D_p
         (R0, Xvv, Xvr, Xrr, Xvvvv, Yv, Yr, Yvvv, Yvvr, Yvrr, Yrrr, Nv, Nr, Nvvv, Nvvr, Nvrr, Nrrr,
@@ -405,7 +410,8 @@ class MMGModel(Model):
             x, u, p = x.tolist(), u.tolist(), p.tolist()
         else:
             xp = _NP
-            x, u, p = np.moveaxis(x, -1, 0), np.moveaxis(u, -1, 0), np.moveaxis(p, -1, 0)
+            x, u = _components(x), _components(u)
+            p = p.tolist() if (p.ndim == 1 and p.dtype.kind == "f") else _components(p)
         P = self.particulars
         L, d, rho = P.lpp, P.draught, P.rho
         F = self._forces(x, u, p, xp)
