@@ -18,14 +18,16 @@ PRIOR_STD = {"a": 5.0, "b": 1.0, "c": 1.0, "CL_alpha": 5.0, "CM_alpha": 1.0}
 # a launch starts at 5 m/s and loses ~1 m/s in the first 0.1 s: the initial state taken
 # from the first samples is uncertain, say so
 X0_STD = {"x": 0.01, "z": 0.05, "theta": 0.05, "u": 1.0, "w": 0.3, "q": 0.5}
+# the filter's RK4 step must resolve the fins' pitch damping (|lambda| ~ 90 /s at 5 m/s):
+# 25 Hz samples, 4 substeps = 0.01 s, the step the truth was simulated with
 
 
-def _fit(logs, n_passes=2):
+def _fit(logs, n_passes=2, substeps=4):
     start = get_model("glider").with_params(START)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         return EKFIdentifier(start, estimate=EST, init="model", prior_std=PRIOR_STD, meas_std=DEFAULT_SENSOR_STD,
-                             initial_state_std=X0_STD, n_passes=n_passes).fit(logs)
+                             initial_state_std=X0_STD, n_passes=n_passes, substeps=substeps).fit(logs)
 
 
 def _table(idf):
@@ -76,13 +78,15 @@ def test_dive_log_rejects_bad_settings():
 def test_ekf_reported_sigma_is_consistent_over_repeated_noise():
     """Monte Carlo over 12 noise realisations of the same two launches: the normalised
     estimation errors z = (estimate - truth) / sigma have mean square near 1 (NEES per
-    coefficient), i.e. the reported sigma is honest, and 3-sigma coverage holds."""
+    coefficient inside the chi2 99 % interval), i.e. the reported sigma is honest."""
     zs = []
     for seed in range(12):
         logs = [dive_log(5.0, 45.0, 0.0, rng=100 + seed), dive_log(3.0, 60.0, 8.0, rng=200 + seed)]
         zs.append(_table(_fit(logs))["z"].to_numpy())
     Z = np.array(zs)                                  # (12, 5)
     nees = (Z**2).mean(axis=0)
-    # chi2(12)/12 two-sided 99 % interval is [0.27, 2.2]; allow the EKF's linearisation some slack
-    assert np.all(nees < 3.0), nees
-    assert (np.abs(Z) < 3).mean() > 0.95
+    # chi2(12)/12 two-sided 99 % interval is [0.27, 2.2].  With substeps=1 (EKF step 0.04 s,
+    # unstable for the pitch mode) NEES reached 2.1 with biased a, b, c and 3 of 60 errors
+    # beyond 3 sigma; with substeps=4 it is 0.6-1.1 and all errors are inside 3 sigma.
+    assert np.all((nees > 0.27) & (nees < 2.2)), nees
+    assert np.all(np.abs(Z) < 3), Z
