@@ -195,9 +195,13 @@ def _summary_row(v: LogValidation, i: int) -> list:
 
 def _section_summary(vals: list[LogValidation]) -> str:
     out = ("<h2 id=\"summary\">Replay of the logs</h2>"
-           "<p class=\"note\">Each log is replayed open-loop: the model is simulated with the log's recorded rudder "
+           "<p class=\"note\">Each log is <b>replayed</b>: the model is simulated with the log's recorded rudder "
            "and propeller inputs from the log's initial state (mean of the first five samples). RMSE is taken "
-           "over all samples against the measurement (measurement noise included).</p>")
+           "over all samples against the measurement (measurement noise included). The <b>closed-loop</b> rows are "
+           "the model's own standard manoeuvre matching the log (same side, rudder and switch angle, approach "
+           "speed; propeller rps held at the value that gives that speed; zigzag rudder reversed by the "
+           "model's heading): the free-running prediction. For a log whose propeller rate changes during "
+           "the run only the replay is comparable.</p>")
     rows = [_summary_row(v, i) for i, v in enumerate(vals)]
     out += _table(["log", "manoeuvre", "RMSE u [m/s]", "RMSE v [m/s]", "RMSE r [deg/s]", "RMSE &psi; [deg]",
                    "track RMSE [m]", "track RMSE [L]"], rows, left=2)
@@ -208,10 +212,13 @@ def _section_summary(vals: list[LogValidation]) -> str:
         keys = SUMMARY_METRICS[kind]
         rows = []
         for i, v in sel:
-            m, p, dd = v.measured.to_dict(), v.predicted.to_dict(), v.difference()
-            for what, src in (("measured", m), ("predicted", p), ("difference", dd)):
-                rows.append([_e(v.log.name) if what == "measured" else "", _e(what)] +
-                            [_f(src.get(k), "{:+.3f}" if what == "difference" else "{:.3f}") for k, _ in keys])
+            srcs = [("measured", v.measured.to_dict()), ("replay", v.predicted.to_dict()),
+                    ("replay &minus; measured", v.difference())]
+            if v.standard is not None:
+                srcs += [("closed loop", v.standard.to_dict()), ("closed loop &minus; measured", v.difference("standard"))]
+            for what, src in srcs:
+                rows.append([_e(v.log.name) if what == "measured" else "", what] +
+                            [_f(src.get(k), "{:+.3f}" if "minus" in what else "{:.3f}") for k, _ in keys])
         out += f"<h3>{'Turning circles' if kind == 'turning' else 'Zigzags'}: metrics measured vs predicted</h3>"
         out += _table(["log", ""] + [_e(lab) for _, lab in keys], rows, left=2)
     return out
@@ -237,25 +244,26 @@ def _section_imo(vals: list[LogValidation]) -> str:
            "ship's by &radic;scale, which gives the strictest overshoot limits).</p>")
     rows = []
     for v in vals:
+        na = ("n/a", "na")
         if v.measured is None:
-            rows.append([_e(v.log.name), "&ndash;", "&ndash;", "&ndash;", ("n/a", "na"), "&ndash;", ("n/a", "na")])
+            rows.append([_e(v.log.name), "&ndash;", "&ndash;", "&ndash;", na, "&ndash;", na, "&ndash;", na])
             continue
         mi = v.measured.imo()
         pd_ = v.predicted.to_dict() if v.predicted is not None else {}
-        pi = pd_.get("imo", {})
+        sd_ = v.standard.to_dict() if v.standard is not None else {}
         md = v.measured.to_dict()
         crits = [k[:-5] for k in mi if k.endswith("_pass")]
         if not crits:
-            rows.append([_e(v.log.name), _e(f"no IMO criterion for a {v.measured.rudder_deg:g} deg "
-                                            f"{v.manoeuvre}"), "", "", ("n/a", "na"), "", ("n/a", "na")])
+            rows.append([_e(v.log.name), _e(f"no IMO criterion for a {abs(v.measured.rudder_deg):g} deg "
+                                            f"{v.manoeuvre}"), "", "", na, "", na, "", na])
         for c in crits:
             key, unit = _IMO_VALUE.get(c, (c, ""))
             lim = mi.get(f"{c}_limit_{unit}") if unit else None
-            rows.append([_e(v.log.name), _e(c.replace("_", " ") + (f" [{unit}]" if unit else "")), _f(lim, "{:.3g}"),
-                         _f(md.get(key), "{:.3f}"), _pass_cell(mi.get(f"{c}_pass")), _f(pd_.get(key), "{:.3f}"),
-                         _pass_cell(pi.get(f"{c}_pass"))])
-    return out + _table(["log", "criterion", "limit", "measured", "measured", "predicted (replay)", "predicted"],
-                        rows, left=2)
+            row = [_e(v.log.name), _e(c.replace("_", " ") + (f" [{unit}]" if unit else "")), _f(lim, "{:.3g}")]
+            for d in (md, pd_, sd_):
+                row += [_f(d.get(key), "{:.3f}"), _pass_cell(d.get("imo", {}).get(f"{c}_pass"))]
+            rows.append(row)
+    return out + _table(["log", "criterion", "limit", "measured", "", "replay", "", "closed loop", ""], rows, left=2)
 
 
 def _innovations_for(identifier, name: str):
