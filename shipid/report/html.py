@@ -16,7 +16,6 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Sequence
 
-import numpy as np
 
 from .._io import OutputExistsError, atomic_write_text
 from ..validation import LogValidation, load_logs, resolve_model, validate_one
@@ -337,8 +336,13 @@ def _section_versions(result) -> str:
 
 # ----------------------------------------------------------------------------- public
 def render_report(result, logs, *, identifier=None, title: str | None = None, lpp: float | None = None,
-                  rudder_sign: float = 1.0, validations: list[LogValidation] | None = None) -> str:
-    """The report as an HTML string (see :func:`write_report`)."""
+                  rudder_sign: float = 1.0, closed_loop: bool = True,
+                  validations: list[LogValidation] | None = None) -> str:
+    """The report as an HTML string (see :func:`write_report`).
+
+    ``validations`` (from :func:`shipid.validation.validate_logs`) reuses replays already computed;
+    ``logs``, ``lpp``, ``rudder_sign`` and ``closed_loop`` are then ignored.
+    """
     if result is None:
         if identifier is None:
             raise ValueError("render_report: give a fit result (or an identifier to take it from)")
@@ -347,7 +351,8 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
     if res is None:
         raise ValueError("render_report: needs a fit result (FitResult or its JSON), not a bare model")
     if validations is None:
-        validations = [validate_one(model, lg, lpp=lpp, rudder_sign=rudder_sign) for lg in load_logs(logs, lpp=lpp)]
+        validations = [validate_one(model, lg, lpp=lpp, rudder_sign=rudder_sign, closed_loop=closed_loop)
+                       for lg in load_logs(logs, lpp=lpp)]
     title = title or f"Validation report: {res.model} model"
     stamp = datetime.now(timezone.utc).isoformat(timespec="seconds")
     n_ok = sum(v.success for v in validations)
@@ -372,7 +377,8 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
 
 
 def write_report(result, logs, path: str | os.PathLike, *, force: bool = False, identifier=None,
-                 title: str | None = None, lpp: float | None = None, rudder_sign: float = 1.0) -> Path:
+                 title: str | None = None, lpp: float | None = None, rudder_sign: float = 1.0,
+                 closed_loop: bool = True) -> Path:
     """Write a self-contained HTML validation report.
 
     Parameters
@@ -389,6 +395,8 @@ def write_report(result, logs, path: str | os.PathLike, *, force: bool = False, 
         Ship length [m] for the metrics (default: from each log, then the model).
     rudder_sign : {1, -1}
         Sign applied to the logged rudder before replay (see :func:`shipid.validation.validate`).
+    closed_loop : bool
+        Also simulate the model's own standard manoeuvre matching each log (see :func:`shipid.validation.validate`).
 
     Returns
     -------
@@ -397,5 +405,6 @@ def write_report(result, logs, path: str | os.PathLike, *, force: bool = False, 
     p = Path(path)
     if p.exists() and not force:  # fail before the (slow) replays and figures
         raise OutputExistsError(f"{p}: output exists; choose another name or pass --force (force=True) to overwrite it")
-    text = render_report(result, logs, identifier=identifier, title=title, lpp=lpp, rudder_sign=rudder_sign)
+    text = render_report(result, logs, identifier=identifier, title=title, lpp=lpp, rudder_sign=rudder_sign,
+                         closed_loop=closed_loop)
     return atomic_write_text(p, text, force=force)
