@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
 from .manoeuvres import metrics as manoeuvre_metrics
@@ -256,10 +257,13 @@ def validate_one(model: Model, log, *, lpp: float | None = None, rudder_sign: fl
     if rudder_sign == -1 and "delta" in data.columns:
         data = data.assign(delta=-data["delta"])
         notes.append("logged rudder angle multiplied by -1 for the replay (opposite sign convention)")
-    sim = replay(m, data, substeps=substeps)
+    with warnings.catch_warnings():  # a diverging replay is reported in the notes and by success=False
+        warnings.simplefilter("ignore", RuntimeWarning)
+        sim = replay(m, data, substeps=substeps)
+        errors = replay_errors(sim, data)
     if not sim.success:
-        notes.append(f"replay: {sim.message}")
-    errors = replay_errors(sim, data)
+        notes.append(f"replay: {sim.message}; no RMSE or predicted metrics")
+        errors = errors.assign(rmse=np.nan, nrmse=np.nan)
     res = LogValidation(log=log, simulation=sim, errors=errors, lpp=L, rudder_sign=float(rudder_sign),
                         model_lpp=_model_lpp(m), notes=notes)
     if L is None:
@@ -272,6 +276,8 @@ def validate_one(model: Model, log, *, lpp: float | None = None, rudder_sign: fl
         return res
     if closed_loop:
         _standard(m, log, res)
+    if not sim.success:
+        return res
     pred = sim.to_pandas().reset_index()
     if rudder_sign == -1:
         pred["delta"] = -pred["delta"]  # back to the log's convention: same rudder history as measured

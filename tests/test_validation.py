@@ -107,7 +107,7 @@ def test_truth_closed_loop_manoeuvre_agrees(truth_validation):
 
 def test_wrong_model_is_caught():
     """A rudder 30 % weaker than the truth (c3, b3): the turn widens, RMSE far above noise."""
-    bad = {v["name"]: v for v in validate(truth_result({"c3": 0.7, "b3": 0.7}), [PATHS["kcs_tc_p35"]])}
+    bad = {v["name"]: v for v in validate(truth_result({"c3": 0.7, "b3": 0.7}), [PATHS["kcs_tc_p35"]], closed_loop=False)}
     v = bad["kcs_tc_p35"]
     print({k: round(x, 3) for k, x in v["difference"].items() if x is not None}, v["rmse"])
     assert v["difference"]["tactical_diameter_L"] > 0.5
@@ -118,7 +118,7 @@ def test_validate_reuses_replay_and_metrics():
     """validate() is replay + replay_errors + manoeuvres.metrics, nothing else."""
     model = get_model("kcs-response", "synthetic-truth")
     log = read_log(PATHS["kcs_zz_m10"])
-    (v,) = validate_logs(model, [log])
+    (v,) = validate_logs(model, [log], closed_loop=False)
     sim = replay(model, log)
     np.testing.assert_array_equal(v.simulation.x, sim.x)
     pd.testing.assert_frame_equal(v.errors, replay_errors(sim, log))
@@ -141,10 +141,10 @@ def test_rudder_sign_convention():
     cols = {c: log.data[c].to_numpy() for c in log.channels}
     cols["delta"] = -cols["delta"]
     flipped = TrialLog.from_arrays(log.time, name="flipped", ship=log.ship, **cols)
-    (wrong,) = validate(model, [flipped])
+    (wrong,) = validate(model, [flipped], closed_loop=False)
     assert any("opposite" in n and "rudder_sign=-1" in n for n in wrong["notes"]), wrong["notes"]
-    (right,) = validate(model, [flipped], rudder_sign=-1)
-    (orig,) = validate(model, [log])
+    (right,) = validate(model, [flipped], rudder_sign=-1, closed_loop=False)
+    (orig,) = validate(model, [log], closed_loop=False)
     assert right["rmse"] == pytest.approx(orig["rmse"], rel=1e-12)
     assert right["difference"]["tactical_diameter_L"] == pytest.approx(orig["difference"]["tactical_diameter_L"], abs=1e-12)
     with pytest.raises(ValueError, match="rudder_sign"):
@@ -265,3 +265,26 @@ def test_marin_wrong_rudder_sign_is_flagged(mmg_result):
     (d,) = validate(mmg_result, [_marin("zz_10")], lpp=320.0, closed_loop=False)
     assert any("opposite" in n for n in d["notes"]), d["notes"]
     assert d["predicted"]["first_side"] != d["measured"]["first_side"]
+
+
+def test_log_without_manoeuvre_and_diverging_model(tmp_path, capsys):
+    """A straight run: replay errors only.  An unstable model: success False, no numbers, CLI exit 1."""
+    model = get_model("kcs-response", "synthetic-truth")
+    t = np.arange(0.0, 20.0, 0.1)
+    straight = TrialLog.from_arrays(t, name="straight", x=1.7 * t, y=0 * t, psi=0 * t, u=1.7 + 0 * t, v=0 * t,
+                                    r=0 * t, delta=0 * t, n=10.0 + 0 * t)
+    (d,) = validate(model, [straight], closed_loop=False)
+    assert d["manoeuvre"] is None and d["measured"] == {} and d["predicted"] == {} and d["success"]
+    assert any("never moves" in n for n in d["notes"])
+    assert d["rmse"]["u"] < 1e-3  # 10 rps holds 1.70 m/s in the truth
+    unstable = truth_result()
+    unstable.coef.update(c2=5.0, a1=3.0)
+    (d,) = validate(unstable, [PATHS["kcs_zz_m10"]], closed_loop=False)
+    assert not d["success"] and not d["replay"]["success"]
+    assert d["predicted"] == {} and all(v is None for v in d["rmse"].values())
+    assert any("non-finite" in n for n in d["notes"])
+    r = unstable.to_json(tmp_path / "unstable.json")
+    out = tmp_path / "v.json"
+    assert main(["validate", str(r), str(PATHS["kcs_zz_m10"]), "--no-closed-loop", "-o", str(out)]) == 1
+    assert json.loads(out.read_text())[0]["replay"]["success"] is False
+    assert "diverged" in capsys.readouterr().err
