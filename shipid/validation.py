@@ -31,7 +31,7 @@ import os
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -78,6 +78,8 @@ class LogValidation:
     lpp: float | None = None
     rudder_sign: float = 1.0
     model_lpp: float | None = None
+    standard: Any = None
+    standard_settings: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
 
     @property
@@ -88,11 +90,13 @@ class LogValidation:
     def manoeuvre(self) -> str | None:
         return None if self.measured is None else self.measured.manoeuvre
 
-    def difference(self) -> dict:
-        """``predicted - measured`` for every numeric metric both have (``None`` where either is missing)."""
-        if self.measured is None or self.predicted is None:
+    def difference(self, other: str = "predicted") -> dict:
+        """``predicted - measured`` (or ``standard - measured``) for every numeric metric both have
+        (``None`` where either is missing)."""
+        o = getattr(self, other)
+        if self.measured is None or o is None:
             return {}
-        m, p = self.measured.to_dict(), self.predicted.to_dict()
+        m, p = self.measured.to_dict(), o.to_dict()
         out = {}
         for k, mv in m.items():
             if k in DIFF_EXCLUDE or isinstance(mv, (bool, str, dict)) or k not in p:
@@ -124,6 +128,9 @@ class LogValidation:
             "nrmse": nrmse,
             "rmse_units": {c: self.simulation.model.units.get(c, "") for c in chans},
             "track_rmse_m": track,
+            "standard": ({**self.standard.to_dict(), "settings": dict(self.standard_settings)}
+                         if self.standard is not None else {}),
+            "standard_difference": self.difference("standard"),
             "replay": {"success": bool(self.simulation.success), "message": self.simulation.message,
                        "rudder_sign": self.rudder_sign, "model_lpp": self.model_lpp,
                        "n_samples": int(self.simulation.t.size)},
@@ -231,7 +238,7 @@ def _for_length(model: Model, lpp: float | None, notes: list) -> Model:
 
 # ----------------------------------------------------------------------------- main
 def validate_one(model: Model, log, *, lpp: float | None = None, rudder_sign: float = 1.0,
-                 substeps: int = 2) -> LogValidation:
+                 substeps: int = 2, closed_loop: bool = True) -> LogValidation:
     """Replay ``model`` on one TrialLog and compare; see :func:`validate`."""
     notes: list[str] = []
     name = getattr(log, "name", "log")
@@ -250,10 +257,13 @@ def validate_one(model: Model, log, *, lpp: float | None = None, rudder_sign: fl
     if rudder_sign == -1 and "delta" in data.columns:
         data = data.assign(delta=-data["delta"])
         notes.append("logged rudder angle multiplied by -1 for the replay (opposite sign convention)")
-    sim = replay(m, data, substeps=substeps)
+    with warnings.catch_warnings():  # a diverging replay is reported in the notes and by success=False
+        warnings.simplefilter("ignore", RuntimeWarning)
+        sim = replay(m, data, substeps=substeps)
+        errors = replay_errors(sim, data)
     if not sim.success:
-        notes.append(f"replay: {sim.message}")
-    errors = replay_errors(sim, data)
+        notes.append(f"replay: {sim.message}; no RMSE or predicted metrics")
+        errors = errors.assign(rmse=np.nan, nrmse=np.nan)
     res = LogValidation(log=log, simulation=sim, errors=errors, lpp=L, rudder_sign=float(rudder_sign),
                         model_lpp=_model_lpp(m), notes=notes)
     if L is None:
@@ -263,6 +273,10 @@ def validate_one(model: Model, log, *, lpp: float | None = None, rudder_sign: fl
         res.measured = manoeuvre_metrics(log, lpp=L, name=name)
     except ValueError as exc:
         notes.append(f"measured metrics not available: {exc}")
+        return res
+    if closed_loop:
+        _standard(m, log, res)
+    if not sim.success:
         return res
     pred = sim.to_pandas().reset_index()
     if rudder_sign == -1:
@@ -282,16 +296,52 @@ def validate_one(model: Model, log, *, lpp: float | None = None, rudder_sign: fl
     return res
 
 
+def _standard(model: Model, log, res: LogValidation) -> None:
+    """Closed-loop standard manoeuvre of the model matching the measured one (see :func:`validate`)."""
+    from .manoeuvres import turning_circle, zigzag
+
+    m = res.measured
+    ship = getattr(log, "ship", None)
+    rate = getattr(ship, "rudder_rate", None) or ship_info(model).get("rudder_rate")
+    side = m.side if m.manoeuvre == "turning" else m.first_side
+    settings = {"rudder_deg": abs(float(m.rudder_deg)), "speed": float(m.approach_speed), "side": side,
+                "rudder_rate_deg_s": None if rate is None else math.degrees(rate), "lpp": res.lpp}
+    if not (math.isfinite(settings["speed"]) and settings["speed"] > 0) or settings["rudder_deg"] <= 0:
+        res.notes.append("closed-loop manoeuvre skipped: approach speed or rudder angle of the log unknown")
+        return
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            if m.manoeuvre == "turning":
+                run = turning_circle(model, settings["rudder_deg"], speed=settings["speed"], side=side,
+                                     rudder_rate=rate, lpp=res.lpp)
+            else:
+                settings["switch_deg"] = float(m.switch_deg)
+                # the zigzag rudder law acts at step starts, so the reversal lags the heading crossing by up
+                # to one step: up to r' * dt U/L rad of extra overshoot -- 1.3 deg for r' = 0.45 at the default
+                # dt = L/(20 U); L/(100 U) bounds it by 0.26 deg (r' = 0.45) at 5x the cost
+                settings["dt"] = 0.01 * res.lpp / settings["speed"]
+                run = zigzag(model, settings["rudder_deg"], settings["switch_deg"], speed=settings["speed"],
+                             first=side, rudder_rate=rate, lpp=res.lpp, dt=settings["dt"])
+    except ValueError as exc:
+        res.notes.append(f"closed-loop manoeuvre not available: {exc}")
+        return
+    settings["n_rps"] = float(run.settings["n"].iloc[0]) if "n" in run.settings else None
+    if not run.success:
+        res.notes.append(f"closed-loop manoeuvre: {run.message}")
+    res.standard, res.standard_settings = run.metrics[0], settings
+
+
 def validate_logs(result_or_model, logs, lpp: float | None = None, *, rudder_sign: float = 1.0,
-                  substeps: int = 2) -> list[LogValidation]:
+                  substeps: int = 2, closed_loop: bool = True) -> list[LogValidation]:
     """Replay a model on each log and compare; returns :class:`LogValidation` objects (see :func:`validate`)."""
     model, _ = resolve_model(result_or_model)
-    return [validate_one(model, lg, lpp=lpp, rudder_sign=rudder_sign, substeps=substeps)
+    return [validate_one(model, lg, lpp=lpp, rudder_sign=rudder_sign, substeps=substeps, closed_loop=closed_loop)
             for lg in load_logs(logs, lpp=lpp)]
 
 
 def validate(result_or_model, logs, lpp: float | None = None, *, rudder_sign: float = 1.0,
-             substeps: int = 2) -> list[dict]:
+             substeps: int = 2, closed_loop: bool = True) -> list[dict]:
     """Validate a model against measured logs by replaying their recorded inputs.
 
     Parameters
@@ -306,14 +356,21 @@ def validate(result_or_model, logs, lpp: float | None = None, *, rudder_sign: fl
         opposite sign to the shipped models: pass -1).
     substeps : int
         RK4 steps per log sample interval.
+    closed_loop : bool
+        Also simulate the model's own standard manoeuvre matching the log (same side, rudder angle,
+        switch angle, approach speed, the log's rudder rate when known; propeller rps solved for
+        the approach speed; rudder reversed by the model's own heading) with
+        :func:`shipid.manoeuvres.turning_circle` / :func:`~shipid.manoeuvres.zigzag`.  Its metrics are
+        the ``standard`` entry -- the free-running prediction a trial would compare with.
 
     Returns
     -------
     list of dict, one per log, with keys ``file``, ``manoeuvre`` ("turning"/"zigzag"/None),
     ``measured`` and ``predicted`` (metric dicts of :mod:`shipid.manoeuvres`, including ``imo``),
-    ``difference`` (predicted - measured per metric), ``rmse`` / ``nrmse`` (per channel; SI units
+    ``difference`` (predicted - measured per metric), ``standard`` and ``standard_difference``
+    (closed-loop manoeuvre, see ``closed_loop``; ``standard.settings`` records how it was run), ``rmse`` / ``nrmse`` (per channel; SI units
     and radians, NRMSE relative to the measured range), ``track_rmse_m``, ``replay`` (success,
     message), ``success`` and ``notes``.
     """
     return [v.to_dict() for v in validate_logs(result_or_model, logs, lpp, rudder_sign=rudder_sign,
-                                               substeps=substeps)]
+                                               substeps=substeps, closed_loop=closed_loop)]

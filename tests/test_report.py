@@ -11,7 +11,6 @@ import base64
 import hashlib
 import io
 import re
-import shutil
 import subprocess
 from html.parser import HTMLParser
 from pathlib import Path

@@ -16,7 +16,6 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Sequence
 
-import numpy as np
 
 from .._io import OutputExistsError, atomic_write_text
 from ..validation import LogValidation, load_logs, resolve_model, validate_one
@@ -195,9 +194,13 @@ def _summary_row(v: LogValidation, i: int) -> list:
 
 def _section_summary(vals: list[LogValidation]) -> str:
     out = ("<h2 id=\"summary\">Replay of the logs</h2>"
-           "<p class=\"note\">Each log is replayed open-loop: the model is simulated with the log's recorded rudder "
+           "<p class=\"note\">Each log is <b>replayed</b>: the model is simulated with the log's recorded rudder "
            "and propeller inputs from the log's initial state (mean of the first five samples). RMSE is taken "
-           "over all samples against the measurement (measurement noise included).</p>")
+           "over all samples against the measurement (measurement noise included). The <b>closed-loop</b> rows are "
+           "the model's own standard manoeuvre matching the log (same side, rudder and switch angle, approach "
+           "speed; propeller rps held at the value that gives that speed; zigzag rudder reversed by the "
+           "model's heading): the free-running prediction. For a log whose propeller rate changes during "
+           "the run only the replay is comparable.</p>")
     rows = [_summary_row(v, i) for i, v in enumerate(vals)]
     out += _table(["log", "manoeuvre", "RMSE u [m/s]", "RMSE v [m/s]", "RMSE r [deg/s]", "RMSE &psi; [deg]",
                    "track RMSE [m]", "track RMSE [L]"], rows, left=2)
@@ -208,10 +211,13 @@ def _section_summary(vals: list[LogValidation]) -> str:
         keys = SUMMARY_METRICS[kind]
         rows = []
         for i, v in sel:
-            m, p, dd = v.measured.to_dict(), v.predicted.to_dict(), v.difference()
-            for what, src in (("measured", m), ("predicted", p), ("difference", dd)):
-                rows.append([_e(v.log.name) if what == "measured" else "", _e(what)] +
-                            [_f(src.get(k), "{:+.3f}" if what == "difference" else "{:.3f}") for k, _ in keys])
+            srcs = [("measured", v.measured.to_dict()), ("replay", v.predicted.to_dict()),
+                    ("replay &minus; measured", v.difference())]
+            if v.standard is not None:
+                srcs += [("closed loop", v.standard.to_dict()), ("closed loop &minus; measured", v.difference("standard"))]
+            for what, src in srcs:
+                rows.append([_e(v.log.name) if what == "measured" else "", what] +
+                            [_f(src.get(k), "{:+.3f}" if "minus" in what else "{:.3f}") for k, _ in keys])
         out += f"<h3>{'Turning circles' if kind == 'turning' else 'Zigzags'}: metrics measured vs predicted</h3>"
         out += _table(["log", ""] + [_e(lab) for _, lab in keys], rows, left=2)
     return out
@@ -237,25 +243,26 @@ def _section_imo(vals: list[LogValidation]) -> str:
            "ship's by &radic;scale, which gives the strictest overshoot limits).</p>")
     rows = []
     for v in vals:
+        na = ("n/a", "na")
         if v.measured is None:
-            rows.append([_e(v.log.name), "&ndash;", "&ndash;", "&ndash;", ("n/a", "na"), "&ndash;", ("n/a", "na")])
+            rows.append([_e(v.log.name), "&ndash;", "&ndash;", "&ndash;", na, "&ndash;", na, "&ndash;", na])
             continue
         mi = v.measured.imo()
         pd_ = v.predicted.to_dict() if v.predicted is not None else {}
-        pi = pd_.get("imo", {})
+        sd_ = v.standard.to_dict() if v.standard is not None else {}
         md = v.measured.to_dict()
         crits = [k[:-5] for k in mi if k.endswith("_pass")]
         if not crits:
-            rows.append([_e(v.log.name), _e(f"no IMO criterion for a {v.measured.rudder_deg:g} deg "
-                                            f"{v.manoeuvre}"), "", "", ("n/a", "na"), "", ("n/a", "na")])
+            rows.append([_e(v.log.name), _e(f"no IMO criterion for a {abs(v.measured.rudder_deg):g} deg "
+                                            f"{v.manoeuvre}"), "", "", na, "", na, "", na])
         for c in crits:
             key, unit = _IMO_VALUE.get(c, (c, ""))
             lim = mi.get(f"{c}_limit_{unit}") if unit else None
-            rows.append([_e(v.log.name), _e(c.replace("_", " ") + (f" [{unit}]" if unit else "")), _f(lim, "{:.3g}"),
-                         _f(md.get(key), "{:.3f}"), _pass_cell(mi.get(f"{c}_pass")), _f(pd_.get(key), "{:.3f}"),
-                         _pass_cell(pi.get(f"{c}_pass"))])
-    return out + _table(["log", "criterion", "limit", "measured", "measured", "predicted (replay)", "predicted"],
-                        rows, left=2)
+            row = [_e(v.log.name), _e(c.replace("_", " ") + (f" [{unit}]" if unit else "")), _f(lim, "{:.3g}")]
+            for d in (md, pd_, sd_):
+                row += [_f(d.get(key), "{:.3f}"), _pass_cell(d.get("imo", {}).get(f"{c}_pass"))]
+            rows.append(row)
+    return out + _table(["log", "criterion", "limit", "measured", "", "replay", "", "closed loop", ""], rows, left=2)
 
 
 def _innovations_for(identifier, name: str):
@@ -329,8 +336,13 @@ def _section_versions(result) -> str:
 
 # ----------------------------------------------------------------------------- public
 def render_report(result, logs, *, identifier=None, title: str | None = None, lpp: float | None = None,
-                  rudder_sign: float = 1.0, validations: list[LogValidation] | None = None) -> str:
-    """The report as an HTML string (see :func:`write_report`)."""
+                  rudder_sign: float = 1.0, closed_loop: bool = True,
+                  validations: list[LogValidation] | None = None) -> str:
+    """The report as an HTML string (see :func:`write_report`).
+
+    ``validations`` (from :func:`shipid.validation.validate_logs`) reuses replays already computed;
+    ``logs``, ``lpp``, ``rudder_sign`` and ``closed_loop`` are then ignored.
+    """
     if result is None:
         if identifier is None:
             raise ValueError("render_report: give a fit result (or an identifier to take it from)")
@@ -339,7 +351,8 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
     if res is None:
         raise ValueError("render_report: needs a fit result (FitResult or its JSON), not a bare model")
     if validations is None:
-        validations = [validate_one(model, lg, lpp=lpp, rudder_sign=rudder_sign) for lg in load_logs(logs, lpp=lpp)]
+        validations = [validate_one(model, lg, lpp=lpp, rudder_sign=rudder_sign, closed_loop=closed_loop)
+                       for lg in load_logs(logs, lpp=lpp)]
     title = title or f"Validation report: {res.model} model"
     stamp = datetime.now(timezone.utc).isoformat(timespec="seconds")
     n_ok = sum(v.success for v in validations)
@@ -364,7 +377,8 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
 
 
 def write_report(result, logs, path: str | os.PathLike, *, force: bool = False, identifier=None,
-                 title: str | None = None, lpp: float | None = None, rudder_sign: float = 1.0) -> Path:
+                 title: str | None = None, lpp: float | None = None, rudder_sign: float = 1.0,
+                 closed_loop: bool = True) -> Path:
     """Write a self-contained HTML validation report.
 
     Parameters
@@ -381,6 +395,8 @@ def write_report(result, logs, path: str | os.PathLike, *, force: bool = False, 
         Ship length [m] for the metrics (default: from each log, then the model).
     rudder_sign : {1, -1}
         Sign applied to the logged rudder before replay (see :func:`shipid.validation.validate`).
+    closed_loop : bool
+        Also simulate the model's own standard manoeuvre matching each log (see :func:`shipid.validation.validate`).
 
     Returns
     -------
@@ -389,5 +405,6 @@ def write_report(result, logs, path: str | os.PathLike, *, force: bool = False, 
     p = Path(path)
     if p.exists() and not force:  # fail before the (slow) replays and figures
         raise OutputExistsError(f"{p}: output exists; choose another name or pass --force (force=True) to overwrite it")
-    text = render_report(result, logs, identifier=identifier, title=title, lpp=lpp, rudder_sign=rudder_sign)
+    text = render_report(result, logs, identifier=identifier, title=title, lpp=lpp, rudder_sign=rudder_sign,
+                         closed_loop=closed_loop)
     return atomic_write_text(p, text, force=force)
