@@ -296,3 +296,21 @@ def test_output_error_refinement_from_the_ekf(kcs_truth, kcs_logs):
     assert 0.9 < ref.rms_normalised_residual_ < 1.2
     res = ref.result()
     assert res.method == "output-error" and res.diagnostics["correlation"]["names"] == est
+
+
+def test_model_options_travel_with_the_result(tmp_path):
+    """An MMG fit at full scale comes back with its particulars (not the default model scale)."""
+    from shipid.identify import FitResult, model_from
+    from shipid.models import get_model
+
+    full = get_model("mmg", "kvlcc2", lpp=320.0)
+    res = FitResult(model="mmg", coef=full.params_series().to_dict(), coef_std={}, cov=pd.DataFrame(),
+                    model_options=full.options())
+    res.to_json(tmp_path / "r.json")
+    back, loaded = model_from(tmp_path / "r.json")
+    assert back.lpp == 320.0 and loaded.model_options["particulars"]["lpp"] == 320.0
+    assert model_from("mmg:kcs")[0].lpp == pytest.approx(4.36)
+    with pytest.raises(ValueError, match="expected 'glider'"):
+        model_from(tmp_path / "r.json", model="glider")
+    with pytest.raises(ValueError, match="neither a result file nor a registered model"):
+        model_from("nope:set")

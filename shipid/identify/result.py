@@ -14,7 +14,7 @@ import pandas as pd
 
 from .._io import atomic_write_text
 
-__all__ = ["FitResult", "load_result", "software_versions", "diagnostics_to_json"]
+__all__ = ["FitResult", "load_result", "model_from", "software_versions", "diagnostics_to_json"]
 
 
 def diagnostics_to_json(d: dict) -> dict:
@@ -68,6 +68,7 @@ class FitResult:
     versions: dict = field(default_factory=dict)
     created: str = ""
     extra: dict = field(default_factory=dict)
+    model_options: dict = field(default_factory=dict)
 
     @classmethod
     def from_identifier(cls, ident) -> "FitResult":
@@ -88,7 +89,7 @@ class FitResult:
             coef_std={k: float(v) for k, v in ident.coef_std_.items()}, cov=ident.cov_.copy(),
             diagnostics=diag, inputs=[dict(m) for m in ident.logs_], method="ekf", settings=settings,
             loglik=ident.loglik_, success=ident.success_, message=ident.message_, versions=software_versions(),
-            created=datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            created=datetime.now(timezone.utc).isoformat(timespec="seconds"), model_options=ident.model.options(),
         )
 
     # ------------------------------------------------------------------- I/O
@@ -99,6 +100,7 @@ class FitResult:
             "cov": {"names": list(self.cov.index), "matrix": self.cov.to_numpy().tolist()},
             "diagnostics": self.diagnostics, "loglik": self.loglik, "settings": self.settings,
             "inputs": self.inputs, "versions": self.versions, "created": self.created, "extra": self.extra,
+            "model_options": self.model_options,
         }
 
     def to_json(self, path, *, force: bool = False) -> Path:
@@ -119,13 +121,19 @@ class FitResult:
             inputs=doc.get("inputs", []), method=doc.get("method", "ekf"), settings=doc.get("settings", {}),
             loglik=doc.get("loglik"), success=doc.get("success", True), message=doc.get("message", ""),
             versions=doc.get("versions", {}), created=doc.get("created", ""), extra=doc.get("extra", {}),
+            model_options=dict(doc.get("model_options") or (doc.get("extra") or {}).get("model_options") or {}),
         )
 
     def to_model(self):
-        """The registered model with these coefficients."""
+        """The registered model with these coefficients (and its options, e.g. MMG particulars)."""
         from ..models import get_model
 
-        return get_model(self.model, self.coef)
+        if not isinstance(self.coef, dict):
+            raise ValueError("fit result: 'coef' must be a mapping name -> value")
+        try:
+            return get_model(self.model, self.coef, **self.model_options)
+        except TypeError as exc:
+            raise ValueError(f"fit result: cannot build model '{self.model}' with options {self.model_options}: {exc}") from None
 
     def summary(self) -> pd.DataFrame:
         est = list(self.cov.index)
@@ -133,6 +141,49 @@ class FitResult:
         sd = pd.Series({k: self.coef_std.get(k, np.nan) for k in est})
         return pd.DataFrame({"value": v, "std": sd, "rel_std_%": 100 * sd / v.abs().where(v.abs() > 0),
                              "ci95_low": v - 1.96 * sd, "ci95_high": v + 1.96 * sd})
+
+
+def model_from(spec, *, model: str | None = None):
+    """A model (and the fit result, if any) from any of the ways a user names one.
+
+    Parameters
+    ----------
+    spec : FitResult, dict (result JSON), path to a result JSON, Model, or ``"name[:parameter-set]"``
+    model : str, optional
+        Registered model the result must be for (ValueError otherwise).
+
+    Returns
+    -------
+    (Model, FitResult or None)
+    """
+    import os
+
+    from ..models import Model, available_models, get_model
+
+    res = None
+    if isinstance(spec, Model):
+        m = spec
+    elif isinstance(spec, FitResult):
+        res = spec
+    elif isinstance(spec, dict):
+        res = FitResult.from_dict(spec)
+    elif isinstance(spec, (str, os.PathLike)):
+        p = Path(spec)
+        if p.suffix.lower() == ".json" or p.is_file():
+            res = load_result(p)
+        else:
+            name, _, pset = str(spec).partition(":")
+            if name not in available_models():
+                raise ValueError(f"'{spec}' is neither a result file nor a registered model; "
+                                 f"models: {', '.join(available_models())}")
+            m = get_model(name, pset or None)
+    else:
+        raise ValueError(f"expected a fit result, a result JSON, a model or 'name[:set]', got {type(spec).__name__}")
+    if res is not None:
+        m = res.to_model()
+    if model is not None and m.name != model:
+        raise ValueError(f"{spec if isinstance(spec, (str, os.PathLike)) else 'result'}: model is '{m.name}', expected '{model}'")
+    return m, res
 
 
 def load_result(path) -> FitResult:

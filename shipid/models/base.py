@@ -270,6 +270,11 @@ class Model:
         return self._fd(t, x, u, p, "u")
 
     # ------------------------------------------------------------ conveniences
+    def options(self) -> dict:
+        """Keyword arguments (JSON-friendly) that rebuild this model besides its parameters,
+        e.g. MMG particulars; stored in fit results as ``model_options``."""
+        return {}
+
     def identifiability_notes(self, arrays, estimated) -> list[str]:
         """Model-specific identifiability warnings for a set of logs.
 
