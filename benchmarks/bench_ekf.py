@@ -79,6 +79,11 @@ def main(argv=None) -> int:
     prob = ident.problem_
     N = prob.t.shape[1]
 
+    def best_once(fn):
+        t0 = time.perf_counter()
+        res = fn()
+        return time.perf_counter() - t0, res
+
     def best(fn):
         times, res = [], None
         for _ in range(args.repeat):
@@ -87,8 +92,12 @@ def main(argv=None) -> int:
             times.append(time.perf_counter() - t0)
         return min(times), res
 
-    t_kernel, out = best(lambda: run_ekf(prob, store=False))
-    t_fp, x_fp = best(lambda: filterpy_loop(prob))
+    # interleave the two so that load from other processes hits both alike
+    t_kernel, t_fp = np.inf, np.inf
+    for _ in range(args.repeat):
+        tk, out = best_once(lambda: run_ekf(prob, store=False))
+        tf, x_fp = best_once(lambda: filterpy_loop(prob))
+        t_kernel, t_fp = min(t_kernel, tk), min(t_fp, tf)
     agree = np.max(np.abs(x_fp - out.z_final[0]) / (1 + np.abs(out.z_final[0])))
 
     # batch: B logs (different noise) in one run

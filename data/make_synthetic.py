@@ -14,7 +14,7 @@ from pathlib import Path
 
 from shipid.logs import ShipParticulars, TrialLog
 from shipid.models import get_model
-from shipid.synthetic import KCS_RECIPES, make_kcs_logs
+from shipid.synthetic import KCS_MMG_RECIPES, KCS_RECIPES, make_kcs_logs
 
 HERE = Path(__file__).resolve().parent
 SEED = 20261123
@@ -33,8 +33,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(HERE), help="output folder (default: this folder)")
     args = ap.parse_args(argv)
     out = Path(args.out)
-    model = get_model("kcs-response", "synthetic-truth")
-    logs = make_kcs_logs(model, seed=SEED)
+    logs = make_kcs_logs(get_model("kcs-response", "synthetic-truth"), seed=SEED)
+    logs.update(make_kcs_logs(get_model("mmg", "kcs"), seed=SEED + 1, recipes=KCS_MMG_RECIPES))
     for name, (noisy, _truth) in logs.items():
         cols = {c: noisy[c].to_numpy() for c in noisy.columns if c != "time"}
         log = TrialLog.from_arrays(noisy["time"].to_numpy(), name=name, ship=KCS_MODEL, **cols)
@@ -43,7 +43,7 @@ def main(argv=None) -> int:
     ship = out / "kcs_model_ship.json"
     if args.force or not ship.exists():
         ship.write_text(json.dumps(KCS_MODEL.to_dict(), indent=2) + "\n")
-    print(f"recipes: {[r.name for r in KCS_RECIPES]}")
+    print(f"recipes: {[r.name for r in KCS_RECIPES + KCS_MMG_RECIPES]}")
     return 0
 
 

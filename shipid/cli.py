@@ -17,7 +17,11 @@ __all__ = ["main", "COMMAND_MODULES"]
 COMMAND_MODULES: list[str] = [
     "shipid.commands.core",
     "shipid.commands.identify",
+    "shipid.commands.logs",
+    "shipid.commands.manoeuvre",
+    "shipid.commands.routing",
     "shipid.commands.glider",
+    "shipid.commands.validate",
 ]
 
 

@@ -609,7 +609,10 @@ def steady_rps(model: Model, speed, *, params=None, n_max: float = 1e3, xtol: fl
         return model.rhs(0.0, x0, uin, p)[:, iu]
 
     grid = np.concatenate([[0.0], np.geomspace(1e-3, n_max, 120)])
-    vals = np.stack([acc(np.full(speeds.size, g)) for g in grid], axis=1)  # (B, G)
+    G = grid.size
+    ug = np.zeros((speeds.size, G, model.nu))
+    ug[..., inn] = grid
+    vals = model.rhs(0.0, np.repeat(x0[:, None, :], G, axis=1), ug, p)[..., iu]  # (B, G), one batched call
     lo = np.full(speeds.size, np.nan)
     hi = np.full(speeds.size, np.nan)
     for b in range(speeds.size):
@@ -682,15 +685,21 @@ def _resolve(model, speed, n, rudder_rate, lpp, params):
 
 
 def _run_batched(model, x0, t_step, controller_factory, done, params, t_max, chunk):
-    """Integrate in chunks until ``done(X_all, t_all)`` or ``t_max``; returns a SimulationResult."""
+    """Integrate in chunks until ``done(X_all, t_all)`` or ``t_max``; returns a SimulationResult.
+
+    ``t_step`` is a step [s] or a callable ``(T, X) -> step`` choosing the step of the next chunk from
+    the run so far (the time grid of ``simulate`` may be non-uniform).
+    """
     ctrl = controller_factory()
     ts, Xs, Us = [], [], []
     t0 = 0.0
     x = x0
     ok, msg = True, "integration finished"
     while True:
-        n_steps = int(round(chunk / t_step))
-        t = t0 + t_step * np.arange(n_steps + 1)
+        h = t_step(np.concatenate(ts), np.concatenate(Xs, axis=1)) if (callable(t_step) and ts) else \
+            (t_step if not callable(t_step) else t_step(None, None))
+        n_steps = max(1, int(round(chunk / h)))
+        t = t0 + h * np.arange(n_steps + 1)
         res = simulate(model, x, t, controller=ctrl, params=params)
         ts.append(t if not ts else t[1:])
         Xs.append(res.x if not Xs else res.x[:, 1:])
@@ -720,7 +729,7 @@ def _time_step(L, speeds, dt):
 def turning_circle(model: Model, rudder_deg: float | Sequence[float] = 35.0, *, speed=None, n=None,
                    side: str = "both", rudder_rate: float | None = None, heading_change_deg: float = 540.0,
                    execute_time: float | None = None, dt: float | None = None, t_max: float | None = None,
-                   lpp: float | None = None, params=None) -> ManoeuvreResult:
+                   lpp: float | None = None, params=None, steady_step_factor: float = 4.0) -> ManoeuvreResult:
     """Simulate turning circles as one batch.
 
     Parameters
@@ -734,7 +743,9 @@ def turning_circle(model: Model, rudder_deg: float | Sequence[float] = 35.0, *, 
     rudder_rate : float, optional  [rad/s]; default the model's (``ship_info``)
     heading_change_deg : float  run until every member has turned this much (default 540)
     execute_time : float, optional  time of the rudder order [s]; default 2 L/U of steady approach
-    dt : float, optional  RK4 step [s]; default L/(50 U)
+    dt : float, optional  RK4 step [s]; default L/(20 U)
+    steady_step_factor : float  step multiplier once every member has turned 270 deg (steady turning;
+        capped at 0.25 L/U); 1 keeps the step fixed
     t_max : float, optional  safety limit [s]; default 60 L/U
     lpp : float, optional  ship length for the metrics (default the model's)
     params : array, optional  model parameters (default ``model.params``)
@@ -765,7 +776,8 @@ def turning_circle(model: Model, rudder_deg: float | Sequence[float] = 35.0, *, 
     R, S, Sd = R.ravel(), S.ravel(), Sd.ravel()
     delta_t = np.radians(R) * Sd
     speeds, ns = spd[S], nn[S]
-    return _simulate_turns(model, delta_t, speeds, ns, rate, L, heading_change_deg, execute_time, dt, t_max, params)
+    return _simulate_turns(model, delta_t, speeds, ns, rate, L, heading_change_deg, execute_time, dt, t_max, params,
+                           coarsen=steady_step_factor)
 
 
 def _speed_for_rps(model, n, params):
@@ -782,7 +794,8 @@ def _speed_for_rps(model, n, params):
     return np.sqrt(lo * hi)
 
 
-def _simulate_turns(model, delta_target, speeds, ns, rate, L, heading_change_deg, execute_time, dt, t_max, params):
+def _simulate_turns(model, delta_target, speeds, ns, rate, L, heading_change_deg, execute_time, dt, t_max, params,
+                    coarsen=4.0):
     B = delta_target.size
     te = 2.0 * L / float(np.min(speeds)) if execute_time is None else float(execute_time)
     h = _time_step(L, speeds, dt)
@@ -808,8 +821,19 @@ def _simulate_turns(model, delta_target, speeds, ns, rate, L, heading_change_deg
         dpsi = np.abs(X[:, ke:, ipsi] - X[:, ke:ke + 1, ipsi])
         return bool(np.all(dpsi.max(axis=1) >= target))
 
+    coarse = min(coarsen, 0.25 * L / float(np.max(speeds)) / h) if coarsen > 1 else 1.0
+
+    def step(T, X):
+        # once every member has turned 270 deg the turn is steady: larger steps (the metrics at 90 and
+        # 180 deg and the rudder transient are always integrated with the fine step)
+        if T is None or T[-1] < te:
+            return h
+        ke = int(np.searchsorted(T, te))
+        steady = np.all(np.abs(X[:, -1, ipsi] - X[:, ke, ipsi]) >= math.radians(270))
+        return h * coarse if steady else h
+
     chunk = max(10 * L / float(np.min(speeds)), te + h)
-    sim = _run_batched(model, _approach_state(model, speeds), h, factory, done, params, t_max, chunk)
+    sim = _run_batched(model, _approach_state(model, speeds), step, factory, done, params, t_max, chunk)
     settings = pd.DataFrame({"rudder_deg": np.degrees(delta_target), "speed": speeds, "n": ns})
     mets = []
     ref = "midship" if model.name == "mmg" else f"model origin of '{model.name}'"

@@ -277,3 +277,22 @@ def test_load_result_errors(tmp_path):
     p.write_text('{"coef": {}}')
     with pytest.raises(ValueError, match="no 'model' entry"):
         load_result(p)
+
+
+def test_output_error_refinement_from_the_ekf(kcs_truth, kcs_logs):
+    from shipid.identify.batch import OutputErrorRefiner
+
+    noisy = kcs_logs["kcs_zz_p20_rpm"][0]
+    est = ["b1", "b3", "c1", "c2", "c3"]
+    start = kcs_truth.with_params({k: kcs_truth.params_series()[k] * 1.1 for k in est})
+    ekf = EKFIdentifier(start, n_passes=1, init="model", estimate=est, prior_std=0.3).fit(noisy)
+    ref = OutputErrorRefiner(ekf.to_model(), estimate=est).fit(noisy, start=ekf)
+    assert ref.success_ and ref.channels_ == ["v", "r"]  # the channels whose equations hold b*, c*
+    assert ref.cost_ <= ref.cost_start_
+    truth = kcs_truth.params_series()[est]
+    z = (ref.coef_[est] - truth) / ref.coef_std_[est]
+    assert np.all(np.abs(z) < 3), z
+    # the refined model predicts as well as the noise allows
+    assert 0.9 < ref.rms_normalised_residual_ < 1.2
+    res = ref.result()
+    assert res.method == "output-error" and res.diagnostics["correlation"]["names"] == est

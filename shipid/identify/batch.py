@@ -22,7 +22,7 @@ from ..simulate import simulate
 from .data import noise_std_from_data, prepare_logs
 from .diagnostics import identifiability
 from .identifier import NotFittedError
-from .result import FitResult, software_versions
+from .result import FitResult, diagnostics_to_json, software_versions
 
 __all__ = ["OutputErrorRefiner"]
 
@@ -166,15 +166,7 @@ class OutputErrorRefiner:
     def result(self) -> FitResult:
         if not hasattr(self, "coef_"):
             raise NotFittedError("this OutputErrorRefiner is not fitted yet: call fit(logs) first")
-        d = self.diagnostics_
-        diag = {
-            "condition_number": d["condition_number"],
-            "correlation": {"names": list(d["correlation"].index), "matrix": d["correlation"].to_numpy().tolist()},
-            "correlated_pairs": [list(p) for p in d["correlated_pairs"]],
-            "poorly_determined": d["poorly_determined"],
-            "unidentified_combinations": d["unidentified_combinations"],
-            "warnings": d["warnings"], "note": d["note"],
-        }
+        diag = diagnostics_to_json(self.diagnostics_)
         return FitResult(
             model=self.model.name, coef={k: float(v) for k, v in self.coef_.items()},
             coef_std={k: float(v) for k, v in self.coef_std_.items()}, cov=self.cov_.copy(), diagnostics=diag,

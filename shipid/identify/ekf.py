@@ -131,14 +131,13 @@ def _transition(prob: EKFProblem, k: int, z: np.ndarray):
     step = STEP_TANGENTS[prob.method]
     uk = prob.U[:, k]
     tk = prob.t[:, k].copy()
-    Fx = np.broadcast_to(np.eye(nx), (B, nx, nx)).copy()
-    Fp = np.zeros((B, nx, ne))
-    for _ in range(prob.substeps):
-        x, Ax, Ap = step(model, tk, x, uk, p, h)
-        Ap = Ap[:, :, prob.est_idx] * prob.scale
-        Fp = Ax @ Fp + Ap
-        Fx = Ax @ Fx
+    x, Fx, Fp = step(model, tk, x, uk, p, h)
+    Fp = Fp[:, :, prob.est_idx] * prob.scale
+    for _ in range(prob.substeps - 1):
         tk = tk + h
+        x, Ax, Ap = step(model, tk, x, uk, p, h)
+        Fp = Ax @ Fp + Ap[:, :, prob.est_idx] * prob.scale
+        Fx = Ax @ Fx
     F = np.zeros((B, nz, nz))
     F[:, :nx, :nx] = Fx
     F[:, :nx, nx:] = Fp
@@ -218,8 +217,8 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKF
             KH = np.zeros((B, nz, nz))
             KH[:, :, mi] = K if full else K * m[:, None, :]
             IKH = eye - KH
+            # Joseph form: symmetric by construction (exactly symmetrised after the prediction)
             P = IKH @ P @ IKH.transpose(0, 2, 1) + (K * R[:, None, :]) @ Kt
-            P = 0.5 * (P + P.transpose(0, 2, 1))
             d2 = np.einsum("bi,bi->b", e, Sinv_e)
             sign, logdet = np.linalg.slogdet(S)
             cnt = m.sum(axis=1)

@@ -14,7 +14,15 @@ import pandas as pd
 
 from .._io import atomic_write_text
 
-__all__ = ["FitResult", "load_result", "software_versions"]
+__all__ = ["FitResult", "load_result", "software_versions", "diagnostics_to_json"]
+
+
+def diagnostics_to_json(d: dict) -> dict:
+    """JSON-friendly copy of a diagnostics dict from :func:`shipid.identify.diagnostics.identifiability`."""
+    out = {k: v for k, v in d.items() if k not in ("correlation", "correlated_pairs")}
+    out["correlation"] = {"names": list(d["correlation"].index), "matrix": d["correlation"].to_numpy().tolist()}
+    out["correlated_pairs"] = [list(p) for p in d["correlated_pairs"]]
+    return out
 
 
 def software_versions() -> dict:
@@ -63,17 +71,7 @@ class FitResult:
 
     @classmethod
     def from_identifier(cls, ident) -> "FitResult":
-        d = ident.diagnostics_
-        diag = {
-            "condition_number": d["condition_number"],
-            "correlation": {"names": list(d["correlation"].index), "matrix": d["correlation"].to_numpy().tolist()},
-            "correlated_pairs": [list(p) for p in d["correlated_pairs"]],
-            "poorly_determined": d["poorly_determined"],
-            "unidentified_combinations": d["unidentified_combinations"],
-            "warnings": d["warnings"],
-            "nis_mean": d.get("nis_mean"),
-            "nis_expected": d.get("nis_expected"),
-        }
+        diag = diagnostics_to_json(ident.diagnostics_)
         settings = {
             "estimated": ident.estimated_,
             "meas_std": ident.meas_std_.to_dict(),

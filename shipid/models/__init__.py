@@ -16,6 +16,7 @@ _REGISTRY: dict[str, str] = {
     "kcs-response": "shipid.models.response:KCSResponseModel",
     "mmg": "shipid.models.mmg:MMGModel",
     "glider": "shipid.models.glider:GliderModel",
+    "planing-boat": "shipid.models.planing:PlaningBoatModel",
 }
 
 

@@ -197,11 +197,16 @@ def _no_default(f) -> bool:
     return f.default is dataclasses.MISSING
 
 
+def _components(a):
+    """View of ``a (..., k)`` with the component axis first (cheap for 1-D and 2-D arrays)."""
+    return a.T if a.ndim <= 2 else np.moveaxis(a, -1, 0)
+
+
 class _NP:
     """numpy backend of the equations (batched, complex-step safe)."""
 
-    sqrt, exp, arcsin, arctan, sin, cos, where, real = (
-        np.sqrt, np.exp, np.arcsin, np.arctan, np.sin, np.cos, np.where, np.real)
+    sqrt, exp, arcsin, arctan, sin, cos, sign, real = (
+        np.sqrt, np.exp, np.arcsin, np.arctan, np.sin, np.cos, np.sign, np.real)
 
 
 class _MATH:
@@ -210,8 +215,8 @@ class _MATH:
     sqrt, exp, arcsin, arctan, sin, cos = math.sqrt, math.exp, math.asin, math.atan, math.sin, math.cos
 
     @staticmethod
-    def where(cond, a, b):
-        return a if cond else b
+    def sign(z):
+        return (z > 0) - (z < 0)
 
     @staticmethod
     def real(z):
@@ -347,7 +352,7 @@ class MMGModel(Model):
         """
         if xp is None:
             xp = _NP
-            x, u, p = np.moveaxis(x, -1, 0), np.moveaxis(u, -1, 0), np.moveaxis(p, -1, 0)
+            x, u, p = _components(x), _components(u), _components(p)
         P = self.particulars
         L, d, rho, Dp = P.lpp, P.draught, P.rho, P.D_p
         (R0, Xvv, Xvr, Xrr, Xvvvv, Yv, Yr, Yvvv, Yvvr, Yvrr, Yrrr, Nv, Nr, Nvvv, Nvvr, Nvrr, Nrrr,
@@ -367,8 +372,9 @@ class MMGModel(Model):
         NH = q * L * (Nv * vp + Nr * rp + Nvvv * vp2 * vp + Nvvr * vp2 * rp + Nvrr * vp * rp2 + Nrrr * rp2 * rp)
         # propeller (eqs. 11-16)
         betaP = beta - xP * rp
-        C2 = xp.where(xp.real(betaP) > 0, C2p, C2m)
-        abs_bP = xp.where(xp.real(betaP) >= 0, betaP, -betaP)
+        posP = xp.real(betaP) > 0
+        C2 = C2m + (C2p - C2m) * posP
+        abs_bP = betaP * xp.sign(xp.real(betaP))  # |beta_P|, complex-step safe
         one_m_wP = (1.0 - wP0) * (1.0 + (1.0 - xp.exp(-C1 * abs_bP)) * (C2 - 1.0))
         uP = uu * one_m_wP
         KTn2D2 = k0 * (n * Dp) ** 2 + k1 * n * Dp * uP + k2 * uP * uP  # K_T n^2 D_P^2
@@ -376,11 +382,11 @@ class MMGModel(Model):
         XP = (1.0 - tP) * T
         # rudder (eqs. 17-28)
         S = uP * uP + (8.0 / math.pi) * KTn2D2
-        sq = xp.sqrt(xp.where(xp.real(S) > 0, S, 0.0 * S))
+        sq = xp.sqrt(S * (xp.real(S) > 0))
         eta = Dp / P.H_R
         uR = eps * xp.sqrt(eta * (uP + kappa * (sq - uP)) ** 2 + (1.0 - eta) * uP * uP)
         betaR = beta - lR * rp
-        gR = xp.where(xp.real(betaR) < 0, gRm, gRp)
+        gR = gRp + (gRm - gRp) * (xp.real(betaR) < 0)
         vR = U * gR * betaR
         alphaR = delta - xp.arctan(vR / uR)
         FN = 0.5 * rho * P.A_R * f_alpha * (uR * uR + vR * vR) * xp.sin(alphaR)
@@ -397,14 +403,15 @@ class MMGModel(Model):
         return self._forces(np.asarray(x, dtype=float), np.asarray(u, dtype=float), self._p(params))
 
     def _rhs(self, t, x, u, p):
-        scalar = x.ndim == 1 and u.ndim == 1 and p.ndim == 1 and not (
-            np.iscomplexobj(x) or np.iscomplexobj(u) or np.iscomplexobj(p))
+        scalar = (x.ndim == 1 and u.ndim == 1 and p.ndim == 1
+                  and x.dtype.kind == "f" and u.dtype.kind == "f" and p.dtype.kind == "f")
         if scalar:
             xp = _MATH
             x, u, p = x.tolist(), u.tolist(), p.tolist()
         else:
             xp = _NP
-            x, u, p = np.moveaxis(x, -1, 0), np.moveaxis(u, -1, 0), np.moveaxis(p, -1, 0)
+            x, u = _components(x), _components(u)
+            p = p.tolist() if (p.ndim == 1 and p.dtype.kind == "f") else _components(p)
         P = self.particulars
         L, d, rho = P.lpp, P.draught, P.rho
         F = self._forces(x, u, p, xp)
@@ -433,7 +440,10 @@ class MMGModel(Model):
         if scalar:
             return np.array(out)
         shape = np.broadcast_shapes(*[np.shape(o) for o in out])
-        return np.stack([np.broadcast_to(o, shape) for o in out], axis=-1)
+        res = np.empty(shape + (6,), dtype=np.result_type(*out))
+        for i, o in enumerate(out):
+            res[..., i] = o
+        return res
 
     # ------------------------------------------------------------- Jacobians
     _H_CS = 1e-30

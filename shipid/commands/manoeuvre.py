@@ -1,0 +1,180 @@
+"""Manoeuvre sub-commands: ``metrics``, ``simulate`` and ``sweep``.
+
+``MODEL`` arguments accept either a fit-result JSON (``{"model": name, "coef": {...}}``, optionally
+``"model_options"`` passed to the model, e.g. MMG particulars) or a registered model name with an
+optional parameter set, e.g. ``mmg``, ``mmg:kcs``, ``kcs-response:synthetic-truth``.
+"""
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+#: Keys printed in the short metric summaries.
+SUMMARY_KEYS = ("advance_L", "transfer_L", "tactical_diameter_L", "steady_diameter_L", "speed_loss",
+                "overshoot1_deg", "overshoot2_deg", "time_second_execute", "initial_turning_L")
+
+
+def register(sub) -> None:
+    p = sub.add_parser("metrics", help="standard-manoeuvre metrics (ITTC/IMO) of measured logs -> JSON list")
+    p.add_argument("logs", nargs="+", metavar="LOG", help="trial logs (CSV or MARIN .dat)")
+    p.add_argument("--lpp", type=float, default=None, help="ship length [m] (default: from the log's particulars)")
+    p.add_argument("--kind", choices=("auto", "turning", "zigzag"), default="auto")
+    p.add_argument("--reference-offset", type=float, default=None, metavar="M",
+                   help="logged point's distance forward of midship [m]; positions are moved to midship")
+    p.add_argument("-o", "--output", default=None, help="JSON file to write (default: print)")
+    p.add_argument("--force", action="store_true", help="overwrite the output file")
+    p.set_defaults(handler=_metrics)
+
+    p = sub.add_parser("simulate", help="simulate a standard manoeuvre with a model (prints its metrics)")
+    p.add_argument("model", metavar="MODEL", help="fit-result JSON or model name[:parameter-set]")
+    g = p.add_mutually_exclusive_group(required=True)
+    g.add_argument("--turning", type=float, metavar="DEG", help="turning circle with this rudder angle [deg]")
+    g.add_argument("--zigzag", metavar="D/P", help="zigzag rudder/heading angles [deg], e.g. 20/20")
+    _common(p)
+    p.add_argument("--side", choices=("both", "starboard", "port"), default="both",
+                   help="turning side / side of the first zigzag execute")
+    p.add_argument("-o", "--output", default=None, help="CSV of the time series (all members, column 'member')")
+    p.add_argument("--force", action="store_true", help="overwrite the output file")
+    p.set_defaults(handler=_simulate)
+
+    p = sub.add_parser("sweep", help="turning-diameter sweep over rudder angle x approach speed (one batch)")
+    p.add_argument("model", metavar="MODEL", help="fit-result JSON or model name[:parameter-set]")
+    p.add_argument("--rudder", default="10,15,25", help="rudder angles [deg], comma separated")
+    p.add_argument("--speed", default=None, help="approach speeds [m/s], comma separated (default: design speed)")
+    p.add_argument("--side", choices=("both", "starboard", "port"), default="starboard")
+    p.add_argument("--lpp", type=float, default=None, help="ship length [m] (default: the model's)")
+    p.add_argument("--rudder-rate", type=float, default=None, metavar="DEG_S", help="rudder rate [deg/s]")
+    p.add_argument("-o", "--output", default=None, help="CSV to write (default: print)")
+    p.add_argument("--force", action="store_true", help="overwrite the output file")
+    p.set_defaults(handler=_sweep)
+
+
+def _common(p):
+    p.add_argument("--speed", type=float, default=None, help="approach speed [m/s] (default: design speed)")
+    p.add_argument("--lpp", type=float, default=None, help="ship length [m] (default: the model's)")
+    p.add_argument("--rudder-rate", type=float, default=None, metavar="DEG_S", help="rudder rate [deg/s]")
+
+
+def load_model(spec: str):
+    """Model from a fit-result JSON path or ``name[:parameter-set]`` (ValueError naming the problem)."""
+    from ..models import available_models, get_model
+
+    path = Path(spec)
+    if path.suffix.lower() == ".json" or path.is_file():
+        if not path.is_file():
+            raise ValueError(f"`{spec}`: no such result file")
+        try:
+            doc = json.loads(path.read_text(encoding="utf-8"))
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"`{spec}`: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+        if not isinstance(doc, dict) or "model" not in doc:
+            raise ValueError(f"`{spec}`: a fit result needs a 'model' key (registered name) and a 'coef' mapping")
+        coef = doc.get("coef", {})
+        if not isinstance(coef, dict):
+            raise ValueError(f"`{spec}`: 'coef' must be a mapping name -> value")
+        opts = doc.get("model_options", {}) or {}
+        try:
+            return get_model(doc["model"], coef, **opts)
+        except ValueError as exc:
+            raise ValueError(f"`{spec}`: {exc}") from None
+    name, _, pset = spec.partition(":")
+    if name not in available_models():
+        raise ValueError(f"'{spec}' is neither a result file nor a registered model; models: {', '.join(available_models())}")
+    return get_model(name, pset or None)
+
+
+def _floats(text: str, what: str) -> list[float]:
+    try:
+        vals = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise ValueError(f"{what} '{text}': give comma-separated numbers, e.g. 10,15,25") from None
+    if not vals:
+        raise ValueError(f"{what}: no values given")
+    return vals
+
+
+def _write_or_print(text: str, output, force: bool):
+    from .._io import atomic_write_text
+
+    if output:
+        atomic_write_text(output, text, force=force)
+    else:
+        sys.stdout.write(text)
+
+
+def _metrics(args) -> int:
+    from ..logs import read_log
+    from ..manoeuvres import metrics
+
+    out = []
+    for f in args.logs:
+        log = read_log(f, lpp=args.lpp) if args.lpp else read_log(f)
+        m = metrics(log, lpp=args.lpp, kind=args.kind, reference_offset=args.reference_offset, name=Path(f).name)
+        out.append({"file": str(f), **m.to_dict()})
+    _write_or_print(json.dumps(out, indent=2) + "\n", args.output, args.force)
+    if args.output:
+        for d in out:
+            print(_summary(d["file"], d))
+    return 0
+
+
+def _summary(label, d) -> str:
+    parts = [f"{k}={d[k]:.3f}" for k in SUMMARY_KEYS if isinstance(d.get(k), float)]
+    side = d.get("side") or d.get("first_side")
+    return f"{label}: {d['manoeuvre']} ({side}) " + " ".join(parts)
+
+
+def _simulate(args) -> int:
+    from ..manoeuvres import turning_circle, zigzag
+
+    model = load_model(args.model)
+    rate = math.radians(args.rudder_rate) if args.rudder_rate is not None else None
+    if args.turning is not None:
+        if not args.turning > 0:
+            raise ValueError(f"--turning {args.turning}: give the rudder angle as a positive number of degrees (use --side)")
+        res = turning_circle(model, args.turning, speed=args.speed, side=args.side, rudder_rate=rate, lpp=args.lpp)
+    else:
+        try:
+            d, p = (float(v) for v in args.zigzag.split("/"))
+        except ValueError:
+            raise ValueError(f"--zigzag '{args.zigzag}': give rudder/heading angles in degrees, e.g. 20/20") from None
+        res = zigzag(model, d, p, speed=args.speed, first=args.side, rudder_rate=rate, lpp=args.lpp)
+    for i, m in enumerate(res.metrics):
+        print(_summary(f"{model.name} member {i}", m.to_dict()))
+    if args.output:
+        import pandas as pd
+
+        frames = []
+        for i in range(res.simulation.x.shape[0]):
+            df = res.member(i).reset_index()
+            df.insert(0, "member", i)
+            frames.append(df)
+        _write_or_print(pd.concat(frames).to_csv(index=False), args.output, args.force)
+    if not res.success:
+        print(f"shipid simulate: warning: {res.message}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _sweep(args) -> int:
+    from ..manoeuvres import ship_info, turning_sweep
+
+    model = load_model(args.model)
+    rud = _floats(args.rudder, "--rudder")
+    if args.speed is None:
+        u0 = ship_info(model).get("design_speed")
+        if u0 is None:
+            raise ValueError(f"model '{model.name}' has no design speed; pass --speed")
+        speeds = [u0]
+    else:
+        speeds = _floats(args.speed, "--speed")
+    if any(r <= 0 for r in rud) or any(s <= 0 for s in speeds):
+        raise ValueError("--rudder and --speed values must be positive (use --side for port)")
+    rate = math.radians(args.rudder_rate) if args.rudder_rate is not None else None
+    df = turning_sweep(model, rud, speeds, side=args.side, rudder_rate=rate, lpp=args.lpp)
+    _write_or_print(df.to_csv(index=False), args.output, args.force)
+    if args.output:
+        print(df[["rudder_deg", "speed", "n", "tactical_diameter_L", "steady_diameter_L"]].to_string(index=False))
+    return 0 if bool(df["success"].all()) else 1
