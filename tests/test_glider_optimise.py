@@ -50,7 +50,6 @@ def test_full_optimisation_against_the_papers_choice():
     assert -0.01 <= res.x["cg_m"] <= 0.0
     assert 35.0 < res.x["angle_deg"] < 45.0 and res.x["fin_deg"] < 5.0
     assert res.objective == pytest.approx(0.78, abs=0.02)
-    paper = res.grid_best.copy()
     from shipid.glider import launch
 
     p = launch(5.0, 30.0, 5.0, 0.0).summary
