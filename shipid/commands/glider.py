@@ -42,6 +42,7 @@ def register(sub) -> None:
 def _model(spec):
     from pathlib import Path
 
+    from ..identify.result import model_from
     from ..models import get_model
 
     if spec is None:
@@ -50,13 +51,7 @@ def _model(spec):
     if path.suffix.lower() == ".json" or path.exists():
         if not path.is_file():
             raise ValueError(f"{spec}: parameter file not found; give a 'shipid fit' result JSON or a parameter-set name")
-        try:
-            doc = json.loads(path.read_text(encoding="utf-8"))
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"{spec}: not valid JSON ({exc.msg} at line {exc.lineno}); give a 'shipid fit' result JSON") from None
-        if not isinstance(doc, dict) or doc.get("model") != "glider" or not isinstance(doc.get("coef"), dict):
-            raise ValueError(f"{spec}: expected a result JSON with \"model\": \"glider\" and a \"coef\" object; got model {doc.get('model') if isinstance(doc, dict) else None!r}")
-        return get_model("glider", doc["coef"])
+        return model_from(path, model="glider")[0]
     return get_model("glider", spec)
 
 

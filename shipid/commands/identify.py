@@ -40,18 +40,16 @@ def register(sub) -> None:
 
 
 def _start_model(args):
-    from ..identify import load_result
+    from ..identify import model_from
     from ..models import get_model, model_class
 
     cls = model_class(args.model)
+    opts = {"lpp": args.lpp} if (args.lpp is not None and "lpp" in cls.__init__.__code__.co_varnames) else {}
     if args.params is None:
-        return cls()
-    if args.params.endswith(".json") and Path(args.params).exists():
-        res = load_result(args.params)
-        if res.model != args.model:
-            raise ValueError(f"{args.params}: result is for model '{res.model}', not '{args.model}'")
-        return get_model(args.model, res.coef)
-    return get_model(args.model, args.params)
+        return cls(**opts)
+    if args.params.endswith(".json"):
+        return model_from(args.params, model=args.model)[0]
+    return get_model(args.model, args.params, **opts)
 
 
 def _fixed(args, model):

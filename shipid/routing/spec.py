@@ -155,26 +155,20 @@ def vessel_from_spec(spec, where: str = "vessel", base_dir: Path | None = None):
         return PaperUSVModel()
     if spec.get("type") != "model":
         raise ValueError(f"{where}.type: expected 'paper' or 'model', got {spec.get('type')!r}")
+    from ..identify.result import model_from
     from ..models import get_model
 
-    params = spec.get("params")
-    name = spec.get("model")
     if "result" in spec:
         rpath = Path(spec["result"])
         if base_dir is not None and not rpath.is_absolute():
             rpath = base_dir / rpath
         if not rpath.exists():
             raise ValueError(f"{where}.result: file {rpath} does not exist")
-        try:
-            doc = json.loads(rpath.read_text(encoding="utf-8"))
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"{rpath}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
-        if "model" not in doc or "coef" not in doc:
-            raise ValueError(f"{rpath}: a fit result needs 'model' and 'coef' keys")
-        name, params = doc["model"], doc["coef"]
-    if name is None:
+        model, _ = model_from(rpath)
+    elif spec.get("model") is not None:
+        model = get_model(spec["model"], spec.get("params"))
+    else:
         raise ValueError(f"{where}: give 'model' (a registered model name) or 'result' (a shipid fit JSON)")
-    model = get_model(name, params)
     n = _num(_need(spec, "n", where), f"{where}.n")
     cp = _num(_need(spec, "power_coefficient", where), f"{where}.power_coefficient")
     return ModelSpeedPower(model, n, cp)
