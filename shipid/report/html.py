@@ -361,8 +361,9 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
         ("identifiability", "Identifiability"), ("model", "Model"), ("logs", "Logs"), ("inputs", "Inputs"),
         ("versions", "Software")))
     body = [f"<h1>{_e(title)}</h1>",
-            f"<p>Model <b>{_e(res.model)}</b> identified by <b>{_e(res.method)}</b> from "
-            f"{len(res.inputs or [])} log(s), validated on {len(validations)} log(s) "
+            f"<p>Model <b>{_e(res.model)}</b> ({_e(res.method)}; "
+            f"{'fitted to ' + str(len(res.inputs)) + ' log(s)' if res.inputs else 'no fitted logs recorded'}), "
+            f"validated on {len(validations)} log(s) "
             f"({n_ok} replayed with both metric sets). Report written {_e(stamp)} by shipid "
             f"{_e(_versions_now().get('shipid'))}.</p>",
             f"<nav>{nav}</nav>",
