@@ -161,42 +161,11 @@ def resolve_model(result_or_model) -> tuple[Model, Any]:
     -------
     (Model, FitResult or None)
     """
-    from .identify import FitResult
-    from .models import get_model
+    from .identify.result import model_from
 
-    obj = result_or_model
-    if isinstance(obj, Model):
-        return obj, None
-    if isinstance(obj, (str, os.PathLike)):
-        p = Path(obj)
-        if not p.is_file():
-            raise FileNotFoundError(f"{p}: no such result file; run `shipid fit` first or check the path")
-        try:
-            obj = json.loads(p.read_text(encoding="utf-8"))
-        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise ValueError(f"{p}: not a JSON fit result ({exc}); pass the file written by `shipid fit -o`") from None
-        if not isinstance(obj, dict):
-            raise ValueError(f"{p}: not a shipid fit result (top level is not an object)")
-        source = str(p)
-    else:
-        source = "result"
-    if isinstance(obj, dict):
-        opts = obj.get("model_options") or (obj.get("extra") or {}).get("model_options") or {}
-        res = FitResult.from_dict(obj, source=source)
-        if opts:
-            res.extra = {**res.extra, "model_options": dict(opts)}
-    elif isinstance(obj, FitResult):
-        res = obj
-        opts = (res.extra or {}).get("model_options") or {}
-    else:
-        raise ValueError(f"expected a FitResult, a result JSON (dict or path) or a Model, got {type(obj).__name__}")
-    if not isinstance(res.coef, dict):
-        raise ValueError(f"{source}: 'coef' must be a mapping name -> value")
-    try:
-        model = get_model(res.model, res.coef, **opts)
-    except (ValueError, TypeError) as exc:
-        raise ValueError(f"{source}: cannot build model '{res.model}' from the result: {exc}") from None
-    return model, res
+    if isinstance(result_or_model, (str, os.PathLike)) and not Path(result_or_model).is_file():
+        raise FileNotFoundError(f"{result_or_model}: no such result file; run `shipid fit` first or check the path")
+    return model_from(result_or_model)
 
 
 def load_logs(logs, *, lpp: float | None = None) -> list:

@@ -162,7 +162,7 @@ def test_result_sources_and_model_options(tmp_path):
     assert model.lpp == pytest.approx(320.0)
     with pytest.raises(ValueError, match="not a shipid fit result"):
         resolve_model({"coef": {}})
-    with pytest.raises(ValueError, match="cannot build model"):
+    with pytest.raises(ValueError, match="unknown model 'nope'"):
         resolve_model({"model": "nope", "coef": {}})
 
 

@@ -116,7 +116,7 @@ def _section_model(result, model) -> str:
                        ("param_walk", "parameter random walk")):
         if key in s:
             rows.append((label, _e(s[key])))
-    opts = (result.extra or {}).get("model_options")
+    opts = result.model_options
     if opts:
         rows.append(("model options", _e(opts)))
     out = "<h2 id=\"model\">Model and method</h2>" + _table(["item", "value"], rows, left=2)
