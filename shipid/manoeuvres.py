@@ -677,9 +677,9 @@ def _resolve(model, speed, n, rudder_rate, lpp, params):
     rate = rudder_rate if rudder_rate is not None else info.get("rudder_rate")
     if rate is None:
         raise ValueError(f"model '{model.name}': rudder rate unknown; pass rudder_rate= [rad/s]")
-    if speed is None:
+    if speed is None and n is None:
         speed = info.get("design_speed")
-        if speed is None and n is None:
+        if speed is None:
             raise ValueError(f"model '{model.name}': approach speed unknown; pass speed= [m/s]")
     return float(L), float(rate), speed
 

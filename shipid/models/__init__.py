@@ -17,6 +17,7 @@ _REGISTRY: dict[str, str] = {
     "mmg": "shipid.models.mmg:MMGModel",
     "glider": "shipid.models.glider:GliderModel",
     "planing-boat": "shipid.models.planing:PlaningBoatModel",
+    "response-nl": "shipid.models.response_nl:ResponseNLModel",
 }
 
 
