@@ -228,7 +228,13 @@ class EKFIdentifier:
         used_eq: list[str] = []
         if self.init == "equation-error":
             given_prior = _as_dict(self.prior, model.param_names, "prior")
-            theta_ee, se_ee, used_eq = equation_error_fit(model, arrays, meas, est_idx, p_base, prior_std_abs)
+            theta_ee, se_ee, used_eq, natural = equation_error_fit(model, arrays, meas, est_idx, p_base, prior_std_abs)
+            # coefficients that start at zero get a prior width from the data's natural scale
+            rel = 1.0 if isinstance(self.prior_std, Mapping) else float(self.prior_std)
+            given_std = self.prior_std if isinstance(self.prior_std, Mapping) else {}
+            for j, n in enumerate(est_names):
+                if theta0[j] == 0 and n not in given_std and np.isfinite(natural[j]):
+                    prior_std_abs[j] = rel * natural[j]
             for j, n in enumerate(est_names):
                 if n not in given_prior:
                     theta0[j] = theta_ee[j]

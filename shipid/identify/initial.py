@@ -47,6 +47,7 @@ def equation_error_fit(
     se : (ne,) its standard errors (white-residual approximation; optimistic
         because numerical derivatives are correlated in time)
     used_equations : list of state names whose equations were used
+    natural : (ne,) natural scale of each coefficient (NaN when no used equation holds it)
     """
     nx = model.nx
     meas_pos = {s: j for j, s in enumerate(meas_names)}
@@ -97,8 +98,20 @@ def equation_error_fit(
         if measured_state[i] and Jp[i, est_idx].max() > 0 and all(measured_state[j] or Jx[i, j] == 0 for j in range(nx))
     ]
     if not use:
-        return p0[est_idx].copy(), np.full(est_idx.size, np.inf), []
+        return p0[est_idx].copy(), np.full(est_idx.size, np.inf), [], np.full(est_idx.size, np.nan)
     w = np.array([1.0 / max(np.std(dX[:, i]), 1e-12) for i in use])
+    # natural scale of each coefficient: the size that makes its term as large as the
+    # derivative it explains, std(dx_i/dt) / rms(d f_i / d theta_j); used for coefficients
+    # that start at zero, where a relative prior means nothing
+    Jall = model.jac_p(T, X, U, p0)[:, :, est_idx]
+    natural = np.full(est_idx.size, np.nan)
+    for j in range(est_idx.size):
+        cands = [np.std(dX[:, i]) / np.sqrt(np.mean(Jall[:, i, j] ** 2)) for i in use
+                 if np.any(Jall[:, i, j] != 0)]
+        if cands:
+            natural[j] = min(cands)
+    zero = p0[est_idx] == 0
+    prior_std = np.where(zero & np.isfinite(natural), natural, prior_std)
 
     def resid(theta):
         p = p0.copy()
@@ -124,4 +137,4 @@ def equation_error_fit(
         se = np.sqrt(np.clip(np.diag(np.linalg.pinv(J.T @ J)) * s2, 0, None))
     except np.linalg.LinAlgError:
         se = np.full(est_idx.size, np.inf)
-    return sol.x, se, [model.state_names[i] for i in use]
+    return sol.x, se, [model.state_names[i] for i in use], natural
