@@ -266,14 +266,30 @@ class EKFIdentifier:
 
             passes = tqdm(passes, desc="EKF passes", unit="pass")
         history = []
-        for _ in passes:
+        good = None  # (prob, out, zs, Ps) of the last pass that did not diverge
+        self.pass_messages_ = []
+        for k in passes:
             prob = self._problem(theta_s, q_mult, r_mult)
             out = run_ekf(prob, store=True)
             zs, Ps = rts_smooth(out)
+            if out.diverged[0]:
+                self.pass_messages_.append(f"pass {k + 1}: {out.message[0]}")
+                break
+            good = (prob, out, zs, Ps)
             theta_s = zs[0, 0, nx:].copy()
             history.append(theta_s * scale)
-            if out.diverged[0]:
-                break
+        if good is None:
+            # even the first pass diverged: keep the start values and the prior, say so
+            nz = nx + len(est_idx)
+            zs = np.broadcast_to(prob.z0[:, None, :], (1, prob.t.shape[1], nz)).copy()
+            zs[0, :, :nx] = out.z_post[0, :, :nx]
+            Ps = np.broadcast_to(prob.P0[:, None], (1, prob.t.shape[1], nz, nz)).copy()
+        else:
+            prob, out_good, zs, Ps = good
+            if out_good is not out:  # a later pass diverged: report the last good one
+                warnings.warn(f"EKF identification: {self.pass_messages_[-1]}; the result of the previous pass "
+                              "is reported", RuntimeWarning, stacklevel=2)
+            out = out_good
         self.problem_, self.output_ = prob, out
         self._finish(out, zs, Ps, prob, history, used_eq, q_mult, r_mult)
         return self
@@ -385,6 +401,8 @@ class EKFIdentifier:
         self.equations_used_for_start_ = used_eq
         self.success_ = not bool(out.diverged[0])
         self.message_ = "converged" if self.success_ else out.message[0]
+        if self.success_ and self.pass_messages_:
+            self.message_ += f" (result of pass {len(history)}; {self.pass_messages_[-1]})"
         if not self.success_:
             warnings.warn(f"EKF identification: {self.message_}", RuntimeWarning, stacklevel=3)
         # per-log smoothed states and innovations

@@ -129,7 +129,12 @@ def equation_error_fit(
         J = -(Jpp * w[None, :, None]).reshape(-1, est_idx.size)
         return np.vstack([J, np.diag(1e-3 * np.sqrt(T.size) / prior_std)])
 
-    sol = least_squares(resid, p0[est_idx], jac=jac, x_scale=prior_std, method="trf", max_nfev=50)
+    th0 = p0[est_idx]
+    sol = least_squares(resid, th0, jac=jac, x_scale=prior_std, method="trf", max_nfev=50)
+    cost0 = 0.5 * float(np.sum(resid(th0) ** 2))
+    if not (np.all(np.isfinite(sol.x)) and np.isfinite(sol.cost) and sol.cost <= cost0):
+        # the start values explain the derivatives better: keep them
+        return th0.copy(), np.full(est_idx.size, np.inf), [model.state_names[i] for i in use], natural
     J = sol.jac
     dof = max(J.shape[0] - J.shape[1], 1)
     s2 = float(np.sum(sol.fun**2) / dof)
