@@ -167,7 +167,10 @@ class EKFIdentifier:
             p[m.param_index(k)] = v
         return p, np.array([m.param_index(n) for n in est]), est
 
-    def _prior_std(self, names, theta):
+    def _prior_std(self, names, theta, natural=None):
+        """Prior std per estimated coefficient: the user's value, else ``rel * |theta|``;
+        a coefficient at zero takes its natural scale from the data (``natural``), else 1.
+        Each coefficient is judged on its own (no floor borrowed from larger ones)."""
         if isinstance(self.prior_std, Mapping):
             given = _as_dict(self.prior_std, self.model.param_names, "prior_std")
             rel = 1.0
@@ -176,15 +179,17 @@ class EKFIdentifier:
             if not rel > 0:
                 raise ValueError(f"prior_std must be positive, got {self.prior_std}")
         out = []
-        mags = np.abs(theta)
-        floor = 1e-3 * (mags.max() if mags.max() > 0 else 1.0)
-        for n, th in zip(names, theta):
+        for j, (n, th) in enumerate(zip(names, theta)):
             if n in given:
                 if not given[n] > 0:
                     raise ValueError(f"prior_std['{n}'] must be positive, got {given[n]}")
                 out.append(given[n])
+            elif th != 0:
+                out.append(rel * abs(th))
+            elif natural is not None and np.isfinite(natural[j]) and natural[j] > 0:
+                out.append(rel * natural[j])
             else:
-                out.append(rel * max(abs(th), floor))
+                out.append(rel)
         return np.array(out)
 
     # ------------------------------------------------------------------- fit
@@ -230,11 +235,7 @@ class EKFIdentifier:
             given_prior = _as_dict(self.prior, model.param_names, "prior")
             theta_ee, se_ee, used_eq, natural = equation_error_fit(model, arrays, meas, est_idx, p_base, prior_std_abs)
             # coefficients that start at zero get a prior width from the data's natural scale
-            rel = 1.0 if isinstance(self.prior_std, Mapping) else float(self.prior_std)
-            given_std = self.prior_std if isinstance(self.prior_std, Mapping) else {}
-            for j, n in enumerate(est_names):
-                if theta0[j] == 0 and n not in given_std and np.isfinite(natural[j]):
-                    prior_std_abs[j] = rel * natural[j]
+            prior_std_abs = self._prior_std(est_names, theta0, natural)
             for j, n in enumerate(est_names):
                 if n not in given_prior:
                     theta0[j] = theta_ee[j]
@@ -242,7 +243,7 @@ class EKFIdentifier:
             # prior: keep the width set by the model's values, widen it to the start
             # values' magnitude and to 3x their (optimistic) standard errors.
             se_ee = np.where(np.isfinite(se_ee), se_ee, 0.0)
-            prior_std_abs = np.maximum.reduce([prior_std_abs, self._prior_std(est_names, theta0), 3.0 * se_ee])
+            prior_std_abs = np.maximum.reduce([prior_std_abs, self._prior_std(est_names, theta0, natural), 3.0 * se_ee])
         scale = np.array([max(abs(th), 1e-12) for th in theta0])
         for k, v in _as_dict(self.scale, model.param_names, "scale").items():
             if k in est_names:
