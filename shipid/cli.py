@@ -16,7 +16,12 @@ __all__ = ["main", "COMMAND_MODULES"]
 #: Modules that add sub-commands (each has ``register(subparsers)``).
 COMMAND_MODULES: list[str] = [
     "shipid.commands.core",
+    "shipid.commands.identify",
+    "shipid.commands.logs",
     "shipid.commands.manoeuvre",
+    "shipid.commands.routing",
+    "shipid.commands.glider",
+    "shipid.commands.validate",
 ]
 
 

@@ -31,7 +31,7 @@ import re
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -46,14 +46,15 @@ __all__ = ["LogError", "ShipParticulars", "TrialLog", "read_log", "read_ship", "
 
 #: unit name -> (dimension, factor to SI).  Aliases are lower-case.
 UNITS: dict[str, tuple[str, float]] = {
-    "s": ("time", 1.0), "sec": ("time", 1.0),
-    "m": ("length", 1.0),
+    "s": ("time", 1.0), "sec": ("time", 1.0), "ms": ("time", 1e-3), "min": ("time", 60.0), "h": ("time", 3600.0),
+    "m": ("length", 1.0), "km": ("length", 1000.0), "nm": ("length", 1852.0), "nmi": ("length", 1852.0),
     "rad": ("angle", 1.0), "deg": ("angle", math.pi / 180.0), "degree": ("angle", math.pi / 180.0),
     "degrees": ("angle", math.pi / 180.0),
     "m/s": ("speed", 1.0), "knots": ("speed", 1852.0 / 3600.0), "knot": ("speed", 1852.0 / 3600.0),
     "kn": ("speed", 1852.0 / 3600.0), "kt": ("speed", 1852.0 / 3600.0), "kts": ("speed", 1852.0 / 3600.0),
     "rad/s": ("rate", 1.0), "deg/s": ("rate", math.pi / 180.0),
     "rps": ("revs", 1.0), "hz": ("revs", 1.0), "1/s": ("revs", 1.0), "rpm": ("revs", 1.0 / 60.0),
+    "1/min": ("revs", 1.0 / 60.0),
 }
 
 #: SI unit written for each dimension.
@@ -80,6 +81,7 @@ _GENERIC_ABSURD = 1e15
 _CONTROL_ANGLES = ("delta", "fin")   # |value| > pi/2 rad looks like degrees
 _ATTITUDE_ANGLES = ("phi", "theta")  # |value| > pi/2 rad looks like degrees
 _RATE_DEG_LIMIT = 3.0                 # |rate| > 3 rad/s looks like deg/s
+_RPM_SCORE = 200.0                    # n sqrt(Lpp) [rps m^0.5] above this looks like rpm
 
 
 # --------------------------------------------------------------------------------------
@@ -601,7 +603,9 @@ def _convert_units(arrays: dict[str, np.ndarray], units: Mapping[str, str], head
         if key not in UNITS:
             col = (columns_in_file or {}).get(name, name)
             raise LogError(f"{where.label} column '{col}': unknown unit {unit!r}; use one of "
-                           "s, m, rad, deg, m/s, knots (kn), rad/s, deg/s, rps, rpm, Hz", column=name, value=unit)
+                           "s, ms, min, h, m, km, nm (nautical mile), rad, deg, m/s, knots (kn), rad/s, deg/s, "
+                           "rps, rpm, Hz",
+                           column=name, value=unit)
         udim, factor = UNITS[key]
         if dim is not None and udim != dim:
             col = (columns_in_file or {}).get(name, name)
@@ -626,6 +630,10 @@ def _finish(t: np.ndarray, ch: dict[str, np.ndarray], *, where: _Where, name: st
     if missing_req:
         raise where.error(f"required channel(s) {missing_req} missing; channels present: "
                           f"{', '.join(['time', *ch]) }", column=missing_req[0])
+    for c in required:
+        if c != "time" and not np.isfinite(ch[c]).any():
+            raise where.error(f"required channel is entirely blank/NaN; give a column with values, or leave it "
+                              f"out of required=", c, 0, value=ch[c][0] if n else None)
     # --- time --------------------------------------------------------------------
     bad = ~np.isfinite(t)
     if bad.any():
@@ -652,6 +660,16 @@ def _finish(t: np.ndarray, ch: dict[str, np.ndarray], *, where: _Where, name: st
         _check_channel(c, a, where, unit_checks)
     if unit_checks and "psi" in ch:
         _check_heading(t, ch, where)
+    if unit_checks and ship is not None and "n" in ch and np.isfinite(ch["n"]).any():
+        # Froude scaling keeps n sqrt(Lpp) of ships and their models within ~10..100 rps m^0.5
+        # (KVLCC2 1.5 rps x sqrt(320 m) = 27; KCS model 10 rps x sqrt(4.36 m) = 21); rpm gives 60x that
+        score = np.abs(ch["n"]) * math.sqrt(ship.lpp)
+        if np.nanmax(score) > _RPM_SCORE:
+            i = int(np.argmax(score > _RPM_SCORE))
+            raise where.error(f"value {_fmt_value(ch['n'][i])} looks like rpm (n sqrt(Lpp) = {score[i]:.0f} "
+                              f"rps m^0.5 for Lpp {ship.lpp:g} m; ships and models stay below {_RPM_SCORE:g}); "
+                              + _deg_hint("n", "rpm") + " (or unit_checks=False if it really is rps)", "n", i,
+                              value=ch["n"][i])
     # --- inputs ------------------------------------------------------------------
     for c in inputs:
         if c not in ch:
@@ -777,20 +795,24 @@ def _check_heading(t: np.ndarray, ch: dict[str, np.ndarray], where: _Where) -> N
             rdt = 0.5 * (r[a] + r[b])[good] * dt[a][good]
             dpsi = jump[good]
             turned = float(np.sum(np.abs(rdt)))
-            den = float(np.dot(rdt, rdt))
+            den = float(np.sum(rdt * rdt))
             if turned > 0.2 and den > 0:  # at least ~11 deg of turning to judge
-                slope = float(np.dot(dpsi, rdt) / den)
-                if 20.0 < abs(slope) < 200.0:
+                slope = float(np.sum(dpsi * rdt) / den)
+                # standard error of the slope: flag only slopes clearly away from both 0 (noise) and 1
+                m = int(good.sum())
+                se = math.sqrt(max(float(np.sum((dpsi - slope * rdt) ** 2)) / (m - 1), 0.0) / den)
+                clear = abs(slope) > 5 * se and abs(abs(slope) - 1.0) > 5 * se
+                if clear and 20.0 < abs(slope) < 200.0:
                     i = int(ok[np.nanargmax(np.abs(psi[ok]))])
                     raise where.error(f"value {_fmt_value(psi[i])} looks like degrees (heading changes "
                                       f"{abs(slope):.1f} x faster than the integral of r; 57.3 = deg/rad); "
                                       + hint, "psi", i, value=psi[i])
-                if 1 / 200.0 < abs(slope) < 1 / 20.0:
+                if clear and 1 / 200.0 < abs(slope) < 1 / 20.0:
                     i = int(np.nanargmax(np.abs(r)))
                     raise where.error(f"value {_fmt_value(r[i])} looks like deg/s (the integral of r changes "
                                       f"{1 / abs(slope):.1f} x faster than the heading; 57.3 = deg/rad); "
                                       + _deg_hint("r", "deg/s") + " (or unit_checks=False)", "r", i, value=r[i])
-                if slope < -0.5:
+                if slope < -0.5 and clear:
                     warnings.warn(f"{where.label}: heading psi and yaw rate r have opposite signs "
                                   f"(d psi/dt = {slope:.2f} r); check the sign conventions", stacklevel=4)
 
@@ -820,10 +842,16 @@ def _split_header(cell: str) -> tuple[str, str | None]:
     m = _HEADER_RE.match(cell)
     name = m.group("name").strip().strip('"').strip()
     unit = m.group("unit")
-    return name, (unit.strip() if unit is not None and unit.strip() else None)
+    unit = unit.strip() if unit is not None else None
+    return name, (unit if unit and unit != "-" else None)  # "[-]": no unit given
 
 
 def _decode(raw: bytes, p: Path) -> str:
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):  # UTF-16 with BOM (Excel "Unicode text")
+        try:
+            return raw.decode("utf-16")
+        except UnicodeDecodeError:
+            pass
     nul = raw.find(b"\x00")
     if nul >= 0:
         line = raw.count(b"\n", 0, nul) + 1
@@ -881,7 +909,8 @@ def read_log(
         CSV file (default schema below) or MARIN SIMMAN ``.dat`` file.
     columns : dict, optional
         Our channel name -> the file's column name (with or without its
-        bracketed unit), e.g. ``{"psi": "heading", "n": "prop_rpm"}``.
+        bracketed unit), e.g. ``{"psi": "heading", "n": "prop_rpm"}``, or the
+        column's 1-based number (``{"u": 5}``) when names are ambiguous.
     units : dict, optional
         Our channel name -> unit of the values in the file; one of s, m, rad,
         deg, m/s, knots (kn), rad/s, deg/s, rps, rpm, Hz.  Overrides a unit in
@@ -995,18 +1024,19 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
     if delimiter is None:
         delim = ","
         if "," not in header_line:
-            sample = [header_line] + [lines[k] for k in data_idx[:5]]
-            for cand, label in ((";", "semicolon"), ("\t", "tab")):
-                if all(cand in s for s in sample):
+            # the header decides: a comma-free header holding ';' or a tab is a delimiter mistake
+            shown = _fmt_value(header_line.strip())
+            for cand, label, cli in ((";", "semicolon", ";"), ("\t", "tab", "tab")):
+                if cand in header_line:
                     raise LogError(f"`{p.name}` row {h + 1}: the header has no commas but is {label}-separated "
-                                   f"({_fmt_value(header_line.strip())}); pass delimiter="
-                                   f"{cand!r} (CLI: --delimiter {'tab' if cand == chr(9) else cand}) or save as "
-                                   "comma-separated CSV", path=p, row=h + 1, value=header_line.strip())
-            if len(header_line.split()) > 1 and all(len(s.split()) == len(header_line.split()) for s in sample):
+                                   f"({shown}); pass delimiter={cand!r} (CLI: --delimiter {cli}) or save the file "
+                                   "as comma-separated CSV", path=p, row=h + 1, value=header_line.strip())
+            first = lines[data_idx[0]].split() if data_idx else []
+            ntok = len(header_line.split())
+            if ntok > 1 and len(first) == ntok and "," not in lines[data_idx[0]]:
                 raise LogError(f"`{p.name}` row {h + 1}: the header has no commas but is whitespace-separated "
-                               f"({_fmt_value(header_line.strip())}); pass delimiter='whitespace' (CLI: --delimiter "
-                               "whitespace) or save as comma-separated CSV", path=p, row=h + 1,
-                               value=header_line.strip())
+                               f"({shown}); pass delimiter='whitespace' (CLI: --delimiter whitespace) or save the "
+                               "file as comma-separated CSV", path=p, row=h + 1, value=header_line.strip())
     else:
         delim = {"tab": "\t", "\\t": "\t", "space": "whitespace", "spaces": "whitespace"}.get(delimiter, delimiter)
         if delim not in _DELIMS:
@@ -1032,54 +1062,70 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
     colmap: dict[str, int] = {}   # our name -> column index
     taken: set[int] = set()
     for ours, theirs in columns.items():
-        j = _find_col(str(theirs), hdr, names)
+        if isinstance(theirs, (int, np.integer)) and not isinstance(theirs, bool):
+            if not 1 <= theirs <= len(hdr):
+                raise LogError(f"`{p.name}` row {h + 1}: columns maps '{ours}' to column number {theirs} but the "
+                               f"header has {len(hdr)} columns (numbers count from 1)", path=p, column=ours,
+                               row=h + 1, value=theirs)
+            j = int(theirs) - 1
+        else:
+            j = _find_col(str(theirs), hdr, names)
+            if j is None and str(theirs).strip().isdigit() and 1 <= int(theirs) <= len(hdr):
+                j = int(theirs) - 1  # a column number given as text (CLI --column u=5)
         if j is None:
             raise LogError(f"`{p.name}` row {h + 1}: columns maps '{ours}' to '{theirs}' but the header has no such "
                            f"column; header: {', '.join(hdr)}", path=p, column=ours, row=h + 1, value=theirs)
         colmap[ours] = j
         taken.add(j)
-    for j, nm in enumerate(names):
-        if j in taken or not nm:
+    known = set(SHIP_CHANNELS) | set(required)
+    for j, nm in enumerate(names):  # exact names of known channels
+        if j in taken or nm not in known or nm in colmap:
             continue
-        ours = nm if nm not in colmap else None
-        if ours is None:
-            continue
-        colmap.setdefault(ours, j)
+        colmap[nm] = j
         taken.add(j)
-    # case-insensitive fallback for required/schema names
-    lower = {}
-    for j, nm in enumerate(names):
-        lower.setdefault(nm.lower(), []).append(j)
+    # case-insensitive fallback ("Time", "PSI") for known names, never stealing a known name ("U" stays U)
     for want in list(dict.fromkeys([*required, *SCHEMA])):
         if want in colmap:
             continue
-        cands = [j for j in lower.get(want.lower(), []) if j not in taken]
+        cands = [j for j, nm in enumerate(names)
+                 if j not in taken and nm.lower() == want.lower() and nm not in SHIP_CHANNELS]
         if len(cands) == 1:
             colmap[want] = cands[0]
             taken.add(cands[0])
     missing_cols = [c for c in required if c not in colmap]
     if missing_cols:
         c = missing_cols[0]
+        single = " (the header is a single column: is the file comma-separated?)" if len(hdr) == 1 else ""
+        if _looks_marin(header_line):
+            single = " (this looks like a MARIN .dat file: pass fmt='marin')"
         raise LogError(f"`{p.name}` row {h + 1}: required column '{c}' not found; header has "
-                       f"{', '.join(repr(x) for x in hdr)}; rename the column or map it with "
+                       f"{', '.join(repr(x) for x in hdr)}{single}; rename the column or map it with "
                        f"columns={{'{c}': 'your name'}} (CLI: --column {c}=NAME)", path=p, column=c, row=h + 1)
     header_units = {ours: parsed[j][1] for ours, j in colmap.items() if parsed[j][1] is not None}
-    file_col = {ours: hdr[j] for ours, j in colmap.items()}
+    file_col = {ours: names[j] or hdr[j] for ours, j in colmap.items()}
     # --- data rows -----------------------------------------------------------------
     if not data_idx:
         raise LogError(f"`{p.name}`: header only, no data rows; the log needs samples below the header",
                        path=p, row=h + 1)
     ncol = len(hdr)
-    rows_txt: list[list[str]] = []
+    rows_txt: list = []
     keep_rows: list[int] = []
-    for k in data_idx:
+    data_idx = [k for k in data_idx if not lines[k].lstrip().startswith("#")]
+    fast = _fast_table(lines, data_idx, delim, ncol)
+    if fast is not None:  # all cells numeric or blank, every row complete: pandas' C parser did the work
+        table, keep = fast
+        rows_txt = [None] * int(keep.sum())
+        keep_rows = [k + 1 for k, ok in zip(data_idx, keep) if ok]
+        data_idx = []
+    if delim == "whitespace":
+        split_rows = (lines[k].split() for k in data_idx)
+    else:
+        split_rows = csv.reader((lines[k] for k in data_idx), delimiter=delim)
+    for k, cells in zip(data_idx, split_rows):
         s = lines[k]
-        if s.lstrip().startswith("#"):
+        if (not cells or not cells[0].strip()) and all(not c.strip() for c in cells):  # bare delimiters
             continue
-        cells = split(s)
         if len(cells) != ncol:
-            if all(not c.strip() for c in cells):  # a row of bare delimiters: blank line
-                continue
             other = [d for d in (";", "\t") if d != delim and d in s]
             extra = f"; the row contains {_DELIMS[other[0]]}s: wrong delimiter?" if other and len(cells) == 1 else ""
             raise LogError(f"`{p.name}` row {k + 1}: {len(cells)} field(s) but the header has {ncol}{extra}; "
@@ -1092,34 +1138,51 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
                        path=p, row=h + 1)
     rows = np.asarray(keep_rows, dtype=np.int64)
     where = _Where(p, p.stem, rows)
-    cols = list(zip(*rows_txt))
+    cols = list(table.T) if fast is not None else list(zip(*rows_txt))
     arrays: dict[str, np.ndarray] = {}
+    first_stamp = None
     for ours, j in colmap.items():
-        arrays[ours] = _to_float(cols[j], ours, hdr[j], where)
+        if ours == "time" and fast is None and _ISO_RE.match(cols[j][0].strip()):
+            arrays[ours] = _iso_seconds(cols[j], names[j] or hdr[j], where)
+            first_stamp = cols[j][0].strip()
+            continue
+        arrays[ours] = _to_float(cols[j], ours, names[j] or hdr[j], where, decimal_comma=delim != ",")
     if "time" not in arrays:
         raise LogError(f"`{p.name}` row {h + 1}: no 'time' column; header has {', '.join(repr(x) for x in hdr)}; "
                        "map it with columns={'time': 'your name'}", path=p, column="time", row=h + 1)
     # unknown extra columns: keep when numeric, else ignore with a warning
     notes: list[str] = []
+    if first_stamp is not None:
+        notes.append(f"time given as date-time stamps; t = 0 s at {first_stamp}")
     order = ["time"] + [c for c in SCHEMA[1:] if c in arrays] + [c for c in arrays if c not in SCHEMA]
     arrays = {c: arrays[c] for c in order}
     for j, nm in enumerate(names):
         if j in taken:
             continue
         label = nm or f"column {j + 1}"
-        try:
-            a = _to_float(cols[j], label, hdr[j], where)
-        except LogError:
+        empty = (np.isnan(cols[j]).all() if isinstance(cols[j], np.ndarray)
+                 else all(not c.strip() for c in cols[j]))
+        if not nm and empty:  # trailing delimiter: an empty unnamed column
+            continue
+        if not _mostly_numeric(cols[j]):
             notes.append(f"column '{hdr[j]}' is not numeric; ignored")
             warnings.warn(f"`{p.name}`: column '{hdr[j]}' is not numeric; ignored", stacklevel=3)
             continue
-        if label in arrays:
-            notes.append(f"column '{hdr[j]}' duplicates '{label}'; ignored")
+        # a mostly numeric column: a bad cell is an error
+        if label in arrays and label in columns:
+            notes.append(f"column '{hdr[j]}' ignored: columns= maps '{label}' to '{columns[label]}'")
             continue
+        if label in arrays:
+            first = next(jj for jj, nn in enumerate(names) if jj in taken and (nn == label or colmap.get(label) == jj))
+            raise LogError(f"`{p.name}` row {h + 1}: column '{label}' appears twice (columns {first + 1} and "
+                           f"{j + 1} of the header); rename one, or pick one by number with "
+                           f"columns={{'{label}': {first + 1}}}",
+                           path=p, column=label, row=h + 1, value=hdr[j])
+        a = _to_float(cols[j], label, label, where, decimal_comma=delim != ",")
         arrays[label] = a
         if parsed[j][1] is not None:
             header_units[label] = parsed[j][1]
-            file_col[label] = hdr[j]
+            file_col[label] = label
     t, ch, units_in = _convert_units(arrays, units, header_units, where, file_col)
     return t, ch, where, units_in, notes, meta
 
@@ -1134,6 +1197,60 @@ def _find_col(theirs: str, hdr: list[str], names: list[str]) -> int | None:
     return hits[0] if len(hits) == 1 else None
 
 
+_NA_TOKENS = ["", "nan", "NaN", "NAN", "na", "NA", "n/a", "N/A", "null", "NULL", "Null", "none", "None", "NONE",
+              "-nan", "-NaN"]
+
+
+# pandas < 3 parses floats with "high" precision by default (last-digit differences possible);
+# pandas 3 deprecates the argument and parses exactly by default
+_EXACT_FLOATS = {"float_precision": "round_trip"} if int(pd.__version__.split(".")[0]) < 3 else {}
+
+
+def _fast_table(lines: list[str], data_idx: list[int], delim: str, ncol: int):
+    """Parse the data rows with pandas' C parser when that is unambiguous, else None.
+
+    Used only when no cell is quoted, every row has ``ncol`` fields and every cell is a
+    number or a missing-value token; any irregularity returns None and the careful
+    row-by-row path (which names the offending row and value) takes over.  Values are
+    parsed exactly as Python's ``float`` does (round-trip precision).
+    Returns (table (n_rows, ncol) float, keep mask dropping all-blank rows).
+    """
+    if len(data_idx) < 50:
+        return None
+    body = [lines[k] for k in data_idx]
+    text = "\n".join(body)
+    if '"' in text or "'" in text:
+        return None
+    if delim == "whitespace":
+        if any(len(b.split()) != ncol for b in body):
+            return None
+        sep = r"\s+"
+    else:
+        if any(b.count(delim) != ncol - 1 for b in body):
+            return None
+        sep = delim
+    try:
+        df = pd.read_csv(io.StringIO(text), sep=sep, header=None, names=list(range(ncol)), dtype=float,
+                         na_values=_NA_TOKENS, keep_default_na=False, skip_blank_lines=False, engine="c",
+                         **_EXACT_FLOATS)
+    except (ValueError, TypeError, pd.errors.ParserError):
+        return None
+    if len(df) != len(body):
+        return None
+    table = df.to_numpy(dtype=float)
+    keep = ~np.isnan(table).all(axis=1)
+    return table[keep], keep
+
+
+def _mostly_numeric(cells) -> bool:
+    if isinstance(cells, np.ndarray):
+        return True
+    vals = [c.strip() for c in cells if c.strip().lower() not in _MISSING_TOKENS]
+    if not vals:
+        return True
+    return sum(_is_number(c) for c in vals[:200]) >= 0.5 * min(len(vals), 200)
+
+
 def _is_number(s: str) -> bool:
     try:
         float(s)
@@ -1142,7 +1259,28 @@ def _is_number(s: str) -> bool:
         return False
 
 
-def _to_float(cells: Sequence[str], ours: str, col: str, where: _Where) -> np.ndarray:
+_ISO_RE = re.compile(r"^\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}")
+_DECIMAL_COMMA_RE = re.compile(r"^[-+]?\d*,\d+([eE][-+]?\d+)?$")
+
+
+def _iso_seconds(cells: Sequence[str], col: str, where: _Where) -> np.ndarray:
+    """ISO 8601 date-time stamps -> seconds after the first one."""
+    stamps = pd.to_datetime(pd.Series([c.strip() for c in cells]), format="ISO8601", errors="coerce")
+    bad = stamps.isna().to_numpy()
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise where.error(f"value {cells[i].strip()!r} is not a date-time stamp like the first one "
+                          f"({cells[0].strip()!r}); fix the cell (every sample needs a time)", col, i,
+                          value=cells[i].strip())
+    if getattr(stamps.dt, "tz", None) is not None:
+        stamps = stamps.dt.tz_convert("UTC")
+    ns = stamps.to_numpy().astype("datetime64[ns]").astype(np.int64)
+    return (ns - ns[0]) * 1e-9
+
+
+def _to_float(cells: Sequence[str], ours: str, col: str, where: _Where, decimal_comma: bool = False) -> np.ndarray:
+    if isinstance(cells, np.ndarray) and cells.dtype.kind == "f":
+        return cells.copy()
     try:
         return np.asarray(cells, dtype=float)  # fast path: no blanks, all numbers
     except ValueError:
@@ -1156,6 +1294,9 @@ def _to_float(cells: Sequence[str], ours: str, col: str, where: _Where) -> np.nd
         try:
             out[i] = float(s)
         except ValueError:
+            if decimal_comma and _DECIMAL_COMMA_RE.match(s):
+                out[i] = float(s.replace(",", "."))
+                continue
             hint = ""
             if re.fullmatch(r"[-+]?\d+,\d+", s):
                 hint = " (decimal comma? save the file with decimal points)"
@@ -1192,27 +1333,14 @@ def _read_marin(text: str, p: Path, units: Mapping[str, str], marin_time: str):
     if start is None:
         raise LogError(f"`{p.name}`: no data rows after the MARIN title lines; expected two title lines, a blank "
                        "line and rows of 11 numbers", path=p)
-    rows_l, vals = [], []
-    for k in range(start, len(lines)):
-        parts = lines[k].split()
-        if not parts:
-            continue
-        if len(parts) != 11:
-            raise LogError(f"`{p.name}` row {k + 1}: {len(parts)} number(s), a MARIN row has 11 (time x0 y0 phi psi "
-                           "u v p r delta rev); fix or delete the row", path=p, row=k + 1, value=lines[k].strip()[:60])
-        rows_l.append(k + 1)
-        vals.append(parts)
-    rows = np.asarray(rows_l, dtype=np.int64)
-    where = _Where(p, p.stem, rows)
-    try:
-        a = np.asarray(vals, dtype=float)
-    except ValueError:
-        cols = list(zip(*vals))
-        for j, c in enumerate(_MARIN_COLS):
-            _to_float(cols[j], c, c, where)
-        raise  # pragma: no cover (_to_float raised)
-    if a.shape[0] == 0:
-        raise LogError(f"`{p.name}`: no data rows", path=p)
+    idx = [k for k in range(start, len(lines)) if lines[k].strip()]
+    fast = _fast_table(lines, idx, "whitespace", 11)
+    if fast is not None and fast[1].all():
+        a = fast[0]
+        rows = np.asarray(idx, dtype=np.int64) + 1
+        where = _Where(p, p.stem, rows)
+    else:
+        a, rows, where = _marin_rows(lines, idx, p)
     notes: list[str] = []
     t = a[:, 0].copy()
     # --- repeated (rounded) time stamps ------------------------------------------------
@@ -1255,6 +1383,28 @@ def _read_marin(text: str, p: Path, units: Mapping[str, str], marin_time: str):
     return t2, ch_out, where, units_in, notes
 
 
+def _marin_rows(lines: list[str], idx: list[int], p: Path):
+    """Careful row-by-row parse of MARIN data lines (names the row of any irregularity)."""
+    rows_l, vals = [], []
+    for k in idx:
+        parts = lines[k].split()
+        if len(parts) != 11:
+            raise LogError(f"`{p.name}` row {k + 1}: {len(parts)} number(s), a MARIN row has 11 (time x0 y0 phi psi "
+                           "u v p r delta rev); fix or delete the row", path=p, row=k + 1, value=lines[k].strip()[:60])
+        rows_l.append(k + 1)
+        vals.append(parts)
+    rows = np.asarray(rows_l, dtype=np.int64)
+    where = _Where(p, p.stem, rows)
+    try:
+        a = np.asarray(vals, dtype=float)
+    except ValueError:
+        cols = list(zip(*vals))
+        for j, c in enumerate(_MARIN_COLS):
+            _to_float(cols[j], c, c, where)
+        raise  # pragma: no cover (_to_float raised)
+    return a, rows, where
+
+
 def _uniform_time(t: np.ndarray) -> tuple[np.ndarray | None, float]:
     """Fit t0 + k dt to stamps rounded to 3 significant digits; None when inconsistent."""
     k = np.arange(t.size, dtype=float)
@@ -1262,11 +1412,16 @@ def _uniform_time(t: np.ndarray) -> tuple[np.ndarray | None, float]:
     w = 1.0 / ulp
     # two candidates: anchored at the first stamp (dt by weighted least squares), and t0, dt both
     # fitted; keep the one that deviates least from the printed stamps
-    dt = float(np.dot(k * w, (t - t[0]) * w) / np.dot(k * w, k * w))
+    dt = float(np.sum(k * w * (t - t[0]) * w) / np.sum((k * w) ** 2))
     cands = [t[0] + k * dt]
-    A = np.stack([np.ones_like(k), k], axis=1)
-    coef = np.linalg.lstsq(A * w[:, None], t * w, rcond=None)[0]
-    cands.append(A @ coef)
+    # weighted least squares for (t0, dt) in closed form (no BLAS: threaded BLAS stalls on a busy machine)
+    w2 = w * w
+    sw, sk, skk = np.sum(w2), np.sum(w2 * k), np.sum(w2 * k * k)
+    st, skt = np.sum(w2 * t), np.sum(w2 * k * t)
+    det = sw * skk - sk * sk
+    dt_free = (sw * skt - sk * st) / det
+    t0_free = (st - dt_free * sk) / sw
+    cands.append(t0_free + k * dt_free)
     devs = [float(np.max(np.abs(c - t) / ulp)) for c in cands]
     j = int(np.argmin(devs))
     tu, dev = cands[j], devs[j]

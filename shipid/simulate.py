@@ -18,7 +18,7 @@ import pandas as pd
 from .integrate import rk4_step
 from .models.base import Model
 
-__all__ = ["simulate", "SimulationResult"]
+__all__ = ["simulate", "SimulationResult", "replay", "replay_errors"]
 
 
 @dataclass
@@ -161,3 +161,76 @@ def simulate(
         last = controller(t[-1], x) if controller is not None else U[..., -1, :]
         Uout[..., -1, :] = np.broadcast_to(np.asarray(last, dtype=float), batch + (model.nu,))
     return SimulationResult(t=t, x=X, u=Uout, model=model, params=np.array(p), success=ok, message=msg)
+
+
+def _log_frame(log) -> pd.DataFrame:
+    data = log if isinstance(log, pd.DataFrame) else getattr(log, "data", None)
+    if not isinstance(data, pd.DataFrame) or "time" not in data.columns:
+        raise ValueError("replay needs a TrialLog or a DataFrame with a 'time' column")
+    return data
+
+
+def replay(model: Model, log, *, x0=None, substeps: int = 2) -> SimulationResult:
+    """Simulate ``model`` with the recorded inputs of ``log`` from its initial state.
+
+    Parameters
+    ----------
+    model : Model
+        Typically a fitted model (``FitResult.to_model()``).
+    log : TrialLog or DataFrame
+        Must contain ``time`` and every input of the model.
+    x0 : array (nx,), optional
+        Initial state; default: the mean of the first five finite samples of
+        each logged state (0 for states not logged).
+    substeps : int
+        RK4 steps per sample interval.
+    """
+    df = _log_frame(log)
+    t = df["time"].to_numpy(dtype=float)
+    missing = [n for n in model.input_names if n not in df.columns]
+    if missing:
+        raise ValueError(f"log lacks input channel(s) {missing} needed to replay model '{model.name}'")
+    U = np.column_stack([df[n].to_numpy(dtype=float) for n in model.input_names])
+    if not np.all(np.isfinite(U)):
+        k = int(np.flatnonzero(~np.all(np.isfinite(U), axis=1))[0])
+        raise ValueError(f"log input missing at sample {k} (t = {t[k]:.6g} s); interpolate the inputs before replaying")
+    if x0 is None:
+        x0 = np.zeros(model.nx)
+        for i, n in enumerate(model.state_names):
+            if n in df.columns:
+                col = df[n].to_numpy(dtype=float)
+                fin = col[np.isfinite(col)][:5]
+                if fin.size:
+                    x0[i] = fin.mean()
+    return simulate(model, x0, t, U, substeps=substeps)
+
+
+def replay_errors(sim: SimulationResult, log) -> pd.DataFrame:
+    """Per-channel RMSE and NRMSE (RMSE / range of the measurement) of a replay,
+    plus the track error (RMS distance between simulated and logged x, y).
+
+    Returns a DataFrame indexed by channel with columns ``rmse``, ``nrmse``,
+    ``n_samples``; the row ``track`` holds the RMS position error [m].
+    """
+    df = _log_frame(log)
+    rows = {}
+    for i, n in enumerate(sim.model.state_names):
+        if n not in df.columns:
+            continue
+        y = df[n].to_numpy(dtype=float)
+        s = sim.x[:, i]
+        ok = np.isfinite(y) & np.isfinite(s)
+        if not ok.any():
+            continue
+        e = s[ok] - y[ok]
+        rmse = float(np.sqrt(np.mean(e**2)))
+        rng = float(np.ptp(y[ok]))
+        rows[n] = {"rmse": rmse, "nrmse": rmse / rng if rng > 0 else np.nan, "n_samples": int(ok.sum())}
+    if {"x", "y"} <= set(df.columns) and {"x", "y"} <= set(sim.model.state_names):
+        dx = sim.state("x") - df["x"].to_numpy(dtype=float)
+        dy = sim.state("y") - df["y"].to_numpy(dtype=float)
+        d2 = dx**2 + dy**2
+        ok = np.isfinite(d2)
+        if ok.any():
+            rows["track"] = {"rmse": float(np.sqrt(np.mean(d2[ok]))), "nrmse": np.nan, "n_samples": int(ok.sum())}
+    return pd.DataFrame.from_dict(rows, orient="index")

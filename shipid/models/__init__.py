@@ -15,6 +15,8 @@ __all__ = ["Model", "ParameterSet", "register_model", "get_model", "model_class"
 _REGISTRY: dict[str, str] = {
     "kcs-response": "shipid.models.response:KCSResponseModel",
     "mmg": "shipid.models.mmg:MMGModel",
+    "glider": "shipid.models.glider:GliderModel",
+    "planing-boat": "shipid.models.planing:PlaningBoatModel",
     "response-nl": "shipid.models.response_nl:ResponseNLModel",
 }
 

@@ -270,6 +270,20 @@ class Model:
         return self._fd(t, x, u, p, "u")
 
     # ------------------------------------------------------------ conveniences
+    def options(self) -> dict:
+        """Keyword arguments (JSON-friendly) that rebuild this model besides its parameters,
+        e.g. MMG particulars; stored in fit results as ``model_options``."""
+        return {}
+
+    def identifiability_notes(self, arrays, estimated) -> list[str]:
+        """Model-specific identifiability warnings for a set of logs.
+
+        ``arrays`` are :class:`shipid.identify.data.LogArrays` (inputs in
+        ``.U`` columns ordered as ``input_names``); ``estimated`` the names
+        of the estimated parameters.  The base model has none.
+        """
+        return []
+
     def describe(self) -> pd.DataFrame:
         """Table of the parameters: name, value, unit."""
         return pd.DataFrame(

@@ -291,6 +291,10 @@ class MMGModel(Model):
         """Default approach speed [m/s]."""
         return self.particulars.design_speed
 
+    def options(self) -> dict:
+        """The particulars travel with fit results (``get_model("mmg", coef, **options)``)."""
+        return {"particulars": self.particulars.to_dict()}
+
     def scaled(self, lpp_new: float) -> "MMGModel":
         """The same (non-dimensional) model for the geometrically similar ship of length ``lpp_new``.
 

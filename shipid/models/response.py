@@ -57,15 +57,30 @@ class KCSResponseModel(Model):
     def _rhs(self, t, x, u, p):
         psi, uu, v, r = x[..., 2], x[..., 3], x[..., 4], x[..., 5]
         d, n = u[..., 0], u[..., 1]
-        a = [p[..., i] for i in range(16)]
-        a1, a2, a3, a4, a5, a6, a7, a8, a9, b1, b2, b3, b4, c1, c2, c3 = a
+        a1, a2, a3, a4, a5, a6, a7, a8, a9, b1, b2, b3, b4, c1, c2, c3 = p.T if p.ndim <= 2 else np.moveaxis(p, -1, 0)
+        out = np.empty(np.broadcast_shapes(x.shape, u.shape[:-1] + (6,), p.shape[:-1] + (6,)))
         c, s = np.cos(psi), np.sin(psi)
-        du = a1 * uu + a2 * v**2 + a3 * r**2 + a4 * d**2 + a5 * v * r + a6 * v * d + a7 * r * d + a8 * uu * n + a9 * n**2
-        dv = b1 * v + b2 * r + b3 * d + b4 * uu * r
-        dr = c1 * v + c2 * r + c3 * d
-        out = [uu * c - v * s, uu * s + v * c, r + 0 * uu, du, dv, dr]
-        shape = np.broadcast_shapes(*[o.shape for o in out])
-        return np.stack([np.broadcast_to(o, shape) for o in out], axis=-1)
+        out[..., 0] = uu * c - v * s
+        out[..., 1] = uu * s + v * c
+        out[..., 2] = r
+        out[..., 3] = (a1 + a8 * n) * uu + a2 * v * v + a3 * r * r + a4 * d * d + (a5 * r + a6 * d) * v + a7 * r * d + a9 * n * n
+        out[..., 4] = b1 * v + (b2 + b4 * uu) * r + b3 * d
+        out[..., 5] = c1 * v + c2 * r + c3 * d
+        return out
+
+    def identifiability_notes(self, arrays, estimated) -> list[str]:
+        """Warn when n is constant over all logs: u, u*n and n^2 are then collinear."""
+        n = np.concatenate([a.U[:, 1] for a in arrays])
+        if not {"a1", "a8", "a9"} & set(estimated) or n.size == 0:
+            return []
+        n_mean = float(np.mean(n))
+        if np.ptp(n) <= 0.01 * max(abs(n_mean), 1e-9):
+            return [
+                f"a1, a8, a9 cannot be separated: the propeller rate is constant (n = {n_mean:.4g} rps) in every log, "
+                "so the regressors u, u*n and n^2 are collinear; only a1 + a8*n and a9*n^2 are determined "
+                "(fix a8 or add logs with rpm changes)"
+            ]
+        return []
 
     def _regressors(self, x, u):
         uu, v, r = x[..., 3], x[..., 4], x[..., 5]
@@ -100,12 +115,22 @@ class KCSResponseModel(Model):
         uu, v, r, d, n = self._regressors(x, u)
         shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
         J = np.zeros(shape + (6, 16))
-        for j, reg in enumerate((uu, v**2, r**2, d**2, v * r, v * d, r * d, uu * n, n**2)):
-            J[..., 3, j] = reg
-        for j, reg in enumerate((v, r, d, uu * r)):
-            J[..., 4, 9 + j] = reg
-        for j, reg in enumerate((v, r, d)):
-            J[..., 5, 13 + j] = reg
+        J[..., 3, 0] = uu
+        J[..., 3, 1] = v * v
+        J[..., 3, 2] = r * r
+        J[..., 3, 3] = d * d
+        J[..., 3, 4] = v * r
+        J[..., 3, 5] = v * d
+        J[..., 3, 6] = r * d
+        J[..., 3, 7] = uu * n
+        J[..., 3, 8] = n * n
+        J[..., 4, 9] = v
+        J[..., 4, 10] = r
+        J[..., 4, 11] = d
+        J[..., 4, 12] = uu * r
+        J[..., 5, 13] = v
+        J[..., 5, 14] = r
+        J[..., 5, 15] = d
         return J
 
     def _jac_u(self, t, x, u, p):
@@ -117,3 +142,4 @@ class KCSResponseModel(Model):
         J[..., 4, 0] = p[..., 11]
         J[..., 5, 0] = p[..., 15]
         return J
+

@@ -1,0 +1,64 @@
+"""Reading speed of shipid.read_log against plain pandas parsing of the same files.
+
+Prints, for a 12 000-row CSV in the default schema and for a MARIN SIMMAN .dat file
+(when ../shared/data/kvlcc2_marin is present), the time of ``read_log`` (parse +
+validation + unit conversion + unwrapping + MARIN time rebuild and rotation) and of
+``pandas.read_csv`` (parse only), and their ratio.  Run:
+
+    python benchmarks/bench_logs.py
+"""
+from __future__ import annotations
+
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from shipid import TrialLog, read_log
+
+MARIN = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "kvlcc2_marin"
+
+
+def best_of(fn, repeat: int = 5) -> float:
+    best = float("inf")
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def main() -> None:
+    n = 12_000
+    t = np.arange(n) * 0.1
+    rng = np.random.default_rng(0)
+    psi = np.cumsum(rng.normal(0, 1e-3, n))
+    log = TrialLog.from_arrays(t, x=np.cumsum(np.cos(psi)) * 0.15, y=np.cumsum(np.sin(psi)) * 0.15, psi=psi,
+                               u=1.5 + rng.normal(0, 0.01, n), v=rng.normal(0, 0.01, n),
+                               r=np.gradient(psi, t), delta=np.full(n, 0.2), n=np.full(n, 10.0))
+    rows = []
+    with tempfile.TemporaryDirectory() as d:
+        p = Path(d) / "log12k.csv"
+        log.to_csv(p)
+        t_ours = best_of(lambda: read_log(p))
+        t_pd = best_of(lambda: pd.read_csv(p, comment="#"))
+        rows.append(("CSV 12000 rows x 9", t_ours, t_pd))
+    f = MARIN / "MARIN_FREE_KVLCC2_tc_35_m.dat"
+    if f.exists():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            t_ours = best_of(lambda: read_log(f))
+        t_pd = best_of(lambda: pd.read_csv(f, sep=r"\s+", skiprows=3, header=None))
+        rows.append((f"MARIN {f.name} ({len(read_log(f))} rows x 11)", t_ours, t_pd))
+    else:
+        print(f"(MARIN data not found at {MARIN}; skipped)")
+    print(f"{'file':55s} {'read_log [ms]':>14s} {'pandas [ms]':>12s} {'ratio':>7s}")
+    for name, a, b in rows:
+        print(f"{name:55s} {a * 1e3:14.1f} {b * 1e3:12.1f} {a / b:7.2f}")
+
+
+if __name__ == "__main__":
+    main()

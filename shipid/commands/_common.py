@@ -1,0 +1,55 @@
+"""Options and helpers shared by the sub-commands (one copy of each)."""
+from __future__ import annotations
+
+import warnings
+
+
+def parse_pairs(items, option: str, convert=str) -> dict:
+    """``["a=1,b=2", "c=3"]`` -> ``{"a": convert("1"), ...}``; ValueError naming the option otherwise."""
+    out: dict = {}
+    for item in items or []:
+        for part in item.split(","):
+            if not part.strip():
+                continue
+            if "=" not in part:
+                raise ValueError(f"{option} entry '{part}' must look like NAME=VALUE, e.g. psi=deg")
+            k, v = part.split("=", 1)
+            try:
+                out[k.strip()] = convert(v.strip())
+            except ValueError:
+                raise ValueError(f"{option} entry '{part}': '{v.strip()}' is not a valid value") from None
+    return out
+
+
+def add_log_options(p) -> None:
+    """The options that say how to read trial logs (same for every command that reads logs)."""
+    p.add_argument("--lpp", type=float, default=None, help="ship length between perpendiculars [m]")
+    p.add_argument("--ship", default=None, help="ship particulars file (JSON or YAML)")
+    p.add_argument("--units", action="append", metavar="CH=UNIT", help="declare units, e.g. psi=deg,n=rpm")
+    p.add_argument("--columns", "--column", dest="columns", action="append", metavar="CH=COLUMN",
+                   help="map a channel to the file's column name (or 1-based number), e.g. psi=heading")
+    p.add_argument("--delimiter", default=None, help="CSV delimiter if not a comma (';', tab or 'whitespace')")
+    p.add_argument("--format", dest="fmt", choices=["auto", "csv", "marin"], default="auto",
+                   help="file format (default: auto)")
+    p.add_argument("--interpolate-inputs", action="store_true", help="fill gaps in delta/n by interpolation")
+    p.add_argument("--no-unit-checks", action="store_true",
+                   help="skip the 'looks like degrees/rpm' heuristics (when a log trips them legitimately)")
+    p.add_argument("--marin-time", choices=["uniform", "drop"], default="uniform",
+                   help="MARIN .dat: rebuild the 3-digit time stamps (uniform, default) or drop repeats")
+
+
+def read_logs(paths, args) -> list:
+    """Read ``paths`` with the options of :func:`add_log_options`; gap warnings are left to the caller
+    (they are in each log's ``summary()``)."""
+    from ..logs import read_log
+
+    kw = dict(units=parse_pairs(args.units, "--units") or None,
+              columns=parse_pairs(args.columns, "--columns") or None,
+              fmt=args.fmt, lpp=args.lpp, ship=args.ship, interpolate_inputs=args.interpolate_inputs,
+              delimiter=args.delimiter, unit_checks=not args.no_unit_checks, marin_time=args.marin_time)
+    logs = []
+    for path in paths:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            logs.append(read_log(path, **kw))
+    return logs

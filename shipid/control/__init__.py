@@ -1,0 +1,13 @@
+"""Optimal control of protocol models: problems, an indirect (costate,
+steepest descent / BFGS, LEPF) and a direct (multiple shooting, SLSQP /
+trust-constr) solver with a common result, seed 000's scenarios and
+time-optimal manoeuvres for identified ship models."""
+from .analytic import BangBang, bang_bang_straight
+from .direct import solve_direct
+from .indirect import lepf, solve_indirect
+from .problem import Problem, evaluate, rk4_sensitivities
+from .result import ControlResult, switch_time
+from .scenarios import SCENARIOS, STOP_SPEED, paper_problem
+
+__all__ = ["Problem", "ControlResult", "solve_indirect", "solve_direct", "bang_bang_straight", "BangBang", "lepf", "evaluate",
+           "rk4_sensitivities", "switch_time", "paper_problem", "SCENARIOS", "STOP_SPEED"]

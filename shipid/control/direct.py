@@ -1,0 +1,244 @@
+"""Direct solver: multiple shooting with scipy's SLSQP or trust-constr.
+
+Decision variables: the piecewise-constant controls (scaled to [0, 1] by
+their bounds), the states at the interior and final shooting nodes (scaled by
+``problem.x_scale``) and, for a free final time, ``t_f``.  Each interval is
+integrated with ``substeps`` RK4 steps of the model, all intervals at once
+(batched over the leading axis of the model protocol).  Constraints:
+
+* continuity ``x_end(interval j) = s_{j+1}`` (equalities, exact Jacobians from
+  :func:`shipid.control.problem.rk4_sensitivities`);
+* terminal equalities; path and terminal bounds as bounds of the node
+  variables (so they hold at the shooting nodes; :func:`evaluate` reports the
+  violation between nodes on a fine grid);
+* input-rate limits as linear inequalities on consecutive controls.
+
+The cost is ``time_weight * t_f`` plus the Mayer term plus the running cost
+by the rectangle rule on the shooting nodes.
+"""
+from __future__ import annotations
+
+import time
+import warnings
+
+import numpy as np
+from scipy.optimize import BFGS, Bounds, NonlinearConstraint, minimize
+
+from .problem import Problem, rk4_sensitivities
+from .result import ControlResult
+
+__all__ = ["solve_direct"]
+
+
+class _MS:
+    def __init__(self, pr: Problem):
+        self.pr = pr
+        m = pr.model
+        self.N, self.s, self.nx, self.nu = pr.n_intervals, pr.substeps, m.nx, m.nu
+        self.rng = pr.u_hi - pr.u_lo
+        self.tf_ref = pr.initial_tf()
+        self.nU = self.N * self.nu
+        self.nS = self.N * self.nx
+        self.n = self.nU + self.nS + (1 if pr.free_final_time else 0)
+        self.nfev = 0
+        self._cache_key = None
+
+    def unpack(self, w):
+        pr = self.pr
+        U = pr.u_lo + w[: self.nU].reshape(self.N, self.nu) * self.rng
+        S = w[self.nU: self.nU + self.nS].reshape(self.N, self.nx) * pr.x_scale
+        tf = w[-1] * self.tf_ref if pr.free_final_time else float(pr.final_time)
+        return U, S, tf
+
+    def pack(self, U, S, tf):
+        pr = self.pr
+        w = np.r_[((U - pr.u_lo) / self.rng).ravel(), (S / pr.x_scale).ravel()]
+        if pr.free_final_time:
+            w = np.r_[w, tf / self.tf_ref]
+        return w
+
+    def shoot(self, w):
+        """End states of all intervals and their derivatives (cached per w)."""
+        key = w.tobytes()
+        if key == self._cache_key:
+            return self._cache
+        self.nfev += 1
+        pr = self.pr
+        U, S, tf = self.unpack(w)
+        starts = np.vstack([pr.x0[None], S[:-1]])
+        h = tf / (self.N * self.s)
+        x = starts.copy()
+        Ax = np.broadcast_to(np.eye(self.nx), (self.N, self.nx, self.nx)).copy()
+        Bu = np.zeros((self.N, self.nx, self.nu))
+        ch = np.zeros((self.N, self.nx))
+        p = pr.model.params
+        with np.errstate(all="ignore"):
+            for _ in range(self.s):
+                x, A, B, c = rk4_sensitivities(pr.model, x, U, p, h)
+                Ax = A @ Ax
+                Bu = A @ Bu + B
+                ch = (A @ ch[..., None])[..., 0] + c
+        self._cache_key, self._cache = key, (U, S, tf, x, Ax, Bu, ch)
+        return self._cache
+
+    # objective -----------------------------------------------------------
+    def cost(self, w):
+        pr = self.pr
+        U, S, tf = self.unpack(w)
+        g = np.zeros(self.n)
+        J = pr.time_weight * tf
+        dtf = pr.time_weight
+        sx = pr.x_scale
+        if pr.mayer is not None:
+            phi, phix, phit = pr.mayer(S[-1], tf)
+            J += phi
+            dtf += phit
+            g[self.nU + (self.N - 1) * self.nx: self.nU + self.nS] += phix * sx
+        if pr.running is not None:
+            starts = np.vstack([pr.x0[None], S[:-1]])
+            gg, gx, gu = pr.running(starts, U)
+            dt = tf / self.N
+            J += dt * np.sum(gg)
+            dtf += np.sum(gg) / self.N
+            g[: self.nU] += (dt * gu * self.rng).ravel()
+            gS = (dt * gx[1:] * sx).ravel()
+            g[self.nU: self.nU + self.nS - self.nx] += gS
+        if pr.free_final_time:
+            g[-1] = dtf * self.tf_ref
+        scale = self.tf_ref if pr.time_weight > 0 else 1.0
+        return J / scale, g / scale
+
+    # constraints -----------------------------------------------------------
+    def eq(self, w):
+        pr = self.pr
+        U, S, tf, xe, Ax, Bu, ch = self.shoot(w)
+        cont = ((xe - S) / pr.x_scale).ravel()
+        term = (S[-1, pr.term_idx] - pr.term_val) / pr.x_scale[pr.term_idx]
+        return np.r_[cont, term]
+
+    def eq_jac(self, w):
+        pr = self.pr
+        U, S, tf, xe, Ax, Bu, ch = self.shoot(w)
+        N, nx, nu = self.N, self.nx, self.nu
+        sx = pr.x_scale
+        nt = len(pr.term_idx)
+        Jm = np.zeros((N * nx + nt, self.n))
+        for j in range(N):
+            rows = slice(j * nx, (j + 1) * nx)
+            Jm[rows, j * nu:(j + 1) * nu] = Bu[j] * self.rng[None, :] / sx[:, None]
+            if j > 0:
+                Jm[rows, self.nU + (j - 1) * nx: self.nU + j * nx] = Ax[j] * sx[None, :] / sx[:, None]
+            Jm[rows, self.nU + j * nx: self.nU + (j + 1) * nx] -= np.eye(nx)
+            if pr.free_final_time:
+                Jm[rows, -1] = ch[j] / (N * self.s) * self.tf_ref / sx
+        for k, i in enumerate(pr.term_idx):
+            Jm[N * nx + k, self.nU + (N - 1) * nx + i] = 1.0
+        return Jm
+
+    def ineq(self, w):
+        """Rate limits as ``g(w) >= 0``."""
+        pr = self.pr
+        U, S, tf = self.unpack(w)
+        dt = tf / self.N
+        out = []
+        for j in np.where(np.isfinite(pr.rate))[0]:
+            seq = U[:, j] if pr.u_initial is None else np.r_[pr.u_initial[j], U[:, j]]
+            d = np.diff(seq) / (pr.rate[j] * dt)
+            out.append(1.0 - d)
+            out.append(1.0 + d)
+        return np.concatenate(out) if out else np.zeros(0)
+
+    def ineq_jac(self, w):
+        pr = self.pr
+        U, S, tf = self.unpack(w)
+        dt = tf / self.N
+        rows = []
+        for j in np.where(np.isfinite(pr.rate))[0]:
+            seq = U[:, j] if pr.u_initial is None else np.r_[pr.u_initial[j], U[:, j]]
+            n_d = len(seq) - 1
+            off = len(seq) - self.N  # 1 when u_initial is prepended
+            D = np.zeros((n_d, self.n))
+            for k in range(n_d):
+                # d_k = (seq[k+1] - seq[k]) / (rate dt); seq index i -> U index i - off
+                for idx, sg in ((k + 1, 1.0), (k, -1.0)):
+                    ui = idx - off
+                    if ui >= 0:
+                        D[k, ui * self.nu + j] += sg * self.rng[j] / (pr.rate[j] * dt)
+            d = np.diff(seq) / (pr.rate[j] * dt)
+            if pr.free_final_time:
+                D[:, -1] = -d / tf * self.tf_ref
+            rows.append(-D)
+            rows.append(D)
+        return np.vstack(rows) if rows else np.zeros((0, self.n))
+
+    def bounds(self):
+        pr = self.pr
+        lb = np.full(self.n, -np.inf)
+        ub = np.full(self.n, np.inf)
+        lb[: self.nU], ub[: self.nU] = 0.0, 1.0
+        sx = pr.x_scale
+        for i, sgn, b, _ in pr.path_rows:
+            sl = slice(self.nU + i, self.nU + self.nS, self.nx)
+            if sgn > 0:
+                ub[sl] = np.minimum(ub[sl], b / sx[i])
+            else:
+                lb[sl] = np.maximum(lb[sl], b / sx[i])
+        last = self.nU + (self.N - 1) * self.nx
+        for i, sgn, b, _ in pr.term_rows:
+            if sgn > 0:
+                ub[last + i] = min(ub[last + i], b / sx[i])
+            else:
+                lb[last + i] = max(lb[last + i], b / sx[i])
+        if pr.free_final_time:
+            lb[-1], ub[-1] = pr.tf_bounds[0] / self.tf_ref, pr.tf_bounds[1] / self.tf_ref
+        return lb, ub
+
+
+def solve_direct(problem: Problem, *, method: str = "slsqp", max_iter: int = 300, ftol: float = 1e-9,
+                 tol: float = 1e-3, U0: np.ndarray | None = None, tf0: float | None = None) -> ControlResult:
+    """Solve ``problem`` by multiple shooting.
+
+    Parameters
+    ----------
+    problem : Problem
+    method : {"slsqp", "trust-constr"}
+        scipy optimiser.
+    max_iter : int
+    ftol : float
+        SLSQP's objective tolerance (trust-constr: ``gtol``/``xtol``).
+    tol : float
+        Largest admissible scaled constraint violation for ``success``.
+    U0, tf0 : optional
+        Initial guess; the node states are initialised by simulating it.
+    """
+    if method not in ("slsqp", "trust-constr"):
+        raise ValueError(f"solve_direct: method must be 'slsqp' or 'trust-constr', got {method!r}")
+    t0 = time.perf_counter()
+    ms = _MS(problem)
+    U = problem.initial_controls() if U0 is None else np.clip(np.asarray(U0, float), problem.u_lo, problem.u_hi)
+    tf = problem.initial_tf() if tf0 is None else float(tf0)
+    _, X, _ = problem.simulate(U, tf)
+    S = X[problem.substeps::problem.substeps]
+    lb, ub = ms.bounds()
+    w0 = np.clip(ms.pack(U, S, tf), lb, ub)
+    has_ineq = bool(np.isfinite(problem.rate).any())
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        if method == "slsqp":
+            cons = [{"type": "eq", "fun": ms.eq, "jac": ms.eq_jac}]
+            if has_ineq:
+                cons.append({"type": "ineq", "fun": ms.ineq, "jac": ms.ineq_jac})
+            res = minimize(ms.cost, w0, jac=True, method="SLSQP", bounds=Bounds(lb, ub), constraints=cons,
+                           options={"maxiter": max_iter, "ftol": ftol})
+        else:
+            cons = [NonlinearConstraint(ms.eq, 0.0, 0.0, jac=ms.eq_jac)]
+            if has_ineq:
+                cons.append(NonlinearConstraint(ms.ineq, 0.0, np.inf, jac=ms.ineq_jac))
+            res = minimize(ms.cost, w0, jac=True, method="trust-constr", bounds=Bounds(lb, ub, keep_feasible=False),
+                           constraints=cons, hess=BFGS(),
+                           options={"maxiter": max_iter * 10, "gtol": 1e-8, "xtol": 1e-10, "verbose": 0})
+    U, S, tf = ms.unpack(res.x)
+    nit = int(getattr(res, "nit", 0))
+    return ControlResult(problem=problem, method=f"direct-{method}", controls=U, final_time=float(tf), nit=nit,
+                         nfev=ms.nfev, optimizer_success=bool(res.success), optimizer_message=str(res.message),
+                         wall_time=time.perf_counter() - t0, tol=tol)

@@ -1,0 +1,162 @@
+"""Common result object of the optimal-control solvers."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from .problem import Problem, evaluate
+
+__all__ = ["ControlResult", "switch_time"]
+
+
+def switch_time(U: np.ndarray, lo: float, hi: float, tf: float, tol: float = 0.02) -> float | None:
+    """Time of the single upper-to-lower (or lower-to-upper) switch of a bang-bang control.
+
+    ``U`` holds the piecewise-constant values on equal intervals of ``[0, tf]``.
+    At most one interval may hold an intermediate value; its fraction of the
+    range is counted as time at the first level (the impulse-equivalent switch
+    time).  Returns None when the history is not one switch between the bounds.
+    """
+    U = np.asarray(U, float)
+    N = len(U)
+    dt = tf / N
+    z = (U - lo) / (hi - lo)
+    top, bot = z >= 1 - tol, z <= tol
+    for first, second, frac in ((top, bot, z), (bot, top, 1 - z)):
+        if not first[0] or not second[-1]:
+            continue
+        j = int(np.argmin(first))  # first interval not at the first level
+        k = j
+        if not second[k]:
+            k = j + 1  # one intermediate interval allowed
+        if k > N or not second[k:].all() or not first[:j].all():
+            continue
+        extra = float(frac[j]) if k == j + 1 else 0.0
+        return (j + extra) * dt
+    return None
+
+
+@dataclass
+class ControlResult:
+    """Result of :func:`solve_indirect` / :func:`solve_direct`.
+
+    Attributes
+    ----------
+    success : bool
+        Optimiser converged and every constraint holds within ``tol``.
+    status : int
+        0 success, 1 optimiser did not converge, 2 constraints violated.
+    message : str
+    method : str
+        ``"indirect-steepest"``, ``"indirect-bfgs"``, ``"direct-slsqp"``...
+    final_time : float [s]
+    controls : ndarray (n_intervals, nu)
+        Piecewise-constant inputs.
+    t, x, u : ndarrays
+        Fine-grid evaluation (times (K+1,), states (K+1, nx), inputs (K+1, nu)).
+    violations : dict
+        Constraint label -> dimensionless violation (see :func:`evaluate`).
+    max_constraint_violation : float
+    nit, nfev : int
+        Optimiser iterations (summed over penalty stages) and cost/gradient evaluations.
+    cost : float
+        Final value of the problem's cost (``t_f`` for minimum time).
+    wall_time : float [s]
+    switch_time : float or None
+        Single bang-bang switch time of ``problem.switch_input`` [s].
+    history : list of dict
+        Per stage/iteration record (cost, violation, tf).
+    """
+
+    problem: Problem
+    method: str
+    controls: np.ndarray
+    final_time: float
+    nit: int
+    nfev: int
+    optimizer_success: bool
+    optimizer_message: str
+    wall_time: float
+    tol: float = 1e-3
+    history: list = field(default_factory=list)
+
+    def __post_init__(self):
+        traj = evaluate(self.problem, self.controls, self.final_time)
+        self.t, self.x, self.u = traj.t, traj.x, traj.u
+        self.violations = traj.violations
+        self.max_constraint_violation = float(traj.max_violation)
+        pr = self.problem
+        cost = pr.time_weight * self.final_time
+        if pr.mayer is not None:
+            cost += float(pr.mayer(self.x[-1], self.final_time)[0])
+        if pr.running is not None:
+            h = np.diff(self.t)
+            cost += float(np.sum(h * pr.running(self.x[:-1], self.u[:-1])[0]))
+        self.cost = cost
+        ok_c = self.max_constraint_violation <= self.tol
+        self.success = bool(self.optimizer_success and ok_c)
+        self.status = 0 if self.success else (2 if not ok_c else 1)
+        msg = self.optimizer_message
+        if not ok_c:
+            worst = max(self.violations, key=self.violations.get)
+            msg += f"; constraint '{worst}' violated by {self.violations[worst]:.3g} (scaled) > tol {self.tol:g}"
+        self.message = msg
+        self.switch_time = None
+        if pr.switch_input is not None:
+            j = pr.model.input_index(pr.switch_input)
+            self.switch_time = switch_time(self.controls[:, j], pr.u_lo[j], pr.u_hi[j], self.final_time)
+
+    @property
+    def model(self):
+        return self.problem.model
+
+    def to_pandas(self) -> pd.DataFrame:
+        """Fine-grid trajectory: time index, one column per state and input."""
+        m = self.problem.model
+        cols = {n: self.x[:, i] for i, n in enumerate(m.state_names)}
+        cols.update({n: self.u[:, i] for i, n in enumerate(m.input_names)})
+        return pd.DataFrame(cols, index=pd.Index(self.t, name="time"))
+
+    def summary(self) -> dict:
+        """JSON-ready summary (what ``shipid plan`` writes)."""
+        m = self.problem.model
+        return {
+            "problem": self.problem.name,
+            "model": m.name,
+            "method": self.method,
+            "success": self.success,
+            "status": self.status,
+            "message": self.message,
+            "final_time_s": self.final_time,
+            "switch_time_s": self.switch_time,
+            "cost": self.cost,
+            "max_constraint_violation": self.max_constraint_violation,
+            "constraint_violations": self.violations,
+            "nit": self.nit,
+            "nfev": self.nfev,
+            "wall_time_s": self.wall_time,
+            "n_intervals": self.problem.n_intervals,
+            "controls": {n: self.controls[:, j].tolist() for j, n in enumerate(m.input_names)},
+            "final_state": dict(zip(m.state_names, map(float, self.x[-1]))),
+        }
+
+    def plot(self, axes=None):
+        """Plot path (y vs x when the model has x, y), states and inputs against time."""
+        import matplotlib.pyplot as plt
+
+        m = self.problem.model
+        names = list(m.state_names) + list(m.input_names)
+        n = len(names)
+        if axes is None:
+            fig, axes = plt.subplots((n + 2) // 3, 3, figsize=(11, 2.2 * ((n + 2) // 3)))
+        axes = np.ravel(axes)
+        df = self.to_pandas()
+        for ax, name in zip(axes, names):
+            ax.plot(df.index, df[name])
+            ax.set_ylabel(f"{name} [{m.units.get(name, '')}]")
+            ax.set_xlabel("t [s]")
+        for ax in axes[n:]:
+            ax.set_visible(False)
+        return axes

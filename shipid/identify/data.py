@@ -1,0 +1,126 @@
+"""Bring trial logs into the arrays the identifier works on.
+
+Accepts :class:`shipid.logs.TrialLog` objects or plain DataFrames with a
+``time`` column, maps their channels onto the model's state and input names,
+and estimates default measurement-noise levels from the data.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from ..models.base import Model
+
+__all__ = ["LogArrays", "prepare_logs", "noise_std_from_data"]
+
+
+@dataclass
+class LogArrays:
+    """One log as arrays aligned with a model."""
+
+    name: str
+    t: np.ndarray  # (N,)
+    U: np.ndarray  # (N, nu)
+    Y: np.ndarray  # (N, nm), NaN = missing
+    meta: dict = field(default_factory=dict)
+
+
+def _frame(log) -> tuple[pd.DataFrame, dict]:
+    if isinstance(log, pd.DataFrame):
+        meta = {"name": log.attrs.get("name", "frame"), "path": None, "sha256": None}
+        return log, meta
+    data = getattr(log, "data", None)
+    if not isinstance(data, pd.DataFrame):
+        raise ValueError(f"expected a TrialLog or a pandas DataFrame, got {type(log).__name__}")
+    meta = {"name": getattr(log, "name", "log"), "path": str(getattr(log, "path", "") or "") or None,
+            "sha256": getattr(log, "sha256", None)}
+    ship = getattr(log, "ship", None)
+    if ship is not None:
+        meta["lpp"] = getattr(ship, "lpp", None)
+    return data, meta
+
+
+def prepare_logs(model: Model, logs) -> tuple[list[LogArrays], list[str]]:
+    """Align logs with ``model``.
+
+    Returns the per-log arrays and the names of the measured channels (model
+    states present in at least one log; columns absent from a log are NaN).
+
+    Raises
+    ------
+    ValueError
+        When a log lacks an input channel, has NaN inputs, or no log measures
+        any state.
+    """
+    if isinstance(logs, (pd.DataFrame,)) or hasattr(logs, "data"):
+        logs = [logs]
+    logs = list(logs)
+    if not logs:
+        raise ValueError("no logs given: pass one or more trial logs to fit")
+    frames = [_frame(lg) for lg in logs]
+    meas = [s for s in model.state_names if any(s in f.columns and f[s].notna().any() for f, _ in frames)]
+    if not meas:
+        raise ValueError(
+            f"none of the logs measures a state of model '{model.name}' ({', '.join(model.state_names)})"
+        )
+    out = []
+    for (f, meta) in frames:
+        name = meta["name"]
+        if "time" not in f.columns:
+            raise ValueError(f"log '{name}' has no 'time' column")
+        t = f["time"].to_numpy(dtype=float)
+        if t.size < 3 or np.any(np.diff(t) <= 0):
+            raise ValueError(f"log '{name}': time must be strictly increasing with at least 3 samples")
+        cols = []
+        for inp in model.input_names:
+            if inp not in f.columns:
+                raise ValueError(
+                    f"log '{name}' has no input channel '{inp}' needed by model '{model.name}' "
+                    f"(inputs: {', '.join(model.input_names)})"
+                )
+            col = f[inp].to_numpy(dtype=float)
+            bad = np.flatnonzero(~np.isfinite(col))
+            if bad.size:
+                raise ValueError(
+                    f"log '{name}' input '{inp}' is missing at sample {bad[0]} (t = {t[bad[0]]:.6g} s): "
+                    "inputs must be complete; read the log with interpolate_inputs=True to fill gaps"
+                )
+            cols.append(col)
+        U = np.column_stack(cols) if cols else np.zeros((t.size, 0))
+        Y = np.column_stack([
+            f[s].to_numpy(dtype=float) if s in f.columns else np.full(t.size, np.nan) for s in meas
+        ])
+        out.append(LogArrays(name=name, t=t, U=U, Y=Y, meta=meta))
+    return out, meas
+
+
+def noise_std_from_data(logs: list[LogArrays], floor: float = 1e-9) -> np.ndarray:
+    """Measurement-noise standard deviation per channel from the data.
+
+    For white noise ``e`` on a smooth signal sampled fast, the second
+    difference is dominated by ``e[k+1] - 2 e[k] + e[k-1]`` with variance
+    ``6 sigma^2``; a robust (median absolute deviation) estimate of its
+    spread divided by ``sqrt(6)`` estimates ``sigma``.  Pooled over logs.
+    """
+    nm = logs[0].Y.shape[1]
+    sig = np.zeros(nm)
+    for j in range(nm):
+        d2 = []
+        scale = []
+        for lg in logs:
+            y = lg.Y[:, j]
+            ok = np.isfinite(y[2:]) & np.isfinite(y[1:-1]) & np.isfinite(y[:-2])
+            d2.append((y[2:] - 2 * y[1:-1] + y[:-2])[ok])
+            fin = y[np.isfinite(y)]
+            if fin.size:
+                scale.append(np.ptp(fin))
+        d = np.concatenate(d2) if d2 else np.array([])
+        if d.size < 5:
+            sig[j] = np.nan
+            continue
+        mad = np.median(np.abs(d - np.median(d))) / 0.6745
+        rng = max(scale) if scale else 1.0
+        sig[j] = max(mad / np.sqrt(6.0), 1e-4 * rng, floor)
+    return sig

@@ -1,0 +1,440 @@
+"""The augmented-state EKF identifier (an estimator: settings in ``__init__``,
+learning in :meth:`EKFIdentifier.fit`, learned attributes end in ``_``)."""
+from __future__ import annotations
+
+import warnings
+from typing import Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+
+from ..models.base import Model
+from .data import LogArrays, noise_std_from_data, prepare_logs
+from .diagnostics import identifiability
+from .ekf import EKFOutput, EKFProblem, rts_smooth, run_ekf
+from .initial import equation_error_fit
+
+__all__ = ["EKFIdentifier", "NotFittedError"]
+
+
+class NotFittedError(ValueError, AttributeError):
+    """Raised when a fitted attribute is used before :meth:`fit`."""
+
+
+def _as_dict(value, names, what) -> dict:
+    if value is None:
+        return {}
+    if isinstance(value, Mapping):
+        unknown = sorted(set(value) - set(names))
+        if unknown:
+            raise ValueError(f"{what}: unknown name(s) {unknown}; expected some of {list(names)}")
+        return {k: float(v) for k, v in value.items()}
+    raise ValueError(f"{what} must be a mapping name -> value, got {type(value).__name__}")
+
+
+class EKFIdentifier:
+    """Identify model parameters from trial logs with an augmented-state EKF.
+
+    The estimated parameters are appended to the model state as random walks;
+    the filter runs over all logs in sequence (the ship state is
+    re-initialised at each log, the parameters carry over), an RTS smoother
+    gives the smoothed states, and the passes are iterated so that the
+    linearisation is made about the latest estimate.
+
+    Parameters
+    ----------
+    model : Model
+        Any model of the protocol; its current parameters are the defaults for
+        fixed parameters and the prior mean when ``init="model"``.
+    estimate : sequence of str, optional
+        Parameters to estimate (default: all but ``fixed``).
+    fixed : mapping or sequence, optional
+        Parameters held fixed (a mapping also sets their values).
+    prior : mapping, optional
+        Prior mean per parameter (overrides the start values).
+    prior_std : mapping or float, optional
+        Prior standard deviation per parameter [parameter units]; a float is
+        relative to the magnitude of the start value (default 1.0, i.e. 100 %).
+    scale : mapping, optional
+        Scale of each estimated parameter (default: magnitude of the start
+        value).  The filter works on ``theta / scale`` so that coefficients of
+        1e-4 and 7 are equally well conditioned.
+    init : {"equation-error", "model"}
+        Start values: an equation-error least-squares fit to numerically
+        differentiated measurements (default), or the model's parameters.
+    meas_std : mapping, optional
+        Measurement noise std per measured channel [channel units]; default
+        estimated from the data (second differences, see
+        :func:`~shipid.identify.data.noise_std_from_data`).
+    process_std : mapping, optional
+        Process noise std per state [state units / sqrt(s)]; default
+        ``0.1 * meas_std / sqrt(dt)`` for measured states and
+        ``unmeasured_process_std`` for the others.
+    param_walk : float
+        Random-walk intensity of the scaled parameters [1/sqrt(s)] (0 keeps
+        them constant in time, the right choice for time-invariant
+        coefficients; >0 lets the filter track slow drift).
+    n_passes : int
+        Filter/smoother passes (each starts from the previous estimate with the
+        original prior covariance).
+    tune_noise : bool
+        Choose multipliers of the process and measurement noise by maximising
+        the innovation likelihood over a grid evaluated as one batch.
+    substeps : int
+        RK4 steps per sample interval.
+    method : {"rk4", "rk4-exact", "euler"}
+        Discretisation: RK4 state propagation with a second-order Taylor
+        transition matrix (default), with the exact RK4 tangent, or Euler.
+    progress : bool
+        Show a tqdm progress bar over passes.
+    """
+
+    def __init__(
+        self,
+        model: Model,
+        *,
+        estimate: Sequence[str] | None = None,
+        fixed: Mapping[str, float] | Sequence[str] | None = None,
+        prior: Mapping[str, float] | None = None,
+        prior_std: Mapping[str, float] | float = 1.0,
+        scale: Mapping[str, float] | None = None,
+        init: str = "equation-error",
+        meas_std: Mapping[str, float] | None = None,
+        process_std: Mapping[str, float] | None = None,
+        unmeasured_process_std: float = 1e-3,
+        initial_state_std: Mapping[str, float] | None = None,
+        param_walk: float = 0.0,
+        n_passes: int = 2,
+        tune_noise: bool = False,
+        substeps: int = 1,
+        method: str = "rk4",
+        progress: bool = False,
+    ):
+        self.model = model
+        self.estimate = estimate
+        self.fixed = fixed
+        self.prior = prior
+        self.prior_std = prior_std
+        self.scale = scale
+        self.init = init
+        self.meas_std = meas_std
+        self.process_std = process_std
+        self.unmeasured_process_std = unmeasured_process_std
+        self.initial_state_std = initial_state_std
+        self.param_walk = param_walk
+        self.n_passes = n_passes
+        self.tune_noise = tune_noise
+        self.substeps = substeps
+        self.method = method
+        self.progress = progress
+
+    # ----------------------------------------------------------------- setup
+    def _check_settings(self):
+        if self.init not in ("equation-error", "model"):
+            raise ValueError(f"init must be 'equation-error' or 'model', got {self.init!r}")
+        from ..integrate import STEP_TANGENTS
+
+        if self.method not in STEP_TANGENTS:
+            raise ValueError(f"method must be one of {sorted(STEP_TANGENTS)}, got {self.method!r}")
+        if int(self.n_passes) < 1:
+            raise ValueError(f"n_passes must be >= 1, got {self.n_passes}")
+        if int(self.substeps) < 1:
+            raise ValueError(f"substeps must be >= 1, got {self.substeps}")
+        if not self.param_walk >= 0:
+            raise ValueError(f"param_walk must be >= 0, got {self.param_walk}")
+
+    def _parameters(self):
+        m = self.model
+        names = list(m.param_names)
+        p = m.params.astype(float).copy()
+        if isinstance(self.fixed, Mapping):
+            for k, v in _as_dict(self.fixed, names, "fixed").items():
+                p[m.param_index(k)] = v
+            fixed = set(self.fixed)
+        else:
+            fixed = set(self.fixed or ())
+            unknown = sorted(fixed - set(names))
+            if unknown:
+                raise ValueError(f"fixed: unknown parameter(s) {unknown}; parameters are {names}")
+        est = list(self.estimate) if self.estimate is not None else [n for n in names if n not in fixed]
+        unknown = sorted(set(est) - set(names))
+        if unknown:
+            raise ValueError(f"estimate: unknown parameter(s) {unknown}; parameters are {names}")
+        est = [n for n in names if n in est and n not in fixed]
+        if not est:
+            raise ValueError("nothing to estimate: every parameter is fixed")
+        for k, v in _as_dict(self.prior, names, "prior").items():
+            p[m.param_index(k)] = v
+        return p, np.array([m.param_index(n) for n in est]), est
+
+    def _prior_std(self, names, theta):
+        if isinstance(self.prior_std, Mapping):
+            given = _as_dict(self.prior_std, self.model.param_names, "prior_std")
+            rel = 1.0
+        else:
+            given, rel = {}, float(self.prior_std)
+            if not rel > 0:
+                raise ValueError(f"prior_std must be positive, got {self.prior_std}")
+        out = []
+        mags = np.abs(theta)
+        floor = 1e-3 * (mags.max() if mags.max() > 0 else 1.0)
+        for n, th in zip(names, theta):
+            if n in given:
+                if not given[n] > 0:
+                    raise ValueError(f"prior_std['{n}'] must be positive, got {given[n]}")
+                out.append(given[n])
+            else:
+                out.append(rel * max(abs(th), floor))
+        return np.array(out)
+
+    # ------------------------------------------------------------------- fit
+    def fit(self, logs) -> "EKFIdentifier":
+        """Identify the parameters from one log or a list of logs.
+
+        Parameters
+        ----------
+        logs : TrialLog, DataFrame, or a list of them
+            Time in a ``time`` column; the model's inputs and any of its states
+            as columns (NaN = missing measurement).
+
+        Returns
+        -------
+        self
+        """
+        self._check_settings()
+        model = self.model
+        arrays, meas = prepare_logs(model, logs)
+        p_base, est_idx, est_names = self._parameters()
+        ne, nx = len(est_idx), model.nx
+        meas_idx = np.array([model.state_index(s) for s in meas])
+
+        # noise levels
+        sig = noise_std_from_data(arrays)
+        for k, v in _as_dict(self.meas_std, meas, "meas_std").items():
+            sig[meas.index(k)] = v
+        bad = [m for m, s in zip(meas, sig) if not (np.isfinite(s) and s > 0)]
+        if bad:
+            raise ValueError(f"cannot estimate the noise of channel(s) {bad} from the data; give meas_std={{...}}")
+        dt = float(np.median(np.concatenate([np.diff(a.t) for a in arrays])))
+        qx = np.full(nx, self.unmeasured_process_std**2)
+        for j, i in enumerate(meas_idx):
+            qx[i] = (0.1 * sig[j]) ** 2 / dt
+        for k, v in _as_dict(self.process_std, model.state_names, "process_std").items():
+            qx[model.state_index(k)] = v**2
+
+        # start values and prior
+        theta0 = p_base[est_idx].copy()
+        prior_std_abs = self._prior_std(est_names, theta0)
+        used_eq: list[str] = []
+        if self.init == "equation-error":
+            given_prior = _as_dict(self.prior, model.param_names, "prior")
+            theta_ee, se_ee, used_eq = equation_error_fit(model, arrays, meas, est_idx, p_base, prior_std_abs)
+            for j, n in enumerate(est_names):
+                if n not in given_prior:
+                    theta0[j] = theta_ee[j]
+            # The start values come from the same data, so they must not narrow the
+            # prior: keep the width set by the model's values, widen it to the start
+            # values' magnitude and to 3x their (optimistic) standard errors.
+            se_ee = np.where(np.isfinite(se_ee), se_ee, 0.0)
+            prior_std_abs = np.maximum.reduce([prior_std_abs, self._prior_std(est_names, theta0), 3.0 * se_ee])
+        scale = np.array([max(abs(th), 1e-12) for th in theta0])
+        for k, v in _as_dict(self.scale, model.param_names, "scale").items():
+            if k in est_names:
+                if not v > 0:
+                    raise ValueError(f"scale['{k}'] must be positive, got {v}")
+                scale[est_names.index(k)] = v
+        scale = np.where(scale > 1e-12, scale, prior_std_abs)
+        prior_cov_s = np.diag((prior_std_abs / scale) ** 2)
+        self._setup = dict(arrays=arrays, meas=meas, meas_idx=meas_idx, p_base=p_base, est_idx=est_idx,
+                           est_names=est_names, sig=sig, qx=qx, scale=scale, prior_cov_s=prior_cov_s, dt=dt)
+
+        # optional noise tuning (one batched filter pass over a grid of multipliers)
+        q_mult, r_mult = 1.0, 1.0
+        if self.tune_noise:
+            q_mult, r_mult, self.tuning_ = self._tune(theta0 / scale)
+
+        theta_s = theta0 / scale
+        passes = range(int(self.n_passes))
+        if self.progress:
+            from tqdm.auto import tqdm
+
+            passes = tqdm(passes, desc="EKF passes", unit="pass")
+        history = []
+        for _ in passes:
+            prob = self._problem(theta_s, q_mult, r_mult)
+            out = run_ekf(prob, store=True)
+            zs, Ps = rts_smooth(out)
+            theta_s = zs[0, 0, nx:].copy()
+            history.append(theta_s * scale)
+            if out.diverged[0]:
+                break
+        self.problem_, self.output_ = prob, out
+        self._finish(out, zs, Ps, prob, history, used_eq, q_mult, r_mult)
+        return self
+
+    def _problem(self, theta_s: np.ndarray, q_mult=1.0, r_mult=1.0) -> EKFProblem:
+        """Build the (batch of) EKF problems: logs concatenated with resets.
+
+        ``q_mult``/``r_mult`` may be arrays of shape (B,) for a batch of
+        tuning candidates.
+        """
+        s = self._setup
+        model = self.model
+        arrays: list[LogArrays] = s["arrays"]
+        nx, ne = model.nx, len(s["est_idx"])
+        q_mult = np.atleast_1d(np.asarray(q_mult, dtype=float))
+        r_mult = np.atleast_1d(np.asarray(r_mult, dtype=float))
+        B = max(q_mult.size, r_mult.size)
+        t_all, U_all, Y_all, reset, xr = [], [], [], [], []
+        offset = 0.0
+        for i, a in enumerate(arrays):
+            t = a.t - a.t[0] + offset
+            offset = t[-1] + float(np.median(np.diff(a.t)))
+            t_all.append(t)
+            U_all.append(a.U)
+            Y_all.append(a.Y)
+            rs = np.zeros(a.t.size, dtype=bool)
+            rs[0] = i > 0
+            reset.append(rs)
+            x0 = self._initial_state(a)
+            xr.append(np.broadcast_to(x0, (a.t.size, nx)))
+        t = np.concatenate(t_all)
+        N = t.size
+        x_init = self._initial_state(arrays[0])
+        P_reset = np.diag(self._initial_state_var(arrays))
+        z0 = np.concatenate([x_init, theta_s])
+        P0 = np.zeros((ne + nx, ne + nx))
+        P0[:nx, :nx] = P_reset
+        P0[nx:, nx:] = s["prior_cov_s"]
+        q = np.concatenate([s["qx"], np.full(ne, self.param_walk**2)])
+        qb = np.broadcast_to(q, (B, nx + ne)).copy()
+        qb[:, :nx] *= q_mult[:, None] if q_mult.size == B else q_mult[0]
+        R = np.broadcast_to(s["sig"] ** 2, (B, len(s["meas"]))).copy()
+        R *= r_mult[:, None] if r_mult.size == B else r_mult[0]
+        rep = lambda a: np.broadcast_to(a, (B,) + np.shape(a)).copy()  # noqa: E731
+        return EKFProblem(
+            model=model, est_idx=s["est_idx"], p_base=rep(s["p_base"]), scale=s["scale"],
+            t=rep(t), U=rep(np.concatenate(U_all)), Y=rep(np.concatenate(Y_all)), meas_idx=s["meas_idx"],
+            R=R, q=qb, z0=rep(z0), P0=rep(P0), reset=rep(np.concatenate(reset)),
+            x_reset=rep(np.concatenate(xr)), P_reset=rep(P_reset), substeps=int(self.substeps), method=self.method,
+        )
+
+    def _initial_state(self, a: LogArrays) -> np.ndarray:
+        s = self._setup
+        x0 = np.zeros(self.model.nx)
+        for j, i in enumerate(s["meas_idx"]):
+            col = a.Y[:, j]
+            fin = np.flatnonzero(np.isfinite(col[: max(5, col.size // 20)]))
+            if fin.size:
+                x0[i] = np.median(col[fin[:5]])
+        return x0
+
+    def _initial_state_var(self, arrays) -> np.ndarray:
+        s = self._setup
+        var = np.ones(self.model.nx)
+        for j, i in enumerate(s["meas_idx"]):
+            var[i] = (2.0 * s["sig"][j]) ** 2
+        for k, v in _as_dict(self.initial_state_std, self.model.state_names, "initial_state_std").items():
+            var[self.model.state_index(k)] = v**2
+        return var
+
+    def _tune(self, theta_s):
+        qs = 10.0 ** np.arange(-3.0, 2.01, 1.0)
+        rs = np.array([0.5, 1.0, 2.0])
+        Q, Rm = np.meshgrid(qs, rs, indexing="ij")
+        prob = self._problem(theta_s, Q.ravel(), Rm.ravel())
+        out = run_ekf(prob, store=False)
+        ll = np.where(out.diverged, -np.inf, out.loglik)
+        b = int(np.argmax(ll))
+        table = pd.DataFrame({"q_mult": Q.ravel(), "r_mult": Rm.ravel(), "loglik": out.loglik, "diverged": out.diverged})
+        return float(Q.ravel()[b]), float(Rm.ravel()[b]), table
+
+    def _finish(self, out: EKFOutput, zs, Ps, prob: EKFProblem, history, used_eq, q_mult, r_mult):
+        s = self._setup
+        model = self.model
+        nx = model.nx
+        est = s["est_names"]
+        scale = s["scale"]
+        theta_s = zs[0, 0, nx:]
+        cov_s = Ps[0, 0, nx:, nx:]
+        # with a random walk the smoothed parameters vary in time; report the
+        # time average and the covariance at the start (equal when walk = 0)
+        if self.param_walk > 0:
+            theta_s = zs[0, :, nx:].mean(axis=0)
+        coef = s["p_base"].copy()
+        coef[s["est_idx"]] = theta_s * scale
+        cov = cov_s * np.outer(scale, scale)
+        self.coef_ = pd.Series(coef, index=list(model.param_names), name="coef")
+        std = np.zeros(model.np)
+        std[s["est_idx"]] = np.sqrt(np.clip(np.diag(cov), 0, None))
+        self.coef_std_ = pd.Series(std, index=list(model.param_names), name="coef_std")
+        self.cov_ = pd.DataFrame(cov, index=est, columns=est)
+        self.estimated_ = list(est)
+        self.scale_ = pd.Series(scale, index=est, name="scale")
+        self.prior_std_ = pd.Series(np.sqrt(np.diag(s["prior_cov_s"])) * scale, index=est, name="prior_std")
+        self.meas_std_ = pd.Series(s["sig"] * np.sqrt(r_mult), index=s["meas"], name="meas_std")
+        self.process_std_ = pd.Series(np.sqrt(s["qx"] * q_mult), index=list(model.state_names), name="process_std")
+        self.loglik_ = float(out.loglik[0])
+        self.history_ = pd.DataFrame(history, columns=est)
+        self.equations_used_for_start_ = used_eq
+        self.success_ = not bool(out.diverged[0])
+        self.message_ = "converged" if self.success_ else out.message[0]
+        if not self.success_:
+            warnings.warn(f"EKF identification: {self.message_}", RuntimeWarning, stacklevel=3)
+        # per-log smoothed states and innovations
+        self.states_, self.innovations_ = [], []
+        start = 0
+        for a in s["arrays"]:
+            n = a.t.size
+            sl = slice(start, start + n)
+            X = zs[0, sl, :nx]
+            SD = np.sqrt(np.clip(np.diagonal(Ps[0, sl, :nx, :nx], axis1=1, axis2=2), 0, None))
+            df = pd.DataFrame(X, columns=list(model.state_names))
+            for i, nme in enumerate(model.state_names):
+                df[f"{nme}_std"] = SD[:, i]
+            df.insert(0, "time", a.t)
+            df.attrs["name"] = a.name
+            self.states_.append(df)
+            inn = pd.DataFrame(out.innov[0, sl], columns=s["meas"])
+            for j, nme in enumerate(s["meas"]):
+                inn[f"{nme}_S"] = out.S_diag[0, sl, j]
+            inn.insert(0, "time", a.t)
+            inn.attrs["name"] = a.name
+            self.innovations_.append(inn)
+            start += n
+        notes = []
+        hook = getattr(model, "identifiability_notes", None)
+        if hook is not None:
+            notes = list(hook(s["arrays"], est))
+        self.diagnostics_ = identifiability(est, cov_s, s["prior_cov_s"], notes=notes)
+        self.diagnostics_["nis_mean"] = float(np.nanmean(out.nis[0]))
+        self.diagnostics_["nis_expected"] = float(np.mean(np.isfinite(out.innov[0]).sum(axis=1)))
+        self.logs_ = [a.meta for a in s["arrays"]]
+
+    # ----------------------------------------------------------- after fitting
+    def _check_fitted(self):
+        if not hasattr(self, "coef_"):
+            raise NotFittedError("this EKFIdentifier is not fitted yet: call fit(logs) first")
+
+    def to_model(self) -> Model:
+        """The model with the identified parameters."""
+        self._check_fitted()
+        return self.model.with_params(self.coef_.to_numpy())
+
+    def summary(self) -> pd.DataFrame:
+        """Coefficient table: value, std, relative std, 95 % interval, prior std."""
+        self._check_fitted()
+        est = self.estimated_
+        v = self.coef_[est]
+        sd = self.coef_std_[est]
+        return pd.DataFrame({
+            "value": v, "std": sd, "rel_std_%": 100 * sd / v.abs().where(v.abs() > 0),
+            "ci95_low": v - 1.96 * sd, "ci95_high": v + 1.96 * sd, "prior_std": self.prior_std_[est],
+        })
+
+    def result(self):
+        """A :class:`~shipid.identify.result.FitResult` (serialisable) of this fit."""
+        from .result import FitResult
+
+        self._check_fitted()
+        return FitResult.from_identifier(self)

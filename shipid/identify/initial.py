@@ -1,0 +1,127 @@
+"""Equation-error start values for the identifier.
+
+Differentiates the measured states with a Savitzky-Golay filter and fits the
+model's state equations to the derivatives by (regularised) nonlinear least
+squares on the parameters.  Cheap, needs no start value of its own, and puts
+the EKF close enough to the answer that its linearisation holds.  Only
+equations whose right-hand side depends solely on measured states are used.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.signal import savgol_filter
+
+from ..models.base import Model
+from .data import LogArrays
+
+__all__ = ["equation_error_fit"]
+
+
+def _smooth_and_derivative(t: np.ndarray, y: np.ndarray, window_s: float):
+    dt = float(np.median(np.diff(t)))
+    w = max(5, int(round(window_s / dt)) | 1)
+    w = min(w, (y.size - 1) | 1 if y.size % 2 == 0 else y.size)
+    if w < 5:
+        return y, np.gradient(y, t)
+    ys = savgol_filter(y, w, 3, mode="interp")
+    dy = savgol_filter(y, w, 3, deriv=1, delta=dt, mode="interp")
+    return ys, dy
+
+
+def equation_error_fit(
+    model: Model,
+    logs: list[LogArrays],
+    meas_names: list[str],
+    est_idx: np.ndarray,
+    p0: np.ndarray,
+    prior_std: np.ndarray,
+    window_s: float | None = None,
+    max_points: int = 20000,
+):
+    """Least-squares fit of the estimated parameters to numerical derivatives.
+
+    Returns
+    -------
+    theta : (ne,) estimate (``p0[est_idx]`` where the data do not inform it)
+    se : (ne,) its standard errors (white-residual approximation; optimistic
+        because numerical derivatives are correlated in time)
+    used_equations : list of state names whose equations were used
+    """
+    nx = model.nx
+    meas_pos = {s: j for j, s in enumerate(meas_names)}
+    rows_t, rows_x, rows_u, rows_dx, rows_ok = [], [], [], [], []
+    for lg in logs:
+        t = lg.t
+        if window_s is None:
+            dt = float(np.median(np.diff(t)))
+            win = max(10 * dt, 1.0)
+        else:
+            win = window_s
+        X = np.zeros((t.size, nx))
+        dX = np.full((t.size, nx), np.nan)
+        ok = np.zeros((t.size, nx), dtype=bool)
+        for i, s in enumerate(model.state_names):
+            if s not in meas_pos:
+                continue
+            y = lg.Y[:, meas_pos[s]]
+            good = np.isfinite(y)
+            if good.sum() < 10:
+                continue
+            yi = np.interp(t, t[good], y[good])
+            ys, dy = _smooth_and_derivative(t, yi, win)
+            X[:, i] = ys
+            dX[:, i] = dy
+            ok[:, i] = True
+        rows_t.append(t)
+        rows_x.append(X)
+        rows_u.append(lg.U)
+        rows_dx.append(dX)
+        rows_ok.append(ok)
+    T = np.concatenate(rows_t)
+    X = np.concatenate(rows_x)
+    U = np.concatenate(rows_u)
+    dX = np.concatenate(rows_dx)
+    OK = np.concatenate(rows_ok)
+    # thin long data sets; keep it cheap
+    if T.size > max_points:
+        sel = np.linspace(0, T.size - 1, max_points).astype(int)
+        T, X, U, dX, OK = T[sel], X[sel], U[sel], dX[sel], OK[sel]
+
+    # which equations can be used: depend on parameters, and only on measured states
+    measured_state = OK.all(axis=0)
+    Jx = np.abs(model.jac_x(T[:50], X[:50], U[:50], p0)).max(axis=0)  # (nx, nx)
+    Jp = np.abs(model.jac_p(T[:50], X[:50], U[:50], p0)).max(axis=0)  # (nx, np)
+    use = [
+        i for i in range(nx)
+        if measured_state[i] and Jp[i, est_idx].max() > 0 and all(measured_state[j] or Jx[i, j] == 0 for j in range(nx))
+    ]
+    if not use:
+        return p0[est_idx].copy(), np.full(est_idx.size, np.inf), []
+    w = np.array([1.0 / max(np.std(dX[:, i]), 1e-12) for i in use])
+
+    def resid(theta):
+        p = p0.copy()
+        p[est_idx] = theta
+        f = model.rhs(T, X, U, p)[:, use]
+        r = ((dX[:, use] - f) * w).ravel()
+        # weak pull to the start values so that collinear directions stay put
+        reg = (theta - p0[est_idx]) / prior_std * 1e-3 * np.sqrt(T.size)
+        return np.concatenate([r, reg])
+
+    def jac(theta):
+        p = p0.copy()
+        p[est_idx] = theta
+        Jpp = model.jac_p(T, X, U, p)[:, use][:, :, est_idx]  # (n, nuse, ne)
+        J = -(Jpp * w[None, :, None]).reshape(-1, est_idx.size)
+        return np.vstack([J, np.diag(1e-3 * np.sqrt(T.size) / prior_std)])
+
+    sol = least_squares(resid, p0[est_idx], jac=jac, x_scale=prior_std, method="trf", max_nfev=50)
+    J = sol.jac
+    dof = max(J.shape[0] - J.shape[1], 1)
+    s2 = float(np.sum(sol.fun**2) / dof)
+    try:
+        se = np.sqrt(np.clip(np.diag(np.linalg.pinv(J.T @ J)) * s2, 0, None))
+    except np.linalg.LinAlgError:
+        se = np.full(est_idx.size, np.inf)
+    return sol.x, se, [model.state_names[i] for i in use]

@@ -1,0 +1,162 @@
+"""Figures of the validation report, rendered off-screen (matplotlib Agg) to PNG data URIs.
+
+Every function builds its own :class:`matplotlib.figure.Figure` with an Agg
+canvas -- pyplot and the global backend are never touched, so the report can
+be written from any program (GUI, notebook, server) without side effects.
+"""
+from __future__ import annotations
+
+import base64
+import io
+import math
+
+import numpy as np
+import pandas as pd
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+__all__ = ["to_data_uri", "correlation_figure", "time_series_figure", "track_figure", "residual_figure",
+           "innovation_figure", "TIME_SERIES_CHANNELS"]
+
+#: Channels of the measured-vs-simulated time series: (name, label, factor to the plotted unit).
+TIME_SERIES_CHANNELS = (("u", "u [m/s]", 1.0), ("v", "v [m/s]", 1.0), ("r", "r [deg/s]", 180 / math.pi),
+                        ("psi", "psi [deg]", 180 / math.pi), ("delta", "delta [deg]", 180 / math.pi))
+_PLOT_UNITS = {"x": ("m", 1.0), "y": ("m", 1.0), "u": ("m/s", 1.0), "v": ("m/s", 1.0),
+               "r": ("deg/s", 180 / math.pi), "psi": ("deg", 180 / math.pi), "delta": ("deg", 180 / math.pi)}
+_DPI = 80
+
+
+def _figure(width: float, height: float) -> Figure:
+    fig = Figure(figsize=(width, height), dpi=_DPI)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _margins(fig: Figure) -> None:
+    """Fixed margins in inches (one draw per figure; ``bbox_inches='tight'`` would draw twice)."""
+    w, h = fig.get_size_inches()
+    fig.subplots_adjust(left=0.85 / w, right=1 - 0.2 / w, bottom=0.5 / h, top=1 - 0.35 / h, hspace=0.12)
+
+
+def to_data_uri(fig: Figure) -> str:
+    """PNG of ``fig`` as a ``data:image/png;base64,...`` URI."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=_DPI, metadata={"Software": None})
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def correlation_figure(names: list[str], matrix) -> Figure:
+    """Heat-map of the posterior correlation matrix (values printed where |rho| >= 0.5)."""
+    C = np.asarray(matrix, dtype=float)
+    n = len(names)
+    size = max(3.5, 0.42 * n + 1.5)
+    fig = _figure(size + 0.8, size)
+    ax = fig.add_subplot()
+    im = ax.imshow(C, cmap="RdBu_r", vmin=-1, vmax=1)
+    ax.set_xticks(range(n), names, rotation=90, fontsize=8)
+    ax.set_yticks(range(n), names, fontsize=8)
+    for i in range(n):
+        for j in range(n):
+            if i != j and np.isfinite(C[i, j]) and abs(C[i, j]) >= 0.5:
+                ax.text(j, i, f"{C[i, j]:+.1f}" if n > 12 else f"{C[i, j]:+.2f}", ha="center", va="center",
+                        fontsize=6 if n > 12 else 7, color="white" if abs(C[i, j]) > 0.8 else "black")
+    fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04, label="correlation")
+    ax.set_title("posterior correlation of the estimated coefficients", fontsize=9)
+    w, h = fig.get_size_inches()
+    fig.subplots_adjust(left=0.8 / w, right=1 - 0.1 / w, bottom=0.8 / h, top=1 - 0.4 / h)
+    return fig
+
+
+def time_series_figure(log_frame: pd.DataFrame, sim_frame: pd.DataFrame, title: str) -> Figure:
+    """Measured (dots) vs replayed (line) u, v, r, psi and delta against time."""
+    chans = [c for c in TIME_SERIES_CHANNELS if c[0] in log_frame.columns or c[0] in sim_frame.columns]
+    fig = _figure(8.5, 1.45 * len(chans) + 0.6)
+    axs = fig.subplots(len(chans), 1, sharex=True, squeeze=False)[:, 0]
+    t_log = log_frame["time"].to_numpy(float)
+    t_sim = sim_frame["time"].to_numpy(float)
+    for ax, (ch, label, f) in zip(axs, chans):
+        if ch in log_frame.columns:
+            ax.plot(t_log, f * log_frame[ch].to_numpy(float), ".", ms=1.5, color="0.35", label="measured")
+        if ch in sim_frame.columns and ch != "delta":
+            ax.plot(t_sim, f * sim_frame[ch].to_numpy(float), "-", lw=1.2, color="C3", label="replay (model)")
+        ax.set_ylabel(label, fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    axs[0].legend(fontsize=7, loc="best", markerscale=4)
+    axs[0].set_title(title, fontsize=9)
+    axs[-1].set_xlabel("time [s]", fontsize=8)
+    _margins(fig)
+    return fig
+
+
+def track_figure(log_frame: pd.DataFrame, sim_frame: pd.DataFrame, title: str, lpp: float | None = None) -> Figure:
+    """Measured vs replayed track (north x up, east y right), in ship lengths when ``lpp`` is known."""
+    s = 1.0 / lpp if lpp else 1.0
+    unit = "L" if lpp else "m"
+    fig = _figure(5.0, 5.0)
+    ax = fig.add_subplot()
+    if {"x", "y"} <= set(log_frame.columns):
+        ax.plot(s * log_frame["y"].to_numpy(float), s * log_frame["x"].to_numpy(float), ".", ms=1.5, color="0.35",
+                label="measured")
+    if {"x", "y"} <= set(sim_frame.columns):
+        ax.plot(s * sim_frame["y"].to_numpy(float), s * sim_frame["x"].to_numpy(float), "-", lw=1.2, color="C3",
+                label="replay (model)")
+        ax.plot(s * sim_frame["y"].iloc[0], s * sim_frame["x"].iloc[0], "o", color="k", ms=4, label="start")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel(f"y (east) [{unit}]", fontsize=8)
+    ax.set_ylabel(f"x (north) [{unit}]", fontsize=8)
+    ax.tick_params(labelsize=7)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, markerscale=3)
+    ax.set_title(title, fontsize=9)
+    fig.subplots_adjust(left=0.16, right=0.97, bottom=0.11, top=0.93)
+    return fig
+
+
+def residual_figure(log_frame: pd.DataFrame, sim_frame: pd.DataFrame, title: str,
+                    channels=("u", "v", "r", "psi")) -> Figure:
+    """Replay residuals (measured - replay) of the state channels against time."""
+    chans = [c for c in channels if c in log_frame.columns and c in sim_frame.columns]
+    fig = _figure(8.5, 1.25 * max(1, len(chans)) + 0.6)
+    axs = fig.subplots(max(1, len(chans)), 1, sharex=True, squeeze=False)[:, 0]
+    t = log_frame["time"].to_numpy(float)
+    for ax, ch in zip(axs, chans):
+        unit, f = _PLOT_UNITS.get(ch, ("", 1.0))
+        e = f * (log_frame[ch].to_numpy(float) - sim_frame[ch].to_numpy(float))
+        ax.plot(t, e, "-", lw=0.8, color="C0")
+        ax.axhline(0, color="k", lw=0.6)
+        ax.set_ylabel(f"{ch} [{unit}]", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    axs[0].set_title(title, fontsize=9)
+    axs[-1].set_xlabel("time [s]", fontsize=8)
+    _margins(fig)
+    return fig
+
+
+def innovation_figure(innov: pd.DataFrame, title: str) -> Figure:
+    """EKF innovations with their +-2 sqrt(S) band (filter's predicted spread)."""
+    chans = [c for c in innov.columns if c != "time" and not c.endswith("_S") and f"{c}_S" in innov.columns]
+    fig = _figure(8.5, 1.25 * max(1, len(chans)) + 0.6)
+    axs = fig.subplots(max(1, len(chans)), 1, sharex=True, squeeze=False)[:, 0]
+    t = innov["time"].to_numpy(float)
+    for ax, ch in zip(axs, chans):
+        unit, f = _PLOT_UNITS.get(ch, ("", 1.0))
+        e = f * innov[ch].to_numpy(float)
+        band = 2 * f * np.sqrt(np.clip(innov[f"{ch}_S"].to_numpy(float), 0, None))
+        ax.fill_between(t, -band, band, color="C1", alpha=0.25, lw=0, label="+-2 sqrt(S)")
+        ax.plot(t, e, "-", lw=0.7, color="C0", label="innovation")
+        # the first samples (filter start-up) can be far larger than the rest: scale to the bulk
+        fin = np.abs(e[np.isfinite(e)])
+        bnd = band[np.isfinite(band)]
+        lim = max(np.percentile(fin, 99.5) if fin.size else 0.0, np.percentile(bnd, 99.5) if bnd.size else 0.0)
+        if lim > 0:
+            ax.set_ylim(-1.3 * lim, 1.3 * lim)
+        ax.set_ylabel(f"{ch} [{unit}]", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    axs[0].legend(fontsize=7, loc="upper right")
+    axs[0].set_title(title, fontsize=9)
+    axs[-1].set_xlabel("time [s]", fontsize=8)
+    _margins(fig)
+    return fig

@@ -1,0 +1,411 @@
+"""One self-contained HTML validation report of an identified model.
+
+The page is built with plain Python string formatting, every value passing
+through :func:`html.escape` (log names, file paths and warnings come from
+the user); images are PNG data URIs, the stylesheet is inline, there is no
+script and no link to anything outside the file, so it opens offline and can
+be mailed or archived as one file.
+"""
+from __future__ import annotations
+
+import html
+import math
+import os
+import sys
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Sequence
+
+
+from .._io import OutputExistsError, atomic_write_text
+from ..validation import LogValidation, load_logs, resolve_model, validate_one
+from . import figures
+
+__all__ = ["render_report", "write_report"]
+
+#: Metrics shown in the summary table, with their labels.
+SUMMARY_METRICS = {
+    "turning": (("advance_L", "advance [L]"), ("transfer_L", "transfer [L]"),
+                ("tactical_diameter_L", "tactical diameter [L]"), ("steady_diameter_L", "steady diameter [L]"),
+                ("speed_loss", "speed loss [-]")),
+    "zigzag": (("overshoot1_deg", "1st overshoot [deg]"), ("overshoot2_deg", "2nd overshoot [deg]"),
+               ("overshoot1_time", "1st overshoot time [s]"), ("time_second_execute", "time to 2nd execute [s]"),
+               ("initial_turning_L", "initial turning [L]")),
+}
+
+_CSS = """
+body{font-family:-apple-system,"Segoe UI",Helvetica,Arial,sans-serif;margin:24px auto;max-width:1100px;
+color:#1d1d1f;line-height:1.4;padding:0 16px}
+h1{font-size:1.6em;border-bottom:2px solid #234;padding-bottom:6px}
+h2{font-size:1.25em;margin-top:1.8em;border-bottom:1px solid #bbb;padding-bottom:3px}
+h3{font-size:1.05em;margin-top:1.4em}
+table{border-collapse:collapse;margin:8px 0 14px 0;font-size:0.86em}
+th,td{border:1px solid #ccc;padding:3px 7px;text-align:right;vertical-align:top}
+th{background:#eef2f6}
+td.l,th.l{text-align:left}
+td.pass{background:#dff5df}td.fail{background:#f9dcdc;font-weight:bold}td.na{color:#888}
+.warn{background:#fff6dc;border-left:4px solid #e0a800;padding:4px 10px;margin:4px 0}
+.note{color:#444;font-size:0.9em}
+.mono{font-family:Menlo,Consolas,monospace;font-size:0.85em;word-break:break-all}
+img{max-width:100%;height:auto;display:block;margin:6px 0}
+.figs{display:flex;flex-wrap:wrap;gap:12px;align-items:flex-start}
+nav a{margin-right:12px}
+"""
+
+
+# ----------------------------------------------------------------------------- helpers
+def _e(x: Any) -> str:
+    return html.escape("" if x is None else str(x), quote=True)
+
+
+def _f(v, fmt: str = "{:.4g}") -> str:
+    if v is None or isinstance(v, bool):
+        return "&ndash;" if v is None else _e(v)
+    try:
+        v = float(v)
+    except (TypeError, ValueError):
+        return _e(v)
+    return "&ndash;" if not math.isfinite(v) else _e(fmt.format(v))
+
+
+def _table(header: Sequence[str], rows: Sequence[Sequence[str]], left: int = 1, cls: str = "") -> str:
+    """Rows are already-escaped HTML cell contents (or (content, css class) tuples)."""
+    th = "".join(f'<th class="l">{h}</th>' if i < left else f"<th>{h}</th>" for i, h in enumerate(header))
+    body = []
+    for r in rows:
+        cells = []
+        for i, c in enumerate(r):
+            css = "l" if i < left else ""
+            if isinstance(c, tuple):
+                c, extra = c
+                css = f"{css} {extra}".strip()
+            cells.append(f'<td class="{css}">{c}</td>' if css else f"<td>{c}</td>")
+        body.append("<tr>" + "".join(cells) + "</tr>")
+    return f'<table class="{cls}"><thead><tr>{th}</tr></thead><tbody>' + "".join(body) + "</tbody></table>"
+
+
+def _img(uri: str, alt: str) -> str:
+    return f'<img src="{uri}" alt="{_e(alt)}">'
+
+
+def _fig(fig, alt: str) -> str:
+    return _img(figures.to_data_uri(fig), alt)
+
+
+def _anchor(i: int) -> str:
+    return f"log{i + 1}"
+
+
+def _versions_now() -> dict:
+    from ..identify.result import software_versions
+
+    return software_versions()
+
+
+# ----------------------------------------------------------------------------- sections
+def _section_model(result, model) -> str:
+    mod = sys.modules.get(type(model).__module__)
+    doc = (mod.__doc__ or "").strip().splitlines()[0] if mod is not None and mod.__doc__ else ""
+    s = result.settings or {}
+    rows = [("registered model", _e(result.model)), ("description", _e(doc)),
+            ("states", _e(", ".join(model.state_names))), ("inputs", _e(", ".join(model.input_names))),
+            ("method", _e(result.method)), ("fit status", _e(("success" if result.success else "FAILED") +
+                                                              (f": {result.message}" if result.message else ""))),
+            ("log-likelihood", _f(result.loglik, "{:.6g}")), ("created (UTC)", _e(result.created))]
+    for key, label in (("n_passes", "EKF passes"), ("discretisation", "discretisation"), ("substeps", "RK4 substeps"),
+                       ("param_walk", "parameter random walk")):
+        if key in s:
+            rows.append((label, _e(s[key])))
+    opts = result.model_options
+    if opts:
+        rows.append(("model options", _e(opts)))
+    out = "<h2 id=\"model\">Model and method</h2>" + _table(["item", "value"], rows, left=2)
+    for key, label in (("meas_std", "measurement noise std (SI units)"), ("process_std", "process noise std (SI units)")):
+        d = s.get(key)
+        if d:
+            out += f"<p class=\"note\">{_e(label)}: " + ", ".join(f"{_e(k)} = {_f(v)}" for k, v in d.items()) + "</p>"
+    return out
+
+
+def _section_coefficients(result) -> str:
+    tab = result.summary()
+    est = list(tab.index)
+    rows = []
+    for name, r in tab.iterrows():
+        rows.append((_e(name), _f(r["value"], "{:.5g}"), _f(r["std"], "{:.3g}"), _f(r["ci95_low"], "{:.5g}"),
+                     _f(r["ci95_high"], "{:.5g}"), _f(r["rel_std_%"], "{:.1f}")))
+    out = "<h2 id=\"coefficients\">Identified coefficients</h2>"
+    fixed = {k: v for k, v in result.coef.items() if k not in est}
+    if not est:
+        return out + ("<p>No coefficient was estimated (the result carries no covariance, e.g. a published "
+                      "parameter set): values used:</p>" +
+                      _table(["coefficient", "value"], [(_e(k), _f(v, "{:.5g}")) for k, v in fixed.items()]))
+    out += ("<p class=\"note\">95 % confidence interval = value &plusmn; 1.96 &sigma; (Gaussian approximation of the "
+            "posterior); relative &sigma; = &sigma; / |value|.</p>")
+    out += _table(["coefficient", "value", "&sigma;", "95 % CI low", "95 % CI high", "relative &sigma; [%]"], rows)
+    if fixed:
+        out += ("<p class=\"note\">Held fixed (not estimated): " +
+                ", ".join(f"{_e(k)} = {_f(v, '{:.5g}')}" for k, v in fixed.items()) + "</p>")
+    return out
+
+
+def _section_identifiability(result) -> str:
+    d = result.diagnostics or {}
+    out = "<h2 id=\"identifiability\">Identifiability</h2>"
+    if not d:
+        return out + "<p class=\"note\">The result carries no identifiability diagnostics.</p>"
+    out += f"<p>Condition number of the scaled posterior covariance: <b>{_f(d.get('condition_number'), '{:.3g}')}</b>"
+    if d.get("nis_mean") is not None and d.get("nis_expected") is not None:
+        out += (f"; mean normalised innovation squared {_f(d['nis_mean'], '{:.3g}')} "
+                f"(expected {_f(d['nis_expected'], '{:.3g}')} for a consistent filter)")
+    out += ".</p>"
+    warns = d.get("warnings") or []
+    if warns:
+        out += "<h3>Warnings</h3>" + "".join(f"<div class=\"warn\">{_e(w)}</div>" for w in warns)
+    else:
+        out += "<p>No identifiability warnings.</p>"
+    poor = d.get("poorly_determined") or []
+    if poor:
+        out += f"<p>Poorly determined coefficients: {_e(', '.join(map(str, poor)))}.</p>"
+    combos = d.get("unidentified_combinations") or []
+    if combos:
+        rows = [(_e(c.get("combination", c)) if isinstance(c, dict) else _e(c),
+                 _f(c.get("variance_ratio") if isinstance(c, dict) else None, "{:.2f}")) for c in combos]
+        out += "<h3>Combinations the data do not determine</h3>" + _table(
+            ["combination (scaled coefficients)", "posterior / prior variance"], rows)
+    corr = d.get("correlation") or {}
+    names, mat = corr.get("names") or [], corr.get("matrix") or []
+    if names and len(mat) == len(names):
+        out += _fig(figures.correlation_figure(names, mat), "correlation heat-map")
+    return out
+
+
+def _summary_row(v: LogValidation, i: int) -> list:
+    d = v.to_dict()
+    kind = d["manoeuvre"]
+    rm = d["rmse"]
+    deg = 180 / math.pi
+    cells = [f'<a href="#{_anchor(i)}">{_e(d["name"])}</a>', (_e(kind) if kind else "&ndash;")]
+    cells += [_f(rm.get("u")), _f(rm.get("v")), _f(None if rm.get("r") is None else rm["r"] * deg),
+              _f(None if rm.get("psi") is None else rm["psi"] * deg), _f(d["track_rmse_m"]),
+              _f(None if d["track_rmse_m"] is None or not v.lpp else d["track_rmse_m"] / v.lpp, "{:.3f}")]
+    return cells
+
+
+def _section_summary(vals: list[LogValidation]) -> str:
+    out = ("<h2 id=\"summary\">Replay of the logs</h2>"
+           "<p class=\"note\">Each log is <b>replayed</b>: the model is simulated with the log's recorded rudder "
+           "and propeller inputs from the log's initial state (mean of the first five samples). RMSE is taken "
+           "over all samples against the measurement (measurement noise included). The <b>closed-loop</b> rows are "
+           "the model's own standard manoeuvre matching the log (same side, rudder and switch angle, approach "
+           "speed; propeller rps held at the value that gives that speed; zigzag rudder reversed by the "
+           "model's heading): the free-running prediction. For a log whose propeller rate changes during "
+           "the run only the replay is comparable.</p>")
+    rows = [_summary_row(v, i) for i, v in enumerate(vals)]
+    out += _table(["log", "manoeuvre", "RMSE u [m/s]", "RMSE v [m/s]", "RMSE r [deg/s]", "RMSE &psi; [deg]",
+                   "track RMSE [m]", "track RMSE [L]"], rows, left=2)
+    for kind in ("turning", "zigzag"):
+        sel = [(i, v) for i, v in enumerate(vals) if v.manoeuvre == kind and v.predicted is not None]
+        if not sel:
+            continue
+        keys = SUMMARY_METRICS[kind]
+        rows = []
+        for i, v in sel:
+            srcs = [("measured", v.measured.to_dict()), ("replay", v.predicted.to_dict()),
+                    ("replay &minus; measured", v.difference())]
+            if v.standard is not None:
+                srcs += [("closed loop", v.standard.to_dict()), ("closed loop &minus; measured", v.difference("standard"))]
+            for what, src in srcs:
+                rows.append([_e(v.log.name) if what == "measured" else "", what] +
+                            [_f(src.get(k), "{:+.3f}" if "minus" in what else "{:.3f}") for k, _ in keys])
+        out += f"<h3>{'Turning circles' if kind == 'turning' else 'Zigzags'}: metrics measured vs predicted</h3>"
+        out += _table(["log", ""] + [_e(lab) for _, lab in keys], rows, left=2)
+    return out
+
+
+_IMO_VALUE = {"advance": ("advance_L", "L"), "tactical_diameter": ("tactical_diameter_L", "L"),
+              "initial_turning": ("initial_turning_L", "L"), "overshoot1": ("overshoot1_deg", "deg"),
+              "overshoot2": ("overshoot2_deg", "deg")}
+
+
+def _pass_cell(v):
+    if v is None:
+        return ("n/a", "na")
+    return ("pass", "pass") if v else ("FAIL", "fail")
+
+
+def _section_imo(vals: list[LogValidation]) -> str:
+    out = ("<h2 id=\"imo\">IMO MSC.137(76) manoeuvring criteria</h2>"
+           "<p class=\"note\">Criteria that apply to each run (turning circle: advance &lt; 4.5 L, tactical "
+           "diameter &lt; 5 L; 10/10 zigzag: overshoot limits depending on L/V, initial turning &le; 2.5 L; "
+           "20/20 zigzag: first overshoot &le; 25&deg;). The standard applies to the full-scale ship in trial "
+           "conditions; the L/V used here is the log's own (for a model-scale log it is smaller than the "
+           "ship's by &radic;scale, which gives the strictest overshoot limits).</p>")
+    rows = []
+    for v in vals:
+        na = ("n/a", "na")
+        if v.measured is None:
+            rows.append([_e(v.log.name), "&ndash;", "&ndash;", "&ndash;", na, "&ndash;", na, "&ndash;", na])
+            continue
+        mi = v.measured.imo()
+        pd_ = v.predicted.to_dict() if v.predicted is not None else {}
+        sd_ = v.standard.to_dict() if v.standard is not None else {}
+        md = v.measured.to_dict()
+        crits = [k[:-5] for k in mi if k.endswith("_pass")]
+        if not crits:
+            rows.append([_e(v.log.name), _e(f"no IMO criterion for a {abs(v.measured.rudder_deg):g} deg "
+                                            f"{v.manoeuvre}"), "", "", na, "", na, "", na])
+        for c in crits:
+            key, unit = _IMO_VALUE.get(c, (c, ""))
+            lim = mi.get(f"{c}_limit_{unit}") if unit else None
+            row = [_e(v.log.name), _e(c.replace("_", " ") + (f" [{unit}]" if unit else "")), _f(lim, "{:.3g}")]
+            for d in (md, pd_, sd_):
+                row += [_f(d.get(key), "{:.3f}"), _pass_cell(d.get("imo", {}).get(f"{c}_pass"))]
+            rows.append(row)
+    return out + _table(["log", "criterion", "limit", "measured", "", "replay", "", "closed loop", ""], rows, left=2)
+
+
+def _innovations_for(identifier, name: str):
+    if identifier is None:
+        return None
+    for inn in getattr(identifier, "innovations_", []) or []:
+        if inn.attrs.get("name") == name:
+            return inn
+    return None
+
+
+def _section_log(v: LogValidation, i: int, identifier) -> str:
+    log = v.log
+    d = v.to_dict()
+    title = f"{log.name}"
+    out = f"<h3 id=\"{_anchor(i)}\">{i + 1}. {_e(title)} ({_e(d['manoeuvre'] or 'no standard manoeuvre')})</h3>"
+    out += f"<p class=\"note\">file <span class=\"mono\">{_e(d['file'])}</span>"
+    if v.lpp:
+        out += f"; Lpp {_f(v.lpp, '{:.4g}')} m"
+    if v.measured is not None:
+        out += f"; positions: {_e(v.measured.reference)}; rudder execute at t = {_f(v.measured.execute_time, '{:.2f}')} s"
+    out += "</p>"
+    for n in v.notes:
+        out += f"<div class=\"warn\">{_e(n)}</div>"
+    for what, m in (("measured", v.measured), ("predicted", v.predicted)):
+        if m is not None and m.message and m.message != "ok":
+            out += f"<p class=\"note\">{_e(what)} metrics: {_e(m.message)}</p>"
+    lf = log.data
+    sf = v.simulation.to_pandas().reset_index()
+    if v.rudder_sign == -1:
+        sf["delta"] = -sf["delta"]
+    out += _fig(figures.time_series_figure(lf, sf, f"{log.name}: measured vs replay"), f"time series {log.name}")
+    out += "<div class=\"figs\">"
+    out += _fig(figures.track_figure(lf, sf, f"{log.name}: track", v.lpp), f"track {log.name}")
+    out += "</div>"
+    out += _fig(figures.residual_figure(lf, sf, f"{log.name}: replay residual (measured - replay)"),
+                f"residuals {log.name}")
+    inn = _innovations_for(identifier, log.name)
+    if inn is not None:
+        out += _fig(figures.innovation_figure(inn, f"{log.name}: EKF innovations (final pass)"),
+                    f"innovations {log.name}")
+    elif identifier is not None:
+        out += "<p class=\"note\">This log was not part of the identifier's fit: no innovations.</p>"
+    return out
+
+
+def _section_inputs(result, vals: list[LogValidation]) -> str:
+    out = "<h2 id=\"inputs\">Input files</h2><h3>Logs the model was fitted to</h3>"
+    rows = [(_e(m.get("name")), f"<span class=\"mono\">{_e(m.get('path'))}</span>",
+             f"<span class=\"mono\">{_e(m.get('sha256'))}</span>") for m in (result.inputs or [])]
+    out += _table(["log", "path", "sha256"], rows, left=3) if rows else "<p class=\"note\">not recorded</p>"
+    out += "<h3>Logs validated in this report</h3>"
+    rows = [(_e(v.log.name), f"<span class=\"mono\">{_e(getattr(v.log, 'path', None) or '(in memory)')}</span>",
+             f"<span class=\"mono\">{_e(getattr(v.log, 'sha256', None) or '-')}</span>") for v in vals]
+    fitted = {m.get("sha256") for m in (result.inputs or []) if m.get("sha256")}
+    out += _table(["log", "path", "sha256"], rows, left=3)
+    held = [v.log.name for v in vals if getattr(v.log, "sha256", None) and v.log.sha256 not in fitted]
+    if fitted:
+        out += (f"<p>Held out (not among the fitted logs, by sha256): {_e(', '.join(held)) if held else 'none'}.</p>")
+    return out
+
+
+def _section_versions(result) -> str:
+    fit = result.versions or {}
+    now = _versions_now()
+    keys = list(dict.fromkeys(list(fit) + list(now)))
+    rows = [(_e(k), _e(fit.get(k, "–")), _e(now.get(k, "–"))) for k in keys]
+    return ("<h2 id=\"versions\">Software</h2>" +
+            _table(["package", "at the fit", "at this report"], rows, left=3))
+
+
+# ----------------------------------------------------------------------------- public
+def render_report(result, logs, *, identifier=None, title: str | None = None, lpp: float | None = None,
+                  rudder_sign: float = 1.0, closed_loop: bool = True,
+                  validations: list[LogValidation] | None = None) -> str:
+    """The report as an HTML string (see :func:`write_report`).
+
+    ``validations`` (from :func:`shipid.validation.validate_logs`) reuses replays already computed;
+    ``logs``, ``lpp``, ``rudder_sign`` and ``closed_loop`` are then ignored.
+    """
+    if result is None:
+        if identifier is None:
+            raise ValueError("render_report: give a fit result (or an identifier to take it from)")
+        result = identifier.result()
+    model, res = resolve_model(result)
+    if res is None:
+        raise ValueError("render_report: needs a fit result (FitResult or its JSON), not a bare model")
+    if validations is None:
+        validations = [validate_one(model, lg, lpp=lpp, rudder_sign=rudder_sign, closed_loop=closed_loop)
+                       for lg in load_logs(logs, lpp=lpp)]
+    title = title or f"Validation report: {res.model} model"
+    stamp = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    n_ok = sum(v.success for v in validations)
+    nav = " ".join(f'<a href="#{a}">{t}</a>' for a, t in (
+        ("summary", "Replay"), ("imo", "IMO criteria"), ("coefficients", "Coefficients"),
+        ("identifiability", "Identifiability"), ("model", "Model"), ("logs", "Logs"), ("inputs", "Inputs"),
+        ("versions", "Software")))
+    body = [f"<h1>{_e(title)}</h1>",
+            f"<p>Model <b>{_e(res.model)}</b> ({_e(res.method)}; "
+            f"{'fitted to ' + str(len(res.inputs)) + ' log(s)' if res.inputs else 'no fitted logs recorded'}), "
+            f"validated on {len(validations)} log(s) "
+            f"({n_ok} replayed with both metric sets). Report written {_e(stamp)} by shipid "
+            f"{_e(_versions_now().get('shipid'))}.</p>",
+            f"<nav>{nav}</nav>",
+            _section_summary(validations), _section_imo(validations), _section_coefficients(res),
+            _section_identifiability(res), _section_model(res, model),
+            "<h2 id=\"logs\">Measured vs simulated, per log</h2>",
+            *[_section_log(v, i, identifier) for i, v in enumerate(validations)],
+            _section_inputs(res, validations), _section_versions(res)]
+    return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+            f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><title>{_e(title)}</title>"
+            f"<style>{_CSS}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n")
+
+
+def write_report(result, logs, path: str | os.PathLike, *, force: bool = False, identifier=None,
+                 title: str | None = None, lpp: float | None = None, rudder_sign: float = 1.0,
+                 closed_loop: bool = True) -> Path:
+    """Write a self-contained HTML validation report.
+
+    Parameters
+    ----------
+    result : FitResult, result JSON (dict or path), or None with ``identifier``
+    logs : sequence of paths or TrialLogs
+        Logs to replay (training and/or held-out runs).
+    path : str or path-like
+        Output ``.html`` file; written atomically, never overwritten unless ``force``.
+    identifier : EKFIdentifier, optional
+        The fitted identifier; adds innovation plots for the logs it was fitted to.
+    title : str, optional
+    lpp : float, optional
+        Ship length [m] for the metrics (default: from each log, then the model).
+    rudder_sign : {1, -1}
+        Sign applied to the logged rudder before replay (see :func:`shipid.validation.validate`).
+    closed_loop : bool
+        Also simulate the model's own standard manoeuvre matching each log (see :func:`shipid.validation.validate`).
+
+    Returns
+    -------
+    pathlib.Path of the written file.
+    """
+    p = Path(path)
+    if p.exists() and not force:  # fail before the (slow) replays and figures
+        raise OutputExistsError(f"{p}: output exists; choose another name or pass --force (force=True) to overwrite it")
+    text = render_report(result, logs, identifier=identifier, title=title, lpp=lpp, rudder_sign=rudder_sign,
+                         closed_loop=closed_loop)
+    return atomic_write_text(p, text, force=force)

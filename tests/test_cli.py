@@ -1,0 +1,185 @@
+"""The CLI: `shipid fit` on good and bad input, `shipid models`, `shipid demo`.
+
+Every bad-input case must exit with code 2, print ONE line on stderr naming the
+file (and the column and row where that applies) with the value, leave the
+input bytes unchanged and write no output."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from shipid.cli import main
+from shipid.datasets import bundled_kcs_logs
+
+SRC = {p.stem: p for p in bundled_kcs_logs()}
+
+
+def _lines(path: Path) -> list[str]:
+    return path.read_text().splitlines()
+
+
+def _write(tmp_path, name, lines=None, data=None) -> Path:
+    p = tmp_path / name
+    if data is not None:
+        p.write_bytes(data)
+    else:
+        p.write_text("\n".join(lines) + "\n")
+    return p
+
+
+def _base(tmp_path):
+    """The bundled 10/10 zigzag: comment lines, header, data (header is line 3)."""
+    lines = _lines(SRC["kcs_zz_m10"])
+    assert lines[2].startswith("time [s]")
+    return lines
+
+
+def _case_missing_column(tmp_path):
+    lines = [",".join(c for i, c in enumerate(l.split(",")) if i != 5) if not l.startswith("#") else l
+             for l in _base(tmp_path)]
+    return _write(tmp_path, "nov.csv", lines), ["nov.csv", "'v'", "row"]
+
+
+def _case_non_numeric(tmp_path):
+    lines = _base(tmp_path)
+    f = lines[40].split(",")
+    f[4] = "1.7O"  # letter O typed for zero
+    lines[40] = ",".join(f)
+    return _write(tmp_path, "typo.csv", lines), ["typo.csv", "column 'u", "row 41", "1.7O"]
+
+
+def _case_time_not_increasing(tmp_path):
+    lines = _base(tmp_path)
+    lines[100], lines[101] = lines[101], lines[100]
+    return _write(tmp_path, "swap.csv", lines), ["swap.csv", "column 'time'", "row 102"]
+
+
+def _case_empty(tmp_path):
+    return _write(tmp_path, "empty.csv", data=b""), ["empty.csv", "empty"]
+
+
+def _case_header_only(tmp_path):
+    return _write(tmp_path, "head.csv", _base(tmp_path)[:3]), ["head.csv", "no data rows"]
+
+
+def _case_too_few_samples(tmp_path):
+    return _write(tmp_path, "short.csv", _base(tmp_path)[:10]), ["short.csv", "7 sample", "at least"]
+
+
+def _case_wrong_delimiter(tmp_path):
+    lines = [l.replace(",", ";") if not l.startswith("#") else l for l in _base(tmp_path)]
+    return _write(tmp_path, "semi.csv", lines), ["semi.csv", "row 3", "semicolon", "--delimiter"]
+
+
+def _case_binary_garbage(tmp_path):
+    rng = np.random.default_rng(0)
+    return _write(tmp_path, "blob.csv", data=rng.integers(0, 256, 4096, dtype=np.uint8).tobytes()), ["blob.csv", "binary"]
+
+
+def _case_absurd_value(tmp_path):
+    lines = _base(tmp_path)
+    f = lines[500].split(",")
+    f[4] = "1e308"
+    lines[500] = ",".join(f)
+    return _write(tmp_path, "absurd.csv", lines), ["absurd.csv", "column 'u'", "row 501", "1e+308"]
+
+
+def _case_degrees_declared_radians(tmp_path):
+    lines = _base(tmp_path)
+    out = lines[:3]
+    for l in lines[3:]:
+        f = l.split(",")
+        f[3] = repr(float(f[3]) * 180 / np.pi + 90.0)  # a compass heading in degrees
+        out.append(",".join(f))
+    return _write(tmp_path, "deg.csv", out), ["deg.csv", "column 'psi'", "row 4", "degrees", "psi=deg"]
+
+
+def _case_missing_file(tmp_path):
+    return tmp_path / "nothere.csv", ["nothere.csv", "does not exist"]
+
+
+def _case_input_gap(tmp_path):
+    lines = _base(tmp_path)
+    f = lines[200].split(",")
+    f[7] = ""
+    lines[200] = ",".join(f)
+    return _write(tmp_path, "gap.csv", lines), ["gap.csv", "column 'delta'", "row 201", "--interpolate-inputs"]
+
+
+BAD = [_case_missing_column, _case_non_numeric, _case_time_not_increasing, _case_empty, _case_header_only,
+       _case_too_few_samples, _case_wrong_delimiter, _case_binary_garbage, _case_absurd_value,
+       _case_degrees_declared_radians, _case_missing_file, _case_input_gap]
+
+
+@pytest.mark.parametrize("case", BAD, ids=[c.__name__[6:] for c in BAD])
+def test_bad_input_exit_2_one_line_named_and_input_untouched(case, tmp_path, capsys):
+    path, needles = case(tmp_path)
+    before = path.read_bytes() if path.exists() else None
+    out = tmp_path / "result.json"
+    rc = main(["fit", str(path), "-o", str(out), "--no-progress"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2
+    assert len(err.splitlines()) == 1, err
+    assert "Traceback" not in err
+    for n in needles:
+        assert n in err, f"{n!r} not in: {err}"
+    assert not out.exists()
+    if before is not None:
+        assert path.read_bytes() == before
+
+
+def test_fit_writes_result_and_refuses_to_overwrite(tmp_path, capsys):
+    out = tmp_path / "r.json"
+    args = ["fit", str(SRC["kcs_zz_m10"]), "--estimate", "c1,c2,c3", "--passes", "1", "-o", str(out), "--no-progress"]
+    assert main(args) == 0
+    doc = json.loads(out.read_text())
+    assert doc["model"] == "kcs-response" and set(doc["cov"]["names"]) == {"c1", "c2", "c3"}
+    assert doc["inputs"][0]["sha256"] and doc["inputs"][0]["path"].endswith("kcs_zz_m10.csv")
+    assert abs(doc["coef"]["c3"] - 0.2) < 3 * doc["coef_std"]["c3"]
+    text = capsys.readouterr().out
+    assert "c3" in text and "wrote" in text
+    before = out.read_bytes()
+    assert main(args) == 2
+    assert "--force" in capsys.readouterr().err
+    assert out.read_bytes() == before
+
+
+def test_fit_with_measured_gap_reports_rows_and_succeeds(tmp_path, capsys):
+    lines = _lines(SRC["kcs_zz_m10"])
+    for k in range(300, 320):
+        f = lines[k].split(",")
+        f[6] = ""  # r missing
+        lines[k] = ",".join(f)
+    p = _write(tmp_path, "gappy.csv", lines)
+    out = tmp_path / "g.json"
+    assert main(["fit", str(p), "--estimate", "c2,c3", "--passes", "1", "-o", str(out), "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert "missing samples" in err and "r 20" in err and "301" in err
+
+
+def test_fit_usage_errors_exit_2(tmp_path, capsys):
+    assert main(["fit", str(SRC["kcs_zz_m10"])]) == 2  # no -o
+    assert main(["fit", str(SRC["kcs_zz_m10"]), "-o", str(tmp_path / "x.json"), "--model", "nope"]) == 2
+    assert "unknown model 'nope'" in capsys.readouterr().err
+    assert main(["fit", str(SRC["kcs_zz_m10"]), "-o", str(tmp_path / "x.json"), "--units", "psi"]) == 2
+    assert main(["fit", str(SRC["kcs_zz_m10"]), "-o", str(tmp_path / "x.json"), "--fixed", "zz=1"]) == 2
+
+
+def test_models_lists_kcs_response(capsys):
+    assert main(["models"]) == 0
+    out = capsys.readouterr().out
+    assert "kcs-response" in out and "a1" in out and "table3" in out
+
+
+@pytest.mark.slow
+def test_demo_runs_and_recovers_the_truth(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main(["demo"]) == 0
+    out = capsys.readouterr().out
+    assert "16/16 coefficients within 3 sigma" in out
+    (folder,) = list(tmp_path.glob("shipid-demo-*"))
+    for f in ("result.json", "coefficients.csv", "replay_rmse.csv", "replay.png"):
+        assert (folder / f).stat().st_size > 0

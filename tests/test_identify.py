@@ -1,0 +1,316 @@
+"""The augmented-state EKF identifier: accuracy against synthetic truth, equivalence with
+filterpy, the RTS smoother against filterpy's linear smoother, diagnostics, results."""
+from __future__ import annotations
+
+import json
+import warnings
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from shipid.identify import EKFIdentifier, NotFittedError, load_result, rts_smooth, run_ekf
+from shipid.integrate import rk4_step_taylor_tangent
+from shipid.models.base import Model
+from shipid.simulate import replay, replay_errors
+from shipid.synthetic import KCS_NOISE_STD, TrialRecipe, make_trial
+
+
+# --------------------------------------------------------------- accuracy
+def test_every_coefficient_within_3_sigma_and_well_determined_within_2_percent(kcs_fit, kcs_truth):
+    fit = kcs_fit
+    assert fit.success_, fit.message_
+    truth = kcs_truth.params_series()
+    z = (fit.coef_ - truth) / fit.coef_std_
+    assert np.all(np.abs(z) < 3.0), f"outside 3 sigma:\n{z[np.abs(z) >= 3]}"
+    rel_std = fit.coef_std_ / truth.abs()
+    well = rel_std[rel_std < 0.006].index  # 3 sigma below 2 %
+    assert {"b4", "c1", "c2", "c3"} <= set(well), rel_std.sort_values()
+    rel_err = ((fit.coef_ - truth) / truth).abs()[well]
+    assert np.all(rel_err < 0.02), rel_err
+    # the filter is consistent: mean normalised innovation squared ~ number of channels
+    d = fit.diagnostics_
+    assert 0.8 * d["nis_expected"] < d["nis_mean"] < 1.25 * d["nis_expected"]
+
+
+def test_replayed_states_match_the_log_within_noise(kcs_fit, kcs_logs):
+    model = kcs_fit.to_model()
+    for name, (noisy, truth) in kcs_logs.items():
+        sim = replay(model, noisy)
+        err = replay_errors(sim, truth)  # against the noise-free truth
+        err_noisy = replay_errors(sim, noisy)
+        for ch in ("u", "v", "r"):
+            # prediction error smaller than the sensor noise, and the residual against the
+            # noisy log is the noise itself (within 25 %)
+            assert err.loc[ch, "rmse"] < KCS_NOISE_STD[ch], (name, ch, err.loc[ch, "rmse"])
+            assert err_noisy.loc[ch, "rmse"] < 1.25 * np.hypot(KCS_NOISE_STD[ch], err.loc[ch, "rmse"])
+
+
+def test_smoothed_states_are_closer_to_truth_than_measurements(kcs_fit, kcs_logs):
+    for states, (noisy, truth) in zip(kcs_fit.states_, kcs_logs.values()):
+        for ch in ("u", "r"):
+            e_s = np.sqrt(np.mean((states[ch] - truth[ch]) ** 2))
+            e_m = np.sqrt(np.mean((noisy[ch] - truth[ch]) ** 2))
+            assert e_s < 0.6 * e_m, (ch, e_s, e_m)
+
+
+def test_constant_rpm_warns_about_a1_a8_a9_and_completes(kcs_truth):
+    recipes = [TrialRecipe("tc", "turning", 30.0, 60.0, ((0.0, 10.0),)),
+               TrialRecipe("zz", "zigzag", 20.0, 60.0, ((0.0, 10.0),), psi_deg=20.0)]
+    rng = np.random.default_rng(11)
+    logs = [make_trial(kcs_truth, r, rng)[0] for r in recipes]
+    fit = EKFIdentifier(kcs_truth, n_passes=1).fit(logs)
+    assert fit.success_
+    text = " ".join(fit.diagnostics_["warnings"])
+    assert "a1, a8, a9 cannot be separated" in text and "n = 10 rps" in text
+    assert np.all(np.isfinite(fit.coef_))
+    # the EKF's own information analysis also flags a combination of a1 and a8
+    combos = " ".join(c["combination"] for c in fit.diagnostics_["unidentified_combinations"])
+    assert "a1" in combos and "a8" in combos
+
+
+def test_missing_measurements_are_predicted_through(kcs_truth, kcs_logs):
+    noisy, truth = kcs_logs["kcs_zz_p20_rpm"]
+    gappy = noisy.copy()
+    gappy.loc[300:340, ["u", "v", "r"]] = np.nan  # a 4 s dropout of the speed/rate sensors
+    gappy.loc[::7, "psi"] = np.nan
+    fit = EKFIdentifier(kcs_truth, n_passes=1, estimate=["c1", "c2", "c3"]).fit(gappy)
+    assert fit.success_
+    st = fit.states_[0]
+    err = np.abs(st.loc[300:340, "r"] - truth.loc[300:340, "r"])
+    assert err.max() < 5 * KCS_NOISE_STD["r"]
+    assert np.isnan(fit.innovations_[0].loc[320, "r"])
+
+
+# ----------------------------------------------------- filterpy equivalence
+def test_same_filtered_states_and_covariances_as_filterpy(kcs_truth, kcs_logs):
+    from filterpy.kalman import ExtendedKalmanFilter
+
+    noisy = kcs_logs["kcs_zz_m10"][0].iloc[:150].copy()
+    noisy.loc[40:45, ["x", "y", "psi", "u", "v", "r"]] = np.nan  # whole-sample gaps: filterpy update(None)
+    ident = EKFIdentifier(kcs_truth, n_passes=1, init="model", estimate=["b1", "c2", "c3", "a9"])
+    ident.fit(noisy)
+    prob, out = ident.problem_, ident.output_
+    model = kcs_truth
+    nx, ne, nm = model.nx, len(prob.est_idx), len(prob.meas_idx)
+    nz = nx + ne
+
+    class EKF(ExtendedKalmanFilter):
+        def predict_x(self, u=0):
+            self.x = self._next.copy()
+
+    ekf = EKF(dim_x=nz, dim_z=nm)
+    ekf.x = prob.z0[0][:, None].copy()
+    ekf.P = prob.P0[0].copy()
+    ekf.R = np.diag(prob.R[0])
+    H = np.zeros((nm, nz))
+    H[np.arange(nm), prob.meas_idx] = 1.0
+    t, U, Y = prob.t[0], prob.U[0], prob.Y[0]
+    worst = 0.0
+    for k in range(t.size):
+        y = Y[k]
+        ekf.update(None if np.all(np.isnan(y)) else y[:, None], lambda x: H, lambda x: H @ x)
+        for a, b in ((ekf.x[:, 0], out.z_post[0, k]), (ekf.P, out.P_post[0, k])):
+            worst = max(worst, np.max(np.abs(a - b) / (1e-12 + np.abs(b).max())))
+        if k == t.size - 1:
+            break
+        z = ekf.x[:, 0]
+        p = prob.p_base[0].copy()
+        p[prob.est_idx] = z[nx:] * prob.scale
+        xn, Fx, Fp = rk4_step_taylor_tangent(model, t[k], z[:nx], U[k], p, t[k + 1] - t[k])
+        F = np.eye(nz)
+        F[:nx, :nx] = Fx
+        F[:nx, nx:] = Fp[:, prob.est_idx] * prob.scale
+        ekf.F = F
+        ekf.Q = np.diag(prob.q[0] * (t[k + 1] - t[k]))
+        ekf._next = np.concatenate([xn, z[nx:]])[:, None]
+        ekf.predict()
+        for a, b in ((ekf.x_prior[:, 0], out.z_prior[0, k + 1]), (ekf.P_prior, out.P_prior[0, k + 1])):
+            worst = max(worst, np.max(np.abs(a - b) / (1e-12 + np.abs(b).max())))
+    assert worst < 1e-9, worst
+
+
+# ------------------------------------------------------------ RTS smoother
+class _LinearTestModel(Model):
+    """x' = A x + [0, theta]: linear in the augmented state, so EKF == KF."""
+
+    name = "linear-test"
+    state_names = ("p", "q")
+    input_names = ("w",)
+    param_names = ("theta",)
+
+    A = np.array([[0.0, 1.0], [-0.5, -0.3]])
+
+    def _rhs(self, t, x, u, p):
+        out = x @ self.A.T
+        out[..., 1] = out[..., 1] + p[..., 0] + 0.0 * u[..., 0]
+        return out
+
+    def _default_params(self):
+        return np.array([0.2])
+
+
+def test_rts_smoother_matches_filterpy_linear_smoother():
+    from filterpy.kalman import KalmanFilter
+
+    m = _LinearTestModel()
+    rng = np.random.default_rng(5)
+    h = 0.1
+    t = np.arange(0, 20, h)
+    x = np.zeros((t.size, 2))
+    x[0] = [1.0, 0.0]
+    for k in range(t.size - 1):
+        x[k + 1] = x[k] + h * m.rhs(0, x[k], [0.0])
+    y = x + rng.normal(0, 0.05, size=x.shape)
+    frame = pd.DataFrame({"time": t, "p": y[:, 0], "q": y[:, 1], "w": 0.0})
+    ident = EKFIdentifier(m, n_passes=1, init="model", method="rk4-exact", prior={"theta": 0.1},
+                          meas_std={"p": 0.05, "q": 0.05}, process_std={"p": 1e-3, "q": 1e-3})
+    ident.fit(frame)
+    prob, out = ident.problem_, ident.output_
+    zs, Ps = rts_smooth(out)
+
+    # the same problem as a linear KF: the RK4 map of the augmented linear system
+    Aa = np.zeros((3, 3))
+    Aa[:2, :2] = m.A
+    Aa[1, 2] = prob.scale[0]
+    hA = h * Aa
+    Phi = np.eye(3) + hA + hA @ hA / 2 + hA @ hA @ hA / 6 + hA @ hA @ hA @ hA / 24
+    kf = KalmanFilter(dim_x=3, dim_z=2)
+    kf.x = prob.z0[0][:, None].copy()
+    kf.P = prob.P0[0].copy()
+    kf.F = Phi
+    kf.H = np.array([[1.0, 0, 0], [0, 1.0, 0]])
+    kf.R = np.diag(prob.R[0])
+    kf.Q = np.diag(prob.q[0] * h)
+    # filterpy's batch_filter predicts before each update; ours updates sample 0 first,
+    # so feed filterpy the first update by hand and smooth the rest
+    kf.update(y[0][:, None])
+    means, covs, _, _ = kf.batch_filter([yy[:, None] for yy in y[1:]])
+    means = np.concatenate([kf_x0 := out.z_post[0, :1, :, None], means])
+    covs = np.concatenate([out.P_post[0, :1], covs])
+    np.testing.assert_allclose(means[:, :, 0], out.z_post[0], rtol=1e-9, atol=1e-12)
+    xs, Pss, _, _ = kf.rts_smoother(means, covs)
+    np.testing.assert_allclose(xs[:, :, 0], zs[0], rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(Pss, Ps[0], rtol=1e-8, atol=1e-12)
+    assert kf_x0.shape == (1, 3, 1)
+
+
+# ---------------------------------------------------------- robustness
+def test_divergence_is_detected_and_reported_not_nan(kcs_truth, kcs_logs):
+    noisy = kcs_logs["kcs_tc_p35"][0].iloc[:400]
+    bad = kcs_truth.with_params({"c3": 500.0})  # absurd rudder yaw moment: innovations explode
+    ident = EKFIdentifier(bad, n_passes=1, init="model", estimate=["a1"], prior_std={"a1": 1e-6})
+    with pytest.warns(RuntimeWarning, match="diverged"):
+        ident.fit(noisy)
+    assert not ident.success_ and "diverged at sample" in ident.message_
+    assert np.all(np.isfinite(ident.coef_)) and np.all(np.isfinite(ident.cov_.to_numpy()))
+    assert np.all(np.isfinite(ident.states_[0][["u", "v", "r"]].to_numpy()))
+
+
+def test_covariance_stays_symmetric_positive_definite(kcs_fit):
+    P = kcs_fit.output_.P_post[0]
+    assert np.allclose(P, P.transpose(0, 2, 1), atol=0)
+    assert np.all(np.linalg.eigvalsh(P[::50]) > 0)
+
+
+def test_scaling_handles_coefficients_of_very_different_size(kcs_truth, kcs_logs):
+    noisy = kcs_logs["kcs_tc_m25_rpm"][0]
+    ident = EKFIdentifier(kcs_truth, n_passes=1, estimate=["a9", "b4", "c3"]).fit(noisy)
+    # a9 ~ 1e-3 and b4 ~ 0.85: both come back to within 3 sigma and to < 1 %
+    for k in ("a9", "b4", "c3"):
+        assert abs(ident.coef_[k] - kcs_truth.params_series()[k]) < 3 * ident.coef_std_[k]
+        assert ident.coef_std_[k] / abs(ident.coef_[k]) < 0.01
+    assert ident.scale_["a9"] < 1e-2 < ident.scale_["b4"]
+
+
+def test_fixed_parameters_and_priors(kcs_truth, kcs_logs):
+    noisy = kcs_logs["kcs_zz_m10"][0]
+    ident = EKFIdentifier(kcs_truth, n_passes=1, fixed={"a8": -0.002, "a9": 1.19e-3},
+                          estimate=["a1", "a8", "a9", "c2", "c3"]).fit(noisy)
+    assert ident.estimated_ == ["a1", "c2", "c3"]
+    assert ident.coef_["a8"] == -0.002 and ident.coef_std_["a8"] == 0.0
+    with pytest.raises(ValueError, match="unknown parameter"):
+        EKFIdentifier(kcs_truth, fixed=["zz"]).fit(noisy)
+    with pytest.raises(ValueError, match="nothing to estimate"):
+        EKFIdentifier(kcs_truth, fixed=list(kcs_truth.param_names)).fit(noisy)
+    with pytest.raises(NotFittedError, match="not fitted"):
+        EKFIdentifier(kcs_truth).summary()
+
+
+def test_noise_tuning_by_likelihood(kcs_truth, kcs_logs):
+    noisy = kcs_logs["kcs_zz_p20_rpm"][0].iloc[:500]
+    ident = EKFIdentifier(kcs_truth, n_passes=1, tune_noise=True, estimate=["c2", "c3"]).fit(noisy)
+    tab = ident.tuning_
+    assert len(tab) == 18 and ident.loglik_ >= tab["loglik"].max() - 1e-6 * abs(tab["loglik"].max())
+    best = tab.loc[tab["loglik"].idxmax()]
+    # the data have no process noise: the likelihood prefers small process noise
+    assert best["q_mult"] <= 1.0
+
+
+# ------------------------------------------------------------------ results
+def test_json_round_trip_and_no_silent_overwrite(kcs_fit, tmp_path):
+    res = kcs_fit.result()
+    path = tmp_path / "result.json"
+    res.to_json(path)
+    doc = json.loads(path.read_text())
+    for key in ("model", "coef", "coef_std", "cov", "diagnostics", "inputs", "versions"):
+        assert key in doc
+    assert doc["versions"]["filterpy"].startswith("2.")
+    back = load_result(path)
+    assert back.coef == res.coef and back.model == "kcs-response"
+    np.testing.assert_allclose(back.cov.to_numpy(), kcs_fit.cov_.to_numpy())
+    np.testing.assert_allclose(back.to_model().params, kcs_fit.coef_.to_numpy())
+    before = path.read_bytes()
+    with pytest.raises(ValueError, match="--force"):
+        res.to_json(path)
+    assert path.read_bytes() == before
+    res.to_json(path, force=True)
+
+
+def test_load_result_errors(tmp_path):
+    with pytest.raises(FileNotFoundError, match="no such result"):
+        load_result(tmp_path / "nope.json")
+    p = tmp_path / "bad.json"
+    p.write_text("{not json")
+    with pytest.raises(ValueError, match="not a JSON fit result"):
+        load_result(p)
+    p.write_text('{"coef": {}}')
+    with pytest.raises(ValueError, match="no 'model' entry"):
+        load_result(p)
+
+
+def test_output_error_refinement_from_the_ekf(kcs_truth, kcs_logs):
+    from shipid.identify.batch import OutputErrorRefiner
+
+    noisy = kcs_logs["kcs_zz_p20_rpm"][0]
+    est = ["b1", "b3", "c1", "c2", "c3"]
+    start = kcs_truth.with_params({k: kcs_truth.params_series()[k] * 1.1 for k in est})
+    ekf = EKFIdentifier(start, n_passes=1, init="model", estimate=est, prior_std=0.3).fit(noisy)
+    ref = OutputErrorRefiner(ekf.to_model(), estimate=est).fit(noisy, start=ekf)
+    assert ref.success_ and ref.channels_ == ["v", "r"]  # the channels whose equations hold b*, c*
+    assert ref.cost_ <= ref.cost_start_
+    truth = kcs_truth.params_series()[est]
+    z = (ref.coef_[est] - truth) / ref.coef_std_[est]
+    assert np.all(np.abs(z) < 3), z
+    # the refined model predicts as well as the noise allows
+    assert 0.9 < ref.rms_normalised_residual_ < 1.2
+    res = ref.result()
+    assert res.method == "output-error" and res.diagnostics["correlation"]["names"] == est
+
+
+def test_model_options_travel_with_the_result(tmp_path):
+    """An MMG fit at full scale comes back with its particulars (not the default model scale)."""
+    from shipid.identify import FitResult, model_from
+    from shipid.models import get_model
+
+    full = get_model("mmg", "kvlcc2", lpp=320.0)
+    res = FitResult(model="mmg", coef=full.params_series().to_dict(), coef_std={}, cov=pd.DataFrame(),
+                    model_options=full.options())
+    res.to_json(tmp_path / "r.json")
+    back, loaded = model_from(tmp_path / "r.json")
+    assert back.lpp == 320.0 and loaded.model_options["particulars"]["lpp"] == 320.0
+    assert model_from("mmg:kcs")[0].lpp == pytest.approx(4.36)
+    with pytest.raises(ValueError, match="expected 'glider'"):
+        model_from(tmp_path / "r.json", model="glider")
+    with pytest.raises(ValueError, match="neither a result file nor a registered model"):
+        model_from("nope:set")
