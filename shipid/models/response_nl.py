@@ -168,7 +168,7 @@ class ResponseNLModel(Model):
 
 def fit_to_model(truth: Model, *, speeds=(1.4, 1.7, 2.0), turning_rudders=(10.0, 20.0, 35.0),
                  zigzags=(10.0, 20.0), free=None, output_error: bool = True, max_nfev: int = 40,
-                 heading_change_deg: float = 400.0, decimate: int = 2, verbose: int = 0):
+                 heading_change_deg: float = 400.0, decimate: int = 2, p0=None, verbose: int = 0):
     """Fit ``response-nl`` to manoeuvres simulated with another model (e.g. ``mmg``).
 
     Recipe: (1) simulate with ``truth`` as one batch each: turning circles at ``turning_rudders`` to both
@@ -186,6 +186,8 @@ def fit_to_model(truth: Model, *, speeds=(1.4, 1.7, 2.0), turning_rudders=(10.0,
     free : sequence of str, optional  coefficients to fit (others are fixed at 0); default all 27.
         ``free=SEED_NAMES`` fits the seed's 16-term ``kcs-response`` structure.
     decimate : int  use every ``decimate``-th sample of the truth runs
+    p0 : mapping or array, optional  start the output-error fit here instead of at the equation-error fit
+        (to continue an earlier fit)
 
     Returns
     -------
@@ -234,6 +236,8 @@ def fit_to_model(truth: Model, *, speeds=(1.4, 1.7, 2.0), turning_rudders=(10.0,
         sol = np.linalg.lstsq(A / sc, acc[:, k], rcond=None)[0] / sc
         for c, val in zip(cols, sol):
             p[idx[c]] = val
+    if p0 is not None:
+        p = ResponseNLModel(p0).params.copy()
     info = {"equation_error_params": dict(zip(names, p.tolist())), "n_samples": int(Xs.shape[0]),
             "settings": {"speeds": list(speeds), "turning_rudders": list(turning_rudders), "zigzags": list(zigzags),
                          "heading_change_deg": heading_change_deg, "decimate": decimate, "free": free,
