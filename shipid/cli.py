@@ -16,6 +16,7 @@ __all__ = ["main", "COMMAND_MODULES"]
 #: Modules that add sub-commands (each has ``register(subparsers)``).
 COMMAND_MODULES: list[str] = [
     "shipid.commands.core",
+    "shipid.commands.control",
 ]
 
 

@@ -11,7 +11,7 @@ protocol).  Few segments keep SLSQP's dense subproblem small.  Constraints:
 * continuity ``x_end(interval j) = s_{j+1}`` (equalities, exact Jacobians from
   :func:`shipid.control.problem.rk4_sensitivities`);
 * terminal equalities; terminal bounds as bounds of the final-state
-  variables; path bounds at every control-interval end (nonlinear
+  variables; path bounds at every RK4 node (nonlinear
   inequalities; :func:`evaluate` reports any violation between them on a
   fine grid);
 * input-rate limits as linear inequalities on consecutive controls.
@@ -85,37 +85,39 @@ class _MS:
         Ax = np.broadcast_to(np.eye(nx), (nseg, nx, nx)).copy()
         Bu = np.zeros((nseg, L, nx, nu))
         ch = np.zeros((nseg, nx))
-        X = np.empty((nseg, L, nx))
-        AxN = np.empty((nseg, L, nx, nx))
-        BuN = np.empty((nseg, L, L, nx, nu))
-        chN = np.empty((nseg, L, nx))
+        ns = self.s
+        X = np.empty((nseg, L * ns, nx))
+        AxN = np.empty((nseg, L * ns, nx, nx))
+        BuN = np.empty((nseg, L * ns, L, nx, nu))
+        chN = np.empty((nseg, L * ns, nx))
         Useg = U.reshape(nseg, L, nu)
         p = pr.model.params
         with np.errstate(all="ignore"):
             for l in range(L):
-                for _ in range(self.s):
+                for sub in range(ns):
                     x, A, B, c = rk4_sensitivities(pr.model, x, Useg[:, l], p, h)
                     Ax = A @ Ax
                     Bu = A[:, None] @ Bu
                     Bu[:, l] += B
                     ch = (A @ ch[..., None])[..., 0] + c
-                X[:, l], AxN[:, l], BuN[:, l], chN[:, l] = x, Ax, Bu, ch
+                    k = l * ns + sub
+                    X[:, k], AxN[:, k], BuN[:, k], chN[:, k] = x, Ax, Bu, ch
         self._cache_key, self._cache = key, (U, S, tf, X, AxN, BuN, chN)
         return self._cache
 
-    def _dstate(self, q, l, w_rows):
-        """Jacobian rows (nx, n) of the unscaled state at the end of interval l of segment q."""
+    def _dstate(self, q, k, w_rows):
+        """Jacobian rows (nx, n) of the unscaled state after RK4 step k of segment q."""
         pr = self.pr
         U, S, tf, X, Ax, Bu, ch = self._cache
         nx, nu, L = self.nx, self.nu, self.L
         D = np.zeros((nx, self.n))
-        for j in range(l + 1):
-            k = q * L + j
-            D[:, k * nu:(k + 1) * nu] = Bu[q, l, j] * self.rng[None, :]
+        for j in range(k // self.s + 1):
+            i = q * L + j
+            D[:, i * nu:(i + 1) * nu] = Bu[q, k, j] * self.rng[None, :]
         if q > 0:
-            D[:, self.nU + (q - 1) * nx: self.nU + q * nx] = Ax[q, l] * pr.x_scale[None, :]
+            D[:, self.nU + (q - 1) * nx: self.nU + q * nx] = Ax[q, k] * pr.x_scale[None, :]
         if pr.free_final_time:
-            D[:, -1] = ch[q, l] / (self.N * self.s) * self.tf_ref
+            D[:, -1] = ch[q, k] / (self.N * self.s) * self.tf_ref
         return D
 
     # objective -----------------------------------------------------------
@@ -134,7 +136,7 @@ class _MS:
         if pr.running is not None:
             # rectangle rule on the interval starts (needs the shooting states)
             _, _, _, X, _, _, _ = self.shoot(w)
-            starts = np.vstack([pr.x0[None], X.reshape(-1, self.nx)[:-1]])
+            starts = np.vstack([pr.x0[None], X[:, self.s - 1::self.s].reshape(-1, self.nx)[:-1]])
             gg, gx, gu = pr.running(starts, U)
             dt = tf / self.N
             J += dt * np.sum(gg)
@@ -142,7 +144,7 @@ class _MS:
             g[: self.nU] += (dt * gu * self.rng).ravel()
             for k in range(1, self.N):
                 q, l = divmod(k - 1, self.L)
-                g += dt * gx[k] @ self._dstate(q, l, None)
+                g += dt * gx[k] @ self._dstate(q, l * self.s + self.s - 1, None)
         if pr.free_final_time:
             g[-1] += dtf * self.tf_ref
         scale = self.tf_ref if pr.time_weight > 0 else 1.0
@@ -165,17 +167,17 @@ class _MS:
         Jm = np.zeros((self.nseg * nx + nt, self.n))
         for q in range(self.nseg):
             rows = slice(q * nx, (q + 1) * nx)
-            Jm[rows] = self._dstate(q, self.L - 1, None) / sx[:, None]
+            Jm[rows] = self._dstate(q, self.L * self.s - 1, None) / sx[:, None]
             Jm[rows, self.nU + q * nx: self.nU + (q + 1) * nx] -= np.eye(nx)
         for k, i in enumerate(pr.term_idx):
             Jm[self.nseg * nx + k, self.nU + (self.nseg - 1) * nx + i] = 1.0
         return Jm
 
     def ineq(self, w):
-        """Path bounds at every interval end and rate limits, as ``g(w) >= 0``."""
+        """Path bounds at every RK4 node and rate limits, as ``g(w) >= 0``."""
         pr = self.pr
         U, S, tf, X, Ax, Bu, ch = self.shoot(w)
-        Xf = X.reshape(-1, self.nx)[:-1]  # interval ends except the final state (a bounded variable)
+        Xf = X.reshape(-1, self.nx)[:-1]  # all RK4 nodes except the final state (a bounded variable)
         out = [-(sgn * (Xf[:, i] - b)) / pr.x_scale[i] for i, sgn, b, _ in pr.path_rows]
         dt = tf / self.N
         for j in np.where(np.isfinite(pr.rate))[0]:
@@ -190,7 +192,7 @@ class _MS:
         U, S, tf, X, Ax, Bu, ch = self.shoot(w)
         rows = []
         if pr.path_rows:
-            D = [self._dstate(*divmod(k, self.L), None) for k in range(self.N - 1)]
+            D = [self._dstate(*divmod(k, self.L * self.s), None) for k in range(self.N * self.s - 1)]
             for i, sgn, b, _ in pr.path_rows:
                 rows.append(np.array([-sgn * Dk[i] / pr.x_scale[i] for Dk in D]).reshape(-1, self.n))
         dt = tf / self.N
@@ -212,7 +214,7 @@ class _MS:
         return np.vstack(rows) if rows else np.zeros((0, self.n))
 
     def n_ineq(self):
-        n = len(self.pr.path_rows) * (self.N - 1)
+        n = len(self.pr.path_rows) * (self.N * self.s - 1)
         n += int(np.isfinite(self.pr.rate).sum()) * 2 * self.N
         return n
 
@@ -240,7 +242,7 @@ class _MS:
 
 
 def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int = 5, max_iter: int = 300,
-                 ftol: float = 1e-9, tol: float = 1e-3, U0: np.ndarray | None = None,
+                 ftol: float = 1e-9, tol: float = 1e-2, U0: np.ndarray | None = None,
                  tf0: float | None = None) -> ControlResult:
     """Solve ``problem`` by multiple shooting.
 
@@ -252,7 +254,7 @@ def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int = 5
     n_segments : int
         Shooting segments (reduced to a divisor of ``n_intervals``); each holds
         ``n_intervals / n_segments`` control intervals.  Path bounds are imposed
-        at every control-interval end.
+        at every RK4 node.
     max_iter : int
     ftol : float
         SLSQP's objective tolerance (trust-constr: ``gtol``/``xtol``).

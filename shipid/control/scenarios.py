@@ -57,5 +57,6 @@ def paper_problem(which: str | int, *, model=None, n_intervals: int | None = Non
     return Problem(model=m, x0=x0, input_bounds=bounds, tf_guess=70.0 if k == 2 else 80.0, tf_bounds=(10.0, 300.0),
                    state_bounds=_PATH, terminal={"x": 300.0, "y": 0.0},
                    terminal_bounds={"u": (-STOP_SPEED, STOP_SPEED), "v": (-STOP_SPEED, STOP_SPEED)},
-                   u_guess=[3750.0, 0.0], n_intervals=n_intervals or 20, substeps=substeps or 8,
+                   u_guess=[7500.0, np.radians(5.0 if k == 2 else 10.0)], n_intervals=n_intervals or 20,
+                   substeps=substeps or 8,
                    name=key, switch_input="T", state_scale={"x": 10.0, "y": 10.0, "u": 10.0, "v": 1.0})
