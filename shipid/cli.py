@@ -22,6 +22,7 @@ COMMAND_MODULES: list[str] = [
     "shipid.commands.routing",
     "shipid.commands.glider",
     "shipid.commands.validate",
+    "shipid.commands.control",
 ]
 
 

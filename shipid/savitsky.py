@@ -236,7 +236,7 @@ def savitsky_equilibrium(hull: PlaningHull, speed: float) -> SavitskyPoint:
     if not np.isfinite(V) or V <= 0:
         raise ValueError(f"savitsky_equilibrium: speed must be a positive number [m/s], got {speed!r}")
     out = SavitskyPoint(speed=V)
-    taus = np.linspace(0.5, 25.0, 99)
+    taus = np.linspace(0.5, 25.0, 50)
     m = np.array([_state_at_trim(hull, V, t)["moment"] for t in taus])
     ok = np.isfinite(m)
     sign_change = np.where(ok[:-1] & ok[1:] & (np.sign(m[:-1]) != np.sign(m[1:])))[0]

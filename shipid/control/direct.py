@@ -1,16 +1,19 @@
 """Direct solver: multiple shooting with scipy's SLSQP or trust-constr.
 
 Decision variables: the piecewise-constant controls (scaled to [0, 1] by
-their bounds), the states at the interior and final shooting nodes (scaled by
-``problem.x_scale``) and, for a free final time, ``t_f``.  Each interval is
-integrated with ``substeps`` RK4 steps of the model, all intervals at once
-(batched over the leading axis of the model protocol).  Constraints:
+their bounds), the states at the segment boundaries and the final state
+(scaled by ``problem.x_scale``) and, for a free final time, ``t_f``.  The
+horizon is cut into ``n_segments`` shooting segments of several control
+intervals; each interval is integrated with ``substeps`` RK4 steps of the
+model, all segments at once (batched over the leading axis of the model
+protocol).  Few segments keep SLSQP's dense subproblem small.  Constraints:
 
 * continuity ``x_end(interval j) = s_{j+1}`` (equalities, exact Jacobians from
   :func:`shipid.control.problem.rk4_sensitivities`);
-* terminal equalities; path and terminal bounds as bounds of the node
-  variables (so they hold at the shooting nodes; :func:`evaluate` reports the
-  violation between nodes on a fine grid);
+* terminal equalities; terminal bounds as bounds of the final-state
+  variables; path bounds at every RK4 node (nonlinear
+  inequalities; :func:`evaluate` reports any violation between them on a
+  fine grid);
 * input-rate limits as linear inequalities on consecutive controls.
 
 The cost is ``time_weight * t_f`` plus the Mayer term plus the running cost
@@ -31,14 +34,20 @@ __all__ = ["solve_direct"]
 
 
 class _MS:
-    def __init__(self, pr: Problem):
+    """Multiple-shooting transcription with ``n_seg`` segments of ``L`` control intervals."""
+
+    def __init__(self, pr: Problem, n_segments: int):
         self.pr = pr
         m = pr.model
         self.N, self.s, self.nx, self.nu = pr.n_intervals, pr.substeps, m.nx, m.nu
+        q = max(1, min(int(n_segments), self.N))
+        while self.N % q:
+            q -= 1
+        self.nseg, self.L = q, self.N // q
         self.rng = pr.u_hi - pr.u_lo
         self.tf_ref = pr.initial_tf()
         self.nU = self.N * self.nu
-        self.nS = self.N * self.nx
+        self.nS = self.nseg * self.nx
         self.n = self.nU + self.nS + (1 if pr.free_final_time else 0)
         self.nfev = 0
         self._cache_key = None
@@ -46,7 +55,7 @@ class _MS:
     def unpack(self, w):
         pr = self.pr
         U = pr.u_lo + w[: self.nU].reshape(self.N, self.nu) * self.rng
-        S = w[self.nU: self.nU + self.nS].reshape(self.N, self.nx) * pr.x_scale
+        S = w[self.nU: self.nU + self.nS].reshape(self.nseg, self.nx) * pr.x_scale
         tf = w[-1] * self.tf_ref if pr.free_final_time else float(pr.final_time)
         return U, S, tf
 
@@ -58,28 +67,58 @@ class _MS:
         return w
 
     def shoot(self, w):
-        """End states of all intervals and their derivatives (cached per w)."""
+        """States at every interval end and their sensitivities (cached per w).
+
+        Returns ``U, S, tf, X (nseg, L, nx), Ax (nseg, L, nx, nx), Bu (nseg, L, L, nx, nu), ch (nseg, L, nx)``;
+        ``Bu[q, l, j]`` is the derivative of the state at the end of interval ``l`` of segment ``q``
+        with respect to the control of interval ``j`` of that segment.
+        """
         key = w.tobytes()
         if key == self._cache_key:
             return self._cache
         self.nfev += 1
         pr = self.pr
         U, S, tf = self.unpack(w)
-        starts = np.vstack([pr.x0[None], S[:-1]])
+        nseg, L, nx, nu = self.nseg, self.L, self.nx, self.nu
+        x = np.vstack([pr.x0[None], S[:-1]])
         h = tf / (self.N * self.s)
-        x = starts.copy()
-        Ax = np.broadcast_to(np.eye(self.nx), (self.N, self.nx, self.nx)).copy()
-        Bu = np.zeros((self.N, self.nx, self.nu))
-        ch = np.zeros((self.N, self.nx))
+        Ax = np.broadcast_to(np.eye(nx), (nseg, nx, nx)).copy()
+        Bu = np.zeros((nseg, L, nx, nu))
+        ch = np.zeros((nseg, nx))
+        ns = self.s
+        X = np.empty((nseg, L * ns, nx))
+        AxN = np.empty((nseg, L * ns, nx, nx))
+        BuN = np.empty((nseg, L * ns, L, nx, nu))
+        chN = np.empty((nseg, L * ns, nx))
+        Useg = U.reshape(nseg, L, nu)
         p = pr.model.params
         with np.errstate(all="ignore"):
-            for _ in range(self.s):
-                x, A, B, c = rk4_sensitivities(pr.model, x, U, p, h)
-                Ax = A @ Ax
-                Bu = A @ Bu + B
-                ch = (A @ ch[..., None])[..., 0] + c
-        self._cache_key, self._cache = key, (U, S, tf, x, Ax, Bu, ch)
+            for l in range(L):
+                for sub in range(ns):
+                    x, A, B, c = rk4_sensitivities(pr.model, x, Useg[:, l], p, h)
+                    Ax = A @ Ax
+                    Bu = A[:, None] @ Bu
+                    Bu[:, l] += B
+                    ch = (A @ ch[..., None])[..., 0] + c
+                    k = l * ns + sub
+                    X[:, k], AxN[:, k], BuN[:, k], chN[:, k] = x, Ax, Bu, ch
+        self._cache_key, self._cache = key, (U, S, tf, X, AxN, BuN, chN)
         return self._cache
+
+    def _dstate(self, q, k, w_rows):
+        """Jacobian rows (nx, n) of the unscaled state after RK4 step k of segment q."""
+        pr = self.pr
+        U, S, tf, X, Ax, Bu, ch = self._cache
+        nx, nu, L = self.nx, self.nu, self.L
+        D = np.zeros((nx, self.n))
+        for j in range(k // self.s + 1):
+            i = q * L + j
+            D[:, i * nu:(i + 1) * nu] = Bu[q, k, j] * self.rng[None, :]
+        if q > 0:
+            D[:, self.nU + (q - 1) * nx: self.nU + q * nx] = Ax[q, k] * pr.x_scale[None, :]
+        if pr.free_final_time:
+            D[:, -1] = ch[q, k] / (self.N * self.s) * self.tf_ref
+        return D
 
     # objective -----------------------------------------------------------
     def cost(self, w):
@@ -93,54 +132,54 @@ class _MS:
             phi, phix, phit = pr.mayer(S[-1], tf)
             J += phi
             dtf += phit
-            g[self.nU + (self.N - 1) * self.nx: self.nU + self.nS] += phix * sx
+            g[self.nU + self.nS - self.nx: self.nU + self.nS] += phix * sx
         if pr.running is not None:
-            starts = np.vstack([pr.x0[None], S[:-1]])
+            # rectangle rule on the interval starts (needs the shooting states)
+            _, _, _, X, _, _, _ = self.shoot(w)
+            starts = np.vstack([pr.x0[None], X[:, self.s - 1::self.s].reshape(-1, self.nx)[:-1]])
             gg, gx, gu = pr.running(starts, U)
             dt = tf / self.N
             J += dt * np.sum(gg)
             dtf += np.sum(gg) / self.N
             g[: self.nU] += (dt * gu * self.rng).ravel()
-            gS = (dt * gx[1:] * sx).ravel()
-            g[self.nU: self.nU + self.nS - self.nx] += gS
+            for k in range(1, self.N):
+                q, l = divmod(k - 1, self.L)
+                g += dt * gx[k] @ self._dstate(q, l * self.s + self.s - 1, None)
         if pr.free_final_time:
-            g[-1] = dtf * self.tf_ref
+            g[-1] += dtf * self.tf_ref
         scale = self.tf_ref if pr.time_weight > 0 else 1.0
         return J / scale, g / scale
 
     # constraints -----------------------------------------------------------
     def eq(self, w):
         pr = self.pr
-        U, S, tf, xe, Ax, Bu, ch = self.shoot(w)
-        cont = ((xe - S) / pr.x_scale).ravel()
+        U, S, tf, X, Ax, Bu, ch = self.shoot(w)
+        cont = ((X[:, -1] - S) / pr.x_scale).ravel()
         term = (S[-1, pr.term_idx] - pr.term_val) / pr.x_scale[pr.term_idx]
         return np.r_[cont, term]
 
     def eq_jac(self, w):
         pr = self.pr
-        U, S, tf, xe, Ax, Bu, ch = self.shoot(w)
-        N, nx, nu = self.N, self.nx, self.nu
+        self.shoot(w)
+        nx = self.nx
         sx = pr.x_scale
         nt = len(pr.term_idx)
-        Jm = np.zeros((N * nx + nt, self.n))
-        for j in range(N):
-            rows = slice(j * nx, (j + 1) * nx)
-            Jm[rows, j * nu:(j + 1) * nu] = Bu[j] * self.rng[None, :] / sx[:, None]
-            if j > 0:
-                Jm[rows, self.nU + (j - 1) * nx: self.nU + j * nx] = Ax[j] * sx[None, :] / sx[:, None]
-            Jm[rows, self.nU + j * nx: self.nU + (j + 1) * nx] -= np.eye(nx)
-            if pr.free_final_time:
-                Jm[rows, -1] = ch[j] / (N * self.s) * self.tf_ref / sx
+        Jm = np.zeros((self.nseg * nx + nt, self.n))
+        for q in range(self.nseg):
+            rows = slice(q * nx, (q + 1) * nx)
+            Jm[rows] = self._dstate(q, self.L * self.s - 1, None) / sx[:, None]
+            Jm[rows, self.nU + q * nx: self.nU + (q + 1) * nx] -= np.eye(nx)
         for k, i in enumerate(pr.term_idx):
-            Jm[N * nx + k, self.nU + (N - 1) * nx + i] = 1.0
+            Jm[self.nseg * nx + k, self.nU + (self.nseg - 1) * nx + i] = 1.0
         return Jm
 
     def ineq(self, w):
-        """Rate limits as ``g(w) >= 0``."""
+        """Path bounds at every RK4 node and rate limits, as ``g(w) >= 0``."""
         pr = self.pr
-        U, S, tf = self.unpack(w)
+        U, S, tf, X, Ax, Bu, ch = self.shoot(w)
+        Xf = X.reshape(-1, self.nx)[:-1]  # all RK4 nodes except the final state (a bounded variable)
+        out = [-(sgn * (Xf[:, i] - b)) / pr.x_scale[i] for i, sgn, b, _ in pr.path_rows]
         dt = tf / self.N
-        out = []
         for j in np.where(np.isfinite(pr.rate))[0]:
             seq = U[:, j] if pr.u_initial is None else np.r_[pr.u_initial[j], U[:, j]]
             d = np.diff(seq) / (pr.rate[j] * dt)
@@ -150,16 +189,19 @@ class _MS:
 
     def ineq_jac(self, w):
         pr = self.pr
-        U, S, tf = self.unpack(w)
-        dt = tf / self.N
+        U, S, tf, X, Ax, Bu, ch = self.shoot(w)
         rows = []
+        if pr.path_rows:
+            D = [self._dstate(*divmod(k, self.L * self.s), None) for k in range(self.N * self.s - 1)]
+            for i, sgn, b, _ in pr.path_rows:
+                rows.append(np.array([-sgn * Dk[i] / pr.x_scale[i] for Dk in D]).reshape(-1, self.n))
+        dt = tf / self.N
         for j in np.where(np.isfinite(pr.rate))[0]:
             seq = U[:, j] if pr.u_initial is None else np.r_[pr.u_initial[j], U[:, j]]
             n_d = len(seq) - 1
-            off = len(seq) - self.N  # 1 when u_initial is prepended
+            off = len(seq) - self.N
             D = np.zeros((n_d, self.n))
             for k in range(n_d):
-                # d_k = (seq[k+1] - seq[k]) / (rate dt); seq index i -> U index i - off
                 for idx, sg in ((k + 1, 1.0), (k, -1.0)):
                     ui = idx - off
                     if ui >= 0:
@@ -170,6 +212,11 @@ class _MS:
             rows.append(-D)
             rows.append(D)
         return np.vstack(rows) if rows else np.zeros((0, self.n))
+
+    def n_ineq(self):
+        n = len(self.pr.path_rows) * (self.N * self.s - 1)
+        n += int(np.isfinite(self.pr.rate).sum()) * 2 * self.N
+        return n
 
     def bounds(self):
         pr = self.pr
@@ -183,7 +230,7 @@ class _MS:
                 ub[sl] = np.minimum(ub[sl], b / sx[i])
             else:
                 lb[sl] = np.maximum(lb[sl], b / sx[i])
-        last = self.nU + (self.N - 1) * self.nx
+        last = self.nU + (self.nseg - 1) * self.nx
         for i, sgn, b, _ in pr.term_rows:
             if sgn > 0:
                 ub[last + i] = min(ub[last + i], b / sx[i])
@@ -194,8 +241,9 @@ class _MS:
         return lb, ub
 
 
-def solve_direct(problem: Problem, *, method: str = "slsqp", max_iter: int = 300, ftol: float = 1e-9,
-                 tol: float = 1e-3, U0: np.ndarray | None = None, tf0: float | None = None) -> ControlResult:
+def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int = 5, max_iter: int = 300,
+                 ftol: float = 1e-9, tol: float = 1e-2, U0: np.ndarray | None = None,
+                 tf0: float | None = None) -> ControlResult:
     """Solve ``problem`` by multiple shooting.
 
     Parameters
@@ -203,6 +251,10 @@ def solve_direct(problem: Problem, *, method: str = "slsqp", max_iter: int = 300
     problem : Problem
     method : {"slsqp", "trust-constr"}
         scipy optimiser.
+    n_segments : int
+        Shooting segments (reduced to a divisor of ``n_intervals``); each holds
+        ``n_intervals / n_segments`` control intervals.  Path bounds are imposed
+        at every RK4 node.
     max_iter : int
     ftol : float
         SLSQP's objective tolerance (trust-constr: ``gtol``/``xtol``).
@@ -214,14 +266,14 @@ def solve_direct(problem: Problem, *, method: str = "slsqp", max_iter: int = 300
     if method not in ("slsqp", "trust-constr"):
         raise ValueError(f"solve_direct: method must be 'slsqp' or 'trust-constr', got {method!r}")
     t0 = time.perf_counter()
-    ms = _MS(problem)
+    ms = _MS(problem, n_segments)
     U = problem.initial_controls() if U0 is None else np.clip(np.asarray(U0, float), problem.u_lo, problem.u_hi)
     tf = problem.initial_tf() if tf0 is None else float(tf0)
     _, X, _ = problem.simulate(U, tf)
-    S = X[problem.substeps::problem.substeps]
+    S = X[problem.substeps * ms.L::problem.substeps * ms.L]
     lb, ub = ms.bounds()
     w0 = np.clip(ms.pack(U, S, tf), lb, ub)
-    has_ineq = bool(np.isfinite(problem.rate).any())
+    has_ineq = ms.n_ineq() > 0
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         if method == "slsqp":

@@ -188,7 +188,7 @@ def _steepest(fun, z0, lb, ub, max_iter, gtol):
 
 
 def solve_indirect(problem: Problem, *, method: str = "bfgs", r0: float = 1.0, c_factor: float = 0.2,
-                   n_penalty: int = 10, max_iter: int = 100, gtol: float = 1e-7, tol: float = 1e-3,
+                   n_penalty: int = 10, max_iter: int = 100, gtol: float = 1e-7, tol: float = 1e-2,
                    U0: np.ndarray | None = None, tf0: float | None = None, callback=None) -> ControlResult:
     """Solve ``problem`` by the paper's indirect method.
 

@@ -79,7 +79,7 @@ class ControlResult:
     optimizer_success: bool
     optimizer_message: str
     wall_time: float
-    tol: float = 1e-3
+    tol: float = 1e-2
     history: list = field(default_factory=list)
 
     def __post_init__(self):

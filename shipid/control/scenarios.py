@@ -46,10 +46,14 @@ def paper_problem(which: str | int, *, model=None, n_intervals: int | None = Non
     k = int(key[-1])
     m = get_model("planing-boat") if model is None else model
     bounds = {"T": (0.0, 7500.0), "phi_p": (-np.radians(45), np.radians(45))}
+    N = n_intervals or (40 if k == 1 else 20)
+    # initial guess: full thrust for the first half, then none (no knowledge of the switch)
+    guess = np.zeros((N, 2))
+    guess[: N // 2, 0] = 7500.0
     if k == 1:
         return Problem(model=m, x0=np.zeros(m.nx), input_bounds=bounds, tf_guess=60.0, tf_bounds=(10.0, 300.0),
                        terminal={"x": 300.0, "y": 0.0}, terminal_bounds={"u": (-STOP_SPEED, STOP_SPEED)},
-                       u_guess=[3750.0, 0.0], n_intervals=n_intervals or 40, substeps=substeps or 4,
+                       u_guess=guess, n_intervals=N, substeps=substeps or 4,
                        name=key, switch_input="T", state_scale={"x": 10.0, "y": 10.0})
     psi0 = np.radians(90.0 if k == 2 else 180.0)
     x0 = np.zeros(m.nx)
@@ -57,5 +61,6 @@ def paper_problem(which: str | int, *, model=None, n_intervals: int | None = Non
     return Problem(model=m, x0=x0, input_bounds=bounds, tf_guess=70.0 if k == 2 else 80.0, tf_bounds=(10.0, 300.0),
                    state_bounds=_PATH, terminal={"x": 300.0, "y": 0.0},
                    terminal_bounds={"u": (-STOP_SPEED, STOP_SPEED), "v": (-STOP_SPEED, STOP_SPEED)},
-                   u_guess=[3750.0, 0.0], n_intervals=n_intervals or 30, substeps=substeps or 6,
+                   u_guess=guess + [0.0, np.radians(5.0 if k == 2 else 10.0)], n_intervals=N,
+                   substeps=substeps or 8,
                    name=key, switch_input="T", state_scale={"x": 10.0, "y": 10.0, "u": 10.0, "v": 1.0})
