@@ -57,7 +57,7 @@ def test_simulate_result_json_zigzag(tmp_path, capsys):
     assert "give rudder/heading angles" in capsys.readouterr().err
     res.write_text(json.dumps({"coef": {}}))
     assert main(["simulate", str(res), "--turning", "35"]) == 2
-    assert "needs a 'model' key" in capsys.readouterr().err
+    assert "no 'model' entry" in capsys.readouterr().err
 
 
 def test_sweep_csv(tmp_path):

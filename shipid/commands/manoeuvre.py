@@ -59,30 +59,9 @@ def _common(p):
 
 def load_model(spec: str):
     """Model from a fit-result JSON path or ``name[:parameter-set]`` (ValueError naming the problem)."""
-    from ..models import available_models, get_model
+    from ..identify.result import model_from
 
-    path = Path(spec)
-    if path.suffix.lower() == ".json" or path.is_file():
-        if not path.is_file():
-            raise ValueError(f"`{spec}`: no such result file")
-        try:
-            doc = json.loads(path.read_text(encoding="utf-8"))
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"`{spec}`: not valid JSON ({exc.msg} at line {exc.lineno})") from None
-        if not isinstance(doc, dict) or "model" not in doc:
-            raise ValueError(f"`{spec}`: a fit result needs a 'model' key (registered name) and a 'coef' mapping")
-        coef = doc.get("coef", {})
-        if not isinstance(coef, dict):
-            raise ValueError(f"`{spec}`: 'coef' must be a mapping name -> value")
-        opts = doc.get("model_options", {}) or {}
-        try:
-            return get_model(doc["model"], coef, **opts)
-        except ValueError as exc:
-            raise ValueError(f"`{spec}`: {exc}") from None
-    name, _, pset = spec.partition(":")
-    if name not in available_models():
-        raise ValueError(f"'{spec}' is neither a result file nor a registered model; models: {', '.join(available_models())}")
-    return get_model(name, pset or None)
+    return model_from(spec)[0]
 
 
 def _floats(text: str, what: str) -> list[float]:

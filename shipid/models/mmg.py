@@ -77,6 +77,7 @@ from typing import Mapping
 import numpy as np
 
 from .base import Model
+from .kinematics import planar_rates
 
 __all__ = ["MMGModel", "MMGParticulars", "MMG_PARAM_NAMES"]
 
@@ -439,8 +440,7 @@ class MMGModel(Model):
         det = A * C - B * B
         dv = (C * fy - B * fn) / det
         dr = (A * fn - B * fy) / det
-        cs, sn = xp.cos(psi), xp.sin(psi)
-        out = [uu * cs - v * sn, uu * sn + v * cs, r, du, dv, dr]
+        out = [*planar_rates(psi, uu, v, r, xp), du, dv, dr]
         if scalar:
             return np.array(out)
         shape = np.broadcast_shapes(*[np.shape(o) for o in out])

@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import Model
+from .kinematics import planar_jacobian, planar_rates
 
 __all__ = ["KCSResponseModel", "RESPONSE_REGRESSORS"]
 
@@ -59,10 +60,7 @@ class KCSResponseModel(Model):
         d, n = u[..., 0], u[..., 1]
         a1, a2, a3, a4, a5, a6, a7, a8, a9, b1, b2, b3, b4, c1, c2, c3 = p.T if p.ndim <= 2 else np.moveaxis(p, -1, 0)
         out = np.empty(np.broadcast_shapes(x.shape, u.shape[:-1] + (6,), p.shape[:-1] + (6,)))
-        c, s = np.cos(psi), np.sin(psi)
-        out[..., 0] = uu * c - v * s
-        out[..., 1] = uu * s + v * c
-        out[..., 2] = r
+        out[..., 0], out[..., 1], out[..., 2] = planar_rates(psi, uu, v, r)
         out[..., 3] = (a1 + a8 * n) * uu + a2 * v * v + a3 * r * r + a4 * d * d + (a5 * r + a6 * d) * v + a7 * r * d + a9 * n * n
         out[..., 4] = b1 * v + (b2 + b4 * uu) * r + b3 * d
         out[..., 5] = c1 * v + c2 * r + c3 * d
@@ -92,15 +90,8 @@ class KCSResponseModel(Model):
         d, n = u[..., 0], u[..., 1]
         shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
         J = np.zeros(shape + (6, 6))
-        c, s = np.cos(psi), np.sin(psi)
         P = lambda i: p[..., i]  # noqa: E731
-        J[..., 0, 2] = -uu * s - v * c
-        J[..., 0, 3] = c
-        J[..., 0, 4] = -s
-        J[..., 1, 2] = uu * c - v * s
-        J[..., 1, 3] = s
-        J[..., 1, 4] = c
-        J[..., 2, 5] = 1.0
+        planar_jacobian(J, psi, uu, v)
         J[..., 3, 3] = P(0) + P(7) * n
         J[..., 3, 4] = 2 * P(1) * v + P(4) * r + P(5) * d
         J[..., 3, 5] = 2 * P(2) * r + P(4) * v + P(6) * d

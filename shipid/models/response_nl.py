@@ -37,6 +37,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import Model
+from .kinematics import planar_jacobian, planar_rates
 
 __all__ = ["ResponseNLModel", "RESPONSE_NL_REGRESSORS", "fit_to_model"]
 
@@ -111,8 +112,7 @@ class ResponseNLModel(Model):
         du = np.einsum("...k,...k->...", ru, p[..., _U_IDX])
         dv = np.einsum("...k,...k->...", rv, p[..., _V_IDX])
         dr = np.einsum("...k,...k->...", rr, p[..., _R_IDX])
-        c, s = np.cos(psi), np.sin(psi)
-        out = [uu * c - v * s, uu * s + v * c, r, du, dv, dr]
+        out = [*planar_rates(psi, uu, v, r), du, dv, dr]
         shape = np.broadcast_shapes(*[np.shape(o) for o in out])
         return np.stack([np.broadcast_to(o, shape) for o in out], axis=-1)
 
@@ -122,15 +122,8 @@ class ResponseNLModel(Model):
         dq = np.where(uu > self.u_floor, -q * q, 0.0)
         shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
         J = np.zeros(shape + (6, 6))
-        c, s = np.cos(psi), np.sin(psi)
         P = lambda name: p[..., self._pi[name]]  # noqa: E731
-        J[..., 0, 2] = -uu * s - v * c
-        J[..., 0, 3] = c
-        J[..., 0, 4] = -s
-        J[..., 1, 2] = uu * c - v * s
-        J[..., 1, 3] = s
-        J[..., 1, 4] = c
-        J[..., 2, 5] = 1.0
+        planar_jacobian(J, psi, uu, v)
         J[..., 3, 3] = P("a1") + P("a8") * n
         J[..., 3, 4] = 2 * P("a2") * v + P("a5") * r + P("a6") * d
         J[..., 3, 5] = 2 * P("a3") * r + P("a5") * v + P("a7") * d
