@@ -104,7 +104,7 @@ def bang():
 def test_analytic_answer_replayed_by_the_4dof_model(bang):
     m, b = bang
     # the switching curve answer, replayed through the full 4-DOF model with a fine RK4 grid
-    t = np.linspace(0.0, b.final_time, 20001)
+    t = np.linspace(0.0, b.final_time, 4001)
     T = np.where(t < b.switch_t, 7500.0, 0.0)
     res = simulate(m, np.zeros(8), t, inputs=np.c_[T, np.zeros_like(t)])
     assert res.state("x")[-1] == pytest.approx(300.0, abs=0.05)
