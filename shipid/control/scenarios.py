@@ -31,6 +31,9 @@ _PATH = {"u": (None, 20.0), "p": (-np.radians(10), np.radians(10)), "r": (-np.ra
 def paper_problem(which: str | int, *, model=None, n_intervals: int | None = None, substeps: int | None = None) -> Problem:
     """Problem of seed 000's scenario ``which`` (1, 2, 3 or "paper-1".."paper-3").
 
+    Scenario 1 holds ``phi_p = 0`` (thrust is its only control, paper eqs. 23-24) and has no
+    ``y`` condition (``y`` stays 0 by symmetry).
+
     Parameters
     ----------
     which : int or str
