@@ -47,8 +47,8 @@ ax.plot(b.accel[1], b.accel[2], label="full thrust from rest")
 ax.plot(b.coast[1], b.coast[0], label="coasting to (300 m, 0.5 m/s)")
 ax.plot(b.switch_x, b.switch_u, "ko", label="switch")
 ax.set_xlabel("x [m]"); ax.set_ylabel("u [m/s]"); ax.legend();"""),
-    nbf.v4.new_code_cell("""kw = dict(n_intervals=10, substeps=4) if FAST else {}
-direct = solve_direct(paper_problem(1, **kw), n_segments=2 if FAST else 5)
+    nbf.v4.new_code_cell("""kw = dict(n_intervals=10, substeps=8) if FAST else {}
+direct = solve_direct(paper_problem(1, **kw))
 print(direct.method, direct.final_time, direct.switch_time, direct.max_constraint_violation, direct.message)
 if not FAST:
     indirect = solve_indirect(paper_problem(1, **kw))

@@ -44,9 +44,12 @@ class _MS:
         while self.N % q:
             q -= 1
         self.nseg, self.L = q, self.N // q
-        self.rng = pr.u_hi - pr.u_lo
+        self.rng = pr.u_range
+        self.free = ~pr.u_fixed  # inputs held fixed (lo == hi) are not decision variables
+        self.nuf = int(self.free.sum())
+        self.col = np.cumsum(self.free) - 1  # input index -> column among the free inputs
         self.tf_ref = pr.initial_tf()
-        self.nU = self.N * self.nu
+        self.nU = self.N * self.nuf
         self.nS = self.nseg * self.nx
         self.n = self.nU + self.nS + (1 if pr.free_final_time else 0)
         self.nfev = 0
@@ -54,14 +57,15 @@ class _MS:
 
     def unpack(self, w):
         pr = self.pr
-        U = pr.u_lo + w[: self.nU].reshape(self.N, self.nu) * self.rng
+        U = np.tile(pr.u_lo, (self.N, 1))
+        U[:, self.free] += w[: self.nU].reshape(self.N, self.nuf) * self.rng[self.free]
         S = w[self.nU: self.nU + self.nS].reshape(self.nseg, self.nx) * pr.x_scale
         tf = w[-1] * self.tf_ref if pr.free_final_time else float(pr.final_time)
         return U, S, tf
 
     def pack(self, U, S, tf):
         pr = self.pr
-        w = np.r_[((U - pr.u_lo) / self.rng).ravel(), (S / pr.x_scale).ravel()]
+        w = np.r_[((U - pr.u_lo) / self.rng)[:, self.free].ravel(), (S / pr.x_scale).ravel()]
         if pr.free_final_time:
             w = np.r_[w, tf / self.tf_ref]
         return w
@@ -113,7 +117,8 @@ class _MS:
         D = np.zeros((nx, self.n))
         for j in range(k // self.s + 1):
             i = q * L + j
-            D[:, i * nu:(i + 1) * nu] = Bu[q, k, j] * self.rng[None, :]
+            nf = self.nuf
+            D[:, i * nf:(i + 1) * nf] = (Bu[q, k, j] * self.rng[None, :])[:, self.free]
         if q > 0:
             D[:, self.nU + (q - 1) * nx: self.nU + q * nx] = Ax[q, k] * pr.x_scale[None, :]
         if pr.free_final_time:
@@ -141,7 +146,7 @@ class _MS:
             dt = tf / self.N
             J += dt * np.sum(gg)
             dtf += np.sum(gg) / self.N
-            g[: self.nU] += (dt * gu * self.rng).ravel()
+            g[: self.nU] += (dt * gu * self.rng)[:, self.free].ravel()
             for k in range(1, self.N):
                 q, l = divmod(k - 1, self.L)
                 g += dt * gx[k] @ self._dstate(q, l * self.s + self.s - 1, None)
@@ -204,8 +209,8 @@ class _MS:
             for k in range(n_d):
                 for idx, sg in ((k + 1, 1.0), (k, -1.0)):
                     ui = idx - off
-                    if ui >= 0:
-                        D[k, ui * self.nu + j] += sg * self.rng[j] / (pr.rate[j] * dt)
+                    if ui >= 0 and self.free[j]:
+                        D[k, ui * self.nuf + self.col[j]] += sg * self.rng[j] / (pr.rate[j] * dt)
             d = np.diff(seq) / (pr.rate[j] * dt)
             if pr.free_final_time:
                 D[:, -1] = -d / tf * self.tf_ref
@@ -241,7 +246,7 @@ class _MS:
         return lb, ub
 
 
-def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int = 5, max_iter: int = 300,
+def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int | None = None, max_iter: int = 300,
                  ftol: float = 1e-9, tol: float = 1e-2, U0: np.ndarray | None = None,
                  tf0: float | None = None) -> ControlResult:
     """Solve ``problem`` by multiple shooting.
@@ -251,8 +256,8 @@ def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int = 5
     problem : Problem
     method : {"slsqp", "trust-constr"}
         scipy optimiser.
-    n_segments : int
-        Shooting segments (reduced to a divisor of ``n_intervals``); each holds
+    n_segments : int, optional
+        Shooting segments (default ``problem.shooting_segments``) (reduced to a divisor of ``n_intervals``); each holds
         ``n_intervals / n_segments`` control intervals.  Path bounds are imposed
         at every RK4 node.
     max_iter : int
@@ -266,7 +271,7 @@ def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int = 5
     if method not in ("slsqp", "trust-constr"):
         raise ValueError(f"solve_direct: method must be 'slsqp' or 'trust-constr', got {method!r}")
     t0 = time.perf_counter()
-    ms = _MS(problem, n_segments)
+    ms = _MS(problem, problem.shooting_segments if n_segments is None else n_segments)
     U = problem.initial_controls() if U0 is None else np.clip(np.asarray(U0, float), problem.u_lo, problem.u_hi)
     tf = problem.initial_tf() if tf0 is None else float(tf0)
     _, X, _ = problem.simulate(U, tf)

@@ -60,7 +60,7 @@ class _Augmented:
         self.N = problem.n_intervals
         self.s = problem.substeps
         self.nu = problem.model.nu
-        self.rng = problem.u_hi - problem.u_lo
+        self.rng = problem.u_range
         self.tf_ref = problem.initial_tf()
         self.cost_scale = max(problem.time_weight * self.tf_ref, 1e-12) if problem.time_weight > 0 else 1.0
         self.nfev = 0
@@ -221,6 +221,7 @@ def solve_indirect(problem: Problem, *, method: str = "bfgs", r0: float = 1.0, c
     nvar = len(z)
     lb = np.zeros(nvar)
     ub = np.ones(nvar)
+    ub[: problem.n_intervals * problem.model.nu] = np.tile(np.where(problem.u_fixed, 0.0, 1.0), problem.n_intervals)
     if problem.free_final_time:
         lb[-1] = problem.tf_bounds[0] / aug.tf_ref
         ub[-1] = problem.tf_bounds[1] / aug.tf_ref

@@ -128,6 +128,8 @@ class Problem:
         A label for reports.
     switch_input : str or None
         Input whose single bang-bang switch time is reported.
+    shooting_segments : int
+        Default number of multiple-shooting segments for :func:`solve_direct`.
     """
 
     model: Model
@@ -150,6 +152,7 @@ class Problem:
     state_scale: Mapping[str, float] = field(default_factory=dict)
     name: str = "problem"
     switch_input: str | None = None
+    shooting_segments: int = 5
 
     def __post_init__(self):
         m = self.model
@@ -160,12 +163,15 @@ class Problem:
         for name, (a, b) in dict(self.input_bounds).items():
             i = m.input_index(name)
             lo[i], hi[i] = float(a), float(b)
-            if not lo[i] < hi[i]:
-                raise ValueError(f"input_bounds['{name}'] = ({a}, {b}): need lo < hi")
+            if not lo[i] <= hi[i]:
+                raise ValueError(f"input_bounds['{name}'] = ({a}, {b}): need lo <= hi (lo == hi holds the input fixed)")
         missing = [n for i, n in enumerate(m.input_names) if not (np.isfinite(lo[i]) and np.isfinite(hi[i]))]
         if missing:
             raise ValueError(f"input_bounds: every input needs finite bounds; missing for {missing}")
         self.u_lo, self.u_hi = lo, hi
+        #: input ranges used for scaling (1 for inputs held fixed by lo == hi)
+        self.u_range = np.where(hi > lo, hi - lo, 1.0)
+        self.u_fixed = hi == lo
         if self.n_intervals < 2 or self.substeps < 1:
             raise ValueError(f"n_intervals must be >= 2 and substeps >= 1, got {self.n_intervals}, {self.substeps}")
         if self.final_time is not None and not self.final_time > 0:
@@ -297,7 +303,7 @@ def evaluate(problem: Problem, U, tf, substeps: int = 10) -> Trajectory:
         viol[f"{name}(tf) = {val}"] = abs(float(xf[i] - val)) / sc[i]
     for i, sgn, b, label in problem.term_rows:
         viol[label] = max(0.0, float(sgn * (xf[i] - b))) / sc[i]
-    rng = problem.u_hi - problem.u_lo
+    rng = problem.u_range
     for j, name in enumerate(problem.model.input_names):
         v = max(float(np.max(U[:, j] - problem.u_hi[j])), float(np.max(problem.u_lo[j] - U[:, j])), 0.0)
         viol[f"{name} within bounds"] = v / rng[j]

@@ -11,13 +11,14 @@ from .problem import Problem, evaluate
 __all__ = ["ControlResult", "switch_time"]
 
 
-def switch_time(U: np.ndarray, lo: float, hi: float, tf: float, tol: float = 0.02) -> float | None:
-    """Time of the single upper-to-lower (or lower-to-upper) switch of a bang-bang control.
+def switch_time(U: np.ndarray, lo: float, hi: float, tf: float, tol: float = 0.02, max_between: int = 2) -> float | None:
+    """Time of the single switch of a bang-bang control between its bounds.
 
     ``U`` holds the piecewise-constant values on equal intervals of ``[0, tf]``.
-    At most one interval may hold an intermediate value; its fraction of the
-    range is counted as time at the first level (the impulse-equivalent switch
-    time).  Returns None when the history is not one switch between the bounds.
+    Up to ``max_between`` consecutive intervals may hold intermediate values
+    (a discretised switch); their fractions of the range count as time at the
+    first level (the impulse-equivalent switch time).  Returns None when the
+    history is not one switch between the bounds.
     """
     U = np.asarray(U, float)
     N = len(U)
@@ -28,13 +29,10 @@ def switch_time(U: np.ndarray, lo: float, hi: float, tf: float, tol: float = 0.0
         if not first[0] or not second[-1]:
             continue
         j = int(np.argmin(first))  # first interval not at the first level
-        k = j
-        if not second[k]:
-            k = j + 1  # one intermediate interval allowed
-        if k > N or not second[k:].all() or not first[:j].all():
+        k = int(np.argmax(second[j:])) + j  # first interval at the second level
+        if k - j > max_between or not second[k:].all():
             continue
-        extra = float(frac[j]) if k == j + 1 else 0.0
-        return (j + extra) * dt
+        return (j + float(np.sum(frac[j:k]))) * dt
     return None
 
 

@@ -31,6 +31,9 @@ _PATH = {"u": (None, 20.0), "p": (-np.radians(10), np.radians(10)), "r": (-np.ra
 def paper_problem(which: str | int, *, model=None, n_intervals: int | None = None, substeps: int | None = None) -> Problem:
     """Problem of seed 000's scenario ``which`` (1, 2, 3 or "paper-1".."paper-3").
 
+    Scenario 1 holds ``phi_p = 0`` (thrust is its only control, paper eqs. 23-24) and has no
+    ``y`` condition (``y`` stays 0 by symmetry).
+
     Parameters
     ----------
     which : int or str
@@ -51,10 +54,14 @@ def paper_problem(which: str | int, *, model=None, n_intervals: int | None = Non
     guess = np.zeros((N, 2))
     guess[: N // 2, 0] = 7500.0
     if k == 1:
-        return Problem(model=m, x0=np.zeros(m.nx), input_bounds=bounds, tf_guess=60.0, tf_bounds=(10.0, 300.0),
-                       terminal={"x": 300.0, "y": 0.0}, terminal_bounds={"u": (-STOP_SPEED, STOP_SPEED)},
+        # the paper's scenario 1 has thrust as its only control (eqs. 23-24): phi_p is held at 0
+        return Problem(model=m, x0=np.zeros(m.nx), input_bounds={"T": (0.0, 7500.0), "phi_p": (0.0, 0.0)}, tf_guess=60.0, tf_bounds=(10.0, 300.0),
+                       terminal={"x": 300.0}, terminal_bounds={"u": (-STOP_SPEED, STOP_SPEED)},
                        u_guess=guess, n_intervals=N, substeps=substeps or 4,
-                       name=key, switch_input="T", state_scale={"x": 10.0, "y": 10.0})
+                       name=key, switch_input="T", state_scale={"x": 10.0, "y": 10.0},
+                       # single shooting: with phi_p fixed the lateral states are uncontrollable and
+                       # their continuity rows make SLSQP's equality system rank deficient
+                       shooting_segments=1)
     psi0 = np.radians(90.0 if k == 2 else 180.0)
     x0 = np.zeros(m.nx)
     x0[m.state_index("psi")] = psi0
