@@ -185,14 +185,15 @@ def test_rts_smoother_matches_filterpy_linear_smoother():
     # filterpy's batch_filter predicts before each update; ours updates sample 0 first,
     # so feed filterpy the first update by hand and smooth the rest
     kf.update(y[0][:, None])
+    x0, P0 = kf.x.copy(), kf.P.copy()  # filterpy's own first posterior
     means, covs, _, _ = kf.batch_filter([yy[:, None] for yy in y[1:]])
-    means = np.concatenate([kf_x0 := out.z_post[0, :1, :, None], means])
-    covs = np.concatenate([out.P_post[0, :1], covs])
+    means = np.concatenate([x0[None], means])
+    covs = np.concatenate([P0[None], covs])
     np.testing.assert_allclose(means[:, :, 0], out.z_post[0], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(covs, out.P_post[0], rtol=1e-9, atol=1e-14)
     xs, Pss, _, _ = kf.rts_smoother(means, covs)
     np.testing.assert_allclose(xs[:, :, 0], zs[0], rtol=1e-8, atol=1e-10)
     np.testing.assert_allclose(Pss, Ps[0], rtol=1e-8, atol=1e-12)
-    assert kf_x0.shape == (1, 3, 1)
 
 
 # ---------------------------------------------------------- robustness
