@@ -56,6 +56,8 @@ def load_runs(folder, decimate: int = 1) -> dict[str, TrialLog]:
 DEFAULT_SETUPS = {
     # constant rpm in every run: a1, a8, a9 are collinear, so a8 is fixed (the identifier says why)
     "kcs-response": lambda: (get_model("kcs-response"), {"fixed": {"a8": 0.0}}),
+    # started from a kcs-response fit (the seed terms) with the non-linear terms at zero: the
+    # default set is for the 4.36 m KCS model and is no start for a 320 m tanker
     "response-nl": lambda: (get_model("response-nl"), {"fixed": {"a8": 0.0}}),
     # the published KVLCC2 MMG set at full scale; re-identify the linear and the main
     # non-linear hull derivatives and the resistance, keep the rudder/propeller interaction
@@ -67,6 +69,9 @@ DEFAULT_SETUPS = {
 def fit_model(name: str, runs: dict[str, TrialLog], train=TRAIN, n_passes: int = 2, start=None):
     """Fit the set-up ``name`` of :data:`DEFAULT_SETUPS` to the training runs."""
     model, opts = DEFAULT_SETUPS[name]()
+    if start is None and name == "response-nl":
+        seed = fit_model("kcs-response", runs, train=train, n_passes=n_passes).coef_
+        start = {k: float(seed.get(k, 0.0)) for k in model.param_names}
     if start is not None:
         model = model.with_params({k: v for k, v in start.items() if k in model.param_names})
     return EKFIdentifier(model, n_passes=n_passes, **opts).fit([runs[k] for k in train])
