@@ -211,6 +211,13 @@ def solve_indirect(problem: Problem, *, method: str = "bfgs", r0: float = 1.0, c
         Largest admissible scaled constraint violation for ``success``.
     U0, tf0 : optional
         Warm start (controls (n_intervals, nu) and final time).
+
+    Returns
+    -------
+    ControlResult
+        ``success`` means every constraint holds within ``tol`` after the last
+        penalty stage (the penalty method has no other convergence test); the
+        message carries the inner optimiser's status of the last stage.
     """
     if method not in ("bfgs", "steepest"):
         raise ValueError(f"solve_indirect: method must be 'bfgs' or 'steepest', got {method!r}")
