@@ -18,7 +18,7 @@ from shipid.models import get_model
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="scenario 1 only, 12 intervals")
+    ap.add_argument("--quick", action="store_true", help="scenario 1 only, 12 intervals x 8 RK4 steps")
     ap.add_argument("--scenarios", default="1,2,3")
     args = ap.parse_args(argv)
     scen = [1] if args.quick else [int(s) for s in args.scenarios.split(",")]
@@ -29,7 +29,7 @@ def main(argv=None):
           f"u = {b.switch_u:.2f} m/s; final time {b.final_time:.2f} s")
     rows = []
     for k in scen:
-        kw = {"n_intervals": 12, "substeps": 4} if args.quick else {}
+        kw = {"n_intervals": 12, "substeps": 8} if args.quick else {}
         runs = {}
         for label, fn in (("steepest+LEPF (paper)", lambda pr: solve_indirect(pr, method="steepest")),
                           ("BFGS+LEPF", lambda pr: solve_indirect(pr, method="bfgs")),

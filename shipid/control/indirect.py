@@ -5,6 +5,9 @@ by the linear extended penalty function (LEPF).
 Augmented cost (seed 000, eqs. (11)-(15), after Rao 2009 sec. 7.13)::
 
     J_a = J + w(r) sum_j h_j^2 + r int_0^tf sum_i C(c_i(x)) dt + r sum_rate C(c_rate)
+
+(the rate terms are a sum over control differences, not an integral, so that
+the unit slope of the linear extension outweighs the time a jump would save)
     C(c) = -1/c            for c <= eps
          = (c - 2 eps)/eps^2  for c > eps,     eps = -sqrt(r)
     r_{k+1} = c' r_k,  0.1 <= c' <= 0.5
@@ -141,16 +144,16 @@ class _Augmented:
             for sgn in (1.0, -1.0):
                 c = sgn * d / (pr.rate[j] * dt) - 1.0
                 val, der = lepf(c, r)
-                J += ps * r * dt * np.sum(val) / self.tf_ref
+                J += ps * r * np.sum(val)
                 # d/dU
-                coef = ps * r * dt / self.tf_ref * der * sgn / (pr.rate[j] * dt)
+                coef = ps * r * der * sgn / (pr.rate[j] * dt)
                 gseq = np.zeros(len(seq))
                 gseq[1:] += coef
                 gseq[:-1] -= coef
                 gU[:, j] += gseq[-N:]
                 # d/dtf through dt (c depends on 1/dt; the weight on dt)
                 dc_ddt = -sgn * d / (pr.rate[j] * dt**2)
-                dJ_dtf += (ps * r / self.tf_ref) * (np.sum(val) + dt * np.sum(der * dc_ddt)) / N
+                dJ_dtf += ps * r * np.sum(der * dc_ddt) / N
         # backward costate sweep
         lam = lam + gx[K]
         for k in range(K - 1, -1, -1):
@@ -208,6 +211,13 @@ def solve_indirect(problem: Problem, *, method: str = "bfgs", r0: float = 1.0, c
         Largest admissible scaled constraint violation for ``success``.
     U0, tf0 : optional
         Warm start (controls (n_intervals, nu) and final time).
+
+    Returns
+    -------
+    ControlResult
+        ``success`` means every constraint holds within ``tol`` after the last
+        penalty stage (the penalty method has no other convergence test); the
+        message carries the inner optimiser's status of the last stage.
     """
     if method not in ("bfgs", "steepest"):
         raise ValueError(f"solve_indirect: method must be 'bfgs' or 'steepest', got {method!r}")
