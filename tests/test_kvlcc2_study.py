@@ -59,14 +59,18 @@ def test_mmg_refit_predicts_turns_and_heldout_zigzags(runs):
 
 @pytest.mark.slow
 def test_seed_linear_model_cannot_do_both(runs):
-    """kcs-response fitted to turns and zigzags: the linear sway/yaw model has unstable
-    closed-loop yaw with these data; its zigzag overshoots are far off (the issue's warning)."""
+    """kcs-response (the seed's linear sway/yaw) fitted to turns and zigzags together: it follows
+    the zigzags (held-out first overshoots within 5 deg; measured +1.0 / +3.9 deg) but turns far
+    too tightly (tactical diameter 33 % / 44 % small) -- the issue's warning, on measured data."""
     full, dec = runs
     fit = ks.fit_model("kcs-response", dec)
-    tab = ks.evaluate(fit.result(), full, names=ks.TEST)
+    assert fit.success_, fit.message_
+    tab = ks.evaluate(fit.result(), full)
     print(tab.round(3).to_string())
-    errs = [abs(_err(tab, run, "overshoot1_deg")) for run in ks.TEST]
-    assert all(not np.isfinite(e) or e > 5.0 for e in errs), errs
+    rel = tab[(tab.metric == "tactical_diameter_L")].set_index("run")["rel_error_%"]
+    assert rel["tc_35"] < -25 and rel["tc_-35"] < -25, rel
+    for run in ks.TEST:
+        assert abs(_err(tab, run, "overshoot1_deg")) < 5.0
 
 
 @pytest.mark.slow
