@@ -522,13 +522,18 @@ def metrics(data, *, lpp: float | None = None, kind: str = "auto", reference_off
             raise ValueError(f"{label}: column '{col}' missing; metrics need time, psi [rad] and delta [rad]"
                              f" (have {list(df.columns)})")
     sub = df.dropna(subset=["time", "psi", "delta"])
-    t = sub["time"].to_numpy(float)
+    if len(sub) < 3:
+        raise ValueError(f"{label}: fewer than 3 rows with time, psi and delta all present")
     psi = sub["psi"].to_numpy(float)
     if np.nanmax(np.abs(np.diff(psi))) > 1.0 and np.nanmax(np.abs(psi)) > 2 * math.pi + 1:
         raise ValueError(f"{label}: column 'psi' jumps by more than 1 rad between samples and exceeds 2 pi; "
                          "it looks like degrees -- convert to radians")
+    kind = detect_manoeuvre(sub["delta"].to_numpy(float)) if kind == "auto" else kind
+    if kind == "turning":  # positions and speed must be present on the samples used
+        sub = sub.dropna(subset=[c for c in ("x", "y", "u") if c in sub.columns])
+    t = sub["time"].to_numpy(float)
+    psi = sub["psi"].to_numpy(float)
     delta = sub["delta"].to_numpy(float)
-    kind = detect_manoeuvre(delta) if kind == "auto" else kind
     x = sub["x"].to_numpy(float) if "x" in sub else None
     y = sub["y"].to_numpy(float) if "y" in sub else None
     if x is not None and reference_offset is not None:

@@ -240,3 +240,21 @@ def test_marin_metrics_agree_with_readme(marin_logs, name):
         # +35 deg in the MARIN files turns the ship to port (their rudder sign is opposite to MMG's)
         assert d["side"] == ("port" if name == "tc_35" else "starboard")
         assert 0.0 < d["steady_diameter_L"] < d["tactical_diameter_L"] and 0.5 < d["speed_loss"] < 0.75
+
+
+def test_missing_samples_are_skipped():
+    """NaN (missing) position samples of a log do not break the turning metrics."""
+    R, U, dt = 250.0, 6.0, 0.05
+    te = 600 * dt
+    t = dt * np.arange(600 + int(2.2 * math.pi * R / U / dt))
+    s = np.clip(t - te, 0, None) * U / R
+    df = pd.DataFrame({"time": t, "x": np.where(t < te, U * (t - te), R * np.sin(s)),
+                       "y": np.where(t < te, 0.0, R * (1 - np.cos(s))), "psi": s, "u": U,
+                       "delta": np.where(t < te, 0.0, math.radians(35))})
+    full = metrics(df, lpp=100.0).to_dict()
+    holes = df.copy()
+    holes.loc[holes.index[1000:1003], "x"] = np.nan
+    m = metrics(holes, lpp=100.0).to_dict()
+    assert m["manoeuvre"] == "turning"
+    assert m["advance_L"] == pytest.approx(full["advance_L"], rel=1e-6)
+    assert m["tactical_diameter_L"] == pytest.approx(2.5 * 2, rel=1e-6)
