@@ -44,8 +44,7 @@ logs unless ``reference_offset`` moves it to midship.
 from __future__ import annotations
 
 import math
-import warnings
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Any, Sequence
 
 import numpy as np

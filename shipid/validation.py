@@ -25,7 +25,6 @@ radians for RMSE values, metrics as documented in :mod:`shipid.manoeuvres`
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 import warnings

@@ -53,3 +53,23 @@ def read_logs(paths, args) -> list:
             warnings.simplefilter("ignore", UserWarning)
             logs.append(read_log(path, **kw))
     return logs
+
+
+def json_and_csv_outputs(output, force: bool):
+    """``(out.json, out.csv)`` for commands that write a JSON summary with a CSV beside it.
+
+    ValueError when the name does not end in .json, its folder is missing, or
+    either file exists without ``--force``.
+    """
+    from pathlib import Path
+
+    out = Path(output)
+    if out.suffix.lower() != ".json":
+        raise ValueError(f"{out}: the output must be a .json file (a CSV is written beside it)")
+    csv = out.with_suffix(".csv")
+    for f in (out, csv):
+        if f.exists() and not force:
+            raise ValueError(f"{f}: output exists; choose another name or pass --force to overwrite it")
+    if not out.parent.exists():
+        raise ValueError(f"{out}: folder {out.parent} does not exist; create it first")
+    return out, csv

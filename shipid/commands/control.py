@@ -2,9 +2,10 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
+
+from ._common import json_and_csv_outputs
 
 
 def register(sub) -> None:
@@ -30,13 +31,7 @@ def _plan(args) -> int:
     from .._io import atomic_write_text
     from ..control import SCENARIOS, load_problem, paper_problem, solve_direct, solve_indirect
 
-    out = Path(args.output)
-    if out.suffix.lower() != ".json":
-        raise ValueError(f"-o {args.output}: the plan is written as JSON; give a file name ending in .json")
-    csv = out.with_suffix(".csv")
-    for f in (out, csv):
-        if f.exists() and not args.force:
-            raise ValueError(f"output '{f}' exists; pass --force to overwrite it")
+    out, csv = json_and_csv_outputs(args.output, args.force)
     if args.intervals is not None and args.intervals < 2:
         raise ValueError(f"--intervals must be >= 2, got {args.intervals}")
     if args.substeps is not None and args.substeps < 1:

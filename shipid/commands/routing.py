@@ -9,11 +9,12 @@ Writes the JSON summary and the route as CSV beside it (same name, ``.csv``).
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 
 from .._io import atomic_write_text
+
+from ._common import json_and_csv_outputs
 
 
 def register(sub) -> None:
@@ -31,16 +32,7 @@ def register(sub) -> None:
 
 
 def _outputs(args):
-    out = Path(args.output)
-    if out.suffix.lower() != ".json":
-        raise ValueError(f"{out}: the output must be a .json file (the route CSV is written beside it)")
-    csv = out.with_suffix(".csv")
-    for p in (out, csv):
-        if p.exists() and not args.force:
-            raise ValueError(f"{p}: output exists; choose another name or pass --force to overwrite it")
-    if not out.parent.exists():
-        raise ValueError(f"{out}: folder {out.parent} does not exist; create it first")
-    return out, csv
+    return json_and_csv_outputs(args.output, args.force)
 
 
 def _route(args) -> int:

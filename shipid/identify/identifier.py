@@ -210,7 +210,7 @@ class EKFIdentifier:
         model = self.model
         arrays, meas = prepare_logs(model, logs)
         p_base, est_idx, est_names = self._parameters()
-        ne, nx = len(est_idx), model.nx
+        nx = model.nx
         meas_idx = np.array([model.state_index(s) for s in meas])
 
         # noise levels
@@ -322,7 +322,6 @@ class EKFIdentifier:
             x0 = self._initial_state(a)
             xr.append(np.broadcast_to(x0, (a.t.size, nx)))
         t = np.concatenate(t_all)
-        N = t.size
         x_init = self._initial_state(arrays[0])
         P_reset = np.diag(self._initial_state_var(arrays))
         z0 = np.concatenate([x_init, theta_s])
