@@ -8,11 +8,21 @@ simulator's are the same map.
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from .models.base import Model
 
 __all__ = ["rk4_step", "rk4_step_tangent", "rk4_step_taylor_tangent", "euler_step_tangent", "STEP_TANGENTS"]
+
+
+@lru_cache(maxsize=16)
+def _eye(n: int) -> np.ndarray:
+    """A cached read-only identity (built once per size; steps are called per sample)."""
+    eye = np.eye(n)
+    eye.flags.writeable = False
+    return eye
 
 
 def rk4_step(model: Model, t, x, u, p, h):
@@ -41,7 +51,7 @@ def rk4_step_tangent(model: Model, t, x, u, p, h):
     hm = h[..., None, None] if h.ndim else h
     f, fx, fp = model._rhs, model._jac_x, model._jac_p
     nx = x.shape[-1]
-    eye = np.eye(nx)
+    eye = _eye(nx)
 
     k1 = f(t, x, u, p)
     A1, B1 = fx(t, x, u, p), fp(t, x, u, p)
@@ -77,7 +87,7 @@ def euler_step_tangent(model: Model, t, x, u, p, h):
     hh = h[..., None] if h.ndim else h
     hm = h[..., None, None] if h.ndim else h
     xn = x + hh * model._rhs(t, x, u, p)
-    Fx = np.eye(x.shape[-1]) + hm * model._jac_x(t, x, u, p)
+    Fx = _eye(x.shape[-1]) + hm * model._jac_x(t, x, u, p)
     Fp = hm * model._jac_p(t, x, u, p)
     return xn, Fx, Fp
 
@@ -98,8 +108,9 @@ def rk4_step_taylor_tangent(model: Model, t, x, u, p, h):
     A = model._jac_x(t, x, u, p)
     Bp = model._jac_p(t, x, u, p)
     hA = hm * A
-    half = np.eye(x.shape[-1]) + 0.5 * hA
-    Fx = np.eye(x.shape[-1]) + hA @ half
+    eye = _eye(x.shape[-1])
+    half = eye + 0.5 * hA
+    Fx = eye + hA @ half
     Fp = hm * (half @ Bp)
     return xn, Fx, Fp
 

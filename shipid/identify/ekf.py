@@ -19,9 +19,12 @@ positive semi-definite), loop.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg.lapack import dpotrf as _potrf
+from scipy.linalg.lapack import dpotrs as _potrs
 
 from ..integrate import STEP_TANGENTS
 from ..models.base import Model
@@ -113,44 +116,44 @@ class EKFOutput:
     message: list
 
 
-def _params(prob: EKFProblem, z: np.ndarray) -> np.ndarray:
-    nx = prob.model.nx
-    p = prob.p_base.copy()
-    p[:, prob.est_idx] = z[:, nx:] * prob.scale
-    return p
+def _index_or_slice(idx, n: int):
+    """``idx`` as a basic slice when it is a contiguous run of ``range(n)`` (indexing then gives a view)."""
+    idx = np.asarray(idx, dtype=np.intp)
+    if idx.size and idx[0] >= 0 and np.array_equal(idx, np.arange(idx[0], idx[0] + idx.size)) and idx[-1] < n:
+        return slice(int(idx[0]), int(idx[0]) + idx.size)
+    return idx
 
 
-def _transition(prob: EKFProblem, k: int, z: np.ndarray):
-    """Propagate the augmented mean from sample k to k+1; return (z_next, F)."""
-    model = prob.model
-    B, N, nx, ne, _ = prob.shape
-    nz = nx + ne
-    x = z[:, :nx]
-    p = _params(prob, z)
-    h = (prob.t[:, k + 1] - prob.t[:, k]) / prob.substeps
-    step = STEP_TANGENTS[prob.method]
-    uk = prob.U[:, k]
-    tk = prob.t[:, k].copy()
-    x, Fx, Fp = step(model, tk, x, uk, p, h)
-    Fp = Fp[:, :, prob.est_idx] * prob.scale
-    for _ in range(prob.substeps - 1):
-        tk = tk + h
-        x, Ax, Ap = step(model, tk, x, uk, p, h)
-        Fp = Ax @ Fp + Ap[:, :, prob.est_idx] * prob.scale
-        Fx = Ax @ Fx
-    F = np.zeros((B, nz, nz))
-    F[:, :nx, :nx] = Fx
-    F[:, :nx, nx:] = Fp
-    F[:, nx:, nx:] = np.eye(ne)
-    zn = np.concatenate([x, z[:, nx:]], axis=1)
-    dt = prob.t[:, k + 1] - prob.t[:, k]
-    Q = prob.q * dt[:, None]
-    rs = prob.reset[:, k + 1]
-    if rs.any():
-        F[rs, :nx, :] = 0.0
-        zn[rs, :nx] = prob.x_reset[rs, k + 1]
-        Q[rs, :nx] = 0.0
-    return zn, F, Q, rs
+def _spd_solve(S: np.ndarray, rhs: np.ndarray):
+    """Solve ``S X = rhs`` for a batch of symmetric positive-definite ``S`` and return ``log det S``.
+
+    ``S (B, m, m)``, ``rhs (B, m, c)`` -> ``(X (B, m, c), log det S (B,) or float)``.
+    A single member is solved by LAPACK's Cholesky routines directly
+    (``dpotrf``/``dpotrs``: numpy's stacked wrappers cost more than the
+    arithmetic for a 6x6 matrix); a batch uses numpy's stacked ``slogdet`` and
+    ``solve``.  Where ``S`` is not positive definite (or not finite) ``X`` is
+    NaN, which the caller's divergence check catches.
+    """
+    if S.shape[0] == 1:
+        c, info = _potrf(S[0], lower=1, clean=0)  # LAPACK flags NaN pivots as not positive definite
+        if info != 0:
+            return np.full(rhs.shape, np.nan), np.nan
+        X, info = _potrs(c, rhs[0], lower=1)
+        return X[None], 2.0 * sum(map(math.log, c.diagonal().tolist()))
+    sign, logdet = np.linalg.slogdet(S)
+    ok = sign > 0
+    if ok.all():
+        try:
+            return np.linalg.solve(S, rhs), logdet
+        except np.linalg.LinAlgError:
+            pass
+    X = np.full(rhs.shape, np.nan)
+    for b in np.flatnonzero(ok):
+        try:
+            X[b] = np.linalg.solve(S[b], rhs[b])
+        except np.linalg.LinAlgError:
+            pass
+    return X, logdet
 
 
 def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKFOutput:
@@ -170,107 +173,185 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKF
     Returns
     -------
     EKFOutput
+
+    Notes
+    -----
+    The loop is written for few numpy calls per sample (their fixed cost,
+    not the arithmetic, dominates at ~20 states): ``H`` selects states, so
+    ``P H^T`` and ``H P H^T`` are column/row picks of ``P`` (views when the
+    measured states are contiguous), and the Joseph update
+    ``(I - K H) P (I - K H)^T + K R K^T`` is evaluated as
+    ``A - (A H^T - K R) K^T`` with ``A = P - K H P`` -- the same product,
+    associated differently, without forming ``I - K H``.
     """
+    model = prob.model
     B, N, nx, ne, nm = prob.shape
     nz = nx + ne
-    mi = np.asarray(prob.meas_idx)
+    n_par = len(prob.p_base[0])
+    mi = _index_or_slice(prob.meas_idx, nz)
+    est = _index_or_slice(prob.est_idx, n_par)
+    all_est = isinstance(est, slice) and est == slice(0, n_par)
+    scale = np.asarray(prob.scale, dtype=float)
+    step = STEP_TANGENTS[prob.method]
+    substeps = int(prob.substeps)
     eye = np.eye(nz)
+
+    # per-sample quantities computed once, outside the loop
+    t_all = prob.t
+    dt = np.diff(t_all, axis=1)  # (B, N-1)
+    h_all = dt / substeps
+    Qd = prob.q[:, None, :] * dt[:, :, None]  # (B, N-1, nz) process-noise variances per interval
+    # where every member shares the sample times, pass plain floats to the model (cheaper than (B,) arrays)
+    # with one sampling interval throughout, Q is one matrix (added in one call)
+    Q_const = Qd[:, 0, :, None] * np.eye(nz) if N > 1 and (Qd == Qd[:, :1]).all() else None
+    shared_t = (t_all == t_all[:1]).all(axis=0).tolist()
+    t_first = t_all[0].tolist()
+    h_first = h_all[0].tolist()
+    Y = prob.Y
+    fin = np.isfinite(Y)
+    all_k = fin.all(axis=(0, 2)).tolist()
+    any_k = fin.any(axis=(0, 2)).tolist()
+    reset_k = prob.reset.any(axis=0).tolist()
+    R = prob.R
+    Rrow = R[:, None, :]
+    Rfull = R[:, :, None] * np.eye(nm)
+    logR = np.log(R)
+    logdet_k = np.full((B, N), np.nan)  # log det S per sample (masked channels removed)
+
     z = prob.z0.copy()
     P = prob.P0.copy()
+    p = prob.p_base.copy()
     if store:
         z_post = np.empty((B, N, nz))
         P_post = np.empty((B, N, nz, nz))
         z_prior = np.empty((B, N, nz))
         P_prior = np.empty((B, N, nz, nz))
-        Fs = np.empty((B, N, nz, nz))
+        Fs = np.zeros((B, N, nz, nz))
+        Fs[:, :, nx:, nx:] = np.eye(ne)
         z_prior[:, 0], P_prior[:, 0] = z, P
+    else:
+        Fbuf = np.zeros((B, nz, nz))
+        Fbuf[:, nx:, nx:] = np.eye(ne)
     innov = np.full((B, N, nm), np.nan)
     S_diag = np.full((B, N, nm), np.nan)
     nis = np.full((B, N), np.nan)
-    loglik = np.zeros(B)
     diverged = np.zeros(B, dtype=bool)
+    any_div = False
     diverged_at = np.full(B, -1)
     message = ["ok"] * B
-    R = prob.R
-    logR = np.log(R)
-    Rfull = R[:, :, None] * np.eye(nm)
     for k in range(N):
         # ---- update with the measurements of sample k
-        y = prob.Y[:, k]
-        m = np.isfinite(y) & ~diverged[:, None]
-        if m.any():
-            full = bool(m.all())
-            # H selects states, so P H^T and H P H^T are column/row picks of P
+        if any_k[k] and not (any_div and diverged.all()):
+            full = all_k[k] and not any_div
+            e = Y[:, k] - z[:, mi]
             PHt = P[:, :, mi]  # (B, nz, nm)
-            if not full:
-                PHt = PHt * m[:, None, :]
-            S = PHt[:, mi, :] if full else PHt[:, mi, :] * m[:, :, None]
-            S = S + Rfull
-            e = y - z[:, mi]
-            if not full:
+            if full:
+                S = PHt[:, mi, :] + Rfull
+            else:
+                m = fin[:, k] & ~diverged[:, None]
                 e = np.where(m, e, 0.0)
+                PHt = PHt * m[:, None, :]
+                S = PHt[:, mi, :] * m[:, :, None] + Rfull
             # one solve for the gain and the normalised innovation: S [K^T, a] = [H P, e]
-            sol = np.linalg.solve(S, np.concatenate([PHt.transpose(0, 2, 1), e[:, :, None]], axis=2))
-            Kt, Sinv_e = sol[:, :, :nz], sol[:, :, nz]
-            K = Kt.transpose(0, 2, 1)
-            z = z + np.einsum("bij,bj->bi", K, e)
-            KH = np.zeros((B, nz, nz))
-            KH[:, :, mi] = K if full else K * m[:, None, :]
-            IKH = eye - KH
-            # Joseph form: symmetric by construction (exactly symmetrised after the prediction)
-            P = IKH @ P @ IKH.transpose(0, 2, 1) + (K * R[:, None, :]) @ Kt
-            d2 = np.einsum("bi,bi->b", e, Sinv_e)
-            sign, logdet = np.linalg.slogdet(S)
-            cnt = m.sum(axis=1)
-            if not full:
+            HP = PHt.transpose(0, 2, 1)
+            X, logdet = _spd_solve(S, np.concatenate((HP, e[:, :, None]), axis=2))
+            Kt = X[:, :, :nz]
+            K = Kt.transpose(0, 2, 1)  # (B, nz, nm)
+            z = z + (K @ e[:, :, None])[:, :, 0]
+            A = P - K @ HP
+            P = A - (A[:, :, mi] - K * Rrow) @ Kt
+            d2 = np.add.reduce(e * X[:, :, nz], axis=1)
+            if full:
+                logdet_k[:, k] = logdet
+                nis[:, k] = d2
+                innov[:, k] = e
+                S_diag[:, k] = S.reshape(B, nm * nm)[:, :: nm + 1]
+            else:
                 # remove the masked channels' R from det(S) (they carry no information)
-                logdet = logdet - np.sum(np.where(m, 0.0, logR), axis=1)
-            ll = -0.5 * (d2 + logdet + cnt * _LOG2PI)
-            loglik += np.where(cnt > 0, ll, 0.0)
-            nis[:, k] = np.where(cnt > 0, d2, np.nan)
-            innov[:, k] = e if full else np.where(m, e, np.nan)
-            Sd = np.diagonal(S, axis1=1, axis2=2)
-            S_diag[:, k] = Sd if full else np.where(m, Sd, np.nan)
+                cnt = m.sum(axis=1)
+                logdet = logdet - np.where(m, 0.0, logR).sum(axis=1)
+                has = cnt > 0
+                logdet_k[:, k] = logdet
+                nis[:, k] = np.where(has, d2, np.nan)
+                innov[:, k] = np.where(m, e, np.nan)
+                S_diag[:, k] = np.where(m, np.diagonal(S, axis1=1, axis2=2), np.nan)
             # ---- divergence checks (NaN fails every comparison)
-            tr = np.einsum("bii->b", P)
-            bad = ~diverged & ~((d2 <= nis_limit) & (tr > 0) & (tr < np.inf) & (sign > 0)
-                                & np.isfinite(z).all(axis=1))
-            if bad.any():
-                for b in np.flatnonzero(bad):
-                    diverged[b] = True
-                    diverged_at[b] = k
-                    tk = prob.t[b, k]
-                    message[b] = (
-                        f"filter diverged at sample {k} (t = {tk:.4g} s): normalised innovation {d2[b]:.3g}"
-                        if np.isfinite(d2[b]) else f"filter diverged at sample {k} (t = {tk:.4g} s): non-finite state or covariance"
-                    )
-                # freeze the member at its last good values
-                if store and k > 0:
-                    z[bad] = z_post[bad, k - 1]
-                    P[bad] = P_post[bad, k - 1]
-                else:
-                    z[bad] = prob.z0[bad]
-                    P[bad] = prob.P0[bad]
+            # trace of P, poisoned (NaN) by a non-finite z; S not positive definite gave a NaN gain
+            tr = np.add.reduce(P.reshape(B, nz * nz)[:, :: nz + 1] + 0.0 * z, axis=1)
+            # margin > 0 iff d2 <= nis_limit and 0 < tr < inf; NaN anywhere fails
+            margin = np.minimum(np.minimum(nis_limit - d2, tr), np.inf - tr)
+            if not np.minimum.reduce(margin) > 0:
+                bad = ~(margin > 0) & ~diverged
+                if bad.any():
+                    any_div = True
+                    for b in np.flatnonzero(bad):
+                        diverged[b] = True
+                        diverged_at[b] = k
+                        tk = t_all[b, k]
+                        message[b] = (
+                            f"filter diverged at sample {k} (t = {tk:.4g} s): normalised innovation {d2[b]:.3g}"
+                            if np.isfinite(d2[b])
+                            else f"filter diverged at sample {k} (t = {tk:.4g} s): non-finite state or covariance"
+                        )
+                    # freeze the member at its last good values
+                    if store and k > 0:
+                        z[bad] = z_post[bad, k - 1]
+                        P[bad] = P_post[bad, k - 1]
+                    else:
+                        z[bad] = prob.z0[bad]
+                        P[bad] = prob.P0[bad]
         if store:
             z_post[:, k], P_post[:, k] = z, P
         if k == N - 1:
             break
-        # ---- predict to sample k+1
-        zn, F, Q, rs = _transition(prob, k, z)
+        # ---- predict to sample k+1 (RK4 map of the model, its tangent as the transition)
+        x = z[:, :nx]
+        if all_est:
+            p = z[:, nx:] * scale
+        else:
+            p[:, est] = z[:, nx:] * scale
+        if shared_t[k] and shared_t[k + 1]:
+            h, tk = h_first[k], t_first[k]
+        else:
+            h, tk = h_all[:, k], t_all[:, k]
+        uk = prob.U[:, k]
+        x, Fx, Fp = step(model, tk, x, uk, p, h)
+        Fp = Fp * scale if all_est else Fp[:, :, est] * scale
+        for _ in range(substeps - 1):
+            tk = tk + h
+            x, Ax, Ap = step(model, tk, x, uk, p, h)
+            Fp = Ax @ Fp + (Ap * scale if all_est else Ap[:, :, est] * scale)
+            Fx = Ax @ Fx
+        F = Fs[:, k] if store else Fbuf
+        F[:, :nx, :nx] = Fx
+        F[:, :nx, nx:] = Fp
+        zn = np.concatenate((x, z[:, nx:]), axis=1)
+        Qk = Qd[:, k]
+        if reset_k[k + 1]:
+            rs = prob.reset[:, k + 1]
+            F[rs, :nx, :] = 0.0
+            zn[rs, :nx] = prob.x_reset[rs, k + 1]
+            Qk = Qk.copy()
+            Qk[rs, :nx] = 0.0
         Pn = F @ P @ F.transpose(0, 2, 1)
-        Pn[:, np.arange(nz), np.arange(nz)] += Q
-        if rs.any():
-            Pn[rs, :nx, :nx] += prob.P_reset[rs]
-        Pn = 0.5 * (Pn + Pn.transpose(0, 2, 1))
-        if diverged.any():
+        Pn = 0.5 * (Pn + Pn.transpose(0, 2, 1))  # exactly symmetric
+        if Q_const is not None and not reset_k[k + 1]:
+            Pn += Q_const
+        else:
+            Pn.reshape(B, nz * nz)[:, :: nz + 1] += Qk
+            if reset_k[k + 1]:
+                Pn[rs, :nx, :nx] += prob.P_reset[rs]
+        if any_div:
             zn[diverged], Pn[diverged] = z[diverged], P[diverged]
             F[diverged] = eye
         z, P = zn, Pn
         if store:
-            Fs[:, k] = F
             z_prior[:, k + 1], P_prior[:, k + 1] = z, P
     if store:
         Fs[:, N - 1] = eye
+    # innovation log-likelihood, summed over the samples that had measurements
+    cnt = np.isfinite(innov).sum(axis=2)
+    loglik = -0.5 * np.where(cnt > 0, nis + logdet_k + cnt * _LOG2PI, 0.0).sum(axis=1)
     return EKFOutput(
         z_post=z_post if store else None, P_post=P_post if store else None,
         z_prior=z_prior if store else None, P_prior=P_prior if store else None,
@@ -303,13 +384,24 @@ def rts_smooth(out: EKFOutput) -> tuple[np.ndarray, np.ndarray]:
         Gt = _psd_solve(Pp[:, k + 1], FPf)
         G = Gt.transpose(0, 2, 1)
         zs[:, k] = zf[:, k] + (G @ (zs[:, k + 1] - zp[:, k + 1])[:, :, None])[:, :, 0]
-        Ps[:, k] = Pf[:, k] + G @ (Ps[:, k + 1] - Pp[:, k + 1]) @ Gt
-        Ps[:, k] = 0.5 * (Ps[:, k] + Ps[:, k].transpose(0, 2, 1))
+        D = Pf[:, k] + G @ (Ps[:, k + 1] - Pp[:, k + 1]) @ Gt
+        Ps[:, k] = 0.5 * (D + D.transpose(0, 2, 1))
     return zs, Ps
 
 
 def _psd_solve(A: np.ndarray, Bm: np.ndarray) -> np.ndarray:
-    """Solve ``A X = B`` for symmetric PSD ``A`` (batch), robust to singular blocks."""
+    """Solve ``A X = B`` for symmetric PSD ``A`` (batch), robust to singular blocks.
+
+    One member goes straight to LAPACK's Cholesky (``dpotrf``/``dpotrs``);
+    a batch, or a member that is not positive definite, to numpy (LU solve,
+    then the pseudo-inverse for singular blocks).
+    """
+    if A.shape[0] == 1:
+        c, info = _potrf(A[0], lower=1, clean=0)
+        if info == 0:
+            X, info = _potrs(c, Bm[0], lower=1)
+            if info == 0:
+                return X[None]
     try:
         return np.linalg.solve(A, Bm)
     except np.linalg.LinAlgError:

@@ -27,7 +27,7 @@ from typing import Any, ClassVar, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-__all__ = ["Model", "ParameterSet", "as_batch"]
+__all__ = ["Model", "ParameterSet", "as_batch", "batch_shape"]
 
 
 @dataclass(frozen=True)
@@ -61,6 +61,21 @@ class ParameterSet:
 def as_batch(a: Any) -> np.ndarray:
     """Return ``a`` as a float array (no copy when already float64)."""
     return np.asarray(a, dtype=float)
+
+
+def batch_shape(*arrays: np.ndarray) -> tuple:
+    """Broadcast leading (batch) shape of arrays whose last axis is a vector axis.
+
+    ``batch_shape(x (B, nx), u (nu,), p (B, np))`` -> ``(B,)``.  Equivalent to
+    ``np.broadcast_shapes(*(a.shape[:-1] for a in arrays))`` at a fraction of
+    its cost (numpy's C broadcasting instead of a Python loop), which matters
+    in right-hand sides evaluated per integration stage.
+    """
+    shape = arrays[0].shape[:-1]
+    for a in arrays[1:]:
+        if a.shape[:-1] != shape:
+            return np.broadcast(*[a[..., :1] for a in arrays]).shape[:-1]
+    return shape
 
 
 class Model:
@@ -243,7 +258,7 @@ class Model:
         args = [x, u, p]
         k = {"x": 0, "u": 1, "p": 2}[which]
         base = args[k]
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
+        shape = batch_shape(x, u, p)
         n = base.shape[-1]
         cols = []
         for j in range(n):

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import Model
+from .base import Model, batch_shape
 from .kinematics import planar_jacobian, planar_rates
 
 __all__ = ["KCSResponseModel", "RESPONSE_REGRESSORS"]
@@ -59,7 +59,7 @@ class KCSResponseModel(Model):
         psi, uu, v, r = x[..., 2], x[..., 3], x[..., 4], x[..., 5]
         d, n = u[..., 0], u[..., 1]
         a1, a2, a3, a4, a5, a6, a7, a8, a9, b1, b2, b3, b4, c1, c2, c3 = p.T if p.ndim <= 2 else np.moveaxis(p, -1, 0)
-        out = np.empty(np.broadcast_shapes(x.shape, u.shape[:-1] + (6,), p.shape[:-1] + (6,)))
+        out = np.empty(batch_shape(x, u, p) + (6,))
         out[..., 0], out[..., 1], out[..., 2] = planar_rates(psi, uu, v, r)
         out[..., 3] = (a1 + a8 * n) * uu + a2 * v * v + a3 * r * r + a4 * d * d + (a5 * r + a6 * d) * v + a7 * r * d + a9 * n * n
         out[..., 4] = b1 * v + (b2 + b4 * uu) * r + b3 * d
@@ -88,7 +88,7 @@ class KCSResponseModel(Model):
     def _jac_x(self, t, x, u, p):
         psi, uu, v, r = x[..., 2], x[..., 3], x[..., 4], x[..., 5]
         d, n = u[..., 0], u[..., 1]
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
+        shape = batch_shape(x, u, p)
         J = np.zeros(shape + (6, 6))
         P = lambda i: p[..., i]  # noqa: E731
         planar_jacobian(J, psi, uu, v)
@@ -104,7 +104,7 @@ class KCSResponseModel(Model):
 
     def _jac_p(self, t, x, u, p):
         uu, v, r, d, n = self._regressors(x, u)
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
+        shape = batch_shape(x, u, p)
         J = np.zeros(shape + (6, 16))
         J[..., 3, 0] = uu
         J[..., 3, 1] = v * v
@@ -126,7 +126,7 @@ class KCSResponseModel(Model):
 
     def _jac_u(self, t, x, u, p):
         uu, v, r, d, n = self._regressors(x, u)
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
+        shape = batch_shape(x, u, p)
         J = np.zeros(shape + (6, 2))
         J[..., 3, 0] = 2 * p[..., 3] * d + p[..., 5] * v + p[..., 6] * r
         J[..., 3, 1] = p[..., 7] * uu + 2 * p[..., 8] * n
