@@ -633,7 +633,7 @@ def _finish(t: np.ndarray, ch: dict[str, np.ndarray], *, where: _Where, name: st
     for c in required:
         if c != "time" and not np.isfinite(ch[c]).any():
             raise where.error("required channel is entirely blank/NaN; give a column with values, or leave it "
-                              f"out of required=", c, 0, value=ch[c][0] if n else None)
+                              "out of required=", c, 0, value=ch[c][0] if n else None)
     # --- time --------------------------------------------------------------------
     bad = ~np.isfinite(t)
     if bad.any():

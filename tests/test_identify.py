@@ -3,7 +3,7 @@ filterpy, the RTS smoother against filterpy's linear smoother, diagnostics, resu
 from __future__ import annotations
 
 import json
-import warnings
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
@@ -194,6 +194,53 @@ def test_rts_smoother_matches_filterpy_linear_smoother():
     xs, Pss, _, _ = kf.rts_smoother(means, covs)
     np.testing.assert_allclose(xs[:, :, 0], zs[0], rtol=1e-8, atol=1e-10)
     np.testing.assert_allclose(Pss, Ps[0], rtol=1e-8, atol=1e-12)
+
+
+def _stacked(prob, B, **override):
+    """The same EKF problem repeated B times along the batch axis (fields in override replace the result)."""
+    rep = lambda a: np.repeat(a, B, axis=0)  # noqa: E731
+    fields = dict(p_base=rep(prob.p_base), t=rep(prob.t), U=rep(prob.U), Y=rep(prob.Y), R=rep(prob.R), q=rep(prob.q),
+                  z0=rep(prob.z0), P0=rep(prob.P0), reset=rep(prob.reset), x_reset=rep(prob.x_reset),
+                  P_reset=rep(prob.P_reset))
+    fields.update(override)
+    return replace(prob, **fields)
+
+
+def test_one_member_and_batch_paths_agree(kcs_truth, kcs_logs):
+    """A single log takes LAPACK's Cholesky directly, a batch numpy's stacked solvers: same numbers."""
+    noisy = kcs_logs["kcs_zz_p20_rpm"][0].iloc[:200].copy()
+    noisy.loc[50:60, ["u", "v"]] = np.nan  # partial gaps: the masked update
+    noisy.loc[90:92, ["x", "y", "psi", "u", "v", "r"]] = np.nan  # whole-sample gaps
+    ident = EKFIdentifier(kcs_truth, n_passes=1, init="model", estimate=["b1", "b3", "c2", "c3"])
+    ident.fit(noisy)
+    one = run_ekf(ident.problem_, store=True)
+    two = run_ekf(_stacked(ident.problem_, 2), store=True)
+    for name in ("z_post", "P_post", "z_prior", "P_prior", "innov", "S_diag", "nis", "loglik"):
+        a, b = getattr(one, name)[0], getattr(two, name)
+        np.testing.assert_allclose(b[0], a, rtol=1e-10, atol=1e-14, err_msg=name)
+        np.testing.assert_allclose(b[1], a, rtol=1e-10, atol=1e-14, err_msg=name)
+    assert np.isfinite(one.loglik[0]) and np.isnan(one.innov[0, 55, 3]) and np.isfinite(one.innov[0, 55, 5])
+    zs1, Ps1 = rts_smooth(one)
+    zs2, Ps2 = rts_smooth(two)
+    np.testing.assert_allclose(zs2[1], zs1[0], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(Ps2[1], Ps1[0], rtol=1e-9, atol=1e-14)
+
+
+def test_a_diverging_batch_member_does_not_stop_the_others(kcs_truth, kcs_logs):
+    noisy = kcs_logs["kcs_tc_p35"][0].iloc[:300]
+    ident = EKFIdentifier(kcs_truth, n_passes=1, init="model", estimate=["c3"])
+    ident.fit(noisy)
+    prob = ident.problem_
+    good = run_ekf(prob, store=False)
+    Y = np.repeat(prob.Y, 3, axis=0)
+    Y[1, 150:, 5] += 50.0  # member 1: an absurd yaw-rate jump at sample 150
+    out = run_ekf(_stacked(prob, 3, Y=Y), store=False)
+    assert list(out.diverged) == [False, True, False]
+    assert out.diverged_at[1] == 150 and "diverged at sample 150" in out.message[1]
+    assert np.all(np.isfinite(out.z_final)) and np.all(np.isfinite(out.P_final))
+    for b in (0, 2):
+        np.testing.assert_allclose(out.z_final[b], good.z_final[0], rtol=1e-10, atol=1e-14)
+        assert out.loglik[b] == pytest.approx(good.loglik[0], rel=1e-10)
 
 
 # ---------------------------------------------------------- robustness

@@ -33,7 +33,7 @@ from scipy.optimize import differential_evolution
 from ..models import get_model
 from ..models.base import Model
 from .launch import launch
-from .study import PAPER_SWEEP, sweep
+from .study import sweep
 
 __all__ = ["optimise_launch", "launch_objective", "GliderOptimum", "DEFAULT_BOUNDS"]
 
@@ -196,15 +196,16 @@ def optimise_launch(
         r = launch(c["speed"], c["angle_deg"], c["fin_deg"], c["cg_m"], model=model, keep_trajectories=False)
         return -launch_objective(r.summary, depth_ref, horizontal_ref, max_exit_angle_deg)
 
-    bar = None
-    cb = None
+    bar = cb = None
     if progress:
         from tqdm.auto import tqdm
 
         bar = tqdm(total=maxiter, desc="glider DE", unit="gen")
 
-        def cb(intermediate_result):
+        def _tick(intermediate_result):
             bar.update(1)
+
+        cb = _tick
 
     import warnings
 
