@@ -360,12 +360,16 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKF
     )
 
 
-def rts_smooth(out: EKFOutput) -> tuple[np.ndarray, np.ndarray]:
+def rts_smooth(out: EKFOutput, chunk: int = 256) -> tuple[np.ndarray, np.ndarray]:
     """Rauch-Tung-Striebel smoother for the EKF output (linearised about the filter).
 
     Uses the stored transitions ``F[k]`` (exact Jacobians of the RK4 map at
     the filtered estimate), so it is the extended RTS smoother; filterpy's
     ``rts_smoother`` assumes one linear ``F`` and cannot be used here.
+
+    The gains ``G_k = Pf_k F_k^T Pp_{k+1}^-1`` depend on filter quantities
+    only, so they are solved for ``chunk`` samples at a time in one stacked
+    call; only the two-line backward recursion runs per sample.
 
     Returns
     -------
@@ -378,30 +382,27 @@ def rts_smooth(out: EKFOutput) -> tuple[np.ndarray, np.ndarray]:
     zs = np.empty_like(zf)
     Ps = np.empty_like(Pf)
     zs[:, -1], Ps[:, -1] = zf[:, -1], Pf[:, -1]
-    for k in range(N - 2, -1, -1):
-        # G = Pf F^T Pp^-1  ->  solve Pp^T G^T = F Pf^T (Pp symmetric)
-        FPf = F[:, k] @ Pf[:, k]
-        Gt = _psd_solve(Pp[:, k + 1], FPf)
-        G = Gt.transpose(0, 2, 1)
-        zs[:, k] = zf[:, k] + (G @ (zs[:, k + 1] - zp[:, k + 1])[:, :, None])[:, :, 0]
-        D = Pf[:, k] + G @ (Ps[:, k + 1] - Pp[:, k + 1]) @ Gt
-        Ps[:, k] = 0.5 * (D + D.transpose(0, 2, 1))
+    hi = N - 1  # samples lo..hi-1 are smoothed from hi..lo+1
+    while hi > 0:
+        lo = max(0, hi - chunk)
+        # G^T = Pp^-1 F Pf  (Pp and Pf symmetric), for samples lo..hi-1 at once
+        Gt_all = _psd_solve(Pp[:, lo + 1:hi + 1], F[:, lo:hi] @ Pf[:, lo:hi])
+        G_all = Gt_all.swapaxes(-1, -2)
+        for k in range(hi - 1, lo - 1, -1):
+            G, Gt = G_all[:, k - lo], Gt_all[:, k - lo]
+            zs[:, k] = zf[:, k] + (G @ (zs[:, k + 1] - zp[:, k + 1])[:, :, None])[:, :, 0]
+            D = Pf[:, k] + G @ (Ps[:, k + 1] - Pp[:, k + 1]) @ Gt
+            Ps[:, k] = 0.5 * (D + D.transpose(0, 2, 1))
+        hi = lo
     return zs, Ps
 
 
 def _psd_solve(A: np.ndarray, Bm: np.ndarray) -> np.ndarray:
-    """Solve ``A X = B`` for symmetric PSD ``A`` (batch), robust to singular blocks.
+    """Solve ``A X = B`` for stacked symmetric PSD ``A (..., n, n)``, robust to singular blocks.
 
-    One member goes straight to LAPACK's Cholesky (``dpotrf``/``dpotrs``);
-    a batch, or a member that is not positive definite, to numpy (LU solve,
-    then the pseudo-inverse for singular blocks).
+    One stacked LU solve; if any block is singular, the stack goes through the
+    (Hermitian) pseudo-inverse instead.
     """
-    if A.shape[0] == 1:
-        c, info = _potrf(A[0], lower=1, clean=0)
-        if info == 0:
-            X, info = _potrs(c, Bm[0], lower=1)
-            if info == 0:
-                return X[None]
     try:
         return np.linalg.solve(A, Bm)
     except np.linalg.LinAlgError:
