@@ -141,7 +141,7 @@ class AdaptiveResult:
     x : ndarray (n_eval, ...)  states at ``t`` (NaN after a failure)
     t_final : float  time reached
     x_final : ndarray  state at ``t_final``
-    h_last : float  last accepted step (a good first step for a continuation)
+    h_last : float  step proposed for a continuation [s] (from the last error estimate)
     n_steps, n_rejected, n_fev : int  accepted / rejected steps, right-hand-side evaluations
     t_events : list of (time, member mask)  events located (see ``event``)
     success : bool
@@ -210,8 +210,9 @@ def dopri5(f: Callable, t0: float, x0, t_end: float, t_eval=None, *, rtol: float
     stop_list = sorted(float(s) for s in stops if t0 < s < t_end) + [float(t_end)]
     si = 0
     n_fev = n_steps = n_rej = 0
-    K = np.empty((7,) + shape)
+    K = np.zeros((7,) + shape)
     Kf = K.reshape(7, -1)
+    flat = x.ndim == 1
     A, C, E, D = _DP_A, _DP_C, _DP_E, _DP_D
     members = shape[:-1]
     inv_sqrt_nx = 1.0 / math.sqrt(nx)
@@ -244,14 +245,16 @@ def dopri5(f: Callable, t0: float, x0, t_end: float, t_eval=None, *, rtol: float
         t_stop = stop_list[si]
         last = h >= t_stop - t - 1e-12 * max(1.0, abs(t_stop))
         hs = t_stop - t if last else h
-        # stages
-        for i in range(1, 7):
-            K[i] = f(t + C[i] * hs, x + hs * (A[i, :i] @ Kf[:i]).reshape(shape))
+        # stages (A is strictly lower triangular and K is finite, so A[i] @ K uses only stages < i)
+        Ah = hs * A
+        for i in range(1, 6):
+            K[i] = f(t + C[i] * hs, x + (Ah[i] @ Kf if flat else (Ah[i] @ Kf).reshape(shape)))
+        # stage 7 is evaluated at x + hs * (A[6] @ K) = x_new (A[6] = b5): K[6] = f(t + hs, x_new)
+        x_new = x + (Ah[6] @ Kf if flat else (Ah[6] @ Kf).reshape(shape))
+        K[6] = f(t + hs, x_new)
         n_fev += 6
-        # stage 7 was evaluated at x + hs * (A[6] @ K) = x_new (A[6] = b5): K[6] = f(t + hs, x_new)
-        x_new = x + hs * (A[6, :6] @ Kf[:6]).reshape(shape)
         sc = atol + rtol * np.maximum(np.abs(x), np.abs(x_new))
-        err = err_norm(hs * (E @ Kf).reshape(shape), sc)
+        err = err_norm((hs * E) @ Kf if flat else ((hs * E) @ Kf).reshape(shape), sc)
         if not math.isfinite(err):
             if hs < 1e-12 * max(1.0, abs(t)):
                 ok, msg = False, f"state became non-finite at t = {t:.6g} s; the model or its parameters are unstable here"
@@ -278,10 +281,12 @@ def dopri5(f: Callable, t0: float, x0, t_end: float, t_eval=None, *, rtol: float
                 h_next = min(hs * fac, h_max)
                 if t_ev < t + hs * (1.0 - 1e-12):  # redo the step to end on the event
                     hs = t_ev - t
-                    for i in range(1, 7):
-                        K[i] = f(t + C[i] * hs, x + hs * (A[i, :i] @ Kf[:i]).reshape(shape))
+                    Ah = hs * A
+                    for i in range(1, 6):
+                        K[i] = f(t + C[i] * hs, x + (Ah[i] @ Kf).reshape(shape))
+                    x_new = x + (Ah[6] @ Kf).reshape(shape)
+                    K[6] = f(t + hs, x_new)
                     n_fev += 6
-                    x_new = x + hs * (A[6, :6] @ Kf[:6]).reshape(shape)
                 ie = _dense_out(X, t_eval, ie, t, hs, x, x_new, K, D)
                 t, x = t_ev, x_new
                 g_pre = event(t, x)
@@ -320,7 +325,7 @@ def dopri5(f: Callable, t0: float, x0, t_end: float, t_eval=None, *, rtol: float
             break
     if not ok:
         warnings.warn(msg, RuntimeWarning, stacklevel=2)
-    return AdaptiveResult(t=t_eval, x=X, t_final=t, x_final=x, h_last=h_last, n_steps=n_steps, n_rejected=n_rej,
+    return AdaptiveResult(t=t_eval, x=X, t_final=t, x_final=x, h_last=h, n_steps=n_steps, n_rejected=n_rej,
                           n_fev=n_fev, t_events=t_events, success=ok, message=msg)
 
 

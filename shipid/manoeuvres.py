@@ -56,7 +56,7 @@ from .simulate import METHODS, InputLaw, SimulationResult, simulate
 __all__ = [
     "TurningMetrics", "ZigzagMetrics", "ManoeuvreResult", "turning_metrics", "zigzag_metrics", "metrics",
     "detect_manoeuvre", "detect_execute", "imo_limits", "turning_circle", "zigzag", "turning_sweep",
-    "steady_rps", "ship_info", "RampSchedule", "TurningRudder", "ZigzagRudder",
+    "steady_rps", "ship_info", "RampSchedule", "TurningRudder", "ZigzagRudder", "SampledHold",
 ]
 
 EXECUTE_THRESHOLD_DEG = 0.5
@@ -611,12 +611,23 @@ class _RudderLaw(InputLaw):
     def _n(self, t):
         if isinstance(self.n, RampSchedule):
             return self.n(t)
-        return np.broadcast_to(self.n, self.batch) if np.ndim(t) == 0 else np.asarray(self.n)[..., None]
+        return self.n if np.ndim(t) == 0 else np.asarray(self.n)[..., None]
 
     def _pack(self, delta, n, shape):
         u = np.empty(shape + (self.nu,))
         u[..., self.idl] = delta
         u[..., self.inn] = n
+        return u
+
+    def _pack_now(self, delta, t):
+        """Inputs at one time: a copy of a cached template with the rps filled (constant rps)."""
+        if isinstance(self.n, RampSchedule):
+            return self._pack(delta, self.n(t), self.batch)
+        tpl = self.__dict__.get("_tpl")
+        if tpl is None:
+            tpl = self._tpl = self._pack(0.0, self.n, self.batch)
+        u = tpl.copy()
+        u[..., self.idl] = delta
         return u
 
 
@@ -635,15 +646,16 @@ class TurningRudder(_RudderLaw):
         delta = np.asarray(delta, dtype=float)
         super().__init__(nu, idl, inn, n, rate, te, delta.shape)
         self.delta = delta
-        self._stops += sorted(set((self.te + np.abs(delta[delta != 0]) / self.rate).tolist()))
+        self._sign, self._mag = np.sign(delta), np.abs(delta)
+        self._stops += sorted(set((self.te + self._mag[delta != 0] / self.rate).tolist()))
 
     def _delta(self, t):
-        d = self.delta if np.ndim(t) == 0 else self.delta[..., None]
-        return np.sign(d) * np.minimum(self.rate * max(t - self.te, 0.0) if np.ndim(t) == 0 else
-                                       self.rate * np.maximum(t - self.te, 0.0), np.abs(d))
+        if np.ndim(t) == 0:
+            return self._sign * np.minimum(self.rate * max(t - self.te, 0.0), self._mag)
+        return self._sign[..., None] * np.minimum(self.rate * np.maximum(t - self.te, 0.0), self._mag[..., None])
 
     def inputs(self, t, x):
-        return self._pack(self._delta(t), self._n(t), self.batch)
+        return self._pack_now(self._delta(t), t)
 
     def input_history(self, t, x):
         return self._pack(self._delta(np.asarray(t)), self._n(np.asarray(t)), self.batch + (np.size(t),))
@@ -696,7 +708,7 @@ class ZigzagRudder(_RudderLaw):
         return d0 + np.clip(cmd - d0, -lim, lim)
 
     def inputs(self, t, x):
-        return self._pack(self._delta(t), self._n(t), self.batch)
+        return self._pack_now(self._delta(t), t)
 
     def event(self, t, x):
         g = np.sign(self._hist[-1][1]) * (x[..., self.ipsi] - self.psi0) - self.lev
@@ -721,6 +733,34 @@ class ZigzagRudder(_RudderLaw):
                 lim = self.rate * (t[sel] - ts)
                 delta[..., sel] = d0[..., None] + np.clip((cmd - d0)[..., None], -lim, lim)
         return self._pack(delta, self._n(t), self.batch + (t.size,))
+
+class SampledHold:
+    """An input law applied by a sampled (digital) controller with zero-order hold, as a plain
+    ``controller(t, x)`` for :func:`shipid.simulate.simulate`.
+
+    At each sample time ``t`` (the start of an interval of length ``dt``) the law's events are checked on
+    the sampled state (a zigzag reverses when the sampled heading deviation has reached the switch
+    angle), and the value the law reaches at ``t + dt`` (the rudder after ``dt`` of steering at the
+    rate) is held over the interval.  The held value is the logged one, so a log made this way satisfies
+    exactly the zero-order-hold input assumption of the identifier (the EKF).  Used by
+    :func:`shipid.synthetic.make_trial`; :func:`zigzag` / :func:`turning_circle` use the continuous law.
+    """
+
+    def __init__(self, law: InputLaw, dt: float):
+        if not dt > 0:
+            raise ValueError(f"SampledHold: dt must be positive, got {dt}")
+        self.law, self.dt = law, float(dt)
+        self._t_last = -math.inf
+
+    def __call__(self, t, x):
+        law = self.law
+        if law.has_events and t > self._t_last:  # simulate() asks again at the final time: no new decision
+            hit = law.event(t, x) >= 0
+            if np.any(hit):
+                law.on_event(t, x, hit)
+        self._t_last = max(self._t_last, t)
+        return law.inputs(t + self.dt, x)
+
 
 # --------------------------------------------------------------------------- simulation
 def ship_info(model: Model) -> dict:
@@ -874,7 +914,8 @@ def _run_batched(model, x0, t_step, controller_factory, done, params, t_max, chu
             (t_step if not callable(t_step) else t_step(None, None))
         n_steps = max(1, int(round(chunk / h)))
         t = t0 + h * np.arange(n_steps + 1)
-        res = simulate(model, x, t, controller=ctrl, params=params, method=method, rtol=rtol)
+        res = simulate(model, x, t, controller=ctrl, params=params, method=method, rtol=rtol,
+                       first_step=stats[-1].get("h_last") if stats else None)
         stats.append(res.meta)
         ts.append(t if not ts else t[1:])
         Xs.append(res.x if not Xs else res.x[:, 1:])

@@ -146,6 +146,7 @@ def simulate(
     method: str = "rk4",
     rtol: float = 1e-6,
     atol=None,
+    first_step: float | None = None,
 ) -> SimulationResult:
     """Integrate ``model`` from ``x0`` over the time grid ``t``.
 
@@ -172,11 +173,14 @@ def simulate(
     rtol, atol : float
         ``dopri5`` error tolerances (per component |err| <= atol + rtol |x|); ``atol`` defaults to
         ``1e-3 rtol``.
+    first_step : float, optional
+        ``dopri5`` first step [s] (e.g. ``meta["h_last"]`` of a previous run being continued); default
+        Hairer's starting-step heuristic.
 
     Returns
     -------
     SimulationResult
-        ``meta`` holds ``method`` and, for ``dopri5``, ``n_steps``, ``n_rejected``, ``n_fev``.
+        ``meta`` holds ``method`` and, for ``dopri5``, ``n_steps``, ``n_rejected``, ``n_fev``, ``h_last``.
     """
     t = np.asarray(t, dtype=float)
     if t.ndim != 1 or t.size < 2 or np.any(np.diff(t) <= 0):
@@ -203,7 +207,8 @@ def simulate(
         U = np.broadcast_to(U, batch + (n_t, model.nu))
     law = controller if isinstance(controller, InputLaw) else None
     if method == "dopri5":
-        return _simulate_dopri5(model, x0, t, U, controller, law, p, rtol, 1e-3 * rtol if atol is None else atol)
+        return _simulate_dopri5(model, x0, t, U, controller, law, p, rtol, 1e-3 * rtol if atol is None else atol,
+                                first_step)
     X = np.full(batch + (n_t, model.nx), np.nan)
     Uout = np.full(batch + (n_t, model.nu), np.nan)
     x = x0.copy()
@@ -277,22 +282,24 @@ def _rk4_law_step(model, law, t, x, p, h):
     return x
 
 
-def _simulate_dopri5(model, x0, t, U, controller, law, p, rtol, atol):
+def _simulate_dopri5(model, x0, t, U, controller, law, p, rtol, atol, first_step=None):
     batch = x0.shape[:-1]
     n_t = t.size
     f = model._rhs
     X = np.full(batch + (n_t, model.nx), np.nan)
     Uout = np.full(batch + (n_t, model.nu), np.nan)
-    stats = {"method": "dopri5", "n_steps": 0, "n_rejected": 0, "n_fev": 0}
+    stats = {"method": "dopri5", "n_steps": 0, "n_rejected": 0, "n_fev": 0, "h_last": None}
     ok, msg = True, "integration finished"
 
     def add(r):
         for k in ("n_steps", "n_rejected", "n_fev"):
             stats[k] += getattr(r, k)
+        stats["h_last"] = r.h_last
 
     if law is not None:
         r = dopri5(lambda tt, xx: f(tt, xx, law.inputs(tt, xx), p), float(t[0]), x0, float(t[-1]), t, rtol=rtol,
-                   atol=atol, stops=law.stops, event=law.event if law.has_events else None, on_event=law.on_event)
+                   atol=atol, h0=first_step, stops=law.stops, event=law.event if law.has_events else None,
+                   on_event=law.on_event)
         add(r)
         X[...] = np.moveaxis(r.x, 0, -2)
         ok, msg = r.success, r.message
@@ -300,15 +307,16 @@ def _simulate_dopri5(model, x0, t, U, controller, law, p, rtol, atol):
     else:
         # zero-order-hold inputs: one adaptive run per interval of constant input
         X[..., 0, :] = x0
-        x, h0 = x0, None
+        x, h0 = x0, first_step
         k = 0
+        if controller is None:  # sample indices where some input of some member changes
+            diff = np.any(U[..., 1:, :] != U[..., :-1, :], axis=-1)
+            changes = np.flatnonzero(np.any(diff.reshape(-1, n_t - 1), axis=0)) + 1
+            ends = np.append(changes[changes < n_t - 1], n_t - 1)
         while k < n_t - 1:
             uk = controller(t[k], x) if controller is not None else U[..., k, :]
             uk = np.broadcast_to(np.asarray(uk, dtype=float), batch + (model.nu,))
-            j = k + 1
-            if controller is None:
-                while j < n_t - 1 and np.array_equal(U[..., j, :], U[..., k, :]):
-                    j += 1
+            j = k + 1 if controller is not None else int(ends[np.searchsorted(ends, k, side="right")])
             r = dopri5(lambda tt, xx, uk=uk: f(tt, xx, uk, p), float(t[k]), x, float(t[j]), t[k + 1:j + 1],
                        rtol=rtol, atol=atol, h0=h0)
             add(r)

@@ -105,10 +105,13 @@ def make_trial(model: Model, recipe: TrialRecipe, rng: np.random.Generator | Non
     :class:`~shipid.manoeuvres.TurningRudder` or :class:`~shipid.manoeuvres.ZigzagRudder` (rudder
     executed at ``execute_s`` and moved at the rudder rate; a zigzag reverses the rudder when the
     heading deviation from the initial course reaches ``psi_deg`` in the direction of the current
-    rudder, located within the step), with the propeller following ``rpm_steps`` at ``n_rate``
-    (:class:`~shipid.manoeuvres.RampSchedule`).  Fixed-step RK4, 4 steps per sample.
+    rudder), with the propeller following ``rpm_steps`` at ``n_rate``
+    (:class:`~shipid.manoeuvres.RampSchedule`), applied as a sampled controller
+    (:class:`~shipid.manoeuvres.SampledHold`: decisions at the samples, inputs held over each sample
+    interval and logged as held -- the identifier's zero-order-hold assumption).  Fixed-step RK4,
+    4 steps per sample.
     """
-    from .manoeuvres import RampSchedule, TurningRudder, ZigzagRudder
+    from .manoeuvres import RampSchedule, SampledHold, TurningRudder, ZigzagRudder
 
     if recipe.kind not in ("turning", "zigzag"):
         raise ValueError(f"recipe {recipe.name}: kind must be 'turning' or 'zigzag', got {recipe.kind!r}")
@@ -127,7 +130,7 @@ def make_trial(model: Model, recipe: TrialRecipe, rng: np.random.Generator | Non
         law = TurningRudder(side * amp, rpm, rate, recipe.execute_s, **idx)
     else:
         law = ZigzagRudder(amp, np.deg2rad(recipe.psi_deg), side, x0[ipsi], rpm, rate, recipe.execute_s, ipsi=ipsi, **idx)
-    res = simulate(model, x0, t, controller=law, substeps=4)
+    res = simulate(model, x0, t, controller=SampledHold(law, recipe.dt_s), substeps=4)
     truth = res.to_pandas().reset_index()
     noisy = truth.copy()
     rng = np.random.default_rng(0) if rng is None else rng
