@@ -181,8 +181,10 @@ def dopri5(f: Callable, t0: float, x0, t_end: float, t_eval=None, *, rtol: float
         (RMS over the components, as in Hairer's DOPRI5 and scipy's RK45).
     h0 : float, optional  first step [s] (default: Hairer's starting-step heuristic)
     h_max : float  largest step [s]
-    stops : sequence of float  times the integration must step onto exactly (kinks or jumps of the
-        inputs); ``f`` is re-evaluated there (no first-same-as-last reuse across a stop).
+    stops : sequence of float  times the integration must step onto exactly: kinks of ``f`` in time (a rudder
+        ramp starting or ending); ``f`` is re-evaluated there (no first-same-as-last reuse across a stop).
+        ``f`` itself must be continuous: a jump is integrated as separate runs (as ``simulate`` does for
+        zero-order-hold inputs).
     event : callable ``(t, x) -> g``, optional  event functions, shape ``x.shape[:-1]`` (one per member);
         an event is a crossing of ``g`` from negative to ``>= 0`` within a step.  The earliest crossing is
         located on the dense output (Illinois regula falsi), the step is redone to end exactly there,

@@ -44,7 +44,7 @@ class InputLaw:
     kept by the law), so that the recorded inputs of a result are the ones that acted.
     """
 
-    #: Times [s] where the inputs have kinks or jumps (known in advance).
+    #: Times [s] where the inputs have kinks (known in advance; the inputs must be continuous in time).
     stops: tuple = ()
     has_events: bool = False
 
