@@ -242,7 +242,6 @@ def dopri5(f: Callable, t0: float, x0, t_end: float, t_eval=None, *, rtol: float
     g_now = event(t, x) if event is not None else None
     t_events: list = []
     ok, msg = True, "integration finished"
-    h_last = h
     while True:
         t_stop = stop_list[si]
         last = h >= t_stop - t - 1e-12 * max(1.0, abs(t_stop))
@@ -302,13 +301,11 @@ def dopri5(f: Callable, t0: float, x0, t_end: float, t_eval=None, *, rtol: float
                 same = mask & (np.abs(g_now - g_pre) <= 1e-9 * (1.0 + np.abs(g_pre)))
                 g_now = np.where(same, np.maximum(g_now, 0.0), g_now)
                 n_steps += 1
-                h_last = hs
                 h = h_next
                 continue
             g_now = g_new
         ie = _dense_out(X, t_eval, ie, t, hs, x, x_new, K, D)
         n_steps += 1
-        h_last = hs
         t, x = (t_stop if last else t + hs), x_new
         if last:
             si += 1
