@@ -295,14 +295,14 @@ def test_zigzag_overshoots_converge_with_the_step_when_the_reversal_is_located()
 def test_dopri5_manoeuvres_agree_with_fine_rk4():
     m = get_model("mmg")
     L, U = m.lpp, 1.179
-    fine = turning_circle(m, [20, 35], speed=U, dt=0.0125 * L / U, steady_step_factor=1)
+    fine = turning_circle(m, [20, 35], speed=U, dt=0.025 * L / U, steady_step_factor=1)
     fast = turning_circle(m, [20, 35], speed=U, method="dopri5", rtol=1e-6)
     assert fast.simulation.meta["method"] == "dopri5" and fast.success
     for a, b in zip(fine.metrics, fast.metrics):
         assert b.tactical_diameter_L == pytest.approx(a.tactical_diameter_L, abs=2e-4)
         assert b.advance_L == pytest.approx(a.advance_L, abs=2e-4)
-    zf = zigzag(m, 20, speed=U, dt=0.0125 * L / U)
-    zd = zigzag(m, 20, speed=U, method="dopri5", rtol=1e-6, dt=0.0125 * L / U)
+    zf = zigzag(m, 20, speed=U, dt=0.025 * L / U)
+    zd = zigzag(m, 20, speed=U, method="dopri5", rtol=1e-6, dt=0.025 * L / U)
     for a, b in zip(zf.metrics, zd.metrics):
         assert b.overshoot1_deg == pytest.approx(a.overshoot1_deg, abs=0.01)
         assert b.overshoot2_deg == pytest.approx(a.overshoot2_deg, abs=0.01)
