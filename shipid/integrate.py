@@ -215,13 +215,26 @@ def dopri5(f: Callable, t0: float, x0, t_end: float, t_eval=None, *, rtol: float
     K = np.zeros((7,) + shape)
     Kf = K.reshape(7, -1)
     flat = x.ndim == 1
-    A, C, E, D = _DP_A, _DP_C, _DP_E, _DP_D
+    A, C, E = _DP_A, _DP_C, _DP_E
     members = shape[:-1]
     inv_sqrt_nx = 1.0 / math.sqrt(nx)
 
     def err_norm(v, sc):
-        e = (v / sc) ** 2
-        return math.sqrt(float(np.max(e.sum(axis=-1)))) * inv_sqrt_nx if members else math.sqrt(float(e.sum())) * inv_sqrt_nx
+        q = v / sc
+        if members:
+            return math.sqrt(float(np.max(np.einsum("...i,...i->...", q, q)))) * inv_sqrt_nx
+        return math.sqrt(float(q @ q)) * inv_sqrt_nx
+
+    # dense output is evaluated once at the end over all steps (vectorised): steps with outputs are kept
+    pending: list = []
+    n_eval = t_eval.size
+
+    def keep(ie, t, hs, x, x_new):
+        if ie < n_eval and t_eval[ie] <= t + hs * (1.0 + 1e-12):
+            je = int(np.searchsorted(t_eval, t + hs * (1.0 + 1e-12), side="right"))
+            pending.append((ie, je, t, hs, x, x_new, K.copy()))
+            return je
+        return ie
 
     t = float(t0)
     K[0] = f(t, x)
@@ -240,6 +253,7 @@ def dopri5(f: Callable, t0: float, x0, t_end: float, t_eval=None, *, rtol: float
         h = float(h0)
     h = min(h, h_max)
     g_now = event(t, x) if event is not None else None
+    ax = np.abs(x)
     t_events: list = []
     ok, msg = True, "integration finished"
     while True:
@@ -254,7 +268,8 @@ def dopri5(f: Callable, t0: float, x0, t_end: float, t_eval=None, *, rtol: float
         x_new = x + (Ah[6] @ Kf if flat else (Ah[6] @ Kf).reshape(shape))
         K[6] = f(t + hs, x_new)
         n_fev += 6
-        sc = atol + rtol * np.maximum(np.abs(x), np.abs(x_new))
+        ax_new = np.abs(x_new)
+        sc = atol + rtol * np.maximum(ax, ax_new)
         err = err_norm((hs * E) @ Kf if flat else ((hs * E) @ Kf).reshape(shape), sc)
         if not math.isfinite(err):
             if hs < 1e-12 * max(1.0, abs(t)):
@@ -288,8 +303,9 @@ def dopri5(f: Callable, t0: float, x0, t_end: float, t_eval=None, *, rtol: float
                     x_new = x + (Ah[6] @ Kf).reshape(shape)
                     K[6] = f(t + hs, x_new)
                     n_fev += 6
-                ie = _dense_out(X, t_eval, ie, t, hs, x, x_new, K, D)
-                t, x = t_ev, x_new
+                    ax_new = np.abs(x_new)
+                ie = keep(ie, t, hs, x, x_new)
+                t, x, ax = t_ev, x_new, ax_new
                 g_pre = event(t, x)
                 on_event(t, x, mask)
                 t_events.append((t, mask))
@@ -304,9 +320,9 @@ def dopri5(f: Callable, t0: float, x0, t_end: float, t_eval=None, *, rtol: float
                 h = h_next
                 continue
             g_now = g_new
-        ie = _dense_out(X, t_eval, ie, t, hs, x, x_new, K, D)
+        ie = keep(ie, t, hs, x, x_new)
         n_steps += 1
-        t, x = (t_stop if last else t + hs), x_new
+        t, x, ax = (t_stop if last else t + hs), x_new, ax_new
         if last:
             si += 1
             if si >= len(stop_list):
@@ -322,6 +338,7 @@ def dopri5(f: Callable, t0: float, x0, t_end: float, t_eval=None, *, rtol: float
         if n_steps + n_rej > max_steps:
             ok, msg = False, f"more than {max_steps} steps"
             break
+    _dense_fill(X, t_eval, pending)
     if not ok:
         warnings.warn(msg, RuntimeWarning, stacklevel=2)
     return AdaptiveResult(t=t_eval, x=X, t_final=t, x_final=x, h_last=h, n_steps=n_steps, n_rejected=n_rej,
@@ -342,17 +359,32 @@ def _dense_eval(coef, th):
     return r1 + th * (r2 + s * (r3 + th * (r4 + s * r5)))
 
 
-def _dense_out(X, t_eval, ie, t, hs, x, x_new, K, D):
-    """Write the outputs with t < t_eval <= t + hs; returns the next output index."""
-    je = int(np.searchsorted(t_eval, t + hs, side="right"))
-    if je > ie:
-        coef = _dense_coeffs(x, x_new, K, hs, D)
-        th = (t_eval[ie:je] - t) / hs
-        th = th.reshape((-1,) + (1,) * x.ndim)
-        X[ie:je] = _dense_eval(coef, th)
-        if abs(t_eval[je - 1] - (t + hs)) <= 1e-12 * max(1.0, abs(t + hs)):
-            X[je - 1] = x_new
-    return je
+def _dense_fill(X, t_eval, pending):
+    """Write the outputs of all kept steps at once: ``pending`` holds (ie, je, t, hs, x, x_new, K) of each
+    step with outputs t_eval[ie:je] in (t, t + hs]."""
+    if not pending:
+        return
+    ie0, je1 = pending[0][0], pending[-1][1]
+    counts = np.array([je - ie for ie, je, *_ in pending])
+    rep = np.repeat(np.arange(len(pending)), counts)
+    T0 = np.array([p[2] for p in pending])
+    H = np.array([p[3] for p in pending])
+    X0 = np.stack([p[4] for p in pending])
+    X1 = np.stack([p[5] for p in pending])
+    K = np.stack([p[6] for p in pending])  # (m, 7, ...)
+    lead = (slice(None),) + (None,) * (X0.ndim - 1)
+    Hb = H[lead]
+    dx = X1 - X0
+    b = Hb * K[:, 0] - dx
+    r4 = dx - Hb * K[:, 6] - b
+    r5 = Hb * np.tensordot(K, _DP_D, axes=([1], [0]))  # (m, ...)
+    th = ((t_eval[ie0:je1] - T0[rep]) / H[rep])[lead]
+    s = 1.0 - th
+    X[ie0:je1] = X0[rep] + th * (dx[rep] + s * (b[rep] + th * (r4[rep] + s * r5[rep])))
+    # outputs that fall on a step end take the step's state itself
+    end = np.abs(t_eval[ie0:je1] - (T0 + H)[rep]) <= 1e-12 * np.maximum(1.0, np.abs(t_eval[ie0:je1]))
+    if np.any(end):
+        X[ie0:je1][end] = X1[rep[end]]
 
 
 def _locate_events(event, x, x_new, K, hs, t, g0, g1, cross, shape):
