@@ -91,6 +91,11 @@ MMG_PARAM_NAMES = (
     "tR", "aH", "xH", "gammaR_m", "gammaR_p", "lR", "eps", "kappa", "f_alpha",
 )
 
+#: The parameters of Yasukawa & Yoshimura (2015) that :meth:`MMGModel._derived` reads by name.
+_BASE_PARAM_NAMES = MMG_PARAM_NAMES[:38]
+#: Number of constants of :meth:`MMGModel._derived` used by the force equations (the rest: eq. (4)).
+_N_FORCE_CONSTS = 42
+
 _PARAM_DOC = {
     "R0": "resistance coefficient R'_0 = R/(1/2 rho L d U^2)",
     "mx": "surge added mass m'_x (by 1/2 rho L^2 d)", "my": "sway added mass m'_y",
@@ -381,12 +386,17 @@ class MMGModel(Model):
         parameter set (cached for a real 1-D ``p``), so that :meth:`_forces` and :meth:`_rhs` do the
         least arithmetic per call.  ``p`` is a sequence of the 38 parameters in :data:`MMG_PARAM_NAMES`
         order (floats or arrays).
+
+        To add a parameter: append its name to :data:`MMG_PARAM_NAMES`, read it here as ``q["name"]``,
+        append what the equations need to the force constants (before ``_N_FORCE_CONSTS``, raising it)
+        and unpack it in :meth:`_force_terms`.
         """
         P = self.particulars
         L, d, rho, Dp = P.lpp, P.draught, P.rho, P.D_p
+        q = dict(zip(self.param_names, p))
         (R0, Xvv, Xvr, Xrr, Xvvvv, Yv, Yr, Yvvv, Yvvr, Yvrr, Yrrr, Nv, Nr, Nvvv, Nvvr, Nvrr, Nrrr,
          mx, my, Jz, tP, wP0, k0, k1, k2, xP, C1, C2p, C2m,
-         tR, aH, xH, gRm, gRp, lR, eps, kappa, f_alpha) = p
+         tR, aH, xH, gRm, gRp, lR, eps, kappa, f_alpha) = (q[k] for k in _BASE_PARAM_NAMES)
         cq = 0.5 * rho * L * d                       # 1/2 rho L d (hull force scale / U^2)
         w1 = 1.0 - wP0                               # 1 - w_P0
         eta = Dp / P.H_R
@@ -455,7 +465,7 @@ class MMGModel(Model):
         (L, cq, cqL,
          R0, Xvv, Xvr, Xrr, Xvvvv, Yv, Yr, Yvvv, Yvvr, Yvrr, Yrrr, Nv, Nr, Nvvv, Nvvr, Nvrr, Nrrr,
          xP, mC1, w1, wcA, wcD, kT0, kT1, k2, cT, cXP, c8pi, kappa, eta, one_m_eta, eps,
-         lR, gRA, gRD, cF, cXR, cYR, cNR) = c[:42]
+         lR, gRA, gRD, cF, cXR, cYR, cNR) = c[:_N_FORCE_CONSTS]
         # hull, eqs. (7)-(10): v' = v/U, r' = r L/U, beta = asin(-v')
         U2 = uu * uu + v * v
         U = xp.sqrt(U2)
@@ -506,7 +516,7 @@ class MMGModel(Model):
             psi, uu, v, r = xc[2], xc[3], xc[4], xc[5]
             delta, n = uc[0], uc[1]
         F = self._force_terms(uu, v, r, delta, n, c, xp)
-        iMx, Mx, My, B, a_fy, a_fn, b_fn = c[42:]
+        iMx, Mx, My, B, a_fy, a_fn, b_fn = c[_N_FORCE_CONSTS:]
         # eq. (4) solved for the accelerations
         du = (F["X_H"] + F["X_R"] + F["X_P"] + (My * v + B * r) * r) * iMx
         ur = uu * r
