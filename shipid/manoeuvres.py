@@ -51,12 +51,12 @@ import numpy as np
 import pandas as pd
 
 from .models.base import Model
-from .simulate import SimulationResult, simulate
+from .simulate import METHODS, InputLaw, SimulationResult, simulate
 
 __all__ = [
     "TurningMetrics", "ZigzagMetrics", "ManoeuvreResult", "turning_metrics", "zigzag_metrics", "metrics",
     "detect_manoeuvre", "detect_execute", "imo_limits", "turning_circle", "zigzag", "turning_sweep",
-    "steady_rps", "ship_info",
+    "steady_rps", "ship_info", "RampSchedule", "TurningRudder", "ZigzagRudder", "SampledHold",
 ]
 
 EXECUTE_THRESHOLD_DEG = 0.5
@@ -552,6 +552,216 @@ def metrics(data, *, lpp: float | None = None, kind: str = "auto", reference_off
     raise ValueError(f"kind={kind!r}: use 'auto', 'turning' or 'zigzag'")
 
 
+
+# --------------------------------------------------------------------------- input laws
+class RampSchedule:
+    """A set-point schedule followed at a limited rate (propeller rps, ...): piecewise linear in time.
+
+    Parameters
+    ----------
+    start : float  value at t = 0
+    steps : sequence of (t_s, value)  set points ordered from time t_s on
+    rate : float  largest rate of change [unit/s]
+    """
+
+    def __init__(self, start: float, steps: Sequence = (), rate: float = math.inf):
+        if not rate > 0:
+            raise ValueError(f"RampSchedule: rate must be positive, got {rate}")
+        knots_t, knots_v = [0.0], [float(start)]
+        steps = sorted((float(a), float(b)) for a, b in steps)
+        for i, (ts, target) in enumerate(steps):
+            t_next = steps[i + 1][0] if i + 1 < len(steps) else math.inf
+            v = float(np.interp(ts, knots_t, knots_v)) if ts <= knots_t[-1] else knots_v[-1]
+            while knots_t and knots_t[-1] > ts:  # a new set point interrupts a running ramp
+                knots_t.pop(), knots_v.pop()
+            if not knots_t or knots_t[-1] < ts:
+                knots_t.append(ts), knots_v.append(v)
+            t_reach = ts + abs(target - v) / rate if math.isfinite(rate) else ts
+            if t_reach > ts:
+                t_end = min(t_reach, t_next)
+                knots_t.append(t_end), knots_v.append(v + math.copysign(rate * (t_end - ts), target - v))
+            elif target != v:  # infinite rate: a jump (as two knots 1e-9 s apart)
+                knots_t.append(ts + 1e-9), knots_v.append(target)
+        self.t = np.array(knots_t)
+        self.v = np.array(knots_v)
+
+    @property
+    def stops(self) -> tuple:
+        """Kinks of the schedule [s]."""
+        return tuple(float(a) for a in self.t[1:])
+
+    def __call__(self, t):
+        """Value(s) at time(s) ``t``."""
+        return np.interp(t, self.t, self.v, right=self.v[-1])
+
+
+class _RudderLaw(InputLaw):
+    """Shared parts of the manoeuvre laws: rudder ramp at the steering rate, propeller from rps or a schedule."""
+
+    def __init__(self, nu, idl, inn, n, rate, te, batch):
+        self.nu, self.idl, self.inn = nu, idl, inn
+        self.rate, self.te, self.batch = float(rate), float(te), batch
+        self.n = n
+        self._stops = [self.te] + (list(n.stops) if isinstance(n, RampSchedule) else [])
+
+    @property
+    def stops(self) -> tuple:
+        return tuple(sorted(set(self._stops)))
+
+    def _n(self, t):
+        if isinstance(self.n, RampSchedule):
+            return self.n(t)
+        return self.n if np.ndim(t) == 0 else np.asarray(self.n)[..., None]
+
+    def _pack(self, delta, n, shape):
+        u = np.empty(shape + (self.nu,))
+        u[..., self.idl] = delta
+        u[..., self.inn] = n
+        return u
+
+    def _pack_now(self, delta, t):
+        """Inputs at one time: a copy of a cached template with the rps filled (constant rps)."""
+        if isinstance(self.n, RampSchedule):
+            return self._pack(delta, self.n(t), self.batch)
+        tpl = self.__dict__.get("_tpl")
+        if tpl is None:
+            tpl = self._tpl = self._pack(0.0, self.n, self.batch)
+        u = tpl.copy()
+        u[..., self.idl] = delta
+        return u
+
+
+class TurningRudder(_RudderLaw):
+    """Turning-circle rudder: from 0 at the execute time ``te`` to ``delta`` at the steering ``rate`` [rad/s], then held.
+
+    Parameters
+    ----------
+    delta : array (B,)  ordered rudder angles [rad] (signed)
+    n : array (B,) or RampSchedule  propeller rps
+    rate, te : float  steering rate [rad/s], execute time [s]
+    nu, idl, inn : int  number of inputs, index of the rudder and of the rps input
+    """
+
+    def __init__(self, delta, n, rate, te, *, nu=2, idl=0, inn=1):
+        delta = np.asarray(delta, dtype=float)
+        super().__init__(nu, idl, inn, n, rate, te, delta.shape)
+        self.delta = delta
+        self._sign, self._mag = np.sign(delta), np.abs(delta)
+        self._stops += sorted(set((self.te + self._mag[delta != 0] / self.rate).tolist()))
+
+    def _delta(self, t):
+        if np.ndim(t) == 0:
+            return self._sign * np.minimum(self.rate * max(t - self.te, 0.0), self._mag)
+        return self._sign[..., None] * np.minimum(self.rate * np.maximum(t - self.te, 0.0), self._mag[..., None])
+
+    def inputs(self, t, x):
+        return self._pack_now(self._delta(t), t)
+
+    def input_history(self, t, x):
+        return self._pack(self._delta(np.asarray(t)), self._n(np.asarray(t)), self.batch + (np.size(t),))
+
+
+class ZigzagRudder(_RudderLaw):
+    """Zigzag rudder law: the one implementation of the ITTC/IMO zigzag (used by :func:`zigzag` and by
+    :func:`shipid.synthetic.make_trial`).
+
+    At ``te`` the rudder is ordered to ``first * amp``; it moves at the steering ``rate``; each member
+    reverses its order when its heading deviation from ``psi0`` reaches ``switch`` on the side it is
+    turning to.  The reversal is a located event (:class:`~shipid.simulate.InputLaw`): it happens at the
+    crossing itself, not at the start of the next step, so overshoot angles converge with the step.
+
+    Parameters
+    ----------
+    amp, switch : float  rudder amplitude and switch heading deviation [rad] (positive)
+    first : array (B,)  +1 (starboard / positive rudder first) or -1
+    psi0 : array (B,)  reference heading [rad] (the approach course)
+    n : array (B,) or RampSchedule  propeller rps
+    rate, te : float  steering rate [rad/s], time of the first execute [s]
+    ipsi, nu, idl, inn : int  index of psi in the state; inputs as in :class:`TurningRudder`
+
+    Attributes
+    ----------
+    count : ndarray (B,) int  rudder executes so far (1 after the first)
+    t_switch : list of (time, mask)  the reversals
+    """
+
+    has_events = True
+
+    def __init__(self, amp, switch, first, psi0, n, rate, te, *, ipsi=2, nu=2, idl=0, inn=1):
+        first = np.asarray(first, dtype=float)
+        super().__init__(nu, idl, inn, n, rate, te, first.shape)
+        self.amp, self.lev, self.ipsi = float(amp), float(switch), ipsi
+        self.psi0 = np.broadcast_to(np.asarray(psi0, dtype=float), first.shape).copy()
+        # history of (t_s, delta at t_s, order from t_s on); the rudder moves from delta_s towards the order
+        self._hist_t = [self.te]
+        self._hist = [(np.zeros(first.shape), first * self.amp)]
+        self.count = np.ones(first.shape, dtype=int)
+        self.t_switch: list = []
+
+    def _delta(self, t):
+        """Rudder at scalar time ``t``."""
+        if t < self.te:
+            return np.zeros(self.batch)
+        k = int(np.searchsorted(self._hist_t, t, side="right")) - 1
+        d0, cmd = self._hist[k]
+        lim = self.rate * (t - self._hist_t[k])
+        return d0 + np.clip(cmd - d0, -lim, lim)
+
+    def inputs(self, t, x):
+        return self._pack_now(self._delta(t), t)
+
+    def event(self, t, x):
+        g = np.sign(self._hist[-1][1]) * (x[..., self.ipsi] - self.psi0) - self.lev
+        return np.where(np.asarray(t) < self.te, -1.0, g)
+
+    def on_event(self, t, x, mask):
+        d = self._delta(t)
+        cmd = self._hist[-1][1]
+        self._hist_t.append(float(t))
+        self._hist.append((d, np.where(mask, -cmd, cmd)))
+        self.count = self.count + mask
+        self.t_switch.append((float(t), mask.copy()))
+
+    def input_history(self, t, x):
+        t = np.asarray(t, dtype=float)
+        delta = np.zeros(self.batch + (t.size,))
+        for k, ts in enumerate(self._hist_t):
+            t_next = self._hist_t[k + 1] if k + 1 < len(self._hist_t) else np.inf
+            sel = (t >= ts) & (t < t_next)
+            if np.any(sel):
+                d0, cmd = self._hist[k]
+                lim = self.rate * (t[sel] - ts)
+                delta[..., sel] = d0[..., None] + np.clip((cmd - d0)[..., None], -lim, lim)
+        return self._pack(delta, self._n(t), self.batch + (t.size,))
+
+class SampledHold:
+    """An input law applied by a sampled (digital) controller with zero-order hold, as a plain
+    ``controller(t, x)`` for :func:`shipid.simulate.simulate`.
+
+    At each sample time ``t`` (the start of an interval of length ``dt``) the law's events are checked on
+    the sampled state (a zigzag reverses when the sampled heading deviation has reached the switch
+    angle), and the value the law reaches at ``t + dt`` (the rudder after ``dt`` of steering at the
+    rate) is held over the interval.  The held value is the logged one, so a log made this way satisfies
+    exactly the zero-order-hold input assumption of the identifier (the EKF).  Used by
+    :func:`shipid.synthetic.make_trial`; :func:`zigzag` / :func:`turning_circle` use the continuous law.
+    """
+
+    def __init__(self, law: InputLaw, dt: float):
+        if not dt > 0:
+            raise ValueError(f"SampledHold: dt must be positive, got {dt}")
+        self.law, self.dt = law, float(dt)
+        self._t_last = -math.inf
+
+    def __call__(self, t, x):
+        law = self.law
+        if law.has_events and t > self._t_last:  # simulate() asks again at the final time: no new decision
+            hit = law.event(t, x) >= 0
+            if np.any(hit):
+                law.on_event(t, x, hit)
+        self._t_last = max(self._t_last, t)
+        return law.inputs(t + self.dt, x)
+
+
 # --------------------------------------------------------------------------- simulation
 def ship_info(model: Model) -> dict:
     """Ship facts a manoeuvre needs: ``lpp`` [m], ``rudder_rate`` [rad/s], ``design_speed`` [m/s].
@@ -688,14 +898,14 @@ def _resolve(model, speed, n, rudder_rate, lpp, params):
     return float(L), float(rate), speed
 
 
-def _run_batched(model, x0, t_step, controller_factory, done, params, t_max, chunk):
+def _run_batched(model, x0, t_step, controller_factory, done, params, t_max, chunk, method="rk4", rtol=1e-6):
     """Integrate in chunks until ``done(X_all, t_all)`` or ``t_max``; returns a SimulationResult.
 
     ``t_step`` is a step [s] or a callable ``(T, X) -> step`` choosing the step of the next chunk from
     the run so far (the time grid of ``simulate`` may be non-uniform).
     """
     ctrl = controller_factory()
-    ts, Xs, Us = [], [], []
+    ts, Xs, Us, stats = [], [], [], []
     t0 = 0.0
     x = x0
     ok, msg = True, "integration finished"
@@ -704,7 +914,9 @@ def _run_batched(model, x0, t_step, controller_factory, done, params, t_max, chu
             (t_step if not callable(t_step) else t_step(None, None))
         n_steps = max(1, int(round(chunk / h)))
         t = t0 + h * np.arange(n_steps + 1)
-        res = simulate(model, x, t, controller=ctrl, params=params)
+        res = simulate(model, x, t, controller=ctrl, params=params, method=method, rtol=rtol,
+                       first_step=stats[-1].get("h_last") if stats else None)
+        stats.append(res.meta)
         ts.append(t if not ts else t[1:])
         Xs.append(res.x if not Xs else res.x[:, 1:])
         Us.append(res.u if not Us else res.u[:, 1:])
@@ -721,7 +933,11 @@ def _run_batched(model, x0, t_step, controller_factory, done, params, t_max, chu
     T, X, Uo = np.concatenate(ts), np.concatenate(Xs, axis=1), np.concatenate(Us, axis=1)
     # the last input sample of a chunk is re-evaluated by the next chunk: keep the later value
     p = model.params if params is None else np.asarray(params, dtype=float)
-    return SimulationResult(t=T, x=X, u=Uo, model=model, params=np.array(p), success=ok, message=msg)
+    meta = {"method": method}
+    for k in ("n_steps", "n_rejected", "n_fev"):
+        if any(k in m for m in stats):
+            meta[k] = int(sum(m.get(k, 0) for m in stats))
+    return SimulationResult(t=T, x=X, u=Uo, model=model, params=np.array(p), success=ok, message=msg, meta=meta)
 
 
 def _time_step(L, speeds, dt):
@@ -733,7 +949,8 @@ def _time_step(L, speeds, dt):
 def turning_circle(model: Model, rudder_deg: float | Sequence[float] = 35.0, *, speed=None, n=None,
                    side: str = "both", rudder_rate: float | None = None, heading_change_deg: float = 540.0,
                    execute_time: float | None = None, dt: float | None = None, t_max: float | None = None,
-                   lpp: float | None = None, params=None, steady_step_factor: float = 4.0) -> ManoeuvreResult:
+                   lpp: float | None = None, params=None, steady_step_factor: float = 4.0,
+                   method: str = "rk4", rtol: float = 1e-6) -> ManoeuvreResult:
     """Simulate turning circles as one batch.
 
     Parameters
@@ -753,12 +970,17 @@ def turning_circle(model: Model, rudder_deg: float | Sequence[float] = 35.0, *, 
     t_max : float, optional  safety limit [s]; default 60 L/U
     lpp : float, optional  ship length for the metrics (default the model's)
     params : array, optional  model parameters (default ``model.params``)
+    method : {"rk4", "dopri5"}  integrator (:func:`shipid.simulate.simulate`): fixed-step RK4 with step
+        ``dt``, or adaptive Dormand-Prince 5(4) at tolerance ``rtol`` (then ``dt`` is only the output
+        spacing the metrics interpolate on; far fewer model evaluations at equal accuracy)
+    rtol : float  ``dopri5`` relative tolerance (absolute: 1e-3 rtol)
 
     Returns
     -------
     ManoeuvreResult
         Members ordered as (rudder, speed, side) with side fastest.
     """
+    _check_method(method)
     L, rate, speed = _resolve(model, speed, n, rudder_rate, lpp, params)
     rud = np.atleast_1d(np.asarray(rudder_deg, dtype=float))
     sides = {"both": [1.0, -1.0], "starboard": [1.0], "port": [-1.0], "given": [1.0]}.get(side)
@@ -781,7 +1003,12 @@ def turning_circle(model: Model, rudder_deg: float | Sequence[float] = 35.0, *, 
     delta_t = np.radians(R) * Sd
     speeds, ns = spd[S], nn[S]
     return _simulate_turns(model, delta_t, speeds, ns, rate, L, heading_change_deg, execute_time, dt, t_max, params,
-                           coarsen=steady_step_factor)
+                           coarsen=steady_step_factor, method=method, rtol=rtol)
+
+
+def _check_method(method):
+    if method not in METHODS:
+        raise ValueError(f"method={method!r}: use one of {METHODS}")
 
 
 def _speed_for_rps(model, n, params):
@@ -799,7 +1026,7 @@ def _speed_for_rps(model, n, params):
 
 
 def _simulate_turns(model, delta_target, speeds, ns, rate, L, heading_change_deg, execute_time, dt, t_max, params,
-                    coarsen=4.0):
+                    coarsen=4.0, method="rk4", rtol=1e-6):
     B = delta_target.size
     te = 2.0 * L / float(np.min(speeds)) if execute_time is None else float(execute_time)
     h = _time_step(L, speeds, dt)
@@ -809,14 +1036,7 @@ def _simulate_turns(model, delta_target, speeds, ns, rate, L, heading_change_deg
     target = math.radians(heading_change_deg)
 
     def factory():
-        def ctrl(t, x):
-            tm = t + 0.5 * h  # rudder at the middle of the step: second-order accurate ramp
-            mag = np.clip(rate * (tm - te), 0.0, np.abs(delta_target))
-            uin = np.zeros((B, model.nu))
-            uin[:, idl] = np.sign(delta_target) * mag
-            uin[:, inn] = ns
-            return uin
-        return ctrl
+        return TurningRudder(delta_target, ns, rate, te, nu=model.nu, idl=idl, inn=inn)
 
     def done(T, X):
         ke = int(np.searchsorted(T, te))
@@ -837,7 +1057,7 @@ def _simulate_turns(model, delta_target, speeds, ns, rate, L, heading_change_deg
         return h * coarse if steady else h
 
     chunk = max(10 * L / float(np.min(speeds)), te + h)
-    sim = _run_batched(model, _approach_state(model, speeds), step, factory, done, params, t_max, chunk)
+    sim = _run_batched(model, _approach_state(model, speeds), step, factory, done, params, t_max, chunk, method, rtol)
     settings = pd.DataFrame({"rudder_deg": np.degrees(delta_target), "speed": speeds, "n": ns})
     mets = []
     ref = "midship" if model.name == "mmg" else f"model origin of '{model.name}'"
@@ -860,7 +1080,7 @@ def _simulate_turns(model, delta_target, speeds, ns, rate, L, heading_change_deg
 def zigzag(model: Model, rudder_deg: float = 10.0, switch_deg: float | None = None, *, speed=None, n=None,
            first: str = "both", rudder_rate: float | None = None, n_executes: int = 4,
            execute_time: float | None = None, dt: float | None = None, t_max: float | None = None,
-           lpp: float | None = None, params=None) -> ManoeuvreResult:
+           lpp: float | None = None, params=None, method: str = "rk4", rtol: float = 1e-6) -> ManoeuvreResult:
     """Simulate zigzag manoeuvres (delta/psi, e.g. 10/10, 20/20) as one batch.
 
     Parameters
@@ -870,10 +1090,14 @@ def zigzag(model: Model, rudder_deg: float = 10.0, switch_deg: float | None = No
     first : {"both", "starboard", "port"}  side of the first rudder execute
     n_executes : int  run until this many rudder executes have happened (>= 4 gives the second overshoot)
 
-    The rudder logic is a batch-aware feedback law: each member reverses its rudder order when its own
-    heading deviation reaches the switch angle on the side it is turning to; the rudder moves at the
-    ship's rudder rate.
+    method, rtol : integrator and ``dopri5`` tolerance (see :func:`turning_circle`); ``dt`` is the RK4 step
+        or, for ``dopri5``, the output spacing
+
+    The rudder logic is :class:`ZigzagRudder`: each member reverses its rudder order when its own
+    heading deviation reaches the switch angle on the side it is turning to (located within the step);
+    the rudder moves at the ship's rudder rate.
     """
+    _check_method(method)
     L, rate, speed = _resolve(model, speed, n, rudder_rate, lpp, params)
     sw = float(rudder_deg if switch_deg is None else switch_deg)
     if rudder_deg <= 0 or sw <= 0:
@@ -897,40 +1121,18 @@ def zigzag(model: Model, rudder_deg: float = 10.0, switch_deg: float | None = No
     t_max = 80.0 * L / float(np.min(speeds)) + te if t_max is None else float(t_max)
     idl, inn, ipsi = model.input_index("delta"), model.input_index("n"), model.state_index("psi")
     amp, lev = math.radians(rudder_deg), math.radians(sw)
-    state: dict = {}
+    x0 = _approach_state(model, speeds)
+    law: list = []
 
     def factory():
-        state.update(cmd=F * amp, delta=np.zeros(B), psi0=None, count=np.ones(B, dtype=int), last_t=-np.inf)
-
-        def ctrl(t, x):
-            if t <= state["last_t"]:  # simulate() re-evaluates the law at the final time: no state change
-                return state["last_u"]
-            state["last_t"] = t
-            uin = np.zeros((B, model.nu))
-            uin[:, inn] = ns
-            if t + 1e-12 < te:
-                state["last_u"] = uin
-                return uin
-            if state["psi0"] is None:
-                state["psi0"] = x[:, ipsi].copy()
-            dpsi = x[:, ipsi] - state["psi0"]
-            cmd = state["cmd"]
-            flip = np.sign(cmd) * dpsi >= lev
-            state["cmd"] = np.where(flip, -cmd, cmd)
-            state["count"] = state["count"] + flip
-            step = np.clip(state["cmd"] - state["delta"], -rate * h, rate * h)
-            mid = state["delta"] + 0.5 * step
-            state["delta"] = state["delta"] + step
-            uin[:, idl] = mid
-            state["last_u"] = uin
-            return uin
-        return ctrl
+        law[:] = [ZigzagRudder(amp, lev, F, x0[:, ipsi], ns, rate, te, ipsi=ipsi, nu=model.nu, idl=idl, inn=inn)]
+        return law[0]
 
     def done(T, X):
-        return bool(np.all(state["count"] >= n_executes + 1)) and T[-1] > te
+        return bool(np.all(law[0].count >= n_executes + 1)) and T[-1] > te
 
     chunk = max(10 * L / float(np.min(speeds)), te + h)
-    sim = _run_batched(model, _approach_state(model, speeds), h, factory, done, params, t_max, chunk)
+    sim = _run_batched(model, x0, h, factory, done, params, t_max, chunk, method, rtol)
     settings = pd.DataFrame({"rudder_deg": rudder_deg, "switch_deg": sw, "first": [_side(f) for f in F],
                              "speed": speeds, "n": ns})
     ref = "midship" if model.name == "mmg" else f"model origin of '{model.name}'"
@@ -950,7 +1152,8 @@ def zigzag(model: Model, rudder_deg: float = 10.0, switch_deg: float | None = No
 
 def turning_sweep(model: Model, rudder_deg: Sequence[float] = (10.0, 15.0, 25.0), speeds: Sequence[float] = (1.7, 2.0, 2.2),
                   *, side: str = "starboard", rudder_rate: float | None = None, heading_change_deg: float = 540.0,
-                  dt: float | None = None, lpp: float | None = None, params=None) -> pd.DataFrame:
+                  dt: float | None = None, lpp: float | None = None, params=None, method: str = "rk4",
+                  rtol: float = 1e-6) -> pd.DataFrame:
     """Turning diameters over rudder angle x approach speed, simulated as ONE batch (seed 002 studies).
 
     The rps of each approach speed is the steady rps of the model at that speed (:func:`steady_rps`).
@@ -962,7 +1165,7 @@ def turning_sweep(model: Model, rudder_deg: Sequence[float] = (10.0, 15.0, 25.0)
         tactical_diameter_L, steady_diameter_L, tactical_diameter [m], steady_diameter [m], speed_loss, success.
     """
     res = turning_circle(model, list(rudder_deg), speed=list(speeds), side=side, rudder_rate=rudder_rate,
-                         heading_change_deg=heading_change_deg, dt=dt, lpp=lpp, params=params)
+                         heading_change_deg=heading_change_deg, dt=dt, lpp=lpp, params=params, method=method, rtol=rtol)
     df = res.to_pandas()
     cols = ["rudder_deg", "speed", "n", "side", "advance_L", "transfer_L", "tactical_diameter_L", "steady_diameter_L",
             "tactical_diameter", "steady_diameter", "speed_loss", "success"]

@@ -1,10 +1,17 @@
 """Integrate a protocol model under an input schedule or a feedback law.
 
-:func:`simulate` is the single forward simulator of the package: fixed-step
-RK4 (the same map the EKF uses, :mod:`shipid.integrate`), vectorised over a
-leading batch axis, with inputs given either as samples on the time grid
-(zero-order hold between samples) or as a callable ``controller(t, x) -> u``
-for state feedback (zigzag rudder logic, autopilots).
+:func:`simulate` is the single forward simulator of the package, vectorised
+over a leading batch axis, with inputs given as samples on the time grid
+(zero-order hold between samples), as a callable ``controller(t, x) -> u``
+for state feedback (held over each step), or as an :class:`InputLaw` (inputs
+as a function of time with located events: the standard manoeuvres' rudder
+laws).  Two integrators:
+
+* ``method="rk4"`` (default): fixed-step RK4, the same map the EKF uses
+  (:mod:`shipid.integrate`);
+* ``method="dopri5"``: the embedded Dormand-Prince 5(4) pair with error
+  control (:func:`shipid.integrate.dopri5`), one shared step for the batch,
+  outputs on ``t`` from its dense output -- far fewer steps at equal accuracy.
 """
 from __future__ import annotations
 
@@ -15,10 +22,52 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from .integrate import rk4_step
+from .integrate import dopri5, rk4_step
 from .models.base import Model
 
-__all__ = ["simulate", "SimulationResult", "replay", "replay_errors"]
+__all__ = ["simulate", "SimulationResult", "InputLaw", "replay", "replay_errors", "METHODS"]
+
+#: Integrators of :func:`simulate`.
+METHODS = ("rk4", "dopri5")
+
+
+class InputLaw:
+    """Inputs as a function of time, with optional state events (base class).
+
+    Subclasses implement :meth:`inputs`; laws that switch on the state (a zigzag's rudder reversal)
+    also set ``has_events = True`` and implement :meth:`event` and :meth:`on_event`.  :func:`simulate`
+    evaluates :meth:`inputs` at every stage (``dopri5``) or at the middle of each step (``rk4``, held
+    over the step), steps onto :attr:`stops` exactly, and locates events within a step (the step is
+    split at the event), so switching happens at the crossing, not at the next step start.
+
+    :meth:`inputs` must give the value *at time t* for any ``t`` up to the current time (history is
+    kept by the law), so that the recorded inputs of a result are the ones that acted.
+    """
+
+    #: Times [s] where the inputs have kinks (known in advance; the inputs must be continuous in time).
+    stops: tuple = ()
+    has_events: bool = False
+
+    def inputs(self, t: float, x: np.ndarray) -> np.ndarray:
+        """Inputs ``(..., nu)`` at time ``t`` [s] for states ``x (..., nx)``."""
+        raise NotImplementedError
+
+    def event(self, t, x: np.ndarray) -> np.ndarray:
+        """Event functions ``(...)``: an event is a crossing from negative to >= 0.  While an event is
+        located, ``t`` is an array of per-member times (shape ``(...)``)."""
+        raise NotImplementedError
+
+    def on_event(self, t: float, x: np.ndarray, mask: np.ndarray) -> None:
+        """Called at an event with the members (``mask``) whose event function crossed zero."""
+        raise NotImplementedError
+
+    def input_history(self, t: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """Inputs ``(..., n_t, nu)`` that acted at the times ``t (n_t,)`` with states ``x (..., n_t, nx)``
+        (after the run; subclasses vectorise this)."""
+        return np.stack([self.inputs(tk, x[..., k, :]) for k, tk in enumerate(t)], axis=-2)
+
+    def __call__(self, t, x):
+        return self.inputs(t, x)
 
 
 @dataclass
@@ -91,9 +140,13 @@ def simulate(
     t,
     inputs=None,
     *,
-    controller: Callable | None = None,
+    controller: Callable | InputLaw | None = None,
     params=None,
     substeps: int = 1,
+    method: str = "rk4",
+    rtol: float = 1e-6,
+    atol=None,
+    first_step: float | None = None,
 ) -> SimulationResult:
     """Integrate ``model`` from ``x0`` over the time grid ``t``.
 
@@ -105,19 +158,29 @@ def simulate(
     t : array, shape (n_t,)
         Strictly increasing output times [s]; steps may be non-uniform.
     inputs : array, shape (n_t, nu) or (B, n_t, nu), optional
-        Inputs sampled on ``t`` and held constant over each step.
-    controller : callable ``(t, x) -> u``, optional
-        State feedback evaluated at the start of each step (batch-aware:
-        ``x`` has shape (B, nx) in a batch).  Exactly one of ``inputs`` and
-        ``controller`` must be given.
+        Inputs sampled on ``t`` and held constant over each interval.
+    controller : callable ``(t, x) -> u`` or InputLaw, optional
+        A callable is state feedback evaluated at the start of each output interval and held over it
+        (batch-aware: ``x`` has shape (B, nx) in a batch).  An :class:`InputLaw` is evaluated as a
+        function of time (see there) with its events located within the steps.  Exactly one of
+        ``inputs`` and ``controller`` must be given.
     params : array, shape (np,) or (B, np), optional
         Defaults to ``model.params``.
     substeps : int
-        RK4 steps per output interval.
+        ``rk4``: steps per output interval.
+    method : {"rk4", "dopri5"}
+        Fixed-step RK4 (the EKF's map) or adaptive Dormand-Prince 5(4) (see module docstring).
+    rtol, atol : float
+        ``dopri5`` error tolerances (per component |err| <= atol + rtol |x|); ``atol`` defaults to
+        ``1e-3 rtol``.
+    first_step : float, optional
+        ``dopri5`` first step [s] (e.g. ``meta["h_last"]`` of a previous run being continued); default
+        Hairer's starting-step heuristic.
 
     Returns
     -------
     SimulationResult
+        ``meta`` holds ``method`` and, for ``dopri5``, ``n_steps``, ``n_rejected``, ``n_fev``, ``h_last``.
     """
     t = np.asarray(t, dtype=float)
     if t.ndim != 1 or t.size < 2 or np.any(np.diff(t) <= 0):
@@ -126,31 +189,52 @@ def simulate(
         raise ValueError("give exactly one of inputs= (sampled inputs) or controller= (feedback law)")
     if substeps < 1:
         raise ValueError(f"substeps must be >= 1, got {substeps}")
+    if method not in METHODS:
+        raise ValueError(f"method={method!r}: use one of {METHODS}")
+    if method == "dopri5" and not (0 < rtol < 1):
+        raise ValueError(f"rtol must be in (0, 1), got {rtol}")
     x0 = np.asarray(x0, dtype=float)
     if x0.shape[-1] != model.nx or x0.ndim > 2:
         raise ValueError(f"x0 must have shape ({model.nx},) or (B, {model.nx}) for {model.state_names}; got {x0.shape}")
     p = model.params if params is None else np.asarray(params, dtype=float)
     batch = x0.shape[:-1]
     n_t = t.size
+    U = None
     if inputs is not None:
         U = np.asarray(inputs, dtype=float)
         if U.shape[-2:] != (n_t, model.nu):
             raise ValueError(f"inputs must have shape (..., {n_t}, {model.nu}) for {model.input_names}; got {U.shape}")
         U = np.broadcast_to(U, batch + (n_t, model.nu))
+    law = controller if isinstance(controller, InputLaw) else None
+    if method == "dopri5":
+        return _simulate_dopri5(model, x0, t, U, controller, law, p, rtol, 1e-3 * rtol if atol is None else atol,
+                                first_step)
     X = np.full(batch + (n_t, model.nx), np.nan)
     Uout = np.full(batch + (n_t, model.nu), np.nan)
     x = x0.copy()
     X[..., 0, :] = x
     ok, msg = True, "integration finished"
+    f = model._rhs
     for k in range(n_t - 1):
-        uk = controller(t[k], x) if controller is not None else U[..., k, :]
-        uk = np.broadcast_to(np.asarray(uk, dtype=float), batch + (model.nu,))
-        Uout[..., k, :] = uk
         h = (t[k + 1] - t[k]) / substeps
         tk = t[k]
-        for _ in range(substeps):
-            x = rk4_step(model, tk, x, uk, p, h)
-            tk += h
+        if law is not None:
+            Uout[..., k, :] = law.inputs(tk, x)
+            for _ in range(substeps):
+                x = _rk4_law_step(model, law, tk, x, p, h)
+                tk += h
+        else:
+            uk = controller(tk, x) if controller is not None else U[..., k, :]
+            uk = np.broadcast_to(np.asarray(uk, dtype=float), batch + (model.nu,))
+            Uout[..., k, :] = uk
+            for _ in range(substeps):
+                # rk4_step inlined (one call less per step; same arithmetic)
+                k1 = f(tk, x, uk, p)
+                k2 = f(tk + h / 2, x + h / 2 * k1, uk, p)
+                k3 = f(tk + h / 2, x + h / 2 * k2, uk, p)
+                k4 = f(tk + h, x + h * k3, uk, p)
+                x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+                tk += h
         X[..., k + 1, :] = x
         if not np.all(np.isfinite(x)):
             ok = False
@@ -158,9 +242,94 @@ def simulate(
             warnings.warn(msg, RuntimeWarning, stacklevel=2)
             break
     if ok:
-        last = controller(t[-1], x) if controller is not None else U[..., -1, :]
+        last = (law.inputs(t[-1], x) if law is not None else controller(t[-1], x)) if controller is not None else U[..., -1, :]
         Uout[..., -1, :] = np.broadcast_to(np.asarray(last, dtype=float), batch + (model.nu,))
-    return SimulationResult(t=t, x=X, u=Uout, model=model, params=np.array(p), success=ok, message=msg)
+    return SimulationResult(t=t, x=X, u=Uout, model=model, params=np.array(p), success=ok, message=msg,
+                            meta={"method": "rk4"})
+
+
+def _rk4_law_step(model, law, t, x, p, h):
+    """RK4 over [t, t + h] under an InputLaw: input held at its mid-step value; stops inside the step
+    and events located within it split the step (events by the Illinois method on the discrete map)."""
+    t_end = t + h
+    while t < t_end - 1e-12 * max(1.0, abs(t_end)):
+        stop = next((s for s in law.stops if t + 1e-12 * max(1.0, abs(t)) < s < t_end), t_end)
+        hs = stop - t
+        xn = rk4_step(model, t, x, law.inputs(t + 0.5 * hs, x), p, hs)
+        if law.has_events:
+            g0, g1 = law.event(t, x), law.event(t + hs, xn)
+            cross = (g0 < 0) & (g1 >= 0)
+            if np.any(cross):
+                lo, hi = np.zeros(g0.shape), np.ones(g0.shape)
+                glo, ghi = np.where(cross, g0, -1.0), np.where(cross, g1, 1.0)
+                for _ in range(50):  # Illinois on the fraction of the step, per crossing member
+                    th = np.clip(np.where(cross, (lo * ghi - hi * glo) / (ghi - glo), 1.0), lo, hi)
+                    ths = float(np.min(th[cross]))
+                    xm = rk4_step(model, t, x, law.inputs(t + 0.5 * ths * hs, x), p, ths * hs)
+                    gm = law.event(t + ths * hs, xm)
+                    first = cross & (th == ths)
+                    up = gm >= 0
+                    hi, ghi = np.where(first & up, ths, hi), np.where(first & up, gm, np.where(first & ~up, ghi * 0.5, ghi))
+                    lo, glo = np.where(first & ~up, ths, lo), np.where(first & ~up, gm, np.where(first & up, glo * 0.5, glo))
+                    if np.all(hi[first] - lo[first] < 1e-12) or np.all(np.abs(gm[first]) < 1e-13):
+                        break
+                th_ev = float(np.min(hi[cross]))
+                hs = th_ev * hs
+                xn = rk4_step(model, t, x, law.inputs(t + 0.5 * hs, x), p, hs)
+                mask = cross & (hi <= th_ev + 1e-9)
+                law.on_event(t + hs, xn, mask)
+        t, x = t + hs, xn
+    return x
+
+
+def _simulate_dopri5(model, x0, t, U, controller, law, p, rtol, atol, first_step=None):
+    batch = x0.shape[:-1]
+    n_t = t.size
+    f = model._rhs
+    X = np.full(batch + (n_t, model.nx), np.nan)
+    Uout = np.full(batch + (n_t, model.nu), np.nan)
+    stats = {"method": "dopri5", "n_steps": 0, "n_rejected": 0, "n_fev": 0, "h_last": None}
+    ok, msg = True, "integration finished"
+
+    def add(r):
+        for k in ("n_steps", "n_rejected", "n_fev"):
+            stats[k] += getattr(r, k)
+        stats["h_last"] = r.h_last
+
+    if law is not None:
+        r = dopri5(lambda tt, xx: f(tt, xx, law.inputs(tt, xx), p), float(t[0]), x0, float(t[-1]), t, rtol=rtol,
+                   atol=atol, h0=first_step, stops=law.stops, event=law.event if law.has_events else None,
+                   on_event=law.on_event)
+        add(r)
+        X[...] = np.moveaxis(r.x, 0, -2)
+        ok, msg = r.success, r.message
+        Uout[...] = law.input_history(t, X)
+    else:
+        # zero-order-hold inputs: one adaptive run per interval of constant input
+        X[..., 0, :] = x0
+        x, h0 = x0, first_step
+        k = 0
+        if controller is None:  # sample indices where some input of some member changes
+            diff = np.any(U[..., 1:, :] != U[..., :-1, :], axis=-1)
+            changes = np.flatnonzero(np.any(diff.reshape(-1, n_t - 1), axis=0)) + 1
+            ends = np.append(changes[changes < n_t - 1], n_t - 1)
+        while k < n_t - 1:
+            uk = controller(t[k], x) if controller is not None else U[..., k, :]
+            uk = np.broadcast_to(np.asarray(uk, dtype=float), batch + (model.nu,))
+            j = k + 1 if controller is not None else int(ends[np.searchsorted(ends, k, side="right")])
+            r = dopri5(lambda tt, xx, uk=uk: f(tt, xx, uk, p), float(t[k]), x, float(t[j]), t[k + 1:j + 1],
+                       rtol=rtol, atol=atol, h0=h0)
+            add(r)
+            Uout[..., k:j, :] = uk[..., None, :]
+            X[..., k + 1:j + 1, :] = np.moveaxis(r.x, 0, -2)
+            if not r.success:
+                ok, msg = False, r.message
+                break
+            x, h0, k = r.x_final, r.h_last, j
+        if ok:
+            last = controller(t[-1], x) if controller is not None else U[..., -1, :]
+            Uout[..., -1, :] = np.broadcast_to(np.asarray(last, dtype=float), batch + (model.nu,))
+    return SimulationResult(t=t, x=X, u=Uout, model=model, params=np.array(p), success=ok, message=msg, meta=stats)
 
 
 def _log_frame(log) -> pd.DataFrame:

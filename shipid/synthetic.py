@@ -97,24 +97,25 @@ def steady_surge_speed(model: Model, n: float, delta: float = 0.0) -> float:
     return float(brentq(f, grid[i], grid[i + 1], xtol=1e-12))
 
 
-def _rpm(recipe: TrialRecipe, t: float, n_now: float, h: float) -> float:
-    target = recipe.rpm_steps[0][1]
-    for ts, n in recipe.rpm_steps:
-        if t >= ts:
-            target = n
-    return n_now + np.clip(target - n_now, -recipe.n_rate * h, recipe.n_rate * h)
-
-
 def make_trial(model: Model, recipe: TrialRecipe, rng: np.random.Generator | None = None,
                noise_std: dict | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Simulate one trial; returns (noisy log, noise-free truth) as frames in the default schema.
 
-    The rudder moves at the rudder rate; a zigzag reverses the rudder when the
-    heading deviation from the initial course reaches ``psi_deg`` in the
-    direction of the current rudder.
+    The inputs are the manoeuvre laws of :mod:`shipid.manoeuvres` (one implementation):
+    :class:`~shipid.manoeuvres.TurningRudder` or :class:`~shipid.manoeuvres.ZigzagRudder` (rudder
+    executed at ``execute_s`` and moved at the rudder rate; a zigzag reverses the rudder when the
+    heading deviation from the initial course reaches ``psi_deg`` in the direction of the current
+    rudder), with the propeller following ``rpm_steps`` at ``n_rate``
+    (:class:`~shipid.manoeuvres.RampSchedule`), applied as a sampled controller
+    (:class:`~shipid.manoeuvres.SampledHold`: decisions at the samples, inputs held over each sample
+    interval and logged as held -- the identifier's zero-order-hold assumption).  Fixed-step RK4,
+    4 steps per sample.
     """
+    from .manoeuvres import RampSchedule, SampledHold, TurningRudder, ZigzagRudder
+
+    if recipe.kind not in ("turning", "zigzag"):
+        raise ValueError(f"recipe {recipe.name}: kind must be 'turning' or 'zigzag', got {recipe.kind!r}")
     t = np.arange(0.0, recipe.duration_s + 1e-9, recipe.dt_s)
-    h = recipe.dt_s
     n0 = recipe.rpm_steps[0][1]
     u0 = steady_surge_speed(model, n0)
     x0 = np.zeros(model.nx)
@@ -123,28 +124,13 @@ def make_trial(model: Model, recipe: TrialRecipe, rng: np.random.Generator | Non
     rate = np.deg2rad(recipe.rudder_rate_deg_s)
     side = np.sign(recipe.delta_deg) or 1.0
     amp = np.deg2rad(abs(recipe.delta_deg))
-    trig = np.deg2rad(recipe.psi_deg)
-    state = {"delta": 0.0, "n": n0, "target": 0.0}
-
-    def controller(tk, x):
-        if tk >= recipe.execute_s:
-            if recipe.kind == "turning":
-                state["target"] = side * amp
-            else:
-                if state["target"] == 0.0:
-                    state["target"] = side * amp
-                dpsi = x[ipsi]
-                if state["target"] > 0 and dpsi >= trig:
-                    state["target"] = -amp
-                elif state["target"] < 0 and dpsi <= -trig:
-                    state["target"] = amp
-        state["delta"] += np.clip(state["target"] - state["delta"], -rate * h, rate * h)
-        state["n"] = _rpm(recipe, tk, state["n"], h)
-        u = np.zeros(model.nu)
-        u[id_], u[in_] = state["delta"], state["n"]
-        return u
-
-    res = simulate(model, x0, t, controller=controller, substeps=4)
+    rpm = RampSchedule(n0, recipe.rpm_steps, recipe.n_rate)
+    idx = {"nu": model.nu, "idl": id_, "inn": in_}
+    if recipe.kind == "turning":
+        law = TurningRudder(side * amp, rpm, rate, recipe.execute_s, **idx)
+    else:
+        law = ZigzagRudder(amp, np.deg2rad(recipe.psi_deg), side, x0[ipsi], rpm, rate, recipe.execute_s, ipsi=ipsi, **idx)
+    res = simulate(model, x0, t, controller=SampledHold(law, recipe.dt_s), substeps=4)
     truth = res.to_pandas().reset_index()
     noisy = truth.copy()
     rng = np.random.default_rng(0) if rng is None else rng

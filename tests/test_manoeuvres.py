@@ -258,3 +258,77 @@ def test_missing_samples_are_skipped():
     assert m["manoeuvre"] == "turning"
     assert m["advance_L"] == pytest.approx(full["advance_L"], rel=1e-6)
     assert m["tactical_diameter_L"] == pytest.approx(2.5 * 2, rel=1e-6)
+
+
+# ------------------------------------------------------------------ input laws and integrators
+from shipid.manoeuvres import RampSchedule, SampledHold, TurningRudder, ZigzagRudder  # noqa: E402
+from shipid.simulate import simulate  # noqa: E402
+
+
+def test_zigzag_overshoots_converge_with_the_step_when_the_reversal_is_located():
+    """The reversal is located within the RK4 step: the overshoot errors fall with the step and are
+    hundredths of a degree at the default step; reversing at the next step start instead (SampledHold,
+    the old behaviour) lags the crossing by up to a step and is far less accurate at the same step."""
+    m = get_model("mmg")
+    L, U = m.lpp, 1.179
+    ref = zigzag(m, 10, speed=U, first="starboard", method="dopri5", rtol=1e-9, dt=0.05 * L / U).metrics[0]
+    err = {}
+    for f in (0.1, 0.05):
+        z = zigzag(m, 10, speed=U, first="starboard", dt=f * L / U).metrics[0]
+        err[f] = max(abs(z.overshoot1_deg - ref.overshoot1_deg), abs(z.overshoot2_deg - ref.overshoot2_deg))
+    print("overshoot errors [deg] by step [L/U]:", err)
+    assert err[0.05] < 0.01 and err[0.05] < 0.75 * err[0.1]
+
+    # the same law sampled at step starts (decision and hold per step) at the same step
+    h = 0.05 * L / U
+    n = steady_rps(m, U)
+    te = h * round(2 * L / U / h)
+    t = np.arange(0.0, te + 60 * L / U, h)
+    law = ZigzagRudder(math.radians(10), math.radians(10), np.array([1.0]), np.zeros(1), n, m.rudder_rate, te)
+    sim = simulate(m, np.array([[0, 0, 0, U, 0, 0]]), t, controller=SampledHold(law, h))
+    zs = zigzag_metrics(sim.t, sim.x[0, :, 2], sim.u[0, :, 0], lpp=L, execute_time=te, switch_deg=10, rudder_deg=10)
+    err_sampled = abs(zs.overshoot1_deg - ref.overshoot1_deg)
+    print("reversal at step starts:", err_sampled)
+    assert err_sampled > 5 * err[0.05]
+
+
+def test_dopri5_manoeuvres_agree_with_fine_rk4():
+    m = get_model("mmg")
+    L, U = m.lpp, 1.179
+    fine = turning_circle(m, [20, 35], speed=U, dt=0.025 * L / U, steady_step_factor=1)
+    fast = turning_circle(m, [20, 35], speed=U, method="dopri5", rtol=1e-6)
+    assert fast.simulation.meta["method"] == "dopri5" and fast.success
+    for a, b in zip(fine.metrics, fast.metrics):
+        assert b.tactical_diameter_L == pytest.approx(a.tactical_diameter_L, abs=2e-4)
+        assert b.advance_L == pytest.approx(a.advance_L, abs=2e-4)
+    zf = zigzag(m, 20, speed=U, dt=0.025 * L / U)
+    zd = zigzag(m, 20, speed=U, method="dopri5", rtol=1e-6, dt=0.025 * L / U)
+    for a, b in zip(zf.metrics, zd.metrics):
+        assert b.overshoot1_deg == pytest.approx(a.overshoot1_deg, abs=0.01)
+        assert b.overshoot2_deg == pytest.approx(a.overshoot2_deg, abs=0.01)
+    with pytest.raises(ValueError, match="method"):
+        turning_circle(m, 35, speed=U, method="euler")
+
+
+def test_ramp_schedule_follows_set_points_at_the_rate():
+    s = RampSchedule(10.0, ((0.0, 10.0), (40.0, 8.0), (41.0, 12.0)), rate=1.0)
+    assert s(np.array([0.0, 39.0, 40.0, 40.5, 41.0, 42.0, 44.0, 45.0, 100.0])) == pytest.approx(
+        [10, 10, 10, 9.5, 9.0, 10.0, 12.0, 12.0, 12.0])  # 8 interrupted at 9 by the 12 set point
+    assert s.stops == (40.0, 41.0, 44.0)
+    with pytest.raises(ValueError, match="rate"):
+        RampSchedule(1.0, (), rate=0.0)
+
+
+def test_laws_record_the_inputs_that_acted():
+    m = get_model("mmg")
+    law = TurningRudder(np.radians([10.0, -35.0]), np.array([10.0, 11.0]), math.radians(2.0), 5.0)
+    assert law.stops == (5.0, 10.0, 22.5)
+    t = np.linspace(0, 30, 61)
+    hist = law.input_history(t, None)
+    for k in (0, 11, 20, 60):
+        assert hist[:, k] == pytest.approx(law.inputs(t[k], None))
+    assert hist[1, -1, 0] == pytest.approx(-math.radians(35)) and hist[0, 18, 0] == pytest.approx(math.radians(8))
+    # zigzag: after an event the history is piecewise and inputs() agrees with it
+    z = zigzag(m, 10, speed=1.179)
+    u = z.simulation.u[0, :, 0]
+    assert np.max(np.abs(np.diff(u))) <= m.rudder_rate * np.diff(z.simulation.t).max() + 1e-12

@@ -91,6 +91,11 @@ MMG_PARAM_NAMES = (
     "tR", "aH", "xH", "gammaR_m", "gammaR_p", "lR", "eps", "kappa", "f_alpha",
 )
 
+#: The parameters of Yasukawa & Yoshimura (2015) that :meth:`MMGModel._derived` reads by name.
+_BASE_PARAM_NAMES = MMG_PARAM_NAMES[:38]
+#: Number of constants of :meth:`MMGModel._derived` used by the force equations (the rest: eq. (4)).
+_N_FORCE_CONSTS = 42
+
 _PARAM_DOC = {
     "R0": "resistance coefficient R'_0 = R/(1/2 rho L d U^2)",
     "mx": "surge added mass m'_x (by 1/2 rho L^2 d)", "my": "sway added mass m'_y",
@@ -204,10 +209,35 @@ def _components(a):
 
 
 class _NP:
-    """numpy backend of the equations (batched, complex-step safe)."""
+    """numpy backend of the equations (real arrays, batched)."""
 
-    sqrt, exp, arcsin, arctan, sin, cos, sign, real = (
-        np.sqrt, np.exp, np.arcsin, np.arctan, np.sin, np.cos, np.sign, np.real)
+    sqrt, exp, arcsin, arctan, sin, cos, sign = np.sqrt, np.exp, np.arcsin, np.arctan, np.sin, np.cos, np.sign
+
+    @staticmethod
+    def sign_nn(z):
+        """+1 for z >= 0, -1 for z < 0 (the branch of a coefficient chosen by z < 0)."""
+        return np.copysign(1.0, z)
+
+    @staticmethod
+    def sqrt_pos(z):
+        """sqrt(max(z, 0))."""
+        return np.sqrt(np.maximum(z, 0.0))
+
+
+class _NPC(_NP):
+    """numpy backend for complex-step differentiation: signs and branches from the real part."""
+
+    @staticmethod
+    def sign(z):
+        return np.sign(np.real(z))
+
+    @staticmethod
+    def sign_nn(z):
+        return np.copysign(1.0, np.real(z))
+
+    @staticmethod
+    def sqrt_pos(z):
+        return np.sqrt(z * (np.real(z) > 0))
 
 
 class _MATH:
@@ -220,8 +250,12 @@ class _MATH:
         return (z > 0) - (z < 0)
 
     @staticmethod
-    def real(z):
-        return z
+    def sign_nn(z):
+        return math.copysign(1.0, z)
+
+    @staticmethod
+    def sqrt_pos(z):
+        return math.sqrt(z) if z > 0 else 0.0
 
 
 class MMGModel(Model):
@@ -345,63 +379,122 @@ class MMGModel(Model):
         return out
 
     # -------------------------------------------------------------- equations
+    def _derived(self, p) -> tuple:
+        """Constants of the equations for one parameter set (floats, or arrays for batched/complex ``p``).
+
+        Everything that depends only on the parameters and the particulars is folded here, once per
+        parameter set (cached for a real 1-D ``p``), so that :meth:`_forces` and :meth:`_rhs` do the
+        least arithmetic per call.  ``p`` is a sequence of the 38 parameters in :data:`MMG_PARAM_NAMES`
+        order (floats or arrays).
+
+        To add a parameter: append its name to :data:`MMG_PARAM_NAMES`, read it here as ``q["name"]``,
+        append what the equations need to the force constants (before ``_N_FORCE_CONSTS``, raising it)
+        and unpack it in :meth:`_force_terms`.
+        """
+        P = self.particulars
+        L, d, rho, Dp = P.lpp, P.draught, P.rho, P.D_p
+        q = dict(zip(self.param_names, p))
+        (R0, Xvv, Xvr, Xrr, Xvvvv, Yv, Yr, Yvvv, Yvvr, Yvrr, Yrrr, Nv, Nr, Nvvv, Nvvr, Nvrr, Nrrr,
+         mx, my, Jz, tP, wP0, k0, k1, k2, xP, C1, C2p, C2m,
+         tR, aH, xH, gRm, gRp, lR, eps, kappa, f_alpha) = (q[k] for k in _BASE_PARAM_NAMES)
+        cq = 0.5 * rho * L * d                       # 1/2 rho L d (hull force scale / U^2)
+        w1 = 1.0 - wP0                               # 1 - w_P0
+        eta = Dp / P.H_R
+        m = rho * P.displacement
+        q2 = 0.5 * rho * L * L * d
+        Mx = m + mx * q2                             # m + m_x
+        My = m + my * q2                             # m + m_y
+        B = P.x_G * m                                # x_G m
+        C = m * (P.kzz * L) ** 2 + P.x_G * P.x_G * m + Jz * q2 * L * L  # I_zG + x_G^2 m + J_z
+        det = My * C - B * B
+        return (
+            L, cq, cq * L,
+            R0, Xvv, Xvr, Xrr, Xvvvv, Yv, Yr, Yvvv, Yvvr, Yvrr, Yrrr, Nv, Nr, Nvvv, Nvvr, Nvrr, Nrrr,
+            # propeller wake, eq. (16); C2 = C2p for beta_P > 0, C2m for beta_P < 0, written as
+            # (C2p + C2m)/2 + sign(beta_P) (C2p - C2m)/2 (the value at beta_P = 0 is multiplied by 0)
+            xP, -C1, w1, w1 * (0.5 * (C2p + C2m) - 1.0), w1 * 0.5 * (C2p - C2m),
+            k0 * Dp * Dp, k1 * Dp, k2, rho * Dp * Dp, (1.0 - tP) * rho * Dp * Dp,  # thrust, eqs. (11)-(15)
+            8.0 / math.pi, kappa, eta, 1.0 - eta, eps,                  # rudder inflow, eqs. (23)-(25)
+            # gamma_R = gammaR_m for beta_R < 0 else gammaR_p, as mean + sign(beta_R) half-difference
+            # (v_R = U gamma_R beta_R vanishes at beta_R = 0 either way)
+            lR, 0.5 * (gRp + gRm), 0.5 * (gRp - gRm), 0.5 * rho * P.A_R * f_alpha,  # eqs. (20)-(22), (26)-(27)
+            -(1.0 - tR), -(1.0 + aH), -(P.x_R + aH * xH) * L,          # eqs. (17)-(19)
+            1.0 / Mx, Mx, My, B, C / det, B / det, My / det,           # eq. (4) solved for u', v', r'
+        )
+
+    def _derived_of(self, p, as_arrays: bool = False) -> tuple:
+        """:meth:`_derived` with a cache for real 1-D parameter arrays (keyed by value and particulars).
+
+        ``as_arrays``: the constants as 0-d float arrays (numpy multiplies those by arrays faster
+        than Python floats) instead of Python floats.
+        """
+        if isinstance(p, np.ndarray) and p.ndim == 1 and p.dtype.kind == "f":
+            cache = self.__dict__.setdefault("_derived_cache", {})
+            key = p.tobytes()
+            hit = cache.get(key)
+            if hit is None or hit[0] is not self.particulars:
+                if len(cache) > 64:
+                    cache.clear()
+                val = self._derived(p.tolist())
+                hit = cache[key] = (self.particulars, val, tuple(np.array(v) for v in val))
+            return hit[2] if as_arrays else hit[1]
+        return self._derived(p if isinstance(p, (list, tuple)) else _components(p))
+
     def _forces(self, x, u, p, xp=None) -> dict:
         """Forces/moments at midship and intermediate quantities.
 
         The equations are written once against a small math backend ``xp``:
-        numpy (batched, complex-step safe; the default) or, for a single real
-        sample, Python's ``math`` (the same formulas, about 10x less overhead
-        per call).  Shapes: leading axes of ``x (..., 6)``, ``u (..., 2)``,
-        ``p (..., np)`` broadcast.  Returns a dict: X_H, Y_H, N_H, X_P, X_R,
-        Y_R, N_R, F_N, T, w_P, u_R, v_R, alpha_R, beta, U.
+        numpy (batched; a complex-step-safe variant for the Jacobians) or, for
+        a single real sample, Python's ``math`` (the same formulas with much
+        less overhead per call).  Shapes: leading axes of ``x (..., 6)``,
+        ``u (..., 2)``, ``p (..., np)`` broadcast.  Returns a dict: X_H, Y_H,
+        N_H, X_P, X_R, Y_R, N_R, F_N, T, w_P, u_R, v_R, alpha_R, beta, U.
         """
         if xp is None:
-            xp = _NP
-            x, u, p = _components(x), _components(u), _components(p)
-        P = self.particulars
-        L, d, rho, Dp = P.lpp, P.draught, P.rho, P.D_p
-        (R0, Xvv, Xvr, Xrr, Xvvvv, Yv, Yr, Yvvv, Yvvr, Yvrr, Yrrr, Nv, Nr, Nvvv, Nvvr, Nvrr, Nrrr,
-         _mx, _my, _Jz, tP, wP0, k0, k1, k2, xP, C1, C2p, C2m,
-         tR, aH, xH, gRm, gRp, lR, eps, kappa, f_alpha) = p
-        uu, v, r = x[3], x[4], x[5]
-        delta, n = u[0], u[1]
+            cplx = any(np.iscomplexobj(a) for a in (x, u, p))
+            xp = _NPC if cplx else _NP
+            x, u = _components(x), _components(u)
+            c = self._derived_of(p, as_arrays=True)
+        else:
+            c = self._derived_of(p)
+        return self._force_terms(x[3], x[4], x[5], u[0], u[1], c, xp)
+
+    @staticmethod
+    def _force_terms(uu, v, r, delta, n, c, xp) -> dict:
+        """The MMG force equations (the one copy); ``c`` from :meth:`_derived`."""
+        (L, cq, cqL,
+         R0, Xvv, Xvr, Xrr, Xvvvv, Yv, Yr, Yvvv, Yvvr, Yvrr, Yrrr, Nv, Nr, Nvvv, Nvvr, Nvrr, Nrrr,
+         xP, mC1, w1, wcA, wcD, kT0, kT1, k2, cT, cXP, c8pi, kappa, eta, one_m_eta, eps,
+         lR, gRA, gRD, cF, cXR, cYR, cNR) = c[:_N_FORCE_CONSTS]
+        # hull, eqs. (7)-(10): v' = v/U, r' = r L/U, beta = asin(-v')
         U2 = uu * uu + v * v
         U = xp.sqrt(U2)
-        vp = v / U
-        rp = r * L / U
-        beta = xp.arcsin(-vp)
-        q = 0.5 * rho * L * d * U2
+        iU = 1.0 / U
+        vp = v * iU
+        rp = (r * L) * iU
+        beta = -xp.arcsin(vp)
         vp2, rp2 = vp * vp, rp * rp
-        XH = q * (-R0 + Xvv * vp2 + Xvr * vp * rp + Xrr * rp2 + Xvvvv * vp2 * vp2)
-        YH = q * (Yv * vp + Yr * rp + Yvvv * vp2 * vp + Yvvr * vp2 * rp + Yvrr * vp * rp2 + Yrrr * rp2 * rp)
-        NH = q * L * (Nv * vp + Nr * rp + Nvvv * vp2 * vp + Nvvr * vp2 * rp + Nvrr * vp * rp2 + Nrrr * rp2 * rp)
-        # propeller (eqs. 11-16)
+        XH = (cq * U2) * (vp2 * (Xvv + Xvvvv * vp2) + Xvr * (vp * rp) + Xrr * rp2 - R0)
+        YH = (cq * U2) * (vp * (Yv + Yvvv * vp2 + Yvrr * rp2) + rp * (Yr + Yvvr * vp2 + Yrrr * rp2))
+        NH = (cqL * U2) * (vp * (Nv + Nvvv * vp2 + Nvrr * rp2) + rp * (Nr + Nvvr * vp2 + Nrrr * rp2))
+        # propeller, eqs. (11)-(16): 1 - w_P = (1 - w_P0)(1 + (1 - exp(-C1 |beta_P|))(C2 - 1))
         betaP = beta - xP * rp
-        posP = xp.real(betaP) > 0
-        C2 = C2m + (C2p - C2m) * posP
-        abs_bP = betaP * xp.sign(xp.real(betaP))  # |beta_P|, complex-step safe
-        one_m_wP = (1.0 - wP0) * (1.0 + (1.0 - xp.exp(-C1 * abs_bP)) * (C2 - 1.0))
+        sP = xp.sign(betaP)
+        one_m_wP = w1 + (wcA + wcD * sP) * (1.0 - xp.exp(mC1 * (betaP * sP)))
         uP = uu * one_m_wP
-        KTn2D2 = k0 * (n * Dp) ** 2 + k1 * n * Dp * uP + k2 * uP * uP  # K_T n^2 D_P^2
-        T = rho * Dp * Dp * KTn2D2
-        XP = (1.0 - tP) * T
-        # rudder (eqs. 17-28)
-        S = uP * uP + (8.0 / math.pi) * KTn2D2
-        sq = xp.sqrt(S * (xp.real(S) > 0))
-        eta = Dp / P.H_R
-        uR = eps * xp.sqrt(eta * (uP + kappa * (sq - uP)) ** 2 + (1.0 - eta) * uP * uP)
+        uP2 = uP * uP
+        KTn2D2 = (kT0 * n + kT1 * uP) * n + k2 * uP2     # K_T n^2 D_P^2, free of the 1/n in J_P
+        # rudder, eqs. (17)-(28)
+        a = uP + kappa * (xp.sqrt_pos(uP2 + c8pi * KTn2D2) - uP)
+        uR = eps * xp.sqrt(eta * (a * a) + one_m_eta * uP2)
         betaR = beta - lR * rp
-        gR = gRp + (gRm - gRp) * (xp.real(betaR) < 0)
-        vR = U * gR * betaR
+        vR = (U * (gRA + gRD * xp.sign_nn(betaR))) * betaR
         alphaR = delta - xp.arctan(vR / uR)
-        FN = 0.5 * rho * P.A_R * f_alpha * (uR * uR + vR * vR) * xp.sin(alphaR)
-        cd = xp.cos(delta)
-        XR = -(1.0 - tR) * FN * xp.sin(delta)
-        YR = -(1.0 + aH) * FN * cd
-        NR = -(P.x_R + aH * xH) * L * FN * cd
-        return {"X_H": XH, "Y_H": YH, "N_H": NH, "X_P": XP, "X_R": XR, "Y_R": YR, "N_R": NR,
-                "F_N": FN, "T": T, "w_P": 1.0 - one_m_wP, "u_R": uR, "v_R": vR, "alpha_R": alphaR,
-                "beta": beta, "U": U}
+        FN = cF * (uR * uR + vR * vR) * xp.sin(alphaR)
+        FNcd = FN * xp.cos(delta)
+        return {"X_H": XH, "Y_H": YH, "N_H": NH, "X_P": cXP * KTn2D2, "X_R": cXR * FN * xp.sin(delta),
+                "Y_R": cYR * FNcd, "N_R": cNR * FNcd, "F_N": FN, "T": cT * KTn2D2, "w_P": 1.0 - one_m_wP,
+                "u_R": uR, "v_R": vR, "alpha_R": alphaR, "beta": beta, "U": U}
 
     def forces(self, x, u, params=None) -> dict:
         """Public view of :meth:`_forces` (forces [N], moments [N m], speeds [m/s], angles [rad])."""
@@ -412,42 +505,31 @@ class MMGModel(Model):
                   and x.dtype.kind == "f" and u.dtype.kind == "f" and p.dtype.kind == "f")
         if scalar:
             xp = _MATH
-            x, u, p = x.tolist(), u.tolist(), p.tolist()
+            c = self._derived_of(p)
+            psi, uu, v, r = x[2:].tolist()
+            delta, n = u.tolist()
         else:
-            xp = _NP
-            x, u = _components(x), _components(u)
-            p = p.tolist() if (p.ndim == 1 and p.dtype.kind == "f") else _components(p)
-        P = self.particulars
-        L, d, rho = P.lpp, P.draught, P.rho
-        F = self._forces(x, u, p, xp)
-        X = F["X_H"] + F["X_R"] + F["X_P"]
-        Y = F["Y_H"] + F["Y_R"]
-        N = F["N_H"] + F["N_R"]
-        m = rho * P.displacement
-        q2 = 0.5 * rho * L * L * d
-        mx = p[17] * q2
-        my = p[18] * q2
-        Jz = p[19] * q2 * L * L
-        xG = P.x_G
-        IzG = m * (P.kzz * L) ** 2
-        psi, uu, v, r = x[2], x[3], x[4], x[5]
-        du = (X + (m + my) * v * r + xG * m * r * r) / (m + mx)
-        A = m + my
-        B = xG * m
-        C = IzG + xG * xG * m + Jz
-        fy = Y - (m + mx) * uu * r
-        fn = N - xG * m * uu * r
-        det = A * C - B * B
-        dv = (C * fy - B * fn) / det
-        dr = (A * fn - B * fy) / det
-        out = [*planar_rates(psi, uu, v, r, xp), du, dv, dr]
+            cplx = x.dtype.kind == "c" or u.dtype.kind == "c" or p.dtype.kind == "c"
+            xp = _NPC if cplx else _NP
+            c = self._derived_of(p, as_arrays=True)
+            xc, uc = _components(x), _components(u)
+            psi, uu, v, r = xc[2], xc[3], xc[4], xc[5]
+            delta, n = uc[0], uc[1]
+        F = self._force_terms(uu, v, r, delta, n, c, xp)
+        iMx, Mx, My, B, a_fy, a_fn, b_fn = c[_N_FORCE_CONSTS:]
+        # eq. (4) solved for the accelerations
+        du = (F["X_H"] + F["X_R"] + F["X_P"] + (My * v + B * r) * r) * iMx
+        ur = uu * r
+        fy = F["Y_H"] + F["Y_R"] - Mx * ur
+        fn = F["N_H"] + F["N_R"] - B * ur
+        out = (*planar_rates(psi, uu, v, r, xp), du, a_fy * fy - a_fn * fn, b_fn * fn - a_fn * fy)
         if scalar:
             return np.array(out)
-        shape = np.broadcast_shapes(*[np.shape(o) for o in out])
-        res = np.empty(shape + (6,), dtype=np.result_type(*out))
-        for i, o in enumerate(out):
-            res[..., i] = o
-        return res
+        try:
+            return np.stack(out, axis=-1)
+        except ValueError:  # members of different (broadcastable) shapes
+            shape = np.broadcast_shapes(*[np.shape(o) for o in out])
+            return np.stack([np.broadcast_to(o, shape) for o in out], axis=-1)
 
     # ------------------------------------------------------------- Jacobians
     _H_CS = 1e-30
