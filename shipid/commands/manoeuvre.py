@@ -46,6 +46,7 @@ def register(sub) -> None:
     p.add_argument("--side", choices=("both", "starboard", "port"), default="starboard")
     p.add_argument("--lpp", type=float, default=None, help="ship length [m] (default: the model's)")
     p.add_argument("--rudder-rate", type=float, default=None, metavar="DEG_S", help="rudder rate [deg/s]")
+    _integrator(p)
     p.add_argument("-o", "--output", default=None, help="CSV to write (default: print)")
     p.add_argument("--force", action="store_true", help="overwrite the output file")
     p.set_defaults(handler=_sweep)
@@ -55,6 +56,19 @@ def _common(p):
     p.add_argument("--speed", type=float, default=None, help="approach speed [m/s] (default: design speed)")
     p.add_argument("--lpp", type=float, default=None, help="ship length [m] (default: the model's)")
     p.add_argument("--rudder-rate", type=float, default=None, metavar="DEG_S", help="rudder rate [deg/s]")
+    _integrator(p)
+
+
+def _integrator(p):
+    p.add_argument("--method", choices=("rk4", "dopri5"), default="rk4",
+                   help="integrator: fixed-step RK4 (default) or adaptive Dormand-Prince 5(4) (faster at equal accuracy)")
+    p.add_argument("--rtol", type=float, default=1e-6, help="relative tolerance of --method dopri5 (default 1e-6)")
+
+
+def _rtol(args) -> float:
+    if not (0.0 < args.rtol < 1.0):
+        raise ValueError(f"--rtol {args.rtol!r}: give a relative tolerance between 0 and 1, e.g. 1e-6")
+    return args.rtol
 
 
 def load_model(spec: str):
@@ -113,13 +127,15 @@ def _simulate(args) -> int:
     if args.turning is not None:
         if not args.turning > 0:
             raise ValueError(f"--turning {args.turning}: give the rudder angle as a positive number of degrees (use --side)")
-        res = turning_circle(model, args.turning, speed=args.speed, side=args.side, rudder_rate=rate, lpp=args.lpp)
+        res = turning_circle(model, args.turning, speed=args.speed, side=args.side, rudder_rate=rate, lpp=args.lpp,
+                             method=args.method, rtol=_rtol(args))
     else:
         try:
             d, p = (float(v) for v in args.zigzag.split("/"))
         except ValueError:
             raise ValueError(f"--zigzag '{args.zigzag}': give rudder/heading angles in degrees, e.g. 20/20") from None
-        res = zigzag(model, d, p, speed=args.speed, first=args.side, rudder_rate=rate, lpp=args.lpp)
+        res = zigzag(model, d, p, speed=args.speed, first=args.side, rudder_rate=rate, lpp=args.lpp,
+                     method=args.method, rtol=_rtol(args))
     for i, m in enumerate(res.metrics):
         print(_summary(f"{model.name} member {i}", m.to_dict()))
     if args.output:
@@ -152,7 +168,8 @@ def _sweep(args) -> int:
     if any(r <= 0 for r in rud) or any(s <= 0 for s in speeds):
         raise ValueError("--rudder and --speed values must be positive (use --side for port)")
     rate = math.radians(args.rudder_rate) if args.rudder_rate is not None else None
-    df = turning_sweep(model, rud, speeds, side=args.side, rudder_rate=rate, lpp=args.lpp)
+    df = turning_sweep(model, rud, speeds, side=args.side, rudder_rate=rate, lpp=args.lpp,
+                       method=args.method, rtol=_rtol(args))
     _write_or_print(df.to_csv(index=False), args.output, args.force)
     if args.output:
         print(df[["rudder_deg", "speed", "n", "tactical_diameter_L", "steady_diameter_L"]].to_string(index=False))
