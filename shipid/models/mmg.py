@@ -44,7 +44,7 @@ Rudder, eqs. (17)-(28): ``X_R = -(1 - t_R) F_N sin(delta)``,
 ``N_R = -(x_R + a_H x_H) F_N cos(delta)`` with **dimensional**
 ``x_R = x'_R L`` and ``x_H = x'_H L`` (this is where the ``shipmmg`` package
 was wrong, its issue #31), ``F_N = 1/2 rho A_R U_R^2 f_alpha sin(alpha_R)``,
-``alpha_R = delta - atan(v_R/u_R)``, ``v_R = U gamma_R beta_R``,
+``alpha_R = delta - delta_0 - atan(v_R/u_R)``, ``v_R = U gamma_R beta_R``,
 ``beta_R = beta - l'_R r'`` (``gamma_R`` = ``gammaR_m`` for beta_R < 0,
 ``gammaR_p`` otherwise),
 ``u_R = eps u_P sqrt(eta {1 + kappa (sqrt(1 + 8 K_T/(pi J_P^2)) - 1)}^2 + 1 - eta)``,
@@ -89,6 +89,7 @@ MMG_PARAM_NAMES = (
     "mx", "my", "Jz",
     "tP", "wP0", "k0", "k1", "k2", "xP", "C1", "C2p", "C2m",
     "tR", "aH", "xH", "gammaR_m", "gammaR_p", "lR", "eps", "kappa", "f_alpha",
+    "delta0",
 )
 
 _PARAM_DOC = {
@@ -104,6 +105,8 @@ _PARAM_DOC = {
     "gammaR_p": "flow straightening gamma_R for beta_R > 0", "lR": "l'_R, effective rudder position in beta_R",
     "eps": "wake ratio epsilon = (1 - w_R)/(1 - w_P)", "kappa": "propeller-slipstream constant kappa",
     "f_alpha": "rudder lift gradient f_alpha [1/rad]",
+    "delta0": "rudder neutral angle delta_0 [rad]: F_N = 0 at delta = delta_0 in straight running "
+              "(propeller-induced asymmetry of a single-screw ship; 0 in the published sets)",
 }
 
 
@@ -253,7 +256,7 @@ class MMGModel(Model):
     input_names = ("delta", "n")
     param_names = MMG_PARAM_NAMES
     units = {"x": "m", "y": "m", "psi": "rad", "u": "m/s", "v": "m/s", "r": "rad/s", "delta": "rad", "n": "rps",
-             **{k: "-" for k in MMG_PARAM_NAMES}, "f_alpha": "1/rad"}
+             **{k: "-" for k in MMG_PARAM_NAMES}, "f_alpha": "1/rad", "delta0": "rad"}
     default_parameter_set = "kvlcc2"
 
     def __init__(self, params=None, *, particulars=None, lpp: float | None = None):
@@ -362,7 +365,7 @@ class MMGModel(Model):
         L, d, rho, Dp = P.lpp, P.draught, P.rho, P.D_p
         (R0, Xvv, Xvr, Xrr, Xvvvv, Yv, Yr, Yvvv, Yvvr, Yvrr, Yrrr, Nv, Nr, Nvvv, Nvvr, Nvrr, Nrrr,
          _mx, _my, _Jz, tP, wP0, k0, k1, k2, xP, C1, C2p, C2m,
-         tR, aH, xH, gRm, gRp, lR, eps, kappa, f_alpha) = p
+         tR, aH, xH, gRm, gRp, lR, eps, kappa, f_alpha, delta0) = p
         uu, v, r = x[3], x[4], x[5]
         delta, n = u[0], u[1]
         U2 = uu * uu + v * v
@@ -393,7 +396,7 @@ class MMGModel(Model):
         betaR = beta - lR * rp
         gR = gRp + (gRm - gRp) * (xp.real(betaR) < 0)
         vR = U * gR * betaR
-        alphaR = delta - xp.arctan(vR / uR)
+        alphaR = delta - delta0 - xp.arctan(vR / uR)  # delta0: neutral angle (see _PARAM_DOC)
         FN = 0.5 * rho * P.A_R * f_alpha * (uR * uR + vR * vR) * xp.sin(alphaR)
         cd = xp.cos(delta)
         XR = -(1.0 - tR) * FN * xp.sin(delta)
