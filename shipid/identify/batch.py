@@ -88,11 +88,12 @@ class OutputErrorRefiner:
         ch_idx = [meas.index(c) for c in chans]
         st_idx = [model.state_index(c) for c in chans]
         x0s = []
-        if x0 is not None and len(x0) != len(arrays):
-            raise ValueError(f"x0: expected one initial state per log ({len(arrays)}), got {len(x0)}")
+        given_x0 = x0
+        if given_x0 is not None and len(given_x0) != len(arrays):
+            raise ValueError(f"x0: expected one initial state per log ({len(arrays)}), got {len(given_x0)}")
         for i, a in enumerate(arrays):
-            if x0 is not None:
-                xi = np.asarray(x0[i], dtype=float)
+            if given_x0 is not None:
+                xi = np.asarray(given_x0[i], dtype=float)
                 if xi.shape != (model.nx,):
                     raise ValueError(f"x0[{i}] must have shape ({model.nx},) for {model.state_names}, got {xi.shape}")
                 x0s.append(xi)
