@@ -137,3 +137,24 @@ def test_prime_round_trip_and_froude_similarity():
     other = simulate(small.scaled(160.0), scale_states(x0, small.state_names, lam), scale_time(t, lam),
                      scale_inputs(U, small.input_names, lam))
     assert np.abs(other.x[:, 1] - res_b.x[:, 1]).max() > 1.0
+
+
+def test_refiner_tangent_and_forward_difference_agree_on_several_logs():
+    """The identifier's OutputErrorRefiner as fit_to_model uses it, on two logs with one time grid (one
+    batch) and their default initial states: the exact-tangent and the forward-difference Jacobians
+    take the same steps (same coefficients and covariance after two evaluations)."""
+    from shipid.identify.batch import OutputErrorRefiner
+    from shipid.logs import TrialLog
+
+    truth = get_model("response-nl").with_params({"b0": 2.7e-6, "c0": -1.4e-5})
+    sim = zigzag(truth, 20.0, speed=1.7, first="both").simulation
+    logs = [TrialLog.from_arrays(sim.t[::4], name=f"z{b}", **dict(zip(truth.state_names, sim.x[b, ::4].T)),
+                                 **dict(zip(truth.input_names, sim.u[b, ::4].T))) for b in range(2)]
+    start = truth.with_params({k: truth.params_series()[k] * 1.05 for k in ("c2", "c3", "c0")})
+    out = {}
+    for mode in ("fd", "tangent"):
+        out[mode] = OutputErrorRefiner(start, estimate=["c2", "c3", "c0"], channels=["r", "psi"],
+                                       meas_std={"r": 0.01, "psi": 0.01}, max_nfev=2, jacobian=mode).fit(logs)
+    np.testing.assert_allclose(out["tangent"].coef_, out["fd"].coef_, rtol=1e-5)
+    np.testing.assert_allclose(out["tangent"].cov_, out["fd"].cov_, rtol=1e-3)
+    assert out["tangent"].cost_ < 0.1 * out["tangent"].cost_start_
