@@ -49,6 +49,12 @@ was wrong, its issue #31), ``F_N = 1/2 rho A_R U_R^2 f_alpha sin(alpha_R)``,
 ``gammaR_p`` otherwise),
 ``u_R = eps u_P sqrt(eta {1 + kappa (sqrt(1 + 8 K_T/(pi J_P^2)) - 1)}^2 + 1 - eta)``,
 ``eta = D_P/H_R`` (written without the 1/J_P singularity).
+``delta_0`` (parameter ``delta0``, 0 in the published sets) is a rudder
+neutral angle, not part of the standard: the propeller slipstream of a
+single-screw ship meets the rudder at an angle, so F_N vanishes at
+``delta = delta_0`` in straight running and the turns to port and starboard
+differ (an inflow-angle offset of the same form as ``gamma_0`` in the MMG
+rudder of the open-source package ``vessel_manoeuvring_models``).
 
 Parameters and particulars
 --------------------------
