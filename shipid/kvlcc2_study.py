@@ -68,14 +68,15 @@ DEFAULT_SETUPS = {
 
 def neutral_rudder_angle(runs: dict[str, TrialLog], names=TRAIN, departure_deg: float = 1.0) -> float:
     """Rudder angle [rad] that holds the ship on a straight course: the mean rudder of the approach
-    phases (from the start of each run until the rudder first departs by more than ``departure_deg``
-    from its first value) of the runs ``names``, pooled sample by sample."""
+    phases (from the start of each run until the rudder first departs by more than
+    ``departure_deg`` from its first value; at least 3 samples) of the runs ``names``, pooled
+    sample by sample."""
     vals = []
     for k in names:
         d = runs[k]["delta"]
         moved = np.flatnonzero(np.abs(d - d[0]) > np.radians(departure_deg))
-        if moved.size == 0 or moved[0] < 5:
-            raise ValueError(f"run '{k}': no approach phase of at least 5 samples before the rudder moves")
+        if moved.size == 0 or moved[0] < 3:
+            raise ValueError(f"run '{k}': no approach phase of at least 3 samples before the rudder moves")
         vals.append(d[:moved[0]])
     return float(np.mean(np.concatenate(vals)))
 
