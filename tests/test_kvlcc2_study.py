@@ -111,11 +111,18 @@ def test_seed_linear_model_cannot_do_both(runs, fitted):
 
 @pytest.mark.slow
 def test_response_nl_predicts_heldout_zigzags(runs, fitted):
-    """RESPONSE_NL_DOC"""
+    """response-nl (the seed's terms + non-linear damping, asymmetry terms b0, c0 held at 0), started
+    from the kcs-response fit: port/starboard symmetric, so it matches the port turn (TD +1.2 %) and
+    misses the 8.5 % wider starboard turn (-7.5 %); held-out first overshoots -3.2 / -0.4 deg, second
+    -1.5 / -4.8 deg (the 2 / 3 deg goals are met on one of the two runs each)."""
     full, _ = runs
     fit = fitted("response-nl")
     assert fit.success_, fit.message_
     tab = ks.evaluate(fit.result(), full)
     print(tab.round(3).to_string())
     rel = tab[(tab.metric == "tactical_diameter_L")].set_index("run")["rel_error_%"]
-    RESPONSE_NL_ASSERTS
+    assert abs(rel["tc_35"]) < 2.0 and -8.5 < rel["tc_-35"] < -6.5, rel
+    assert abs(_err(tab, "zz_-20", "overshoot1_deg")) < 2.0                    # goal met
+    assert abs(_err(tab, "zz_20", "overshoot2_deg")) < 3.0                     # goal met
+    assert -4.0 < _err(tab, "zz_20", "overshoot1_deg") < -2.5                  # goal missed by ~1.2 deg
+    assert -5.5 < _err(tab, "zz_-20", "overshoot2_deg") < -4.0                 # goal missed by ~1.8 deg
