@@ -46,7 +46,8 @@ print("MARIN data:", folder.resolve() if HAVE_DATA else "not found -- the rest o
 
 Decimated to every 4th sample (0.54 s at full scale, still far below the ship's time
 constants of ~40 s). The MMG fit re-identifies the linear and main non-linear hull
-derivatives and the resistance; rudder and propeller interaction stay published."""),
+derivatives and the resistance, with the rudder neutral angle `delta0` fixed at the
+measured straight-course rudder (section 4); rudder and propeller interaction stay published."""),
     code("""if HAVE_DATA:
     dec = ks.load_runs(folder, decimate=8 if FAST else 4)
     setups = ["kcs-response"] if FAST else list(ks.DEFAULT_SETUPS)
