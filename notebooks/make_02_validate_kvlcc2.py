@@ -46,7 +46,8 @@ print("MARIN data:", folder.resolve() if HAVE_DATA else "not found -- the rest o
 
 Decimated to every 4th sample (0.54 s at full scale, still far below the ship's time
 constants of ~40 s). The MMG fit re-identifies the linear and main non-linear hull
-derivatives and the resistance; rudder and propeller interaction stay published."""),
+derivatives and the resistance, with the rudder neutral angle `delta0` fixed at the
+measured straight-course rudder (section 4); rudder and propeller interaction stay published."""),
     code("""if HAVE_DATA:
     dec = ks.load_runs(folder, decimate=8 if FAST else 4)
     setups = ["kcs-response"] if FAST else list(ks.DEFAULT_SETUPS)
@@ -64,7 +65,12 @@ derivatives and the resistance; rudder and propeller interaction stay published.
 Goals of the issue: first overshoot within 2° and second within 3° on the held-out 20/20
 zigzags, tactical diameter within 5 % on the training turns. The measured tactical
 diameters differ by 8.5 % between port and starboard (3.07 vs 3.33 L); a port/starboard
-symmetric model therefore misses one side by at least 4 %."""),
+symmetric model therefore misses one side by at least 4 %. The asymmetry comes from the
+propeller: the rudder that holds the ship straight before each execute is not zero
+(`ks.neutral_rudder_angle`, +0.92° pooled over the training runs). `mmg` takes it as its
+rudder neutral angle `delta0`, `response-nl` as the propeller terms `b0 n², c0 n²`."""),
+    code("""if HAVE_DATA:
+    print(f"neutral rudder angle of the training runs: {np.rad2deg(ks.neutral_rudder_angle(dec, train)):+.2f} deg")"""),
     code("""if HAVE_DATA:
     piv = summary.pivot_table(index=["run", "metric"], columns="model", values="error")
     display(piv.round(2))

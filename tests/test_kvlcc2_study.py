@@ -23,6 +23,24 @@ def runs(request):
     return ks.load_runs(MARIN_DIR), ks.load_runs(MARIN_DIR, decimate=4)
 
 
+@pytest.fixture(scope="module")
+def fitted(runs):
+    """Fits shared by the tests of this module (the kcs-response fit is also response-nl's start)."""
+    _, dec = runs
+    cache = {}
+
+    def get(name):
+        if name not in cache:
+            start = None
+            if name == "response-nl":
+                seed = get("kcs-response").coef_
+                start = {k: float(seed.get(k, 0.0)) for k in ks.DEFAULT_SETUPS[name]()[0].param_names}
+            cache[name] = ks.fit_model(name, dec, start=start)
+        return cache[name]
+
+    return get
+
+
 def _err(table, run, metric):
     row = table[(table.run == run) & (table.metric == metric)]
     return float(row["error"].iloc[0]) if row["error"].notna().all() else np.nan
@@ -39,31 +57,49 @@ def test_symmetric_models_cannot_meet_5_percent_on_both_turns(runs):
     assert 0.07 < spread < 0.10
 
 
-@pytest.mark.slow
-def test_mmg_refit_predicts_turns_and_heldout_zigzags(runs):
+def test_neutral_rudder_angle_of_the_approach_phases(runs):
+    """The rudder that holds the ship straight before each execute: +0.92 deg (models' sign) pooled over
+    the four training runs, on the side that makes the turn with negative rudder (MARIN tc_35) the
+    tighter one -- as measured (3.07 L vs 3.33 L)."""
     full, dec = runs
-    fit = ks.fit_model("mmg", dec)
+    d0 = np.degrees(ks.neutral_rudder_angle(full))
+    assert 0.85 < d0 < 1.0, d0
+    assert abs(np.degrees(ks.neutral_rudder_angle(dec)) - d0) < 0.05
+    assert abs(full["tc_35"]["delta"].min() - np.radians(-35.0)) < np.radians(0.3)  # tc_35 is the negative-rudder turn
+    with pytest.raises(ValueError, match="no approach phase"):
+        ks.neutral_rudder_angle({"x": type(full["tc_35"]).from_arrays(np.arange(10.0), name="x", delta=np.linspace(0, 0.5, 10))},
+                                names=("x",))
+
+
+@pytest.mark.slow
+def test_mmg_refit_with_neutral_angle_meets_the_turning_goal(runs, fitted):
+    """MMG with the measured neutral angle (delta0 = +0.92 deg from the approach phases, fixed) and the
+    hull derivatives and resistance re-identified: the tactical diameters of both training turns are
+    within the 5 % goal (+0.4 %, -4.9 %); the held-out first overshoots are +6.7 / +0.2 deg and the
+    second +1.5 / +7.7 deg -- the 2 / 3 deg goals are met on one run each (measured, asserted as such).
+    With delta0 estimated by the EKF instead it lands at -0.9 deg (wrong side) and the turns miss by
+    +5.9 / -5.3 % (docs/validation.md)."""
+    full, _ = runs
+    fit = fitted("mmg")
     assert fit.success_, fit.message_
+    assert np.degrees(fit.coef_["delta0"]) == pytest.approx(0.915, abs=0.01)
     tab = ks.evaluate(fit.result(), full)
     print(tab.round(3).to_string())
-    # training turns: tactical diameter within 6 % (5 % met on tc_35; tc_-35 is the asymmetric side)
-    for run in ("tc_35", "tc_-35"):
-        rel = tab[(tab.run == run) & (tab.metric == "tactical_diameter_L")]["rel_error_%"].iloc[0]
-        assert abs(rel) < 6.0, (run, rel)
-    # held-out zigzags: first overshoot within 5 deg (measured +4.2 / +1.0 deg: the 2 deg goal is
-    # met on zz_-20 only), second within 7 deg
-    for run in ks.TEST:
-        assert abs(_err(tab, run, "overshoot1_deg")) < 5.0
-        assert abs(_err(tab, run, "overshoot2_deg")) < 7.0
+    rel = tab[(tab.metric == "tactical_diameter_L")].set_index("run")["rel_error_%"]
+    assert abs(rel["tc_35"]) < 1.0 and abs(rel["tc_-35"]) < 5.0, rel          # goal met on both
+    assert abs(_err(tab, "zz_-20", "overshoot1_deg")) < 2.0                    # goal met
+    assert abs(_err(tab, "zz_20", "overshoot2_deg")) < 3.0                     # goal met
+    assert 6.0 < _err(tab, "zz_20", "overshoot1_deg") < 7.5                    # goal missed by ~4.7 deg
+    assert 7.0 < _err(tab, "zz_-20", "overshoot2_deg") < 8.5                   # goal missed by ~4.7 deg
 
 
 @pytest.mark.slow
-def test_seed_linear_model_cannot_do_both(runs):
+def test_seed_linear_model_cannot_do_both(runs, fitted):
     """kcs-response (the seed's linear sway/yaw) fitted to turns and zigzags together: it follows
     the zigzags (held-out first overshoots within 5 deg; measured +1.0 / +3.9 deg) but turns far
     too tightly (tactical diameter 33 % / 44 % small) -- the issue's warning, on measured data."""
-    full, dec = runs
-    fit = ks.fit_model("kcs-response", dec)
+    full, _ = runs
+    fit = fitted("kcs-response")
     assert fit.success_, fit.message_
     tab = ks.evaluate(fit.result(), full)
     print(tab.round(3).to_string())
@@ -74,18 +110,19 @@ def test_seed_linear_model_cannot_do_both(runs):
 
 
 @pytest.mark.slow
-def test_response_nl_predicts_heldout_zigzags(runs):
-    """response-nl (the seed's terms + non-linear damping), started from a kcs-response fit:
-    port/starboard symmetric, so it matches the port turn (TD +1.2 %) and misses the 8.5 % wider
-    starboard turn (-7.5 %); held-out first overshoots -3.2 / -0.4 deg, second -1.5 / -4.8 deg
-    (the 2 / 3 deg goals are met on one of the two runs each)."""
-    full, dec = runs
-    fit = ks.fit_model("response-nl", dec)
+def test_response_nl_predicts_heldout_zigzags(runs, fitted):
+    """response-nl (the seed's terms + non-linear damping, asymmetry terms b0, c0 held at 0), started
+    from the kcs-response fit: port/starboard symmetric, so it matches the port turn (TD +1.2 %) and
+    misses the 8.5 % wider starboard turn (-7.5 %); held-out first overshoots -3.2 / -0.4 deg, second
+    -1.5 / -4.8 deg (the 2 / 3 deg goals are met on one of the two runs each)."""
+    full, _ = runs
+    fit = fitted("response-nl")
     assert fit.success_, fit.message_
     tab = ks.evaluate(fit.result(), full)
     print(tab.round(3).to_string())
     rel = tab[(tab.metric == "tactical_diameter_L")].set_index("run")["rel_error_%"]
-    assert abs(rel["tc_35"]) < 5.0 and abs(rel["tc_-35"]) < 9.0, rel
-    for run in ks.TEST:
-        assert abs(_err(tab, run, "overshoot1_deg")) < 4.0
-        assert abs(_err(tab, run, "overshoot2_deg")) < 6.0
+    assert abs(rel["tc_35"]) < 2.0 and -8.5 < rel["tc_-35"] < -6.5, rel
+    assert abs(_err(tab, "zz_-20", "overshoot1_deg")) < 2.0                    # goal met
+    assert abs(_err(tab, "zz_20", "overshoot2_deg")) < 3.0                     # goal met
+    assert -4.0 < _err(tab, "zz_20", "overshoot1_deg") < -2.5                  # goal missed by ~1.2 deg
+    assert -5.5 < _err(tab, "zz_-20", "overshoot2_deg") < -4.0                 # goal missed by ~1.8 deg

@@ -10,7 +10,7 @@ import pytest
 from shipid.manoeuvres import turning_circle, zigzag
 from shipid.models import get_model
 from shipid.models.base import Model
-from shipid.models.response_nl import EXTRA_NAMES, SEED_NAMES, ResponseNLModel, fit_to_model
+from shipid.models.response_nl import ASYM_NAMES, EXTRA_NAMES, SEED_NAMES, ResponseNLModel, fit_to_model
 
 
 def _point(rng, batch=()):
@@ -22,18 +22,18 @@ def _point(rng, batch=()):
 
 def test_jacobians_with_every_term_active():
     rng = np.random.default_rng(7)
-    m = ResponseNLModel(rng.normal(size=27) * 0.3)
+    m = ResponseNLModel(rng.normal(size=29) * 0.3)
     for _ in range(5):
         x, u = _point(rng, (3,))
         for which in ("x", "u", "p"):
             J = getattr(m, f"jac_{which}")(0.0, x, u)
-            fd = Model._fd(m, 0.0, x, u, np.broadcast_to(m.params, (3, 27)).copy(), which)
+            fd = Model._fd(m, 0.0, x, u, np.broadcast_to(m.params, (3, 29)).copy(), which)
             np.testing.assert_allclose(J, fd, rtol=1e-6, atol=1e-8, err_msg=which)
 
 
 def test_reduces_to_kcs_response_when_the_new_terms_are_zero():
     seed = get_model("kcs-response")
-    nl = ResponseNLModel({**dict(zip(SEED_NAMES, seed.params)), **{k: 0.0 for k in EXTRA_NAMES}})
+    nl = ResponseNLModel({**dict(zip(SEED_NAMES, seed.params)), **{k: 0.0 for k in EXTRA_NAMES + ASYM_NAMES}})
     rng = np.random.default_rng(8)
     x, u = _point(rng, (10,))
     np.testing.assert_allclose(nl.rhs(0.0, x, u), seed.rhs(0.0, x, u), rtol=1e-14, atol=1e-15)
@@ -85,3 +85,76 @@ def test_default_set_reproduces_mmg_kcs_zigzags(kcs_truth_and_default):
         f = zigzag(nl, z, speed=1.7, first="starboard")
         o1 = np.mean([m.overshoot1_deg for m in t.metrics])
         assert abs(f.metrics[0].overshoot1_deg - o1) <= acc["overshoot1_abs_deg_max"] + 0.05, (z, f.metrics[0].overshoot1_deg, o1)
+
+
+
+@pytest.mark.slow
+def test_output_error_refinement_recovers_its_own_coefficients():
+    """Output-error stage (the identifier's OutputErrorRefiner with exact RK4 tangents) started 3-5 %
+    away from the truth on response-nl's own noise-free manoeuvres, asymmetry terms included: it must
+    return the truth to rounding.  One speed at constant rps: a8 (u n) is collinear with a1 (u), so it
+    is held at its true value; every sample is used (decimate=1) so that the replay with sampled inputs
+    reproduces the truth's runs exactly."""
+    truth = get_model("response-nl").with_params({"b0": 2.7e-6, "c0": -1.4e-5})  # ~1 deg neutral angle
+    rng = np.random.default_rng(3)
+    start = truth.params * (1 + rng.uniform(0.03, 0.05, truth.np) * rng.choice([-1, 1], truth.np))
+    start[truth.param_index("a8")] = truth.params[truth.param_index("a8")]
+    free = [k for k in truth.param_names if k != "a8"]
+    fitted, info = fit_to_model(truth, speeds=(1.7,), turning_rudders=(35.0,), zigzags=(20.0,), free=free,
+                                heading_change_deg=120.0, decimate=1, p0=start, max_nfev=15)
+    assert info["success"] and info["cost"][1] < 1e-20 * info["cost"][0], info
+    np.testing.assert_allclose(fitted.params, truth.params, rtol=1e-8, atol=1e-14)
+
+
+def test_prime_round_trip_and_froude_similarity():
+    """A model scaled from the 4.36 m KCS model to 320 m predicts the same manoeuvre: positions x lam,
+    times x sqrt(lam), speeds x sqrt(lam), rates and rps / sqrt(lam) (RK4 on the scaled time grid is
+    exactly similar, so to rounding); the prime coefficients are unchanged and round-trip."""
+    from shipid.scaling import scale_inputs, scale_states, scale_time
+    from shipid.simulate import simulate
+
+    small = get_model("response-nl").with_params({"b0": 2.7e-6, "c0": -1.4e-5})
+    assert small.lpp == pytest.approx(4.36)
+    big = small.scaled(320.0)
+    lam = 320.0 / 4.36
+    assert big.lpp == 320.0 and big.design_speed == pytest.approx(small.design_speed * np.sqrt(lam))
+    assert big.rudder_rate == pytest.approx(small.rudder_rate / np.sqrt(lam))
+    pr_s, pr_b = small.to_prime(), big.to_prime()
+    for k in small.param_names:
+        assert pr_b[k] == pytest.approx(pr_s[k], rel=1e-12, abs=1e-300), k
+    np.testing.assert_allclose(ResponseNLModel.from_prime(pr_s, 4.36).params, small.params, rtol=1e-13)
+    # the named set scaled on construction equals the scaled model
+    np.testing.assert_allclose(ResponseNLModel(lpp=320.0).params, get_model("response-nl").scaled(320.0).params,
+                               rtol=1e-13)
+    z = zigzag(small, 20.0, speed=1.7, first="starboard").simulation
+    t, x0, U = z.t, z.x[0, 0], z.u[0]
+    res_s = simulate(small, x0, t, U)
+    res_b = simulate(big, scale_states(x0, small.state_names, lam), scale_time(t, lam),
+                     scale_inputs(U, small.input_names, lam))
+    np.testing.assert_allclose(res_b.x, scale_states(res_s.x, small.state_names, lam), rtol=1e-9, atol=1e-9)
+    assert np.ptp(res_s.x[:, 2]) > 0.5  # a real manoeuvre (heading swings of tens of degrees)
+    # a different length is not similar
+    other = simulate(small.scaled(160.0), scale_states(x0, small.state_names, lam), scale_time(t, lam),
+                     scale_inputs(U, small.input_names, lam))
+    assert np.abs(other.x[:, 1] - res_b.x[:, 1]).max() > 1.0
+
+
+def test_refiner_tangent_and_forward_difference_agree_on_several_logs():
+    """The identifier's OutputErrorRefiner as fit_to_model uses it, on two logs with one time grid (one
+    batch) and their default initial states: the exact-tangent and the forward-difference Jacobians
+    take the same steps (same coefficients and covariance after two evaluations)."""
+    from shipid.identify.batch import OutputErrorRefiner
+    from shipid.logs import TrialLog
+
+    truth = get_model("response-nl").with_params({"b0": 2.7e-6, "c0": -1.4e-5})
+    sim = zigzag(truth, 20.0, speed=1.7, first="both").simulation
+    logs = [TrialLog.from_arrays(sim.t[::4], name=f"z{b}", **dict(zip(truth.state_names, sim.x[b, ::4].T)),
+                                 **dict(zip(truth.input_names, sim.u[b, ::4].T))) for b in range(2)]
+    start = truth.with_params({k: truth.params_series()[k] * 1.05 for k in ("c2", "c3", "c0")})
+    out = {}
+    for mode in ("fd", "tangent"):
+        out[mode] = OutputErrorRefiner(start, estimate=["c2", "c3", "c0"], channels=["r", "psi"],
+                                       meas_std={"r": 0.01, "psi": 0.01}, max_nfev=2, jacobian=mode).fit(logs)
+    np.testing.assert_allclose(out["tangent"].coef_, out["fd"].coef_, rtol=1e-5)
+    np.testing.assert_allclose(out["tangent"].cov_, out["fd"].cov_, rtol=1e-3)
+    assert out["tangent"].cost_ < 0.1 * out["tangent"].cost_start_

@@ -7,7 +7,11 @@ minimise the weighted simulation error of the measured dynamic channels
 estimate and usually the better predictor on long manoeuvres.  Sensitivities
 come from one *batched* simulation per log and iteration (the nominal
 parameters and one forward-difference perturbation per coefficient run
-together along the batch axis).
+together along the batch axis); logs that share one time grid are simulated
+as one batch.  With ``jacobian="tangent"`` the sensitivities are instead the
+exact derivatives of the RK4 map (:func:`shipid.integrate.rk4_step_tangent`),
+propagated along the nominal trajectory; this needs the model's analytic (or
+complex-step) ``_jac_x``/``_jac_p`` to be cheap.
 """
 from __future__ import annotations
 
@@ -45,20 +49,28 @@ class OutputErrorRefiner:
         Iteration limit of the least-squares solver.
     substeps : int
         RK4 steps per sample.
+    jacobian : {"fd", "tangent"}
+        Sensitivities by forward differences in one batched simulation (default) or
+        by the exact tangent of the RK4 map.
     """
 
     def __init__(self, model: Model, *, estimate=None, channels=None, meas_std=None, max_nfev: int = 30,
-                 substeps: int = 1):
+                 substeps: int = 1, jacobian: str = "fd"):
         self.model = model
         self.estimate = estimate
         self.channels = channels
         self.meas_std = meas_std
         self.max_nfev = max_nfev
         self.substeps = substeps
+        self.jacobian = jacobian
 
-    def fit(self, logs, start=None) -> "OutputErrorRefiner":
+    def fit(self, logs, start=None, x0=None) -> "OutputErrorRefiner":
         """Refine on ``logs``; ``start`` may be a fitted :class:`EKFIdentifier` whose
-        smoothed initial states and prior are used."""
+        smoothed initial states and prior are used.  ``x0`` (sequence of arrays of shape
+        (nx,), one per log) gives the initial states explicitly (e.g. the exact ones of
+        simulated logs); by default they are the mean of each log's first five samples."""
+        if self.jacobian not in ("fd", "tangent"):
+            raise ValueError(f"jacobian must be 'fd' or 'tangent', got {self.jacobian!r}")
         model = self.model
         arrays, meas = prepare_logs(model, logs)
         names = list(self.estimate) if self.estimate is not None else list(model.param_names)
@@ -76,8 +88,16 @@ class OutputErrorRefiner:
         ch_idx = [meas.index(c) for c in chans]
         st_idx = [model.state_index(c) for c in chans]
         x0s = []
+        given_x0 = x0
+        if given_x0 is not None and len(given_x0) != len(arrays):
+            raise ValueError(f"x0: expected one initial state per log ({len(arrays)}), got {len(given_x0)}")
         for i, a in enumerate(arrays):
-            if start is not None and hasattr(start, "states_"):
+            if given_x0 is not None:
+                xi = np.asarray(given_x0[i], dtype=float)
+                if xi.shape != (model.nx,):
+                    raise ValueError(f"x0[{i}] must have shape ({model.nx},) for {model.state_names}, got {xi.shape}")
+                x0s.append(xi)
+            elif start is not None and hasattr(start, "states_"):
                 x0s.append(start.states_[i][list(model.state_names)].to_numpy()[0])
             else:
                 x0 = np.zeros(model.nx)
@@ -90,18 +110,60 @@ class OutputErrorRefiner:
         if start is not None and hasattr(start, "scale_"):
             scale = start.scale_.reindex(names).fillna(pd.Series(scale, index=names)).to_numpy()
 
+        # logs sharing one time grid run as one batch
+        groups: list[list[int]] = []
+        for i, a in enumerate(arrays):
+            for g in groups:
+                if arrays[g[0]].t.shape == a.t.shape and np.array_equal(arrays[g[0]].t, a.t):
+                    g.append(i)
+                    break
+            else:
+                groups.append([i])
+
         def simulate_all(theta_batch):
             """theta_batch (B, ne) scaled -> list of (B, N, nchan) simulated channels."""
-            P = np.broadcast_to(p0, (theta_batch.shape[0], model.np)).copy()
+            B = theta_batch.shape[0]
+            P = np.broadcast_to(p0, (B, model.np)).copy()
             P[:, est_idx] = theta_batch * scale
-            out = []
-            for a, x0 in zip(arrays, x0s):
-                X0 = np.broadcast_to(x0, (theta_batch.shape[0], model.nx))
+            out: list = [None] * len(arrays)
+            for g in groups:
+                t, G = arrays[g[0]].t, len(g)
+                X0 = np.broadcast_to(np.stack([x0s[i] for i in g]), (B, G, model.nx)).reshape(B * G, model.nx)
+                Ug = np.stack([arrays[i].U for i in g])
+                Ug = np.broadcast_to(Ug, (B,) + Ug.shape).reshape((B * G,) + Ug.shape[1:])
+                Pg = np.repeat(P, G, axis=0)
                 with np.errstate(all="ignore"):
-                    res = simulate(model, X0, a.t, np.broadcast_to(a.U, (theta_batch.shape[0],) + a.U.shape),
-                                   params=P, substeps=self.substeps)
-                out.append(res.x[:, :, st_idx])
+                    res = simulate(model, X0, t, Ug, params=Pg, substeps=self.substeps)
+                xs = res.x.reshape((B, G) + res.x.shape[1:])
+                for j, i in enumerate(g):
+                    out[i] = xs[:, j][:, :, st_idx]
             return out
+
+        def tangent_jac(th):
+            """Exact sensitivities of the RK4 map along the nominal trajectory, (n_res, ne)."""
+            from ..integrate import rk4_step_tangent
+
+            p = p0.copy()
+            p[est_idx] = th * scale
+            blocks: list = [None] * len(arrays)
+            for g in groups:
+                t = arrays[g[0]].t
+                x = np.stack([x0s[i] for i in g])
+                Ug = np.stack([arrays[i].U for i in g])
+                S = np.zeros((len(g), model.nx, model.np))
+                J = np.zeros((len(g), t.size, len(st_idx), est_idx.size))
+                with np.errstate(all="ignore"):
+                    for k in range(t.size - 1):
+                        h = (t[k + 1] - t[k]) / self.substeps
+                        for m in range(self.substeps):
+                            x, Fx, Fp = rk4_step_tangent(model, t[k] + m * h, x, Ug[:, k], p, h)
+                            S = Fx @ S + Fp
+                        J[:, k + 1] = S[:, st_idx][:, :, est_idx]
+                J = J * scale / sig[ch_idx][:, None]
+                for j, i in enumerate(g):
+                    blocks[i] = np.where(masks[i][:, :, None], J[j], 0.0).reshape(-1, est_idx.size)
+            Jt = np.concatenate(blocks, axis=0)
+            return np.where(np.isfinite(Jt), Jt, 0.0)
 
         masks = [np.isfinite(a.Y[:, ch_idx]) for a in arrays]
 
@@ -120,6 +182,8 @@ class OutputErrorRefiner:
             return residual_batch(th[None])[0]
 
         def jac(th):
+            if self.jacobian == "tangent":
+                return tangent_jac(th)
             batch = np.vstack([th, th + h * np.eye(th.size)])
             R = residual_batch(batch)
             return ((R[1:] - R[0]) / h).T
@@ -146,6 +210,7 @@ class OutputErrorRefiner:
         self.cost_start_ = float(0.5 * np.sum(fun(th0) ** 2))
         self.rms_normalised_residual_ = float(np.sqrt(s2))
         self.success_ = bool(sol.success)
+        self.nfev_ = int(sol.nfev)
         self.message_ = str(sol.message)
         if start is not None and hasattr(start, "prior_std_"):
             prior_cov_s = np.diag((start.prior_std_.reindex(names).to_numpy() / scale) ** 2)

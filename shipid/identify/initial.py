@@ -38,8 +38,24 @@ def equation_error_fit(
     prior_std: np.ndarray,
     window_s: float | None = None,
     max_points: int = 20000,
+    derivatives: list[np.ndarray] | None = None,
+    regularisation: float = 1e-3,
+    max_nfev: int = 50,
 ):
     """Least-squares fit of the estimated parameters to numerical derivatives.
+
+    Parameters
+    ----------
+    derivatives : list of arrays (N_i, nx), optional
+        Known state derivatives of each log (e.g. the exact right-hand side of
+        a simulator that produced the log; NaN where unknown).  When given, the
+        measured states are used as they are (not smoothed) and these replace
+        the Savitzky-Golay derivatives.
+    regularisation : float
+        Weight of the pull to the start values, relative to ``sqrt(n_points)``
+        residuals of unit size (0 turns it off: a plain least-squares fit).
+    max_nfev : int
+        Iteration limit of the least-squares solver.
 
     Returns
     -------
@@ -51,8 +67,10 @@ def equation_error_fit(
     """
     nx = model.nx
     meas_pos = {s: j for j, s in enumerate(meas_names)}
+    if derivatives is not None and len(derivatives) != len(logs):
+        raise ValueError(f"derivatives: expected one array per log ({len(logs)}), got {len(derivatives)}")
     rows_t, rows_x, rows_u, rows_dx, rows_ok = [], [], [], [], []
-    for lg in logs:
+    for k_log, lg in enumerate(logs):
         t = lg.t
         if window_s is None:
             dt = float(np.median(np.diff(t)))
@@ -70,7 +88,12 @@ def equation_error_fit(
             if good.sum() < 10:
                 continue
             yi = np.interp(t, t[good], y[good])
-            ys, dy = _smooth_and_derivative(t, yi, win)
+            if derivatives is not None:
+                ys, dy = yi, np.asarray(derivatives[k_log], dtype=float)[:, i]
+                if not np.all(np.isfinite(dy)):
+                    continue
+            else:
+                ys, dy = _smooth_and_derivative(t, yi, win)
             X[:, i] = ys
             dX[:, i] = dy
             ok[:, i] = True
@@ -119,7 +142,7 @@ def equation_error_fit(
         f = model.rhs(T, X, U, p)[:, use]
         r = ((dX[:, use] - f) * w).ravel()
         # weak pull to the start values so that collinear directions stay put
-        reg = (theta - p0[est_idx]) / prior_std * 1e-3 * np.sqrt(T.size)
+        reg = (theta - p0[est_idx]) / prior_std * regularisation * np.sqrt(T.size)
         return np.concatenate([r, reg])
 
     def jac(theta):
@@ -127,10 +150,10 @@ def equation_error_fit(
         p[est_idx] = theta
         Jpp = model.jac_p(T, X, U, p)[:, use][:, :, est_idx]  # (n, nuse, ne)
         J = -(Jpp * w[None, :, None]).reshape(-1, est_idx.size)
-        return np.vstack([J, np.diag(1e-3 * np.sqrt(T.size) / prior_std)])
+        return np.vstack([J, np.diag(regularisation * np.sqrt(T.size) / prior_std)])
 
     th0 = p0[est_idx]
-    sol = least_squares(resid, th0, jac=jac, x_scale=prior_std, method="trf", max_nfev=50)
+    sol = least_squares(resid, th0, jac=jac, x_scale=prior_std, method="trf", max_nfev=max_nfev)
     cost0 = 0.5 * float(np.sum(resid(th0) ** 2))
     if not (np.all(np.isfinite(sol.x)) and np.isfinite(sol.cost) and sol.cost <= cost0):
         # the start values explain the derivatives better: keep them

@@ -44,11 +44,17 @@ Rudder, eqs. (17)-(28): ``X_R = -(1 - t_R) F_N sin(delta)``,
 ``N_R = -(x_R + a_H x_H) F_N cos(delta)`` with **dimensional**
 ``x_R = x'_R L`` and ``x_H = x'_H L`` (this is where the ``shipmmg`` package
 was wrong, its issue #31), ``F_N = 1/2 rho A_R U_R^2 f_alpha sin(alpha_R)``,
-``alpha_R = delta - atan(v_R/u_R)``, ``v_R = U gamma_R beta_R``,
+``alpha_R = delta - delta_0 - atan(v_R/u_R)``, ``v_R = U gamma_R beta_R``,
 ``beta_R = beta - l'_R r'`` (``gamma_R`` = ``gammaR_m`` for beta_R < 0,
 ``gammaR_p`` otherwise),
 ``u_R = eps u_P sqrt(eta {1 + kappa (sqrt(1 + 8 K_T/(pi J_P^2)) - 1)}^2 + 1 - eta)``,
 ``eta = D_P/H_R`` (written without the 1/J_P singularity).
+``delta_0`` (parameter ``delta0``, 0 in the published sets) is a rudder
+neutral angle, not part of the standard: the propeller slipstream of a
+single-screw ship meets the rudder at an angle, so F_N vanishes at
+``delta = delta_0`` in straight running and the turns to port and starboard
+differ (an inflow-angle offset of the same form as ``gamma_0`` in the MMG
+rudder of the open-source package ``vessel_manoeuvring_models``).
 
 Parameters and particulars
 --------------------------
@@ -89,12 +95,13 @@ MMG_PARAM_NAMES = (
     "mx", "my", "Jz",
     "tP", "wP0", "k0", "k1", "k2", "xP", "C1", "C2p", "C2m",
     "tR", "aH", "xH", "gammaR_m", "gammaR_p", "lR", "eps", "kappa", "f_alpha",
+    "delta0",
 )
 
 #: The parameters of Yasukawa & Yoshimura (2015) that :meth:`MMGModel._derived` reads by name.
 _BASE_PARAM_NAMES = MMG_PARAM_NAMES[:38]
 #: Number of constants of :meth:`MMGModel._derived` used by the force equations (the rest: eq. (4)).
-_N_FORCE_CONSTS = 42
+_N_FORCE_CONSTS = 43
 
 _PARAM_DOC = {
     "R0": "resistance coefficient R'_0 = R/(1/2 rho L d U^2)",
@@ -109,6 +116,8 @@ _PARAM_DOC = {
     "gammaR_p": "flow straightening gamma_R for beta_R > 0", "lR": "l'_R, effective rudder position in beta_R",
     "eps": "wake ratio epsilon = (1 - w_R)/(1 - w_P)", "kappa": "propeller-slipstream constant kappa",
     "f_alpha": "rudder lift gradient f_alpha [1/rad]",
+    "delta0": "rudder neutral angle delta_0 [rad]: F_N = 0 at delta = delta_0 in straight running "
+              "(propeller-induced asymmetry of a single-screw ship; 0 in the published sets)",
 }
 
 
@@ -287,7 +296,7 @@ class MMGModel(Model):
     input_names = ("delta", "n")
     param_names = MMG_PARAM_NAMES
     units = {"x": "m", "y": "m", "psi": "rad", "u": "m/s", "v": "m/s", "r": "rad/s", "delta": "rad", "n": "rps",
-             **{k: "-" for k in MMG_PARAM_NAMES}, "f_alpha": "1/rad"}
+             **{k: "-" for k in MMG_PARAM_NAMES}, "f_alpha": "1/rad", "delta0": "rad"}
     default_parameter_set = "kvlcc2"
 
     def __init__(self, params=None, *, particulars=None, lpp: float | None = None):
@@ -384,7 +393,7 @@ class MMGModel(Model):
 
         Everything that depends only on the parameters and the particulars is folded here, once per
         parameter set (cached for a real 1-D ``p``), so that :meth:`_forces` and :meth:`_rhs` do the
-        least arithmetic per call.  ``p`` is a sequence of the 38 parameters in :data:`MMG_PARAM_NAMES`
+        least arithmetic per call.  ``p`` is a sequence of the 39 parameters in :data:`MMG_PARAM_NAMES`
         order (floats or arrays).
 
         To add a parameter: append its name to :data:`MMG_PARAM_NAMES`, read it here as ``q["name"]``,
@@ -419,6 +428,7 @@ class MMGModel(Model):
             # (v_R = U gamma_R beta_R vanishes at beta_R = 0 either way)
             lR, 0.5 * (gRp + gRm), 0.5 * (gRp - gRm), 0.5 * rho * P.A_R * f_alpha,  # eqs. (20)-(22), (26)-(27)
             -(1.0 - tR), -(1.0 + aH), -(P.x_R + aH * xH) * L,          # eqs. (17)-(19)
+            q["delta0"],                                                # rudder neutral angle (_PARAM_DOC)
             1.0 / Mx, Mx, My, B, C / det, B / det, My / det,           # eq. (4) solved for u', v', r'
         )
 
@@ -465,7 +475,7 @@ class MMGModel(Model):
         (L, cq, cqL,
          R0, Xvv, Xvr, Xrr, Xvvvv, Yv, Yr, Yvvv, Yvvr, Yvrr, Yrrr, Nv, Nr, Nvvv, Nvvr, Nvrr, Nrrr,
          xP, mC1, w1, wcA, wcD, kT0, kT1, k2, cT, cXP, c8pi, kappa, eta, one_m_eta, eps,
-         lR, gRA, gRD, cF, cXR, cYR, cNR) = c[:_N_FORCE_CONSTS]
+         lR, gRA, gRD, cF, cXR, cYR, cNR, delta0) = c[:_N_FORCE_CONSTS]
         # hull, eqs. (7)-(10): v' = v/U, r' = r L/U, beta = asin(-v')
         U2 = uu * uu + v * v
         U = xp.sqrt(U2)
@@ -489,7 +499,7 @@ class MMGModel(Model):
         uR = eps * xp.sqrt(eta * (a * a) + one_m_eta * uP2)
         betaR = beta - lR * rp
         vR = (U * (gRA + gRD * xp.sign_nn(betaR))) * betaR
-        alphaR = delta - xp.arctan(vR / uR)
+        alphaR = delta - delta0 - xp.arctan(vR / uR)  # delta0: neutral angle (see _PARAM_DOC)
         FN = cF * (uR * uR + vR * vR) * xp.sin(alphaR)
         FNcd = FN * xp.cos(delta)
         return {"X_H": XH, "Y_H": YH, "N_H": NH, "X_P": cXP * KTn2D2, "X_R": cXR * FN * xp.sin(delta),
