@@ -289,3 +289,29 @@ def test_kvlcc2_zigzags_against_marin_measurements(kvlcc2):
             meas = MEASURED_ZZ[(amp, m.first_side)]
             print(f"{amp}/{amp} {m.first_side} first: overshoot1 MMG {m.overshoot1_deg:.2f} measured {meas}")
             assert m.overshoot1_deg == pytest.approx(meas, abs=3.5)
+
+
+def test_rudder_neutral_angle_makes_the_ship_asymmetric(kvlcc2):
+    """delta0 > 0: no rudder force at delta = delta0 (a straight course needs that rudder), and the turn
+    to port (negative rudder, larger |alpha_R|) becomes the tighter one.  The published set is already
+    slightly asymmetric through gamma_R and C2 (different for beta_R, beta_P < 0 and > 0); with those
+    made equal the turns are mirror images."""
+    from shipid.manoeuvres import turning_circle
+
+    d0 = math.radians(1.0)
+    x = np.array([0, 0, 0, 1.179, 0, 0.0])
+    n = 10.0
+    asym = kvlcc2.with_params({"delta0": d0})
+    assert abs(asym.forces(x, [d0, n])["F_N"]) < 1e-12 and abs(asym.rhs(0.0, x, [d0, n])[5]) < 1e-15
+    assert abs(kvlcc2.forces(x, [d0, n])["F_N"]) > 1.0
+    p = dict(zip(kvlcc2.param_names, kvlcc2.params))
+    mirror = {"gammaR_m": p["gammaR_p"], "C2m": p["C2p"]}
+    td = {}
+    for name, m in (("published", kvlcc2), ("published+delta0", asym),
+                    ("mirror", kvlcc2.with_params(mirror)), ("mirror+delta0", kvlcc2.with_params({**mirror, "delta0": d0}))):
+        res = turning_circle(m, 35.0, side="both")
+        td[name] = [r.tactical_diameter_L for r in res.metrics]  # members: starboard, port
+    assert td["mirror"][0] == pytest.approx(td["mirror"][1], rel=1e-6)
+    assert td["mirror+delta0"][1] < td["mirror"][1] < td["mirror+delta0"][0]
+    gap = {k: v[0] - v[1] for k, v in td.items()}  # starboard minus port
+    assert gap["published+delta0"] > gap["published"] + 0.02 > 0.02
