@@ -1,6 +1,7 @@
 """Optimal control: LEPF, exact gradients (RK4 sensitivities, costates, shooting Jacobians),
 the analytic bang-bang answer of seed 000's scenario 1 against both numeric solvers and the
 paper, scenarios 2-3 constraints, identified-model plans and the `shipid plan` CLI."""
+import builtins
 import json
 
 import numpy as np
@@ -218,3 +219,24 @@ def test_cli_bad_inputs(tmp_path, capsys):
         paper_problem(7)
     with pytest.raises(ValueError, match="give 'model'"):
         problem_from_dict({"input_bounds": {}})
+
+
+def test_missing_casadi_gives_a_clear_error(monkeypatch, capsys, tmp_path):
+    real_import = builtins.__import__
+
+    def no_casadi(name, *args, **kwargs):
+        if name == "casadi" or name.startswith("casadi."):
+            raise ImportError("No module named 'casadi'")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_casadi)
+    from shipid.control.ipopt import MissingExtraError, have_casadi  # importable without CasADi
+
+    assert not have_casadi()
+    with pytest.raises(MissingExtraError, match=r"pip install shipid\[casadi\]"):
+        solve_direct(paper_problem(1, n_intervals=4, substeps=2), method="ipopt")
+    # the CLI reports it as one line and exit code 2
+    assert main(["plan", "paper-1", "--optimizer", "ipopt", "-o", str(tmp_path / "p.json")]) == 2
+    assert "pip install shipid[casadi]" in capsys.readouterr().err
+    # the rest of the control layer does not need CasADi
+    assert solve_direct(paper_problem(1, n_intervals=4, substeps=2), max_iter=2).method == "direct-slsqp"

@@ -254,8 +254,10 @@ def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int | N
     Parameters
     ----------
     problem : Problem
-    method : {"slsqp", "trust-constr"}
-        scipy optimiser.
+    method : {"slsqp", "trust-constr", "ipopt"}
+        Optimiser: scipy's SLSQP or trust-constr, or IPOPT through CasADi (the same
+        transcription built by :func:`shipid.control.ipopt.solve_ipopt`; needs the extra
+        ``pip install shipid[casadi]``).
     n_segments : int, optional
         Shooting segments (default ``problem.shooting_segments``) (reduced to a divisor of ``n_intervals``); each holds
         ``n_intervals / n_segments`` control intervals.  Path bounds are imposed
@@ -268,8 +270,12 @@ def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int | N
     U0, tf0 : optional
         Initial guess; the node states are initialised by simulating it.
     """
-    if method not in ("slsqp", "trust-constr"):
-        raise ValueError(f"solve_direct: method must be 'slsqp' or 'trust-constr', got {method!r}")
+    if method not in ("slsqp", "trust-constr", "ipopt"):
+        raise ValueError(f"solve_direct: method must be 'slsqp', 'trust-constr' or 'ipopt', got {method!r}")
+    if method == "ipopt":
+        from .ipopt import solve_ipopt
+
+        return solve_ipopt(problem, n_segments=n_segments, max_iter=max(max_iter, 1000), tol=tol, U0=U0, tf0=tf0)
     t0 = time.perf_counter()
     ms = _MS(problem, problem.shooting_segments if n_segments is None else n_segments)
     U = problem.initial_controls() if U0 is None else np.clip(np.asarray(U0, float), problem.u_lo, problem.u_hi)
