@@ -113,7 +113,7 @@ class _MS:
         """Jacobian rows (nx, n) of the unscaled state after RK4 step k of segment q."""
         pr = self.pr
         U, S, tf, X, Ax, Bu, ch = self._cache
-        nx, nu, L = self.nx, self.nu, self.L
+        nx, L = self.nx, self.L
         D = np.zeros((nx, self.n))
         for j in range(k // self.s + 1):
             i = q * L + j

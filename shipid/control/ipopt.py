@@ -265,10 +265,8 @@ def solve_ipopt(problem: Problem, *, n_segments: int | None = None, max_iter: in
 
     t0 = time.perf_counter()
     pr = problem
-    m = pr.model
     ms = _MS(pr, pr.shooting_segments if n_segments is None else n_segments)
     N, s, nx, nu, nseg, L = ms.N, ms.s, ms.nx, ms.nu, ms.nseg, ms.L
-    p = m.params
     keep: list = []  # the callbacks must outlive the solver
 
     F = _interval_callback(ca, pr, nseg, keep)
