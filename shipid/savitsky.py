@@ -325,6 +325,8 @@ class ResistanceCurve:
         vmax = float(s[-1])
         if a > vmax:
             rmax = float(self._y[-1])
+            if a > 1e100:  # a diverged trajectory: inf (as the array path gives), not OverflowError
+                return sgn * np.inf, np.inf
             return sgn * rmax * (a / vmax) ** 2, 2 * rmax * a / vmax**2
         if not hasattr(self, "_lists"):
             self._lists = (s.tolist(), self._y.tolist(), self._d.tolist())

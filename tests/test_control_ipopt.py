@@ -44,15 +44,24 @@ def test_interval_callback_jacobian_matches_finite_differences():
     assert np.all(J[24:, :8] == 0) and np.all(J[:24, 8:16] == 0)
 
 
-def test_ipopt_scenario1_agrees_with_analytic_and_slsqp():
+@pytest.fixture(scope="module")
+def analytic():
     m = get_model("planing-boat")
     s = m.params_series()
-    b = bang_bang_straight(m.resistance, s["m"] - s["X_udot"], 7500.0, 300.0, 0.5)
+    return bang_bang_straight(m.resistance, s["m"] - s["X_udot"], 7500.0, 300.0, 0.5)
+
+
+def test_ipopt_scenario1_agrees_with_analytic(analytic):
     ip = solve_direct(paper_problem(1, n_intervals=12, substeps=8), method="ipopt")
     assert ip.success, ip.message
     assert ip.method == "direct-ipopt" and "IPOPT" in ip.message
-    assert ip.final_time == pytest.approx(b.final_time, rel=0.01)
-    assert ip.switch_time == pytest.approx(b.switch_t, rel=0.03)
+    assert ip.final_time == pytest.approx(analytic.final_time, rel=0.01)
+    assert ip.switch_time == pytest.approx(analytic.switch_t, rel=0.03)
+
+
+@pytest.mark.slow
+def test_ipopt_and_slsqp_find_the_same_discrete_optimum_of_scenario1():
+    ip = solve_direct(paper_problem(1, n_intervals=12, substeps=8), method="ipopt")
     sq = solve_direct(paper_problem(1, n_intervals=12, substeps=8), method="slsqp")
     # the same transcription: both optimisers land on the same discrete optimum
     assert ip.final_time == pytest.approx(sq.final_time, rel=1e-4)
@@ -60,7 +69,7 @@ def test_ipopt_scenario1_agrees_with_analytic_and_slsqp():
 
 
 def test_ipopt_kcs_turn_with_rate_limits_and_running_cost():
-    pr = kcs_turn_problem(n_intervals=10, substeps=2)
+    pr = kcs_turn_problem(n_intervals=6, substeps=4)
     pr.running = lambda x, u: (0.01 * u[..., 0] ** 2, np.zeros_like(x), np.stack([0.02 * u[..., 0], 0 * u[..., 1]], -1))
     ip = solve_direct(pr, method="ipopt")
     sq = solve_direct(pr, method="slsqp")
@@ -72,9 +81,10 @@ def test_ipopt_kcs_turn_with_rate_limits_and_running_cost():
     assert rate.max() <= pr.rate[0] * 1.001
 
 
-def test_cli_plan_solver_ipopt(tmp_path):
+def test_cli_plan_solver_ipopt(tmp_path, analytic):
     out = tmp_path / "plan.json"
-    assert main(["plan", "paper-1", "--solver", "ipopt", "--intervals", "12", "--substeps", "8", "-o", str(out)]) == 0
+    assert main(["plan", "paper-1", "--solver", "ipopt", "--intervals", "6", "--substeps", "8", "-o", str(out)]) == 0
     doc = json.loads(out.read_text())
     assert doc["method"] == "direct-ipopt" and doc["max_constraint_violation"] <= 1e-2
-    assert 47.5 < doc["final_time_s"] < 48.6 and doc["switch_time_s"] is not None
+    # 6 intervals are coarse (+2.4 % above the analytic time, as SLSQP on the same grid); the 1 % check is above
+    assert 0 < doc["final_time_s"] / analytic.final_time - 1 < 0.03 and doc["switch_time_s"] is not None
