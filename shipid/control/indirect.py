@@ -252,7 +252,7 @@ def solve_indirect(problem: Problem, *, method: str = "bfgs", r0: float = 1.0, c
             msg = "projected gradient below gtol" if ok else "iteration limit of the stage reached"
         nit += it
         Uc, tfc = aug.unpack(z)
-        history.append({"stage": stage, "r": r, "nit": it, "tf": tfc, "J_a": float(fun(z)[0])})
+        history.append({"stage": stage, "r": r, "nit": it, "tf": float(tfc), "J_a": float(fun(z)[0]), "message": msg})
         if callback is not None:
             callback(stage, Uc, tfc)
         r *= c_factor
