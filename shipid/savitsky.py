@@ -314,7 +314,8 @@ class ResistanceCurve:
     def _hermite(self, a):
         s, n = self.speed, len(self.speed)
         if self._inv_step is not None:
-            i = np.minimum(np.maximum((a - s[0]) * self._inv_step, 0.0), n - 2).astype(np.intp)
+            with np.errstate(invalid="ignore"):  # NaN (a diverged trajectory) -> any index; t stays NaN
+                i = np.minimum(np.maximum(((a - s[0]) * self._inv_step).astype(np.intp), 0), n - 2)
         else:
             i = np.minimum(np.maximum(np.searchsorted(s, a, side="right") - 1, 0), n - 2)
         t = a - s[i]

@@ -86,3 +86,6 @@ def test_diverged_speed_gives_inf_not_overflow():
     R = get_model("planing-boat").resistance
     assert R(1e200) == np.inf and R(-1e300) == -np.inf and R.derivative(1e300) == np.inf
     assert np.isnan(R(float("nan")))
+    r = R(np.array([np.nan, 1e300, -np.inf, 5.0]))
+    assert np.isnan(r[0]) and r[1] == np.inf and r[2] == -np.inf and r[3] == pytest.approx(R(5.0), rel=1e-12)
+    assert np.isnan(R.derivative(np.array([np.nan]))[0])
