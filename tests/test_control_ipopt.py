@@ -88,3 +88,23 @@ def test_cli_plan_solver_ipopt(tmp_path, analytic):
     assert doc["method"] == "direct-ipopt" and doc["max_constraint_violation"] <= 1e-2
     # 6 intervals are coarse (+2.4 % above the analytic time, as SLSQP on the same grid); the 1 % check is above
     assert 0 < doc["final_time_s"] / analytic.final_time - 1 < 0.03 and doc["switch_time_s"] is not None
+
+
+def test_ipopt_fixed_final_time_with_mayer_cost():
+    # fixed horizon, maximise the heading reached in 8 s (Mayer term), rudder angle and rate limited
+    pr = kcs_turn_problem(n_intervals=6, substeps=4)
+    pr.final_time, pr.time_weight = 8.0, 0.0
+    pr.term_idx, pr.term_val, pr.terminal = np.zeros(0, int), np.zeros(0), {}
+    i = pr.model.state_index("psi")
+
+    def mayer(xf, tf):
+        g = np.zeros(pr.model.nx)
+        g[i] = -1.0
+        return -xf[i], g, 0.0
+
+    pr.mayer = mayer
+    ip = solve_direct(pr, method="ipopt")
+    sq = solve_direct(pr, method="slsqp")
+    assert ip.success and sq.success, (ip.message, sq.message)
+    assert ip.final_time == 8.0 and ip.cost == pytest.approx(sq.cost, rel=1e-3)
+    assert -ip.cost > 0.5  # turned by more than ~30 deg
