@@ -64,7 +64,9 @@ def main(argv=None):
                 warnings.simplefilter("ignore")
                 res = fn(pr, args)
             runs[key] = (label, res, time.perf_counter() - t0, pr)
-            print(f"  scenario {k}: {label} done in {runs[key][2]:.1f} s", flush=True)
+            worst = max(res.violations, key=res.violations.get)
+            print(f"  scenario {k}: {label} done in {runs[key][2]:.1f} s: {res.nit} iterations, tf {res.final_time:.3f} s, "
+                  f"max violation {res.max_constraint_violation:.2e} ({worst}), success {res.success}", flush=True)
         ref_wall = runs[methods[0]][2]
         tf_ref = b.final_time if k == 1 else (runs["slsqp"][1].final_time if "slsqp" in runs else None)
         for key, (label, res, wall, pr) in runs.items():
