@@ -263,6 +263,7 @@ def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int | N
         ``n_intervals / n_segments`` control intervals.  Path bounds are imposed
         at every RK4 node.
     max_iter : int
+        Iteration limit (SLSQP, IPOPT; trust-constr gets ten times as many).
     ftol : float
         SLSQP's objective tolerance (trust-constr: ``gtol``/``xtol``).
     tol : float
@@ -275,7 +276,7 @@ def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int | N
     if method == "ipopt":
         from .ipopt import solve_ipopt
 
-        return solve_ipopt(problem, n_segments=n_segments, max_iter=max(max_iter, 1000), tol=tol, U0=U0, tf0=tf0)
+        return solve_ipopt(problem, n_segments=n_segments, max_iter=max_iter, tol=tol, U0=U0, tf0=tf0)
     t0 = time.perf_counter()
     ms = _MS(problem, problem.shooting_segments if n_segments is None else n_segments)
     U = problem.initial_controls() if U0 is None else np.clip(np.asarray(U0, float), problem.u_lo, problem.u_hi)
