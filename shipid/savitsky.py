@@ -303,16 +303,25 @@ class ResistanceCurve:
         # Hermite data for a fast evaluation (np.searchsorted instead of scipy's call overhead)
         self._y = r
         self._d = pch.derivative()(s)
+        # the same cubic per segment in power form about its left knot: c0 + c1 t + c2 t^2 + c3 t^3, t = V - s_i
+        h = np.diff(s)
+        dy = np.diff(r) / h
+        d0, d1 = self._d[:-1], self._d[1:]
+        self._coef = np.array([r[:-1], d0, (3 * dy - 2 * d0 - d1) / h, (d0 + d1 - 2 * dy) / h**2])
+        # uniform tables (Savitsky curves) index by division instead of a search
+        self._inv_step = 1.0 / h[0] if np.allclose(h, h[0], rtol=1e-12, atol=0.0) else None
 
     def _hermite(self, a):
-        s, y, d = self.speed, self._y, self._d
-        i = np.clip(np.searchsorted(s, a, side="right") - 1, 0, len(s) - 2)
-        h = s[i + 1] - s[i]
-        t = (a - s[i]) / h
-        t2, t3 = t * t, t * t * t
-        val = (2 * t3 - 3 * t2 + 1) * y[i] + (t3 - 2 * t2 + t) * h * d[i] + (-2 * t3 + 3 * t2) * y[i + 1] + (t3 - t2) * h * d[i + 1]
-        der = ((6 * t2 - 6 * t) * y[i] + (3 * t2 - 4 * t + 1) * h * d[i] + (-6 * t2 + 6 * t) * y[i + 1]
-               + (3 * t2 - 2 * t) * h * d[i + 1]) / h
+        s, n = self.speed, len(self.speed)
+        if self._inv_step is not None:
+            with np.errstate(invalid="ignore"):  # NaN (a diverged trajectory) -> any index; t stays NaN
+                i = np.minimum(np.maximum(((a - s[0]) * self._inv_step).astype(np.intp), 0), n - 2)
+        else:
+            i = np.minimum(np.maximum(np.searchsorted(s, a, side="right") - 1, 0), n - 2)
+        t = a - s[i]
+        c0, c1, c2, c3 = self._coef[:, i]
+        val = c0 + t * (c1 + t * (c2 + t * c3))
+        der = c1 + t * (2 * c2 + 3 * t * c3)
         return val, der
 
     def _scalar(self, V: float):
@@ -325,6 +334,8 @@ class ResistanceCurve:
         vmax = float(s[-1])
         if a > vmax:
             rmax = float(self._y[-1])
+            if a > 1e100:  # a diverged trajectory: inf (as the array path gives), not OverflowError
+                return sgn * np.inf, np.inf
             return sgn * rmax * (a / vmax) ** 2, 2 * rmax * a / vmax**2
         if not hasattr(self, "_lists"):
             self._lists = (s.tolist(), self._y.tolist(), self._d.tolist())

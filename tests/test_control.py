@@ -1,6 +1,7 @@
 """Optimal control: LEPF, exact gradients (RK4 sensitivities, costates, shooting Jacobians),
 the analytic bang-bang answer of seed 000's scenario 1 against both numeric solvers and the
 paper, scenarios 2-3 constraints, identified-model plans and the `shipid plan` CLI."""
+import builtins
 import json
 
 import numpy as np
@@ -137,7 +138,10 @@ def test_scenario1_direct_agrees_with_analytic(bang):
 @pytest.mark.slow
 def test_scenario1_indirect_agrees_with_analytic(bang):
     _, b = bang
-    res = solve_indirect(paper_problem(1, n_intervals=20, substeps=4), method="bfgs")
+    # 11 LEPF stages: with 10, the exterior-penalty residual on u(tf) sits at the 0.01 tolerance and
+    # depends on round-off (0.0085 before, 0.0137 after a 1e-11 change of the R_T evaluation); 11 give
+    # 0.0082. The later stages stall after one L-BFGS-B iteration (docs/control.md), so it shrinks little.
+    res = solve_indirect(paper_problem(1, n_intervals=20, substeps=4), method="bfgs", n_penalty=11)
     assert res.success, res.message
     assert res.final_time == pytest.approx(b.final_time, rel=0.01)
     assert res.switch_time == pytest.approx(b.switch_t, rel=0.03)
@@ -166,7 +170,8 @@ def test_scenarios_2_3_satisfy_constraints(k):
 @pytest.mark.slow
 def test_identified_model_turn_direct_and_indirect_agree():
     fit = {"model": "kcs-response", "coef": get_model("kcs-response").params_series().to_dict()}
-    pr = kcs_turn_problem(get_model(fit["model"], fit["coef"]))
+    # 12 intervals keep the test short (20 give the same pattern, 11.55 s vs 11.42 s here)
+    pr = kcs_turn_problem(get_model(fit["model"], fit["coef"]), n_intervals=12)
     d = solve_direct(pr)
     i = solve_indirect(pr)
     assert d.success and i.success, (d.message, i.message)
@@ -218,3 +223,24 @@ def test_cli_bad_inputs(tmp_path, capsys):
         paper_problem(7)
     with pytest.raises(ValueError, match="give 'model'"):
         problem_from_dict({"input_bounds": {}})
+
+
+def test_missing_casadi_gives_a_clear_error(monkeypatch, capsys, tmp_path):
+    real_import = builtins.__import__
+
+    def no_casadi(name, *args, **kwargs):
+        if name == "casadi" or name.startswith("casadi."):
+            raise ImportError("No module named 'casadi'")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_casadi)
+    from shipid.control.ipopt import MissingExtraError, have_casadi  # importable without CasADi
+
+    assert not have_casadi()
+    with pytest.raises(MissingExtraError, match=r"pip install shipid\[casadi\]"):
+        solve_direct(paper_problem(1, n_intervals=4, substeps=2), method="ipopt")
+    # the CLI reports it as one line and exit code 2
+    assert main(["plan", "paper-1", "--optimizer", "ipopt", "-o", str(tmp_path / "p.json")]) == 2
+    assert "pip install shipid[casadi]" in capsys.readouterr().err
+    # the rest of the control layer does not need CasADi
+    assert solve_direct(paper_problem(1, n_intervals=4, substeps=2), max_iter=2).method == "direct-slsqp"

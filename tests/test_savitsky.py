@@ -77,3 +77,15 @@ def test_user_table_errors():
         ResistanceCurve(np.array([0, 2, 1.0]), np.array([0, 1, 2.0]))
     t = ResistanceCurve(np.array([1.0, 2.0, 3.0]), np.array([100.0, 400.0, 900.0]))
     assert t(0.0) == 0.0 and t(2.0) == pytest.approx(400.0)
+
+
+def test_diverged_speed_gives_inf_not_overflow():
+    # a diverging trajectory inside an optimiser's line search must give inf (rejected step), not raise
+    from shipid.models import get_model
+
+    R = get_model("planing-boat").resistance
+    assert R(1e200) == np.inf and R(-1e300) == -np.inf and R.derivative(1e300) == np.inf
+    assert np.isnan(R(float("nan")))
+    r = R(np.array([np.nan, 1e300, -np.inf, 5.0]))
+    assert np.isnan(r[0]) and r[1] == np.inf and r[2] == -np.inf and r[3] == pytest.approx(R(5.0), rel=1e-12)
+    assert np.isnan(R.derivative(np.array([np.nan]))[0])

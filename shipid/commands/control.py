@@ -17,8 +17,10 @@ def register(sub) -> None:
     p.add_argument("problem", help="paper-1, paper-2, paper-3 (seed 000's scenarios) or a PROBLEM.json file")
     p.add_argument("--method", choices=("indirect", "direct"), default="direct",
                    help="indirect: costates + LEPF (the paper's method); direct: multiple shooting (default)")
-    p.add_argument("--optimizer", choices=("bfgs", "steepest", "slsqp", "trust-constr"), default=None,
-                   help="inner optimiser (indirect: bfgs|steepest, default bfgs; direct: slsqp|trust-constr, default slsqp)")
+    p.add_argument("--optimizer", "--solver", dest="optimizer", choices=("bfgs", "steepest", "slsqp", "trust-constr", "ipopt"),
+                   default=None,
+                   help="inner optimiser (indirect: bfgs|steepest, default bfgs; direct: slsqp|trust-constr|ipopt, "
+                        "default slsqp; ipopt needs `pip install shipid[casadi]`)")
     p.add_argument("--intervals", type=int, default=None, help="number of control intervals (overrides the problem)")
     p.add_argument("--substeps", type=int, default=None, help="RK4 steps per control interval (overrides the problem)")
     p.add_argument("--tol", type=float, default=1e-2, help="admissible scaled constraint violation (default 0.01)")
@@ -52,8 +54,8 @@ def _plan(args) -> int:
             raise ValueError(f"--optimizer {opt} is not available with --method indirect; use bfgs or steepest")
         res = solve_indirect(problem, method=opt or "bfgs", tol=args.tol)
     else:
-        if opt not in (None, "slsqp", "trust-constr"):
-            raise ValueError(f"--optimizer {opt} is not available with --method direct; use slsqp or trust-constr")
+        if opt not in (None, "slsqp", "trust-constr", "ipopt"):
+            raise ValueError(f"--optimizer {opt} is not available with --method direct; use slsqp, trust-constr or ipopt")
         res = solve_direct(problem, method=opt or "slsqp", tol=args.tol)
     doc = res.summary()
     doc["trajectory_csv"] = csv.name

@@ -1,7 +1,8 @@
 """Optimal control of protocol models: problems, an indirect (costate,
 steepest descent / BFGS, LEPF) and a direct (multiple shooting, SLSQP /
-trust-constr) solver with a common result, seed 000's scenarios and
-time-optimal manoeuvres for identified ship models."""
+trust-constr, or IPOPT through the optional CasADi extra) solver with a common
+result, seed 000's scenarios and time-optimal manoeuvres for identified ship
+models."""
 from .analytic import BangBang, bang_bang_straight
 from .direct import solve_direct
 from .indirect import lepf, solve_indirect

@@ -113,7 +113,7 @@ class _MS:
         """Jacobian rows (nx, n) of the unscaled state after RK4 step k of segment q."""
         pr = self.pr
         U, S, tf, X, Ax, Bu, ch = self._cache
-        nx, nu, L = self.nx, self.nu, self.L
+        nx, L = self.nx, self.L
         D = np.zeros((nx, self.n))
         for j in range(k // self.s + 1):
             i = q * L + j
@@ -254,13 +254,16 @@ def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int | N
     Parameters
     ----------
     problem : Problem
-    method : {"slsqp", "trust-constr"}
-        scipy optimiser.
+    method : {"slsqp", "trust-constr", "ipopt"}
+        Optimiser: scipy's SLSQP or trust-constr, or IPOPT through CasADi (the same
+        transcription built by :func:`shipid.control.ipopt.solve_ipopt`; needs the extra
+        ``pip install shipid[casadi]``).
     n_segments : int, optional
         Shooting segments (default ``problem.shooting_segments``) (reduced to a divisor of ``n_intervals``); each holds
         ``n_intervals / n_segments`` control intervals.  Path bounds are imposed
         at every RK4 node.
     max_iter : int
+        Iteration limit (SLSQP, IPOPT; trust-constr gets ten times as many).
     ftol : float
         SLSQP's objective tolerance (trust-constr: ``gtol``/``xtol``).
     tol : float
@@ -268,8 +271,12 @@ def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int | N
     U0, tf0 : optional
         Initial guess; the node states are initialised by simulating it.
     """
-    if method not in ("slsqp", "trust-constr"):
-        raise ValueError(f"solve_direct: method must be 'slsqp' or 'trust-constr', got {method!r}")
+    if method not in ("slsqp", "trust-constr", "ipopt"):
+        raise ValueError(f"solve_direct: method must be 'slsqp', 'trust-constr' or 'ipopt', got {method!r}")
+    if method == "ipopt":
+        from .ipopt import solve_ipopt
+
+        return solve_ipopt(problem, n_segments=n_segments, max_iter=max_iter, tol=tol, U0=U0, tf0=tf0)
     t0 = time.perf_counter()
     ms = _MS(problem, problem.shooting_segments if n_segments is None else n_segments)
     U = problem.initial_controls() if U0 is None else np.clip(np.asarray(U0, float), problem.u_lo, problem.u_hi)

@@ -191,7 +191,7 @@ def _steepest(fun, z0, lb, ub, max_iter, gtol):
 
 
 def solve_indirect(problem: Problem, *, method: str = "bfgs", r0: float = 1.0, c_factor: float = 0.2,
-                   n_penalty: int = 10, max_iter: int = 100, gtol: float = 1e-7, tol: float = 1e-2,
+                   n_penalty: int = 10, max_iter: int = 100, gtol: float = 1e-7, ftol: float = 1e-13, tol: float = 1e-2,
                    U0: np.ndarray | None = None, tf0: float | None = None, callback=None) -> ControlResult:
     """Solve ``problem`` by the paper's indirect method.
 
@@ -207,6 +207,9 @@ def solve_indirect(problem: Problem, *, method: str = "bfgs", r0: float = 1.0, c
         Iterations per penalty stage.
     gtol : float
         Projected-gradient tolerance per stage.
+    ftol : float
+        L-BFGS-B's relative-reduction stop per stage (0 disables it: only ``gtol`` and ``max_iter`` stop a
+        stage).
     tol : float
         Largest admissible scaled constraint violation for ``success``.
     U0, tf0 : optional
@@ -244,7 +247,7 @@ def solve_indirect(problem: Problem, *, method: str = "bfgs", r0: float = 1.0, c
         fun = lambda zz, rr=r: aug(zz, rr)  # noqa: E731
         if method == "bfgs":
             res = minimize(fun, z, jac=True, method="L-BFGS-B", bounds=list(zip(lb, ub)),
-                           options={"maxiter": max_iter, "gtol": gtol, "ftol": 1e-13})
+                           options={"maxiter": max_iter, "gtol": gtol, "ftol": ftol})
             z, it, ok = res.x, res.nit, bool(res.success) or res.status == 1
             msg = res.message if isinstance(res.message, str) else str(res.message)
         else:
@@ -252,7 +255,7 @@ def solve_indirect(problem: Problem, *, method: str = "bfgs", r0: float = 1.0, c
             msg = "projected gradient below gtol" if ok else "iteration limit of the stage reached"
         nit += it
         Uc, tfc = aug.unpack(z)
-        history.append({"stage": stage, "r": r, "nit": it, "tf": tfc, "J_a": float(fun(z)[0])})
+        history.append({"stage": stage, "r": r, "nit": it, "tf": float(tfc), "J_a": float(fun(z)[0]), "message": msg})
         if callback is not None:
             callback(stage, Uc, tfc)
         r *= c_factor

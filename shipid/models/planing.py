@@ -238,7 +238,6 @@ class PlaningBoatModel(Model):
 
     def _jac_x(self, t, x, u, p):
         psi, phi, uu, v, pp, r = (x[..., i] for i in range(2, 8))
-        T, ang = u[..., 0], u[..., 1]
         shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
         J = np.zeros(shape + (8, 8))
         P = lambda i: p[..., i]  # noqa: E731
