@@ -674,7 +674,9 @@ class ZigzagRudder(_RudderLaw):
     ----------
     amp, switch : float  rudder amplitude and switch heading deviation [rad] (positive)
     first : array (B,)  +1 (starboard / positive rudder first) or -1
-    psi0 : array (B,)  reference heading [rad] (the approach course)
+    psi0 : array (B,) or None  reference heading [rad]; None: each member's heading at the first
+        execute ``te`` (the ITTC definition; it differs from the start heading when an asymmetric ship,
+        e.g. with a rudder neutral angle, drifts off course during the approach)
     n : array (B,) or RampSchedule  propeller rps
     rate, te : float  steering rate [rad/s], time of the first execute [s]
     ipsi, nu, idl, inn : int  index of psi in the state; inputs as in :class:`TurningRudder`
@@ -691,7 +693,7 @@ class ZigzagRudder(_RudderLaw):
         first = np.asarray(first, dtype=float)
         super().__init__(nu, idl, inn, n, rate, te, first.shape)
         self.amp, self.lev, self.ipsi = float(amp), float(switch), ipsi
-        self.psi0 = np.broadcast_to(np.asarray(psi0, dtype=float), first.shape).copy()
+        self.psi0 = None if psi0 is None else np.broadcast_to(np.asarray(psi0, dtype=float), first.shape).copy()
         # history of (t_s, delta at t_s, order from t_s on); the rudder moves from delta_s towards the order
         self._hist_t = [self.te]
         self._hist = [(np.zeros(first.shape), first * self.amp)]
@@ -711,6 +713,10 @@ class ZigzagRudder(_RudderLaw):
         return self._pack_now(self._delta(t), t)
 
     def event(self, t, x):
+        if np.all(np.asarray(t) < self.te):
+            return np.full(self.batch, -1.0)
+        if self.psi0 is None:  # first evaluation at the execute (te is a step boundary / stop)
+            self.psi0 = np.array(x[..., self.ipsi], dtype=float)
         g = np.sign(self._hist[-1][1]) * (x[..., self.ipsi] - self.psi0) - self.lev
         return np.where(np.asarray(t) < self.te, -1.0, g)
 
@@ -1125,7 +1131,8 @@ def zigzag(model: Model, rudder_deg: float = 10.0, switch_deg: float | None = No
     law: list = []
 
     def factory():
-        law[:] = [ZigzagRudder(amp, lev, F, x0[:, ipsi], ns, rate, te, ipsi=ipsi, nu=model.nu, idl=idl, inn=inn)]
+        # reference heading: each member's heading at the execute (ITTC), not at the start of the approach
+        law[:] = [ZigzagRudder(amp, lev, F, None, ns, rate, te, ipsi=ipsi, nu=model.nu, idl=idl, inn=inn)]
         return law[0]
 
     def done(T, X):

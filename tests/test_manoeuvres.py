@@ -332,3 +332,20 @@ def test_laws_record_the_inputs_that_acted():
     z = zigzag(m, 10, speed=1.179)
     u = z.simulation.u[0, :, 0]
     assert np.max(np.abs(np.diff(u))) <= m.rudder_rate * np.diff(z.simulation.t).max() + 1e-12
+
+
+def test_zigzag_heading_reference_is_the_heading_at_the_execute():
+    """An asymmetric ship (MMG with a 1 deg rudder neutral angle) drifts off course during the
+    approach at zero rudder; the first reversal must still come 20 deg from the heading at the
+    execute (ITTC), for both the fixed-step and the adaptive integrator."""
+    m = get_model("mmg").with_params({"delta0": math.radians(1.0)})
+    for kw in ({}, {"method": "dopri5", "rtol": 1e-8}):
+        res = zigzag(m, 20.0, 20.0, first="starboard", execute_time=40.0, **kw)
+        sim = res.simulation
+        t, psi, delta = sim.t, sim.x[0, :, 2], sim.u[0, :, 0]
+        i_e = int(np.searchsorted(t, 40.0))
+        drift = math.degrees(psi[i_e] - psi[0])
+        assert abs(drift) > 0.2, drift  # the approach really drifts (so the reference matters)
+        i_rev = int(np.argmax(np.diff(delta) < -1e-9))  # first sample where the rudder swings back
+        psi_rev = np.interp(t[i_rev], t, psi)
+        assert math.degrees(psi_rev - psi[i_e]) == pytest.approx(20.0, abs=0.3), kw
