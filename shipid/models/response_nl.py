@@ -309,12 +309,18 @@ def fit_to_model(truth: Model, *, speeds=(1.4, 1.7, 2.0), turning_rudders=(10.0,
                            heading_change_deg=heading_change_deg)]
     for z in zigzags:
         runs.append(zigzag(truth, float(z), speed=list(speeds), first="both"))
-    # the truth runs as logs (all six states measured exactly), their exact derivatives and initial states
+    # the truth runs as logs (all six states measured exactly), their exact derivatives and initial states;
+    # the inputs are sampled every `decimate` steps and held over each interval (the identifier's input
+    # model), and the truth is re-run with exactly those inputs, so a perfect fit reproduces the logs
+    from ..simulate import simulate
+
     logs, derivs, x0s = [], [], []
     for j, run in enumerate(runs):
         sim = run.simulation
+        t, Ub = sim.t[::decimate], sim.u[:, ::decimate]
+        Xb = simulate(truth, sim.x[:, 0], t, Ub).x
         for b in range(sim.x.shape[0]):
-            X, U, t = sim.x[b, ::decimate], sim.u[b, ::decimate], sim.t[::decimate]
+            X, U = Xb[b], Ub[b]
             logs.append(TrialLog.from_arrays(t, name=f"run{j}_{b}", **dict(zip(model.state_names, X.T)),
                                              **dict(zip(model.input_names, U.T))))
             derivs.append(truth.rhs(t, X, U))
