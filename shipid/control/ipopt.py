@@ -63,6 +63,49 @@ def have_casadi() -> bool:
     return True
 
 
+def _callback(ca, name: str, sp_in: tuple, sp_out: tuple, evaluate, keep: list, jacobian=None):
+    """A CasADi ``Callback`` with fixed input/output sparsities whose numerics are ``evaluate(arg)``.
+
+    ``jacobian``: a zero-argument factory of the callback computing the Jacobian (CasADi asks for it
+    once), or None.  Every callback is appended to ``keep``: CasADi holds only a weak reference.
+    """
+
+    class _CB(ca.Callback):
+        def __init__(self):
+            ca.Callback.__init__(self)
+            self.construct(name, {"enable_fd": False})
+
+        def get_n_in(self):
+            return len(sp_in)
+
+        def get_n_out(self):
+            return len(sp_out)
+
+        def get_sparsity_in(self, i):
+            return sp_in[i]
+
+        def get_sparsity_out(self, i):
+            return sp_out[i]
+
+        def eval(self, arg):
+            return evaluate(arg)
+
+        def has_jacobian(self):
+            return jacobian is not None
+
+        def get_jacobian(self, jname, inames, onames, opts):
+            return jacobian()
+
+    cb = _CB()
+    keep.append(cb)
+    return cb
+
+
+def _blockdiag(ca, blocks, sp):
+    """Nonzeros of a block-diagonal pattern ``sp`` of K dense (m, n) ``blocks`` (K, m, n), column-major."""
+    return ca.DM(sp, np.ascontiguousarray(np.transpose(blocks, (0, 2, 1))).ravel())
+
+
 def _batched_callback(ca, name: str, fun, jac, na: int, nb: int, no: int, batch: int, keep: list):
     """CasADi function ``(A (na, K), B (nb, K)) -> O (no, K)`` of a batch-aware numpy function.
 
@@ -75,64 +118,21 @@ def _batched_callback(ca, name: str, fun, jac, na: int, nb: int, no: int, batch:
     sp_a = ca.diagcat(*[ca.Sparsity.dense(no, na)] * K)
     sp_b = ca.diagcat(*[ca.Sparsity.dense(no, nb)] * K)
 
-    def _blockdiag(blocks, sp):
-        # nonzeros of a block-diagonal pattern of K dense (no, n) blocks, column-major: block k, column j, rows i
-        return ca.DM(sp, np.ascontiguousarray(np.transpose(blocks, (0, 2, 1))).ravel())
+    dense = ca.Sparsity.dense
+    sp_in = (dense(na, K), dense(nb, K))
 
-    class _Jac(ca.Callback):
-        def __init__(self):
-            ca.Callback.__init__(self)
-            self.construct(f"jac_{name}", {"enable_fd": False})
+    def evaluate(arg):
+        a, b = np.array(arg[0]).T, np.array(arg[1]).T
+        return [ca.DM(np.asarray(fun(a, b), float).reshape(K, no).T)]
 
-        def get_n_in(self):
-            return 3
+    def evaluate_jac(arg):
+        a, b = np.array(arg[0]).T, np.array(arg[1]).T
+        ja, jb = jac(a, b)
+        return [_blockdiag(ca, ja, sp_a), _blockdiag(ca, jb, sp_b)]
 
-        def get_n_out(self):
-            return 2
-
-        def get_sparsity_in(self, i):
-            return ca.Sparsity.dense(*((na, K), (nb, K), (no, K))[i])
-
-        def get_sparsity_out(self, i):
-            return (sp_a, sp_b)[i]
-
-        def eval(self, arg):
-            a, b = np.array(arg[0]).T, np.array(arg[1]).T
-            ja, jb = jac(a, b)
-            return [_blockdiag(ja, sp_a), _blockdiag(jb, sp_b)]
-
-    class _Fun(ca.Callback):
-        def __init__(self):
-            ca.Callback.__init__(self)
-            self.construct(name, {"enable_fd": False})
-
-        def get_n_in(self):
-            return 2
-
-        def get_n_out(self):
-            return 1
-
-        def get_sparsity_in(self, i):
-            return ca.Sparsity.dense(*((na, K), (nb, K))[i])
-
-        def get_sparsity_out(self, i):
-            return ca.Sparsity.dense(no, K)
-
-        def eval(self, arg):
-            a, b = np.array(arg[0]).T, np.array(arg[1]).T
-            return [ca.DM(np.asarray(fun(a, b), float).reshape(K, no).T)]
-
-        def has_jacobian(self):
-            return True
-
-        def get_jacobian(self, jname, inames, onames, opts):
-            j = _Jac()
-            keep.append(j)
-            return j
-
-    f = _Fun()
-    keep.append(f)
-    return f
+    return _callback(ca, name, sp_in, (dense(no, K),), evaluate, keep,
+                     jacobian=lambda: _callback(ca, f"jac_{name}", (*sp_in, dense(no, K)), (sp_a, sp_b),
+                                                evaluate_jac, keep))
 
 
 def _interval_callback(ca, pr: Problem, batch: int, keep: list):
@@ -156,81 +156,38 @@ def _interval_callback(ca, pr: Problem, batch: int, keep: list):
     def _unpack(arg):
         return np.array(arg[0]).T, np.array(arg[1]).T, float(np.array(arg[2])[0, 0])
 
-    def _blockdiag(blocks, sp):
-        # nonzeros of K dense (no, n) diagonal blocks, column-major: block k, column j, rows i
-        return ca.DM(sp, np.ascontiguousarray(np.transpose(blocks, (0, 2, 1))).ravel())
+    dense = ca.Sparsity.dense
+    sp_in = (dense(nx, K), dense(nu, K), dense(1, 1))
 
-    class _Jac(ca.Callback):
-        def __init__(self):
-            ca.Callback.__init__(self)
-            self.construct("jac_interval", {"enable_fd": False})
+    def evaluate(arg):
+        from ..integrate import rk4_step
 
-        def get_n_in(self):
-            return 4
+        x, u, h = _unpack(arg)
+        out = np.empty((K, s, nx))
+        with np.errstate(all="ignore"):
+            for j in range(s):
+                x = rk4_step(m, 0.0, x, u, p, h)
+                out[:, j] = x
+        return [ca.DM(out.reshape(K, no).T)]
 
-        def get_n_out(self):
-            return 3
+    def evaluate_jac(arg):
+        x, u, h = _unpack(arg)
+        Ax = np.broadcast_to(np.eye(nx), (K, nx, nx))
+        Bu = np.zeros((K, nx, nu))
+        ch = np.zeros((K, nx))
+        JX, JU, JH = (np.empty((K, s, nx, nx)), np.empty((K, s, nx, nu)), np.empty((K, s, nx)))
+        with np.errstate(all="ignore"):
+            for j in range(s):
+                x, A, B, c = rk4_sensitivities(m, x, u, p, h)
+                Ax, Bu = A @ Ax, A @ Bu + B
+                ch = (A @ ch[..., None])[..., 0] + c  # d x_j / d h, every step has size h
+                JX[:, j], JU[:, j], JH[:, j] = Ax, Bu, ch
+        return [_blockdiag(ca, JX.reshape(K, no, nx), sp_x), _blockdiag(ca, JU.reshape(K, no, nu), sp_u),
+                ca.DM(JH.reshape(K, no).T.reshape(-1, 1, order="F"))]
 
-        def get_sparsity_in(self, i):
-            return ca.Sparsity.dense(*((nx, K), (nu, K), (1, 1), (no, K))[i])
-
-        def get_sparsity_out(self, i):
-            return (sp_x, sp_u, ca.Sparsity.dense(no * K, 1))[i]
-
-        def eval(self, arg):
-            x, u, h = _unpack(arg)
-            Ax = np.broadcast_to(np.eye(nx), (K, nx, nx))
-            Bu = np.zeros((K, nx, nu))
-            ch = np.zeros((K, nx))
-            JX, JU, JH = (np.empty((K, s, nx, nx)), np.empty((K, s, nx, nu)), np.empty((K, s, nx)))
-            with np.errstate(all="ignore"):
-                for j in range(s):
-                    x, A, B, c = rk4_sensitivities(m, x, u, p, h)
-                    Ax, Bu = A @ Ax, A @ Bu + B
-                    ch = (A @ ch[..., None])[..., 0] + c  # d x_j / d h, every step has size h
-                    JX[:, j], JU[:, j], JH[:, j] = Ax, Bu, ch
-            return [_blockdiag(JX.reshape(K, no, nx), sp_x), _blockdiag(JU.reshape(K, no, nu), sp_u),
-                    ca.DM(JH.reshape(K, no).T.reshape(-1, 1, order="F"))]
-
-    class _Fun(ca.Callback):
-        def __init__(self):
-            ca.Callback.__init__(self)
-            self.construct("interval", {"enable_fd": False})
-
-        def get_n_in(self):
-            return 3
-
-        def get_n_out(self):
-            return 1
-
-        def get_sparsity_in(self, i):
-            return ca.Sparsity.dense(*((nx, K), (nu, K), (1, 1))[i])
-
-        def get_sparsity_out(self, i):
-            return ca.Sparsity.dense(no, K)
-
-        def eval(self, arg):
-            from ..integrate import rk4_step
-
-            x, u, h = _unpack(arg)
-            out = np.empty((K, s, nx))
-            with np.errstate(all="ignore"):
-                for j in range(s):
-                    x = rk4_step(m, 0.0, x, u, p, h)
-                    out[:, j] = x
-            return [ca.DM(out.reshape(K, no).T)]
-
-        def has_jacobian(self):
-            return True
-
-        def get_jacobian(self, jname, inames, onames, opts):
-            j = _Jac()
-            keep.append(j)
-            return j
-
-    f = _Fun()
-    keep.append(f)
-    return f
+    return _callback(ca, "interval", sp_in, (dense(no, K),), evaluate, keep,
+                     jacobian=lambda: _callback(ca, "jac_interval", (*sp_in, dense(no, K)),
+                                                (sp_x, sp_u, dense(no * K, 1)), evaluate_jac, keep))
 
 
 def solve_ipopt(problem: Problem, *, n_segments: int | None = None, max_iter: int = 3000, tol: float = 1e-2,
