@@ -201,11 +201,11 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKF
     dt = np.diff(t_all, axis=1)  # (B, N-1)
     h_all = dt / substeps
     Qd = prob.q[:, None, :] * dt[:, :, None]  # (B, N-1, nz) process-noise variances per interval
-    # where every member shares the sample times, pass plain floats to the model (cheaper than (B,) arrays)
-    # with one sampling interval throughout, Q is one matrix (added in one call)
-    # (one interval to rounding: time stamps like k*0.1 give differences that vary in the last bits)
+    # with one sampling interval throughout, Q is one matrix (added in one call); "one interval" to
+    # rounding, since time stamps like k*0.1 give differences that vary in the last bits
     uniform = N > 1 and bool(np.all(np.abs(dt - dt[:, :1]) <= 1e-9 * np.abs(dt[:, :1])))
     Q_const = prob.q[:, :, None] * dt[:, :1, None] * np.eye(nz) if uniform else None
+    # where every member shares the sample times, pass plain floats to the model (cheaper than (B,) arrays)
     shared_t = (t_all == t_all[:1]).all(axis=0).tolist()
     t_first = t_all[0].tolist()
     h_first = h_all[0].tolist()
