@@ -41,6 +41,14 @@ def fitted(runs):
     return get
 
 
+def _evaluated(fit, full):
+    """The fit's hold-out table (printed for the test log) and its tactical-diameter errors [%] by run."""
+    assert fit.success_, fit.message_
+    tab = ks.evaluate(fit.result(), full)
+    print(tab.round(3).to_string())
+    return tab, tab[(tab.metric == "tactical_diameter_L")].set_index("run")["rel_error_%"]
+
+
 def _err(table, run, metric):
     row = table[(table.run == run) & (table.metric == metric)]
     return float(row["error"].iloc[0]) if row["error"].notna().all() else np.nan
@@ -81,11 +89,8 @@ def test_mmg_refit_with_neutral_angle_meets_the_turning_goal(runs, fitted):
     +5.9 / -5.3 % (docs/validation.md)."""
     full, _ = runs
     fit = fitted("mmg")
-    assert fit.success_, fit.message_
+    tab, rel = _evaluated(fit, full)
     assert np.degrees(fit.coef_["delta0"]) == pytest.approx(0.915, abs=0.01)
-    tab = ks.evaluate(fit.result(), full)
-    print(tab.round(3).to_string())
-    rel = tab[(tab.metric == "tactical_diameter_L")].set_index("run")["rel_error_%"]
     assert abs(rel["tc_35"]) < 1.0 and abs(rel["tc_-35"]) < 5.0, rel          # goal met on both
     assert abs(_err(tab, "zz_-20", "overshoot1_deg")) < 2.0                    # goal met
     assert abs(_err(tab, "zz_20", "overshoot2_deg")) < 3.0                     # goal met
@@ -99,11 +104,7 @@ def test_seed_linear_model_cannot_do_both(runs, fitted):
     the zigzags (held-out first overshoots within 5 deg; measured +1.0 / +3.9 deg) but turns far
     too tightly (tactical diameter 33 % / 44 % small) -- the issue's warning, on measured data."""
     full, _ = runs
-    fit = fitted("kcs-response")
-    assert fit.success_, fit.message_
-    tab = ks.evaluate(fit.result(), full)
-    print(tab.round(3).to_string())
-    rel = tab[(tab.metric == "tactical_diameter_L")].set_index("run")["rel_error_%"]
+    tab, rel = _evaluated(fitted("kcs-response"), full)
     assert rel["tc_35"] < -25 and rel["tc_-35"] < -25, rel
     for run in ks.TEST:
         assert abs(_err(tab, run, "overshoot1_deg")) < 5.0
@@ -116,11 +117,7 @@ def test_response_nl_predicts_heldout_zigzags(runs, fitted):
     misses the 8.5 % wider starboard turn (-7.5 %); held-out first overshoots -3.2 / -0.4 deg, second
     -1.5 / -4.8 deg (the 2 / 3 deg goals are met on one of the two runs each)."""
     full, _ = runs
-    fit = fitted("response-nl")
-    assert fit.success_, fit.message_
-    tab = ks.evaluate(fit.result(), full)
-    print(tab.round(3).to_string())
-    rel = tab[(tab.metric == "tactical_diameter_L")].set_index("run")["rel_error_%"]
+    tab, rel = _evaluated(fitted("response-nl"), full)
     assert abs(rel["tc_35"]) < 2.0 and -8.5 < rel["tc_-35"] < -6.5, rel
     assert abs(_err(tab, "zz_-20", "overshoot1_deg")) < 2.0                    # goal met
     assert abs(_err(tab, "zz_20", "overshoot2_deg")) < 3.0                     # goal met
