@@ -265,12 +265,29 @@ def _interp_at(a, k, f):
 
 
 def _circle_fit(x, y):
-    """Least-squares (Kasa) circle through points; returns (xc, yc, radius)."""
-    A = np.stack([x, y, np.ones_like(x)], axis=1)
-    b = -(x * x + y * y)
-    (D, E, F), *_ = np.linalg.lstsq(A, b, rcond=None)
-    xc, yc = -D / 2, -E / 2
-    return xc, yc, math.sqrt(max(xc * xc + yc * yc - F, 0.0))
+    """Least-squares (Kasa) circle through points; returns (xc, yc, radius).
+
+    Minimises sum (x^2 + y^2 + D x + E y + F)^2 in coordinates centred on the points' mean, where
+    the normal equations separate: a 2x2 system for (D, E) and F = -mean(x^2 + y^2).
+    """
+    mx, my = float(x.mean()), float(y.mean())
+    xc_, yc_ = x - mx, y - my
+    z = xc_ * xc_ + yc_ * yc_
+    sxx, syy, sxy = xc_.dot(xc_), yc_.dot(yc_), xc_.dot(yc_)
+    sxz, syz = xc_.dot(z), yc_.dot(z)
+    det = sxx * syy - sxy * sxy
+    D = (-sxz * syy + syz * sxy) / det
+    E = (-syz * sxx + sxz * sxy) / det
+    F = -float(z.mean())
+    a, b = -D / 2, -E / 2
+    return mx + a, my + b, math.sqrt(max(a * a + b * b - F, 0.0))
+
+
+def _unwrap(psi):
+    """``np.unwrap(psi)`` (float array), skipping the work when no step exceeds pi (simulated headings;
+    with NaNs it always unwraps, as before)."""
+    psi = np.asarray(psi, dtype=float)
+    return psi if psi.size < 2 or np.abs(np.diff(psi)).max() <= math.pi else np.unwrap(psi)
 
 
 def _side(sign):
@@ -293,7 +310,7 @@ def turning_metrics(t, x, y, psi, u, delta, *, lpp: float, v=None, execute_time:
     reference : str  what the positions refer to (copied into the result)
     """
     t, x, y, u, delta = (np.asarray(a, dtype=float) for a in (t, x, y, u, delta))
-    psi = np.unwrap(np.asarray(psi, dtype=float))
+    psi = _unwrap(psi)
     U = np.abs(u) if v is None else np.hypot(u, np.asarray(v, dtype=float))
     if not lpp or lpp <= 0:
         raise ValueError(f"turning_metrics: lpp must be a positive length in metres, got {lpp}")
@@ -374,7 +391,7 @@ def zigzag_metrics(t, psi, delta, *, lpp: float, u=None, v=None, x=None, y=None,
         default: the rudder amplitude rounded to a whole degree, and switch = rudder (an x/x zigzag).
     """
     t, delta = np.asarray(t, dtype=float), np.asarray(delta, dtype=float)
-    psi = np.unwrap(np.asarray(psi, dtype=float))
+    psi = _unwrap(psi)
     ie, te = _execute(t, delta, execute_time)
     psi_e = _at_time(t, psi, te)
     dpsi = psi - psi_e

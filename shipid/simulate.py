@@ -214,7 +214,7 @@ def simulate(
     x = x0.copy()
     X[..., 0, :] = x
     ok, msg = True, "integration finished"
-    f = model._rhs
+    f = model._rhs_bound(p)
     for k in range(n_t - 1):
         h = (t[k + 1] - t[k]) / substeps
         tk = t[k]
@@ -229,10 +229,10 @@ def simulate(
             Uout[..., k, :] = uk
             for _ in range(substeps):
                 # rk4_step inlined (one call less per step; same arithmetic)
-                k1 = f(tk, x, uk, p)
-                k2 = f(tk + h / 2, x + h / 2 * k1, uk, p)
-                k3 = f(tk + h / 2, x + h / 2 * k2, uk, p)
-                k4 = f(tk + h, x + h * k3, uk, p)
+                k1 = f(tk, x, uk)
+                k2 = f(tk + h / 2, x + h / 2 * k1, uk)
+                k3 = f(tk + h / 2, x + h / 2 * k2, uk)
+                k4 = f(tk + h, x + h * k3, uk)
                 x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
                 tk += h
         X[..., k + 1, :] = x
@@ -285,7 +285,7 @@ def _rk4_law_step(model, law, t, x, p, h):
 def _simulate_dopri5(model, x0, t, U, controller, law, p, rtol, atol, first_step=None):
     batch = x0.shape[:-1]
     n_t = t.size
-    f = model._rhs
+    f = model._rhs_bound(p)
     X = np.full(batch + (n_t, model.nx), np.nan)
     Uout = np.full(batch + (n_t, model.nu), np.nan)
     stats = {"method": "dopri5", "n_steps": 0, "n_rejected": 0, "n_fev": 0, "h_last": None}
@@ -297,7 +297,7 @@ def _simulate_dopri5(model, x0, t, U, controller, law, p, rtol, atol, first_step
         stats["h_last"] = r.h_last
 
     if law is not None:
-        r = dopri5(lambda tt, xx: f(tt, xx, law.inputs(tt, xx), p), float(t[0]), x0, float(t[-1]), t, rtol=rtol,
+        r = dopri5(lambda tt, xx: f(tt, xx, law.inputs(tt, xx)), float(t[0]), x0, float(t[-1]), t, rtol=rtol,
                    atol=atol, h0=first_step, stops=law.stops, event=law.event if law.has_events else None,
                    on_event=law.on_event)
         add(r)
@@ -317,7 +317,7 @@ def _simulate_dopri5(model, x0, t, U, controller, law, p, rtol, atol, first_step
             uk = controller(t[k], x) if controller is not None else U[..., k, :]
             uk = np.broadcast_to(np.asarray(uk, dtype=float), batch + (model.nu,))
             j = k + 1 if controller is not None else int(ends[np.searchsorted(ends, k, side="right")])
-            r = dopri5(lambda tt, xx, uk=uk: f(tt, xx, uk, p), float(t[k]), x, float(t[j]), t[k + 1:j + 1],
+            r = dopri5(lambda tt, xx, uk=uk: f(tt, xx, uk), float(t[k]), x, float(t[j]), t[k + 1:j + 1],
                        rtol=rtol, atol=atol, h0=h0)
             add(r)
             Uout[..., k:j, :] = uk[..., None, :]

@@ -26,6 +26,7 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
+from shipid import _jit
 from shipid.models import get_model
 from shipid.models.mmg import MMG_PARAM_NAMES, MMGModel, MMGParticulars
 from shipid.simulate import simulate
@@ -182,11 +183,42 @@ def test_rudder_moment_lever_is_dimensional(kvlcc2):
 
 
 def test_scalar_and_batch_backends_agree(kvlcc2):
+    """One copy of the equations, four ways to run it: Python floats (one sample), numpy (batched),
+    and -- with numba installed -- compiled for one sample and for a batch; all agree to 1e-13."""
     rng = np.random.default_rng(3)
     x, u = MMGModel.sample_point(rng, batch=(9,))
-    batch = kvlcc2.rhs(0.0, x, u)
+    with _jit.disabled():
+        batch = kvlcc2.rhs(0.0, x, u)  # numpy
+        for i in range(9):  # Python floats
+            np.testing.assert_allclose(kvlcc2.rhs(0.0, x[i], u[i]), batch[i], rtol=1e-13, atol=1e-15)
+        # per-member parameters always take the numpy path
+        p = np.tile(kvlcc2.params, (9, 1))
+        np.testing.assert_allclose(kvlcc2.rhs(0.0, x, u, p), batch, rtol=1e-13, atol=1e-15)
+    if not _jit.available():
+        pytest.skip("numba not installed (extra 'fast'): compiled path not tested")
+    np.testing.assert_allclose(kvlcc2.rhs(0.0, x, u), batch, rtol=1e-13, atol=1e-15)
+    f = kvlcc2._rhs_bound(kvlcc2.params)
     for i in range(9):
         np.testing.assert_allclose(kvlcc2.rhs(0.0, x[i], u[i]), batch[i], rtol=1e-13, atol=1e-15)
+        np.testing.assert_allclose(f(0.0, x[i], u[i]), batch[i], rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(f(0.0, x, u), batch, rtol=1e-13, atol=1e-15)
+    with _jit.disabled():  # a broadcast (3, 4) batch through the compiled loop
+        b3 = kvlcc2.rhs(0.0, x[:3, None], u[None, :4])
+    np.testing.assert_allclose(kvlcc2.rhs(0.0, x[:3, None], u[None, :4]), b3, rtol=1e-13, atol=1e-15)
+
+
+def test_compiled_and_pure_simulations_agree(kvlcc2):
+    """A 35 deg turn with the adaptive integrator: compiled and pure paths give the same track."""
+    if not _jit.available():
+        pytest.skip("numba not installed (extra 'fast'): compiled path not tested")
+    n = _steady_n(kvlcc2, U0)
+    t = np.linspace(0.0, 100.0, 51)
+    U = np.tile([math.radians(35), n], (t.size, 1))
+    fast = simulate(kvlcc2, [0, 0, 0, U0, 0, 0], t, U, method="dopri5", rtol=1e-8)
+    with _jit.disabled():
+        pure = simulate(kvlcc2, [0, 0, 0, U0, 0, 0], t, U, method="dopri5", rtol=1e-8)
+    assert fast.meta["n_fev"] == pure.meta["n_fev"]
+    np.testing.assert_allclose(fast.x, pure.x, rtol=1e-10, atol=1e-10)
 
 
 def test_complex_step_jacobians_match_central_differences(kvlcc2):

@@ -250,6 +250,16 @@ class Model:
         """``d rhs / d u``, shape ``(..., nx, nu)``."""
         return self._jac_u(t, as_batch(x), as_batch(u), self._p(params))
 
+    def _rhs_bound(self, p):
+        """``f(t, x, u)`` equal to ``self._rhs(t, x, u, p)`` for the fixed parameters ``p``.
+
+        Integrators call this once per run; a model may return a faster specialised callable
+        (e.g. :class:`~shipid.models.mmg.MMGModel`'s compiled kernels with the parameter constants
+        folded once).
+        """
+        rhs = self._rhs
+        return lambda t, x, u: rhs(t, x, u, p)
+
     def _rhs(self, t, x, u, p) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError(f"{type(self).__name__} must implement _rhs")
 

@@ -9,13 +9,18 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["planar_rates", "planar_jacobian"]
+__all__ = ["planar_rates", "planar_rates_cs", "planar_jacobian"]
+
+
+def planar_rates_cs(u, v, r, c, s):
+    """``(x', y', psi')`` from ``c = cos psi``, ``s = sin psi`` (plain arithmetic: numpy, floats, or
+    compiled by :mod:`shipid._jit`)."""
+    return u * c - v * s, u * s + v * c, r
 
 
 def planar_rates(psi, u, v, r, xp=np):
     """``(x', y', psi')``; ``xp`` is the array namespace (numpy, or one for complex steps)."""
-    c, s = xp.cos(psi), xp.sin(psi)
-    return u * c - v * s, u * s + v * c, r
+    return planar_rates_cs(u, v, r, xp.cos(psi), xp.sin(psi))
 
 
 def planar_jacobian(J, psi, u, v, ipsi: int = 2, iu: int = 3, iv: int = 4, ir: int = 5) -> None:

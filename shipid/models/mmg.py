@@ -14,8 +14,8 @@ States and inputs (same names and meaning as ``kcs-response``)
 starboard).  Inputs ``delta`` [rad] rudder angle (positive = starboard turn,
 as in the paper) and ``n`` [rps] propeller revolutions.
 
-Equations (one copy, in :meth:`MMGModel._forces` and :meth:`MMGModel._rhs`)
--------------------------------------------------------------------------
+Equations (one copy, in :mod:`shipid.models._mmg_equations`; numba compiles it when installed)
+---------------------------------------------------------------------------------------------
 Motion at midship, eq. (4)::
 
     (m + m_x) u' - (m + m_y) v r - x_G m r^2          = X_H + X_R + X_P
@@ -82,8 +82,9 @@ from typing import Mapping
 
 import numpy as np
 
-from .base import Model
-from .kinematics import planar_rates
+from .._jit import compiled, rebind
+from . import _mmg_equations as _eq
+from .base import Model, batch_shape
 
 __all__ = ["MMGModel", "MMGParticulars", "MMG_PARAM_NAMES"]
 
@@ -101,7 +102,7 @@ MMG_PARAM_NAMES = (
 #: The parameters of Yasukawa & Yoshimura (2015) that :meth:`MMGModel._derived` reads by name.
 _BASE_PARAM_NAMES = MMG_PARAM_NAMES[:38]
 #: Number of constants of :meth:`MMGModel._derived` used by the force equations (the rest: eq. (4)).
-_N_FORCE_CONSTS = 43
+_N_FORCE_CONSTS = _eq.N_FORCE_CONSTS
 
 _PARAM_DOC = {
     "R0": "resistance coefficient R'_0 = R/(1/2 rho L d U^2)",
@@ -217,54 +218,10 @@ def _components(a):
     return a.T if a.ndim <= 2 else np.moveaxis(a, -1, 0)
 
 
-class _NP:
-    """numpy backend of the equations (real arrays, batched)."""
-
-    sqrt, exp, arcsin, arctan, sin, cos, sign = np.sqrt, np.exp, np.arcsin, np.arctan, np.sin, np.cos, np.sign
-
-    @staticmethod
-    def sign_nn(z):
-        """+1 for z >= 0, -1 for z < 0 (the branch of a coefficient chosen by z < 0)."""
-        return np.copysign(1.0, z)
-
-    @staticmethod
-    def sqrt_pos(z):
-        """sqrt(max(z, 0))."""
-        return np.sqrt(np.maximum(z, 0.0))
-
-
-class _NPC(_NP):
-    """numpy backend for complex-step differentiation: signs and branches from the real part."""
-
-    @staticmethod
-    def sign(z):
-        return np.sign(np.real(z))
-
-    @staticmethod
-    def sign_nn(z):
-        return np.copysign(1.0, np.real(z))
-
-    @staticmethod
-    def sqrt_pos(z):
-        return np.sqrt(z * (np.real(z) > 0))
-
-
-class _MATH:
-    """Python-float backend of the same equations (one real sample)."""
-
-    sqrt, exp, arcsin, arctan, sin, cos = math.sqrt, math.exp, math.asin, math.atan, math.sin, math.cos
-
-    @staticmethod
-    def sign(z):
-        return (z > 0) - (z < 0)
-
-    @staticmethod
-    def sign_nn(z):
-        return math.copysign(1.0, z)
-
-    @staticmethod
-    def sqrt_pos(z):
-        return math.sqrt(z) if z > 0 else 0.0
+#: The equations on numpy arrays (batched) and with complex-step-safe branches (Jacobians); the
+#: module functions of :mod:`._mmg_equations` themselves are the one-sample (Python float) path.
+_EQ_NUMPY = rebind(_eq.FUNCTIONS, _eq.NUMPY)
+_EQ_COMPLEX = rebind(_eq.FUNCTIONS, _eq.COMPLEX_STEP)
 
 
 class MMGModel(Model):
@@ -398,7 +355,7 @@ class MMGModel(Model):
 
         To add a parameter: append its name to :data:`MMG_PARAM_NAMES`, read it here as ``q["name"]``,
         append what the equations need to the force constants (before ``_N_FORCE_CONSTS``, raising it)
-        and unpack it in :meth:`_force_terms`.
+        and unpack it in :func:`shipid.models._mmg_equations.forces`.
         """
         P = self.particulars
         L, d, rho, Dp = P.lpp, P.draught, P.rho, P.D_p
@@ -432,11 +389,12 @@ class MMGModel(Model):
             1.0 / Mx, Mx, My, B, C / det, B / det, My / det,           # eq. (4) solved for u', v', r'
         )
 
-    def _derived_of(self, p, as_arrays: bool = False) -> tuple:
+    def _derived_of(self, p, form: str = "floats"):
         """:meth:`_derived` with a cache for real 1-D parameter arrays (keyed by value and particulars).
 
-        ``as_arrays``: the constants as 0-d float arrays (numpy multiplies those by arrays faster
-        than Python floats) instead of Python floats.
+        ``form``: ``"floats"`` (a tuple of Python floats), ``"arrays"`` (a tuple of 0-d float arrays:
+        numpy multiplies those by arrays faster than Python floats) or ``"vector"`` (one float array,
+        for the compiled equations).  Other ``p`` (batched, complex) gives a tuple of arrays.
         """
         if isinstance(p, np.ndarray) and p.ndim == 1 and p.dtype.kind == "f":
             cache = self.__dict__.setdefault("_derived_cache", {})
@@ -446,100 +404,68 @@ class MMGModel(Model):
                 if len(cache) > 64:
                     cache.clear()
                 val = self._derived(p.tolist())
-                hit = cache[key] = (self.particulars, val, tuple(np.array(v) for v in val))
-            return hit[2] if as_arrays else hit[1]
+                hit = cache[key] = (self.particulars, {"floats": val, "arrays": tuple(np.array(v) for v in val),
+                                                       "vector": np.array(val, dtype=float)})
+            return hit[1][form]
         return self._derived(p if isinstance(p, (list, tuple)) else _components(p))
 
-    def _forces(self, x, u, p, xp=None) -> dict:
-        """Forces/moments at midship and intermediate quantities.
+    def _forces(self, x, u, p) -> dict:
+        """Forces/moments at midship and intermediate quantities (numpy; complex-step safe).
 
-        The equations are written once against a small math backend ``xp``:
-        numpy (batched; a complex-step-safe variant for the Jacobians) or, for
-        a single real sample, Python's ``math`` (the same formulas with much
-        less overhead per call).  Shapes: leading axes of ``x (..., 6)``,
-        ``u (..., 2)``, ``p (..., np)`` broadcast.  Returns a dict: X_H, Y_H,
-        N_H, X_P, X_R, Y_R, N_R, F_N, T, w_P, u_R, v_R, alpha_R, beta, U.
+        Shapes: leading axes of ``x (..., 6)``, ``u (..., 2)``, ``p (..., np)`` broadcast.  Returns a
+        dict keyed by ``_mmg_equations.FORCE_KEYS``: X_H, Y_H, N_H, X_P, X_R, Y_R, N_R, F_N, T, w_P, u_R, v_R,
+        alpha_R, beta, U.
         """
-        if xp is None:
-            cplx = any(np.iscomplexobj(a) for a in (x, u, p))
-            xp = _NPC if cplx else _NP
-            x, u = _components(x), _components(u)
-            c = self._derived_of(p, as_arrays=True)
-        else:
-            c = self._derived_of(p)
-        return self._force_terms(x[3], x[4], x[5], u[0], u[1], c, xp)
-
-    @staticmethod
-    def _force_terms(uu, v, r, delta, n, c, xp) -> dict:
-        """The MMG force equations (the one copy); ``c`` from :meth:`_derived`."""
-        (L, cq, cqL,
-         R0, Xvv, Xvr, Xrr, Xvvvv, Yv, Yr, Yvvv, Yvvr, Yvrr, Yrrr, Nv, Nr, Nvvv, Nvvr, Nvrr, Nrrr,
-         xP, mC1, w1, wcA, wcD, kT0, kT1, k2, cT, cXP, c8pi, kappa, eta, one_m_eta, eps,
-         lR, gRA, gRD, cF, cXR, cYR, cNR, delta0) = c[:_N_FORCE_CONSTS]
-        # hull, eqs. (7)-(10): v' = v/U, r' = r L/U, beta = asin(-v')
-        U2 = uu * uu + v * v
-        U = xp.sqrt(U2)
-        iU = 1.0 / U
-        vp = v * iU
-        rp = (r * L) * iU
-        beta = -xp.arcsin(vp)
-        vp2, rp2 = vp * vp, rp * rp
-        XH = (cq * U2) * (vp2 * (Xvv + Xvvvv * vp2) + Xvr * (vp * rp) + Xrr * rp2 - R0)
-        YH = (cq * U2) * (vp * (Yv + Yvvv * vp2 + Yvrr * rp2) + rp * (Yr + Yvvr * vp2 + Yrrr * rp2))
-        NH = (cqL * U2) * (vp * (Nv + Nvvv * vp2 + Nvrr * rp2) + rp * (Nr + Nvvr * vp2 + Nrrr * rp2))
-        # propeller, eqs. (11)-(16): 1 - w_P = (1 - w_P0)(1 + (1 - exp(-C1 |beta_P|))(C2 - 1))
-        betaP = beta - xP * rp
-        sP = xp.sign(betaP)
-        one_m_wP = w1 + (wcA + wcD * sP) * (1.0 - xp.exp(mC1 * (betaP * sP)))
-        uP = uu * one_m_wP
-        uP2 = uP * uP
-        KTn2D2 = (kT0 * n + kT1 * uP) * n + k2 * uP2     # K_T n^2 D_P^2, free of the 1/n in J_P
-        # rudder, eqs. (17)-(28)
-        a = uP + kappa * (xp.sqrt_pos(uP2 + c8pi * KTn2D2) - uP)
-        uR = eps * xp.sqrt(eta * (a * a) + one_m_eta * uP2)
-        betaR = beta - lR * rp
-        vR = (U * (gRA + gRD * xp.sign_nn(betaR))) * betaR
-        alphaR = delta - delta0 - xp.arctan(vR / uR)  # delta0: neutral angle (see _PARAM_DOC)
-        FN = cF * (uR * uR + vR * vR) * xp.sin(alphaR)
-        FNcd = FN * xp.cos(delta)
-        return {"X_H": XH, "Y_H": YH, "N_H": NH, "X_P": cXP * KTn2D2, "X_R": cXR * FN * xp.sin(delta),
-                "Y_R": cYR * FNcd, "N_R": cNR * FNcd, "F_N": FN, "T": cT * KTn2D2, "w_P": 1.0 - one_m_wP,
-                "u_R": uR, "v_R": vR, "alpha_R": alphaR, "beta": beta, "U": U}
+        cplx = any(np.iscomplexobj(a) for a in (x, u, p))
+        x, u = _components(x), _components(u)
+        forces = (_EQ_COMPLEX if cplx else _EQ_NUMPY)["forces"]
+        return dict(zip(_eq.FORCE_KEYS, forces(x[3], x[4], x[5], u[0], u[1], self._derived_of(p, "arrays"))))
 
     def forces(self, x, u, params=None) -> dict:
         """Public view of :meth:`_forces` (forces [N], moments [N m], speeds [m/s], angles [rad])."""
         return self._forces(np.asarray(x, dtype=float), np.asarray(u, dtype=float), self._p(params))
 
     def _rhs(self, t, x, u, p):
-        scalar = (x.ndim == 1 and u.ndim == 1 and p.ndim == 1
-                  and x.dtype.kind == "f" and u.dtype.kind == "f" and p.dtype.kind == "f")
-        if scalar:
-            xp = _MATH
-            c = self._derived_of(p)
-            psi, uu, v, r = x[2:].tolist()
-            delta, n = u.tolist()
-        else:
-            cplx = x.dtype.kind == "c" or u.dtype.kind == "c" or p.dtype.kind == "c"
-            xp = _NPC if cplx else _NP
-            c = self._derived_of(p, as_arrays=True)
-            xc, uc = _components(x), _components(u)
-            psi, uu, v, r = xc[2], xc[3], xc[4], xc[5]
-            delta, n = uc[0], uc[1]
-        F = self._force_terms(uu, v, r, delta, n, c, xp)
-        iMx, Mx, My, B, a_fy, a_fn, b_fn = c[_N_FORCE_CONSTS:]
-        # eq. (4) solved for the accelerations
-        du = (F["X_H"] + F["X_R"] + F["X_P"] + (My * v + B * r) * r) * iMx
-        ur = uu * r
-        fy = F["Y_H"] + F["Y_R"] - Mx * ur
-        fn = F["N_H"] + F["N_R"] - B * ur
-        out = (*planar_rates(psi, uu, v, r, xp), du, a_fy * fy - a_fn * fn, b_fn * fn - a_fn * fy)
-        if scalar:
-            return np.array(out)
+        real = x.dtype.kind == "f" and u.dtype.kind == "f" and p.dtype.kind == "f"
+        if real and p.ndim == 1:
+            fast = compiled(_eq.FUNCTIONS)
+            if fast is not None:  # numba: one compiled loop over the samples
+                c = self._derived_of(p, "vector")
+                if x.ndim == 1 and u.ndim == 1:
+                    return fast["rhs_one"](x, u, c)
+                lead = batch_shape(x, u)
+                X = np.broadcast_to(x, lead + (6,)).reshape(-1, 6)
+                U = np.broadcast_to(u, lead + (2,)).reshape(-1, 2)
+                return fast["rhs_rows"](X, U, c).reshape(lead + (6,))
+            if x.ndim == 1 and u.ndim == 1:  # one sample: Python floats
+                return np.array(_eq.rates(*x[2:].tolist(), *u.tolist(), self._derived_of(p)))
+        rates = (_EQ_NUMPY if real else _EQ_COMPLEX)["rates"]
+        xc, uc = _components(x), _components(u)
+        out = rates(xc[2], xc[3], xc[4], xc[5], uc[0], uc[1], self._derived_of(p, "arrays"))
         try:
             return np.stack(out, axis=-1)
         except ValueError:  # members of different (broadcastable) shapes
             shape = np.broadcast_shapes(*[np.shape(o) for o in out])
             return np.stack([np.broadcast_to(o, shape) for o in out], axis=-1)
+
+    def _rhs_bound(self, p):
+        """``f(t, x, u)`` for fixed parameters; with numba, the compiled kernels with the constants
+        folded once (no per-call parameter handling), for one sample or an (N, 6) batch."""
+        fast = compiled(_eq.FUNCTIONS) if (p.ndim == 1 and p.dtype.kind == "f") else None
+        if fast is None:
+            return super()._rhs_bound(p)
+        c = self._derived_of(p, "vector")
+        one, rows, rhs = fast["rhs_one"], fast["rhs_rows"], self._rhs
+
+        def f(t, x, u):
+            if x.dtype.kind == "f" and u.dtype.kind == "f":
+                if x.ndim == 1 and u.ndim == 1:
+                    return one(x, u, c)
+                if x.ndim == 2 and u.shape == (x.shape[0], 2):
+                    return rows(x, u, c)
+            return rhs(t, x, u, p)
+
+        return f
 
     # ------------------------------------------------------------- Jacobians
     _H_CS = 1e-30

@@ -1,0 +1,100 @@
+"""Optional compilation of model equations with numba (the ``fast`` extra).
+
+A model's equations are written once, as plain Python functions of floats
+whose elementary functions (``sqrt``, ``sin``, ...) are the globals of their
+module (e.g. :mod:`shipid.models._mmg_equations`).  :func:`rebind` runs the
+same code objects with other globals -- numpy's functions for batched arrays,
+complex-step-safe ones for Jacobians -- and :func:`compiled` hands them to
+numba.  There is no second copy of any equation: every path executes, or
+compiles, the one source.
+
+numba is optional.  Without it (or with the environment variable
+``SHIPID_JIT=0``, or inside :func:`disabled`) :func:`compiled` returns
+``None`` and the models use their numpy/math paths, which give the same
+values (``tests/test_mmg.py`` compares both).
+
+Compiled code is cached on disk by numba (``__pycache__`` beside the source,
+or numba's user cache directory), so only the first run compiles (a few
+seconds for a ship model).  numba invalidates a cached function when *its*
+source file changes, not when a helper in another file does: the tests
+compare the compiled and pure paths, so a stale cache shows there; delete
+the ``*.nbi``/``*.nbc`` files after changing a compiled helper in another file
+(e.g. :func:`shipid.models.kinematics.planar_rates_cs`).
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import types
+
+__all__ = ["available", "enabled", "disabled", "rebind", "compiled"]
+
+try:  # pragma: no cover - depends on the environment
+    import numba as _numba
+except ImportError:  # pragma: no cover
+    _numba = None
+
+_off = [False]  # set by disabled() (process-wide; meant for tests and comparisons)
+#: ``SHIPID_JIT=0`` in the environment (read once, at import) switches compilation off.
+_ENV_OFF = os.environ.get("SHIPID_JIT", "1") == "0"
+_compiled: dict = {}
+
+
+def available() -> bool:
+    """numba can be imported."""
+    return _numba is not None
+
+
+def enabled() -> bool:
+    """Compiled paths are in use: numba available, ``SHIPID_JIT`` not ``0``, not inside :func:`disabled`."""
+    return _numba is not None and not _ENV_OFF and not _off[0]
+
+
+@contextlib.contextmanager
+def disabled():
+    """Context manager: use the pure numpy/math paths inside (e.g. to compare both in tests).
+
+    Process-wide, not per thread."""
+    prev = _off[0]
+    _off[0] = True
+    try:
+        yield
+    finally:
+        _off[0] = prev
+
+
+def rebind(functions: dict, namespace: dict, jit: bool = False) -> dict:
+    """The ``functions`` (name -> function, in dependency order) with their globals overridden.
+
+    Each function is rebuilt from its own code object with its module's globals updated by
+    ``namespace`` and by the functions rebuilt before it, so that calls among them stay within the
+    new set.  Names that ``namespace`` provides are not rebuilt (the namespace's object is used).
+    With ``jit`` each rebuilt function is compiled by ``numba.njit(cache=True)`` (lazily, at its
+    first call).
+    """
+    if jit and _numba is None:
+        raise RuntimeError("numba is not installed: pip install 'shipid[fast]'")
+    ns = dict(namespace)
+    out = {}
+    for name, fn in functions.items():
+        if name in namespace:
+            continue
+        g = dict(fn.__globals__)
+        g.update(ns)
+        new = types.FunctionType(fn.__code__, g, fn.__name__, fn.__defaults__, fn.__closure__)
+        new.__qualname__, new.__doc__ = fn.__qualname__, fn.__doc__
+        if jit:
+            new = _numba.njit(cache=True)(new)
+        ns[name] = out[name] = new
+    return out
+
+
+def compiled(functions: dict) -> dict | None:
+    """numba-compiled ``functions`` (see :func:`rebind`; built once per dict), or ``None`` when
+    compilation is not :func:`enabled`."""
+    if _numba is None or _ENV_OFF or _off[0]:
+        return None
+    out = _compiled.get(id(functions))
+    if out is None:
+        out = _compiled[id(functions)] = (functions, rebind(functions, {}, jit=True))
+    return out[1]

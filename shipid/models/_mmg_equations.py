@@ -1,0 +1,120 @@
+"""The MMG equations (Yasukawa & Yoshimura 2015) -- the one copy.
+
+Written on Python floats with the :mod:`math` functions that are this
+module's globals, which makes the module itself the one-sample backend.
+:func:`shipid._jit.rebind` runs the same code objects on other globals:
+numpy's functions (batched arrays), complex-step-safe ones (Jacobians), and,
+with numba installed, compiled (``shipid[fast]``).  See
+:mod:`shipid.models.mmg` for the model, the symbols and the equation numbers;
+``c`` is the sequence of constants of :meth:`MMGModel._derived
+<shipid.models.mmg.MMGModel._derived>`.
+"""
+from __future__ import annotations
+
+import math
+from math import asin as arcsin, atan as arctan, cos, exp, sin, sqrt
+
+import numpy as np
+
+from .kinematics import planar_rates_cs
+
+#: Number of constants of ``MMGModel._derived`` used by the force equations (the rest: eq. (4)).
+N_FORCE_CONSTS = 43
+
+#: Names of the values returned by :func:`forces`, in order.
+FORCE_KEYS = ("X_H", "Y_H", "N_H", "X_P", "X_R", "Y_R", "N_R", "F_N", "T", "w_P", "u_R", "v_R", "alpha_R", "beta", "U")
+
+
+def sign(z):
+    return 1.0 if z > 0 else (-1.0 if z < 0 else 0.0)
+
+
+def sign_nn(z):
+    """+1 for z >= 0, -1 for z < 0 (the branch of a coefficient chosen by z < 0)."""
+    return math.copysign(1.0, z)
+
+
+def sqrt_pos(z):
+    """sqrt(max(z, 0))."""
+    return math.sqrt(z) if z > 0 else 0.0
+
+
+def forces(uu, v, r, delta, n, c):
+    """The values named by :data:`FORCE_KEYS` (forces [N], moments [N m], speeds, angles), eqs. (7)-(28)."""
+    (L, cq, cqL,
+     R0, Xvv, Xvr, Xrr, Xvvvv, Yv, Yr, Yvvv, Yvvr, Yvrr, Yrrr, Nv, Nr, Nvvv, Nvvr, Nvrr, Nrrr,
+     xP, mC1, w1, wcA, wcD, kT0, kT1, k2, cT, cXP, c8pi, kappa, eta, one_m_eta, eps,
+     lR, gRA, gRD, cF, cXR, cYR, cNR, delta0) = c[:N_FORCE_CONSTS]
+    # hull, eqs. (7)-(10): v' = v/U, r' = r L/U, beta = asin(-v')
+    U2 = uu * uu + v * v
+    U = sqrt(U2)
+    iU = 1.0 / U
+    vp = v * iU
+    rp = (r * L) * iU
+    beta = -arcsin(vp)
+    vp2, rp2 = vp * vp, rp * rp
+    XH = (cq * U2) * (vp2 * (Xvv + Xvvvv * vp2) + Xvr * (vp * rp) + Xrr * rp2 - R0)
+    YH = (cq * U2) * (vp * (Yv + Yvvv * vp2 + Yvrr * rp2) + rp * (Yr + Yvvr * vp2 + Yrrr * rp2))
+    NH = (cqL * U2) * (vp * (Nv + Nvvv * vp2 + Nvrr * rp2) + rp * (Nr + Nvvr * vp2 + Nrrr * rp2))
+    # propeller, eqs. (11)-(16): 1 - w_P = (1 - w_P0)(1 + (1 - exp(-C1 |beta_P|))(C2 - 1))
+    betaP = beta - xP * rp
+    sP = sign(betaP)
+    one_m_wP = w1 + (wcA + wcD * sP) * (1.0 - exp(mC1 * (betaP * sP)))
+    uP = uu * one_m_wP
+    uP2 = uP * uP
+    KTn2D2 = (kT0 * n + kT1 * uP) * n + k2 * uP2     # K_T n^2 D_P^2, free of the 1/n in J_P
+    # rudder, eqs. (17)-(28)
+    a = uP + kappa * (sqrt_pos(uP2 + c8pi * KTn2D2) - uP)
+    uR = eps * sqrt(eta * (a * a) + one_m_eta * uP2)
+    betaR = beta - lR * rp
+    vR = (U * (gRA + gRD * sign_nn(betaR))) * betaR
+    alphaR = delta - delta0 - arctan(vR / uR)  # delta0: rudder neutral angle (not in the standard)
+    FN = cF * (uR * uR + vR * vR) * sin(alphaR)
+    FNcd = FN * cos(delta)
+    return (XH, YH, NH, cXP * KTn2D2, cXR * FN * sin(delta), cYR * FNcd, cNR * FNcd, FN, cT * KTn2D2,
+            1.0 - one_m_wP, uR, vR, alphaR, beta, U)
+
+
+def rates(psi, uu, v, r, delta, n, c):
+    """``(x', y', psi', u', v', r')``: eq. (4) solved for the accelerations, and the kinematics."""
+    F = forces(uu, v, r, delta, n, c)
+    iMx, Mx, My, B, a_fy, a_fn, b_fn = c[N_FORCE_CONSTS:N_FORCE_CONSTS + 7]
+    du = (F[0] + F[4] + F[3] + (My * v + B * r) * r) * iMx
+    ur = uu * r
+    fy = F[1] + F[5] - Mx * ur
+    fn = F[2] + F[6] - B * ur
+    xd, yd, psid = planar_rates_cs(uu, v, r, cos(psi), sin(psi))
+    return xd, yd, psid, du, a_fy * fy - a_fn * fn, b_fn * fn - a_fn * fy
+
+
+def rhs_one(x, u, c):
+    """Rates of one sample: ``x (6,)``, ``u (2,)`` -> ``(6,)`` (used compiled)."""
+    out = np.empty(6)
+    out[0], out[1], out[2], out[3], out[4], out[5] = rates(x[2], x[3], x[4], x[5], u[0], u[1], c)
+    return out
+
+
+def rhs_rows(x, u, c):
+    """Rates of N samples: ``x (N, 6)``, ``u (N, 2)`` -> ``(N, 6)`` (a loop; used compiled)."""
+    out = np.empty((x.shape[0], 6))
+    for i in range(x.shape[0]):
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3], out[i, 4], out[i, 5] = rates(
+            x[i, 2], x[i, 3], x[i, 4], x[i, 5], u[i, 0], u[i, 1], c)
+    return out
+
+
+#: The functions of this module in dependency order (what :func:`shipid._jit.rebind` rebinds).
+FUNCTIONS = {"sign": sign, "sign_nn": sign_nn, "sqrt_pos": sqrt_pos, "planar_rates_cs": planar_rates_cs,
+             "forces": forces, "rates": rates, "rhs_one": rhs_one, "rhs_rows": rhs_rows}
+
+_NUMPY_BASE = {"sqrt": np.sqrt, "exp": np.exp, "arcsin": np.arcsin, "arctan": np.arctan, "sin": np.sin,
+               "cos": np.cos}
+
+#: Globals of the batched numpy backend (real arrays).
+NUMPY = {**_NUMPY_BASE, "sign": np.sign, "sign_nn": lambda z: np.copysign(1.0, z),
+         "sqrt_pos": lambda z: np.sqrt(np.maximum(z, 0.0))}
+
+#: Globals of the complex-step backend: signs and branches from the real part.
+COMPLEX_STEP = {**_NUMPY_BASE, "sign": lambda z: np.sign(np.real(z)),
+                "sign_nn": lambda z: np.copysign(1.0, np.real(z)),
+                "sqrt_pos": lambda z: np.sqrt(z * (np.real(z) > 0))}
