@@ -394,7 +394,16 @@ def _dense_fill(X, t_eval, pending):
     r5 = Hb * np.tensordot(K, _DP_D, axes=([1], [0]))  # (m, ...)
     th = ((t_eval[ie0:je1] - T0[rep]) / H[rep])[lead]
     s = 1.0 - th
-    X[ie0:je1] = X0[rep] + th * (dx[rep] + s * (b[rep] + th * (r4[rep] + s * r5[rep])))
+    # Horner form of _dense_eval, in place on the output block (no full-size temporaries)
+    out = X[ie0:je1]
+    np.multiply(s, r5[rep], out=out)
+    out += r4[rep]
+    out *= th
+    out += b[rep]
+    out *= s
+    out += dx[rep]
+    out *= th
+    out += X0[rep]
     # outputs that fall on a step end take the step's state itself
     end = np.abs(t_eval[ie0:je1] - (T0 + H)[rep]) <= 1e-12 * np.maximum(1.0, np.abs(t_eval[ie0:je1]))
     if np.any(end):

@@ -244,43 +244,75 @@ def detect_execute(t, delta, threshold_deg: float = EXECUTE_THRESHOLD_DEG) -> tu
     return i, float(np.asarray(t)[i])
 
 
-def _crossing(t, h, level, start):
-    """First time after index ``start`` where ``h`` reaches ``level`` (upwards), linearly interpolated.
+def _crossing_rows(t, h, level, start, valid):
+    """Per row of ``h (B, n)``: the first sample at or after ``start (B,)`` (and inside ``valid (B, n)``)
+    where ``h`` reaches ``level`` upwards, with the crossing linearly interpolated.
 
-    Returns (index_after, fraction, time) or None.
+    Returns ``(found, k, f, time)``, arrays (B,): the index after the crossing, the fraction of the
+    interval before it (1.0 when the level is reached at ``start`` itself) and the time.
     """
-    hh = h[start:]
-    idx = np.nonzero(hh >= level)[0]
-    if idx.size == 0:
-        return None
-    k = start + int(idx[0])
-    if k == start:
-        return k, 1.0, float(t[k])
-    f = (level - h[k - 1]) / (h[k] - h[k - 1])
-    return k, float(f), float(t[k - 1] + f * (t[k] - t[k - 1]))
+    col = np.arange(h.shape[1])
+    mask = (h >= level) & (col >= start[:, None]) & valid
+    found = mask.any(axis=1)
+    k = np.argmax(mask, axis=1)
+    rows = np.arange(h.shape[0])
+    km = np.maximum(k - 1, 0)
+    at_start = k == start
+    with np.errstate(invalid="ignore", divide="ignore"):
+        f = np.where(at_start, 1.0, (level - h[rows, km]) / (h[rows, k] - h[rows, km]))
+        time = np.where(at_start, t[k], t[km] + f * (t[k] - t[km]))  # rows not found: unused
+    return found, k, f, time
+
+
+def _crossing(t, h, level, start):
+    """:func:`_crossing_rows` for one series: ``(index_after, fraction, time)`` or None."""
+    found, k, f, time = _crossing_rows(t, h[None], level, np.array([start]), np.ones((1, h.size), bool))
+    return (int(k[0]), float(f[0]), float(time[0])) if found[0] else None
+
+
+def _interp_rows(a, k, f):
+    """``a`` at fraction ``f`` of the interval before index ``k``, per row (``a[k]`` when f >= 1 or k == 0)."""
+    rows = np.arange(a.shape[0])
+    km = np.maximum(k - 1, 0)
+    with np.errstate(invalid="ignore"):  # f is not finite in rows without a crossing (unused)
+        return np.where((f < 1.0) & (k > 0), a[rows, km] + f * (a[rows, k] - a[rows, km]), a[rows, k])
 
 
 def _interp_at(a, k, f):
     return a[k - 1] + f * (a[k] - a[k - 1]) if f < 1.0 or k == 0 else a[k]
 
 
-def _circle_fit(x, y):
-    """Least-squares (Kasa) circle through points; returns (xc, yc, radius).
+def _at_time_rows(t, a, te):
+    """``np.interp(te[b], t, a[b])`` for each row ``b`` of ``a (B, n)`` (``te`` inside ``[t0, t_end]``)."""
+    j = np.clip(np.searchsorted(t, te, side="right") - 1, 0, t.size - 2)
+    w = (te - t[j]) / (t[j + 1] - t[j])
+    rows = np.arange(a.shape[0])
+    return np.where(w == 0.0, a[rows, j], a[rows, j] + w * (a[rows, j + 1] - a[rows, j]))
+
+
+def _masked_sum(a, mask):
+    """Row sums of ``a`` over ``mask`` (NaNs inside the mask propagate, outside are ignored)."""
+    return np.where(mask, a, 0.0).sum(axis=1)
+
+
+def _circle_fit_rows(x, y, mask):
+    """Least-squares (Kasa) circle through the points of each row selected by ``mask``; (xc, yc, radius).
 
     Minimises sum (x^2 + y^2 + D x + E y + F)^2 in coordinates centred on the points' mean, where
     the normal equations separate: a 2x2 system for (D, E) and F = -mean(x^2 + y^2).
     """
-    mx, my = float(x.mean()), float(y.mean())
-    xc_, yc_ = x - mx, y - my
-    z = xc_ * xc_ + yc_ * yc_
-    sxx, syy, sxy = xc_.dot(xc_), yc_.dot(yc_), xc_.dot(yc_)
-    sxz, syz = xc_.dot(z), yc_.dot(z)
+    nw = mask.sum(axis=1)
+    mx, my = _masked_sum(x, mask) / nw, _masked_sum(y, mask) / nw
+    xc = np.where(mask, x - mx[:, None], 0.0)
+    yc = np.where(mask, y - my[:, None], 0.0)
+    z = xc * xc + yc * yc
+    sxx, syy, sxy = (xc * xc).sum(1), (yc * yc).sum(1), (xc * yc).sum(1)
+    sxz, syz = (xc * z).sum(1), (yc * z).sum(1)
     det = sxx * syy - sxy * sxy
-    D = (-sxz * syy + syz * sxy) / det
-    E = (-syz * sxx + sxz * sxy) / det
-    F = -float(z.mean())
-    a, b = -D / 2, -E / 2
-    return mx + a, my + b, math.sqrt(max(a * a + b * b - F, 0.0))
+    a = 0.5 * (sxz * syy - syz * sxy) / det
+    b = 0.5 * (syz * sxx - sxz * sxy) / det
+    F = -z.sum(1) / nw
+    return mx + a, my + b, np.sqrt(np.maximum(a * a + b * b - F, 0.0))
 
 
 def _unwrap(psi):
@@ -310,69 +342,98 @@ def turning_metrics(t, x, y, psi, u, delta, *, lpp: float, v=None, execute_time:
     reference : str  what the positions refer to (copied into the result)
     """
     t, x, y, u, delta = (np.asarray(a, dtype=float) for a in (t, x, y, u, delta))
-    psi = _unwrap(psi)
     U = np.abs(u) if v is None else np.hypot(u, np.asarray(v, dtype=float))
     if not lpp or lpp <= 0:
         raise ValueError(f"turning_metrics: lpp must be a positive length in metres, got {lpp}")
     ie, te = _execute(t, delta, execute_time)
-    psi_e = _at_time(t, psi, te)
-    xe, ye = _at_time(t, x, te), _at_time(t, y, te)
-    dpsi = psi - psi_e
-    after = t >= te
-    s = 1.0 if dpsi[after][np.argmax(np.abs(dpsi[after]))] >= 0 else -1.0
-    h = s * dpsi
-    rud = float(delta[np.argmax(np.abs(delta - delta[0]))])
-    U_app = float(np.mean(U[: ie + 1][-max(1, min(ie + 1, 20)):]))
-    res = TurningMetrics(lpp=float(lpp), side=_side(s), rudder_deg=math.degrees(rud), approach_speed=U_app,
-                         execute_time=te, reference=reference, max_heading_change_deg=float(np.degrees(h[after].max())))
-    cos_e, sin_e = math.cos(psi_e), math.sin(psi_e)
-    along = (x - xe) * cos_e + (y - ye) * sin_e
-    across = s * (-(x - xe) * sin_e + (y - ye) * cos_e)
-    msgs = []
-    c10 = _crossing(t, h, math.radians(10), ie)
-    if c10:
-        k, f, _ = c10
-        seg = np.hypot(np.diff(x[ie:k + 1]), np.diff(y[ie:k + 1]))
-        res.track_reach_10deg = float(seg[:-1].sum() + f * seg[-1]) if seg.size else 0.0
-    c90 = _crossing(t, h, math.pi / 2, ie)
-    if c90:
-        k, f, res.time_90 = c90
-        res.advance = float(_interp_at(along, k, f))
-        res.transfer = float(_interp_at(across, k, f))
-        res.time_90 -= te
-    else:
-        msgs.append("heading change never reached 90 deg")
-    c180 = _crossing(t, h, math.pi, ie)
-    if c180:
-        k, f, res.time_180 = c180
-        res.tactical_diameter = float(_interp_at(across, k, f))
-        res.time_180 -= te
-    else:
-        msgs.append("heading change never reached 180 deg")
+    return _turning_rows(t, x[None], y[None], np.asarray(psi, dtype=float)[None], U[None], delta[None], lpp,
+                         np.array([ie]), np.array([te]), reference, np.array([t.size]))[0]
+
+
+def _turning_rows(t, x, y, psi, U, delta, lpp, ie, te, reference, n_valid) -> list[TurningMetrics]:
+    """:func:`turning_metrics` of B runs on one time grid at once (the one copy of the definitions).
+
+    ``x, y, psi, U, delta`` (B, n); ``ie, te`` (B,) execute index and time (``t[ie - 1] < te <= t[ie]``);
+    row ``b`` uses its first ``n_valid[b]`` samples (a simulation that failed later).
+    """
+    B, n = x.shape
+    col = np.arange(n)
+    valid = col < n_valid[:, None]
+    # headings: unwrap only when a valid step exceeds pi (never, for simulations)
+    dpsi_step = np.abs(np.diff(psi, axis=1))
+    if n > 1 and not np.all(np.where(valid[:, 1:], dpsi_step, 0.0) <= math.pi):
+        psi = np.unwrap(psi, axis=1)
+    psi_e, xe, ye = (_at_time_rows(t, a, te) for a in (psi, x, y))
+    dpsi = psi - psi_e[:, None]
+    after = (t >= te[:, None]) & valid
+    rows = np.arange(B)
+    s = np.where(dpsi[rows, np.argmax(np.where(after, np.abs(dpsi), -np.inf), axis=1)] >= 0, 1.0, -1.0)
+    h = s[:, None] * dpsi
+    rud = delta[rows, np.argmax(np.where(valid, np.abs(delta - delta[:, :1]), -np.inf), axis=1)]
+    # approach speed: mean of the (at most) 20 samples up to and including the execute sample
+    back = ie[:, None] - np.arange(20)[None, :]
+    U_app = _masked_sum(U[rows[:, None], np.maximum(back, 0)], back >= 0) / np.minimum(ie + 1, 20)
+    hmax_all = np.where(after, h, -np.inf).max(axis=1)
+    cos_e, sin_e = np.cos(psi_e)[:, None], np.sin(psi_e)[:, None]
+    dx, dy = x - xe[:, None], y - ye[:, None]
+    along = dx * cos_e + dy * sin_e
+    across = s[:, None] * (-dx * sin_e + dy * cos_e)
+    # track length: cumulative segment lengths, with a NaN segment anywhere in a range making it NaN
+    seg = np.hypot(np.diff(x, axis=1), np.diff(y, axis=1))
+    bad = ~np.isfinite(seg)
+    cum = np.concatenate([np.zeros((B, 1)), np.cumsum(np.where(bad, 0.0, seg), axis=1)], axis=1)
+    cbad = np.concatenate([np.zeros((B, 1), int), np.cumsum(bad, axis=1)], axis=1)
+    f10, k10, fr10, _ = _crossing_rows(t, h, math.radians(10), ie, valid)
+    km = np.maximum(k10 - 1, 0)
+    reach = np.where(k10 > ie, cum[rows, km] - cum[rows, ie] + fr10 * seg[rows, np.minimum(km, n - 2)], 0.0)
+    reach = np.where((k10 > ie) & (cbad[rows, k10] - cbad[rows, ie] > 0), np.nan, reach)
+    f90, k90, fr90, t90 = _crossing_rows(t, h, math.pi / 2, ie, valid)
+    f180, k180, fr180, t180 = _crossing_rows(t, h, math.pi, ie, valid)
+    adv, trf, tdia = _interp_rows(along, k90, fr90), _interp_rows(across, k90, fr90), _interp_rows(across, k180, fr180)
     # the steady part ends where the rudder leaves its held angle (pull-out at the end of MARIN's tc runs)
-    held_end = t.size
-    if c90:
-        held = delta[c90[0]]
-        moved = np.nonzero(np.abs(delta[c90[0]:] - held) > math.radians(1.0))[0]
-        if moved.size:
-            held_end = c90[0] + int(moved[0])
-            msgs.append(f"rudder left its held angle at t = {t[held_end]:.1f} s; metrics use the track before it")
-    in_hold = np.arange(t.size) < held_end
-    hmax = h[after & in_hold].max()
-    start = math.radians(360) if hmax >= math.radians(450) else math.radians(270)
-    steady = after & in_hold & (h >= start)
-    if steady.sum() >= 10 and hmax - start >= math.radians(90):
-        _, _, R = _circle_fit(x[steady], y[steady])
-        res.steady_diameter = 2 * R
-        res.steady_speed = float(np.mean(U[steady]))
-        res.speed_loss = 1.0 - res.steady_speed / U_app
-        if start < math.radians(360):
-            msgs.append("steady part taken from 270 deg heading change (run shorter than 450 deg)")
-    else:
-        msgs.append("run too short for the steady turning diameter (needs >= 360 deg heading change)")
-    res.success = bool(c90 and c180)
-    res.message = "; ".join(msgs) if msgs else "ok"
-    return res
+    held = delta[rows, k90]
+    moved = (np.abs(delta - held[:, None]) > math.radians(1.0)) & (col >= k90[:, None]) & valid & f90[:, None]
+    has_moved = moved.any(axis=1)
+    held_end = np.where(has_moved, np.argmax(moved, axis=1), n_valid)
+    in_hold = after & (col < held_end[:, None])
+    hmax = np.where(in_hold, h, -np.inf).max(axis=1)
+    start = np.where(hmax >= math.radians(450), math.radians(360), math.radians(270))
+    steady = in_hold & (h >= start[:, None])
+    n_steady = steady.sum(axis=1)
+    fit = (n_steady >= 10) & (hmax - start >= math.radians(90))
+    with np.errstate(invalid="ignore", divide="ignore"):  # rows without a steady part give NaN, unused
+        _, _, R = _circle_fit_rows(x, y, steady & fit[:, None])
+        U_steady = _masked_sum(U, steady) / n_steady
+    out = []
+    for b in range(B):
+        res = TurningMetrics(lpp=float(lpp), side=_side(s[b]), rudder_deg=math.degrees(rud[b]),
+                             approach_speed=float(U_app[b]), execute_time=float(te[b]), reference=reference,
+                             max_heading_change_deg=math.degrees(hmax_all[b]))
+        msgs = []
+        if f10[b]:
+            res.track_reach_10deg = float(reach[b])
+        if f90[b]:
+            res.advance, res.transfer, res.time_90 = float(adv[b]), float(trf[b]), float(t90[b]) - res.execute_time
+        else:
+            msgs.append("heading change never reached 90 deg")
+        if f180[b]:
+            res.tactical_diameter, res.time_180 = float(tdia[b]), float(t180[b]) - res.execute_time
+        else:
+            msgs.append("heading change never reached 180 deg")
+        if has_moved[b]:
+            msgs.append(f"rudder left its held angle at t = {t[held_end[b]]:.1f} s; metrics use the track before it")
+        if fit[b]:
+            res.steady_diameter = 2 * float(R[b])
+            res.steady_speed = float(U_steady[b])
+            res.speed_loss = 1.0 - res.steady_speed / res.approach_speed
+            if start[b] < math.radians(360):
+                msgs.append("steady part taken from 270 deg heading change (run shorter than 450 deg)")
+        else:
+            msgs.append("run too short for the steady turning diameter (needs >= 360 deg heading change)")
+        res.success = bool(f90[b] and f180[b])
+        res.message = "; ".join(msgs) if msgs else "ok"
+        out.append(res)
+    return out
 
 
 def zigzag_metrics(t, psi, delta, *, lpp: float, u=None, v=None, x=None, y=None, execute_time: float | None = None,
@@ -931,10 +992,10 @@ def _run_batched(model, x0, t_step, controller_factory, done, params, t_max, chu
     ts, Xs, Us, stats = [], [], [], []
     t0 = 0.0
     x = x0
+    T = X = None  # the run so far (concatenated once per chunk)
     ok, msg = True, "integration finished"
     while True:
-        h = t_step(np.concatenate(ts), np.concatenate(Xs, axis=1)) if (callable(t_step) and ts) else \
-            (t_step if not callable(t_step) else t_step(None, None))
+        h = t_step(T, X) if callable(t_step) else t_step
         n_steps = max(1, int(round(chunk / h)))
         t = t0 + h * np.arange(n_steps + 1)
         res = simulate(model, x, t, controller=ctrl, params=params, method=method, rtol=rtol,
@@ -949,8 +1010,9 @@ def _run_batched(model, x0, t_step, controller_factory, done, params, t_max, chu
         x = res.x[:, -1]
         t0 = t[-1]
         T, X = np.concatenate(ts), np.concatenate(Xs, axis=1)
-        if done(T, X) or t0 >= t_max - 1e-9:
-            if not done(T, X):
+        finished = done(T, X)
+        if finished or t0 >= t_max - 1e-9:
+            if not finished:
                 ok, msg = False, f"t_max = {t_max:g} s reached before every member finished the manoeuvre"
             break
     T, X, Uo = np.concatenate(ts), np.concatenate(Xs, axis=1), np.concatenate(Us, axis=1)
@@ -1082,20 +1144,21 @@ def _simulate_turns(model, delta_target, speeds, ns, rate, L, heading_change_deg
     chunk = max(10 * L / float(np.min(speeds)), te + h)
     sim = _run_batched(model, _approach_state(model, speeds), step, factory, done, params, t_max, chunk, method, rtol)
     settings = pd.DataFrame({"rudder_deg": np.degrees(delta_target), "speed": speeds, "n": ns})
-    mets = []
     ref = "midship" if model.name == "mmg" else f"model origin of '{model.name}'"
-    for b in range(B):
-        X = sim.x[b]
-        ok = np.all(np.isfinite(X))
-        last = X.shape[0] if ok else int(np.argmax(~np.all(np.isfinite(X), axis=1)))
-        Xb = X[:last]
-        m = turning_metrics(sim.t[:last], Xb[:, 0], Xb[:, 1], Xb[:, ipsi], Xb[:, model.state_index("u")],
-                            sim.u[b, :last, idl], lpp=L, v=Xb[:, model.state_index("v")], execute_time=te, reference=ref)
+    X = sim.x
+    finite = np.all(np.isfinite(X), axis=2)
+    n_valid = np.where(finite.all(axis=1), X.shape[1], np.argmax(~finite, axis=1))
+    ie = int(np.searchsorted(sim.t, te, side="left"))
+    iu, iv = model.state_index("u"), model.state_index("v")
+    mets = _turning_rows(sim.t, X[..., 0], X[..., 1], X[..., ipsi], np.hypot(X[..., iu], X[..., iv]), sim.u[..., idl],
+                         L, np.full(B, ie), np.full(B, te), ref, n_valid)
+    for b, m in enumerate(mets):
         m.rudder_deg = float(np.degrees(delta_target[b]))
         m.approach_speed = float(speeds[b])
-        if not ok:
+        if n_valid[b] <= ie:
+            m.success, m.message = False, "simulation became non-finite before the rudder execute"
+        elif n_valid[b] < X.shape[1]:
             m.success, m.message = False, "simulation became non-finite; " + m.message
-        mets.append(m)
     success = sim.success and all(m.success for m in mets)
     return ManoeuvreResult("turning", sim, settings, mets, success, sim.message)
 

@@ -242,6 +242,49 @@ def test_marin_metrics_agree_with_readme(marin_logs, name):
         assert 0.0 < d["steady_diameter_L"] < d["tactical_diameter_L"] and 0.5 < d["speed_loss"] < 0.75
 
 
+_TURN_FIELDS = ("advance", "transfer", "tactical_diameter", "steady_diameter", "steady_speed", "speed_loss", "time_90",
+                "time_180", "max_heading_change_deg", "track_reach_10deg", "approach_speed", "execute_time")
+
+
+def _assert_same_turning(a, b, skip=()):
+    for k in set(_TURN_FIELDS) - set(skip):
+        va, vb = getattr(a, k), getattr(b, k)
+        assert (math.isnan(va) and math.isnan(vb)) or va == pytest.approx(vb, rel=1e-12, abs=1e-12), k
+    assert (a.side, a.success, a.message) == (b.side, b.success, b.message)
+
+
+def test_batched_turning_metrics_equal_the_single_run_function():
+    """The batch path of the turning metrics (all members of a simulation at once) gives what the public
+    single-series function gives for each member -- also for a member whose simulation ended early, for a
+    member that never reached 180 deg, and for headings wrapped to (-pi, pi]."""
+    from shipid.manoeuvres import _turning_rows
+
+    m = get_model("mmg")
+    res = turning_circle(m, [10.0, 35.0], speed=1.179, side="both", heading_change_deg=400, method="dopri5", rtol=1e-6)
+    sim, L = res.simulation, m.lpp
+    X, delta = sim.x, sim.u[..., 0]
+    U = np.hypot(X[..., 3], X[..., 4])
+    te = res.metrics[0].execute_time
+    ie = int(np.searchsorted(sim.t, te))
+    k150 = int(np.argmax(np.abs(X[1, :, 2] - X[1, ie, 2]) > math.radians(150)))  # member 1 ends before 180 deg
+    n_valid = np.array([sim.t.size, k150, sim.t.size, sim.t.size])
+    psi = X[..., 2].copy()
+    psi[3] = np.angle(np.exp(1j * psi[3]))  # wrapped heading
+    rows = _turning_rows(sim.t, X[..., 0], X[..., 1], psi, U, delta, L, np.full(4, ie), np.full(4, te), "midship",
+                         n_valid)
+    for b in range(4):
+        n = n_valid[b]
+        one = turning_metrics(sim.t[:n], X[b, :n, 0], X[b, :n, 1], psi[b, :n], X[b, :n, 3], delta[b, :n], lpp=L,
+                              v=X[b, :n, 4], execute_time=te, reference="midship")
+        _assert_same_turning(rows[b], one)
+    assert rows[1].success is False and "never reached 180 deg" in rows[1].message
+    plain = _turning_rows(sim.t, X[..., 0], X[..., 1], X[..., 2], U, delta, L, np.full(4, ie), np.full(4, te),
+                          "midship", np.full(4, sim.t.size))
+    _assert_same_turning(rows[3], plain[3])  # the wrapped heading is unwrapped
+    for b in range(4):  # the manoeuvre's own metrics are the rows of its simulation (nominal approach speed)
+        _assert_same_turning(res.metrics[b], plain[b], skip=("approach_speed",))
+
+
 def test_missing_samples_are_skipped():
     """NaN (missing) position samples of a log do not break the turning metrics."""
     R, U, dt = 250.0, 6.0, 0.05
