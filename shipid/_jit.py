@@ -24,15 +24,14 @@ the ``*.nbi``/``*.nbc`` files after changing a compiled helper in another file
 from __future__ import annotations
 
 import contextlib
+import importlib.util
 import os
 import types
 
 __all__ = ["available", "enabled", "disabled", "rebind", "compiled"]
 
-try:  # pragma: no cover - depends on the environment
-    import numba as _numba
-except ImportError:  # pragma: no cover
-    _numba = None
+_numba = None  # the numba module once imported (lazily: importing it takes ~0.6 s)
+_HAVE_NUMBA = importlib.util.find_spec("numba") is not None
 
 _off = [False]  # set by disabled() (process-wide; meant for tests and comparisons)
 #: ``SHIPID_JIT=0`` in the environment (read once, at import) switches compilation off.
@@ -41,13 +40,13 @@ _compiled: dict = {}
 
 
 def available() -> bool:
-    """numba can be imported."""
-    return _numba is not None
+    """numba is installed."""
+    return _HAVE_NUMBA
 
 
 def enabled() -> bool:
     """Compiled paths are in use: numba available, ``SHIPID_JIT`` not ``0``, not inside :func:`disabled`."""
-    return _numba is not None and not _ENV_OFF and not _off[0]
+    return _HAVE_NUMBA and not _ENV_OFF and not _off[0]
 
 
 @contextlib.contextmanager
@@ -72,8 +71,8 @@ def rebind(functions: dict, namespace: dict, jit: bool = False) -> dict:
     With ``jit`` each rebuilt function is compiled by ``numba.njit(cache=True)`` (lazily, at its
     first call).
     """
-    if jit and _numba is None:
-        raise RuntimeError("numba is not installed: pip install 'shipid[fast]'")
+    if jit:
+        _import_numba()
     ns = dict(namespace)
     out = {}
     for name, fn in functions.items():
@@ -89,10 +88,21 @@ def rebind(functions: dict, namespace: dict, jit: bool = False) -> dict:
     return out
 
 
+def _import_numba():
+    global _numba
+    if _numba is None:
+        if not _HAVE_NUMBA:
+            raise RuntimeError("numba is not installed: pip install 'shipid[fast]'")
+        import numba
+
+        _numba = numba
+    return _numba
+
+
 def compiled(functions: dict) -> dict | None:
     """numba-compiled ``functions`` (see :func:`rebind`; built once per dict), or ``None`` when
     compilation is not :func:`enabled`."""
-    if _numba is None or _ENV_OFF or _off[0]:
+    if not _HAVE_NUMBA or _ENV_OFF or _off[0]:
         return None
     out = _compiled.get(id(functions))
     if out is None:

@@ -194,8 +194,8 @@ def test_scalar_and_batch_backends_agree(kvlcc2):
         # per-member parameters always take the numpy path
         p = np.tile(kvlcc2.params, (9, 1))
         np.testing.assert_allclose(kvlcc2.rhs(0.0, x, u, p), batch, rtol=1e-13, atol=1e-15)
-    if not _jit.available():
-        pytest.skip("numba not installed (extra 'fast'): compiled path not tested")
+    if not _jit.enabled():
+        pytest.skip("numba not installed (extra 'fast') or SHIPID_JIT=0: compiled path not tested")
     np.testing.assert_allclose(kvlcc2.rhs(0.0, x, u), batch, rtol=1e-13, atol=1e-15)
     f = kvlcc2._rhs_bound(kvlcc2.params)
     for i in range(9):
@@ -209,8 +209,8 @@ def test_scalar_and_batch_backends_agree(kvlcc2):
 
 def test_compiled_and_pure_simulations_agree(kvlcc2):
     """A 35 deg turn with the adaptive integrator: compiled and pure paths give the same track."""
-    if not _jit.available():
-        pytest.skip("numba not installed (extra 'fast'): compiled path not tested")
+    if not _jit.enabled():
+        pytest.skip("numba not installed (extra 'fast') or SHIPID_JIT=0: compiled path not tested")
     n = _steady_n(kvlcc2, U0)
     t = np.linspace(0.0, 100.0, 51)
     U = np.tile([math.radians(35), n], (t.size, 1))
