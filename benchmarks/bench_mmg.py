@@ -18,7 +18,7 @@ The speed ratio is taken at equal accuracy: for each shipmmg setting, the fastes
 is at least as accurate.  Times are CPU times of this process (best of several repeats for part 1),
 so other load on a shared machine does not count.
 
-Run:  python benchmarks/bench_mmg.py [--quick]
+Run:  python benchmarks/bench_mmg.py [--quick]      (SHIPID_JIT=0 for shipid's pure numpy/Python path)
 shipmmg is not shipid's model: it differs in the wake and U/beta formulas (tests/test_mmg.py), so the
 two converged solutions differ by ~0.1 L in position and 1-2 % in the turning diameter; accuracy is
 measured per code.
@@ -109,6 +109,10 @@ def main(argv=None):
         y = sol.sol(t_out)
         return np.stack([y[3], y[4]], axis=-1)
 
+    from shipid import _jit
+
+    print("shipid MMG equations: " + ("compiled by numba (extra 'fast')" if _jit.enabled() else
+                                      "pure numpy/Python (numba not installed or SHIPID_JIT=0)"))
     ref_id = run_dopri5(1e-11)
     ref_sm = run_shipmmg(1e-10)
     err = lambda a, ref: float(np.hypot(*(a - ref).T).max() / L)  # noqa: E731
