@@ -62,14 +62,15 @@ def disabled():
         _off[0] = prev
 
 
-def rebind(functions: dict, namespace: dict, jit: bool = False) -> dict:
+def rebind(functions: dict, namespace: dict, jit: bool = False, tag: str = "") -> dict:
     """The ``functions`` (name -> function, in dependency order) with their globals overridden.
 
     Each function is rebuilt from its own code object with its module's globals updated by
     ``namespace`` and by the functions rebuilt before it, so that calls among them stay within the
     new set.  Names that ``namespace`` provides are not rebuilt (the namespace's object is used).
     With ``jit`` each rebuilt function is compiled by ``numba.njit(cache=True)`` (lazily, at its
-    first call).
+    first call); ``tag`` is appended to the qualified names so that two sets built from the same
+    functions with different globals keep separate disk caches.
     """
     if jit:
         _import_numba()
@@ -81,7 +82,7 @@ def rebind(functions: dict, namespace: dict, jit: bool = False) -> dict:
         g = dict(fn.__globals__)
         g.update(ns)
         new = types.FunctionType(fn.__code__, g, fn.__name__, fn.__defaults__, fn.__closure__)
-        new.__qualname__, new.__doc__ = fn.__qualname__, fn.__doc__
+        new.__qualname__, new.__doc__ = fn.__qualname__ + tag, fn.__doc__
         if jit:
             new = _numba.njit(cache=True)(new)
         ns[name] = out[name] = new
@@ -99,12 +100,12 @@ def _import_numba():
     return _numba
 
 
-def compiled(functions: dict) -> dict | None:
-    """numba-compiled ``functions`` (see :func:`rebind`; built once per dict), or ``None`` when
-    compilation is not :func:`enabled`."""
+def compiled(functions: dict, namespace: dict | None = None, tag: str = "") -> dict | None:
+    """numba-compiled ``functions`` with globals overridden by ``namespace`` (see :func:`rebind`; built
+    once per ``functions`` dict), or ``None`` when compilation is not :func:`enabled`."""
     if not _HAVE_NUMBA or _ENV_OFF or _off[0]:
         return None
     out = _compiled.get(id(functions))
     if out is None:
-        out = _compiled[id(functions)] = (functions, rebind(functions, {}, jit=True))
+        out = _compiled[id(functions)] = (functions, rebind(functions, namespace or {}, jit=True, tag=tag))
     return out[1]

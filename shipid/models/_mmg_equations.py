@@ -11,6 +11,7 @@ with numba installed, compiled (``shipid[fast]``).  See
 """
 from __future__ import annotations
 
+import cmath
 import math
 from math import asin as arcsin, atan as arctan, cos, exp, sin, sqrt
 
@@ -37,6 +38,49 @@ def sign_nn(z):
 def sqrt_pos(z):
     """sqrt(max(z, 0))."""
     return math.sqrt(z) if z > 0 else 0.0
+
+
+def derived(p, P):
+    """Constants ``c`` of the equations for one parameter set: everything that depends only on the
+    parameters and the particulars, folded once so that :func:`forces` and :func:`rates` do the least
+    arithmetic per call.
+
+    ``p``: the 39 parameters in ``MMG_PARAM_NAMES`` order (floats, arrays, complex);
+    ``P``: the particulars ``(lpp, draught, rho, D_p, H_R, A_R, x_R, displacement, x_G, kzz)``.
+    The first :data:`N_FORCE_CONSTS` constants are those of :func:`forces`, the last 7 those of eq. (4).
+    To add a parameter: append its name to ``MMG_PARAM_NAMES``, unpack it here, append what the
+    equations need to the force constants (raising :data:`N_FORCE_CONSTS`) and unpack it in
+    :func:`forces`.
+    """
+    L, d, rho, Dp, H_R, A_R, x_R, disp, x_G, kzz = P[0], P[1], P[2], P[3], P[4], P[5], P[6], P[7], P[8], P[9]
+    (R0, Xvv, Xvr, Xrr, Xvvvv, Yv, Yr, Yvvv, Yvvr, Yvrr, Yrrr, Nv, Nr, Nvvv, Nvvr, Nvrr, Nrrr,
+     mx, my, Jz, tP, wP0, k0, k1, k2, xP, C1, C2p, C2m,
+     tR, aH, xH, gRm, gRp, lR, eps, kappa, f_alpha, delta0) = p[:39]
+    cq = 0.5 * rho * L * d                       # 1/2 rho L d (hull force scale / U^2)
+    w1 = 1.0 - wP0                               # 1 - w_P0
+    eta = Dp / H_R
+    m = rho * disp
+    q2 = 0.5 * rho * L * L * d
+    Mx = m + mx * q2                             # m + m_x
+    My = m + my * q2                             # m + m_y
+    B = x_G * m                                  # x_G m
+    C = m * (kzz * L) ** 2 + x_G * x_G * m + Jz * q2 * L * L  # I_zG + x_G^2 m + J_z
+    det = My * C - B * B
+    return (
+        L, cq, cq * L,
+        R0, Xvv, Xvr, Xrr, Xvvvv, Yv, Yr, Yvvv, Yvvr, Yvrr, Yrrr, Nv, Nr, Nvvv, Nvvr, Nvrr, Nrrr,
+        # propeller wake, eq. (16); C2 = C2p for beta_P > 0, C2m for beta_P < 0, written as
+        # (C2p + C2m)/2 + sign(beta_P) (C2p - C2m)/2 (the value at beta_P = 0 is multiplied by 0)
+        xP, -C1, w1, w1 * (0.5 * (C2p + C2m) - 1.0), w1 * 0.5 * (C2p - C2m),
+        k0 * Dp * Dp, k1 * Dp, k2, rho * Dp * Dp, (1.0 - tP) * rho * Dp * Dp,  # thrust, eqs. (11)-(15)
+        8.0 / math.pi, kappa, eta, 1.0 - eta, eps,                  # rudder inflow, eqs. (23)-(25)
+        # gamma_R = gammaR_m for beta_R < 0 else gammaR_p, as mean + sign(beta_R) half-difference
+        # (v_R = U gamma_R beta_R vanishes at beta_R = 0 either way)
+        lR, 0.5 * (gRp + gRm), 0.5 * (gRp - gRm), 0.5 * rho * A_R * f_alpha,  # eqs. (20)-(22), (26)-(27)
+        -(1.0 - tR), -(1.0 + aH), -(x_R + aH * xH) * L,            # eqs. (17)-(19)
+        delta0,                                                     # rudder neutral angle
+        1.0 / Mx, Mx, My, B, C / det, B / det, My / det,           # eq. (4) solved for u', v', r'
+    )
 
 
 def forces(uu, v, r, delta, n, c):
@@ -78,7 +122,7 @@ def forces(uu, v, r, delta, n, c):
 def rates(psi, uu, v, r, delta, n, c):
     """``(x', y', psi', u', v', r')``: eq. (4) solved for the accelerations, and the kinematics."""
     F = forces(uu, v, r, delta, n, c)
-    iMx, Mx, My, B, a_fy, a_fn, b_fn = c[N_FORCE_CONSTS:N_FORCE_CONSTS + 7]
+    iMx, Mx, My, B, a_fy, a_fn, b_fn = c[N_FORCE_CONSTS:]
     du = (F[0] + F[4] + F[3] + (My * v + B * r) * r) * iMx
     ur = uu * r
     fy = F[1] + F[5] - Mx * ur
@@ -103,9 +147,70 @@ def rhs_rows(x, u, c):
     return out
 
 
+def jacobians(x, u, p, P, h, which):
+    """Complex-step Jacobians of the rates of N samples (used compiled, with complex-safe globals).
+
+    ``x (N, 6)``, ``u (N, 2)`` real; ``p (Np, 39)`` real with Np = 1 (shared) or N; ``P`` the
+    particulars (see :func:`derived`); ``h`` the step; ``which``: 0 -> d/dx (N, 6, 6), 1 -> d/du
+    (N, 6, 2), 2 -> d/dp (N, 6, 39).  Exact to rounding (no subtraction).
+    """
+    N = x.shape[0]
+    xc, uc, pc = x.astype(np.complex128), u.astype(np.complex128), p.astype(np.complex128)
+    Pc = P.astype(np.complex128)
+    k = 6 if which == 0 else (2 if which == 1 else p.shape[1])
+    out = np.zeros((N, 6, k))
+    ih = 1j * h
+    c = derived(pc[0], Pc)
+    for i in range(N):
+        ip = i if p.shape[0] > 1 else 0
+        if p.shape[0] > 1 and which != 2:
+            c = derived(pc[ip], Pc)
+        for j in range(k):
+            if which == 0:
+                if j < 2:  # x, y do not enter the rates
+                    continue
+                xc[i, j] += ih
+                f = rates(xc[i, 2], xc[i, 3], xc[i, 4], xc[i, 5], uc[i, 0], uc[i, 1], c)
+                xc[i, j] -= ih
+            elif which == 1:
+                uc[i, j] += ih
+                f = rates(xc[i, 2], xc[i, 3], xc[i, 4], xc[i, 5], uc[i, 0], uc[i, 1], c)
+                uc[i, j] -= ih
+            else:
+                pc[ip, j] += ih
+                f = rates(xc[i, 2], xc[i, 3], xc[i, 4], xc[i, 5], uc[i, 0], uc[i, 1], derived(pc[ip], Pc))
+                pc[ip, j] -= ih
+            for m in range(6):
+                out[i, m, j] = f[m].imag / h
+    return out
+
+
+def sign_cs(z):
+    """:func:`sign` of the real part (complex step: branches from the real part)."""
+    x = z.real
+    return 1.0 if x > 0 else (-1.0 if x < 0 else 0.0)
+
+
+def sign_nn_cs(z):
+    return math.copysign(1.0, z.real)
+
+
+def sqrt_pos_cs(z):
+    return cmath.sqrt(z) if z.real > 0 else 0j
+
+
 #: The functions of this module in dependency order (what :func:`shipid._jit.rebind` rebinds).
 FUNCTIONS = {"sign": sign, "sign_nn": sign_nn, "sqrt_pos": sqrt_pos, "planar_rates_cs": planar_rates_cs,
-             "forces": forces, "rates": rates, "rhs_one": rhs_one, "rhs_rows": rhs_rows}
+             "derived": derived, "forces": forces, "rates": rates, "rhs_one": rhs_one, "rhs_rows": rhs_rows}
+
+#: The complex-step set compiled for the Jacobians: the same equations with complex-safe elementary
+#: functions (``sign`` and friends branch on the real part), and the driver :func:`jacobians`.
+FUNCTIONS_CS = {"sign": sign_cs, "sign_nn": sign_nn_cs, "sqrt_pos": sqrt_pos_cs,
+                "planar_rates_cs": planar_rates_cs, "derived": derived, "forces": forces, "rates": rates,
+                "jacobians": jacobians}
+#: Globals of the compiled complex-step set (``cmath``).
+CMATH = {"sqrt": cmath.sqrt, "exp": cmath.exp, "arcsin": cmath.asin, "arctan": cmath.atan, "sin": cmath.sin,
+         "cos": cmath.cos}
 
 _NUMPY_BASE = {"sqrt": np.sqrt, "exp": np.exp, "arcsin": np.arcsin, "arctan": np.arctan, "sin": np.sin,
                "cos": np.cos}

@@ -99,8 +99,6 @@ MMG_PARAM_NAMES = (
     "delta0",
 )
 
-#: The parameters of Yasukawa & Yoshimura (2015) that :meth:`MMGModel._derived` reads by name.
-_BASE_PARAM_NAMES = MMG_PARAM_NAMES[:38]
 #: Number of constants of :meth:`MMGModel._derived` used by the force equations (the rest: eq. (4)).
 _N_FORCE_CONSTS = _eq.N_FORCE_CONSTS
 
@@ -345,49 +343,16 @@ class MMGModel(Model):
         return out
 
     # -------------------------------------------------------------- equations
-    def _derived(self, p) -> tuple:
-        """Constants of the equations for one parameter set (floats, or arrays for batched/complex ``p``).
-
-        Everything that depends only on the parameters and the particulars is folded here, once per
-        parameter set (cached for a real 1-D ``p``), so that :meth:`_forces` and :meth:`_rhs` do the
-        least arithmetic per call.  ``p`` is a sequence of the 39 parameters in :data:`MMG_PARAM_NAMES`
-        order (floats or arrays).
-
-        To add a parameter: append its name to :data:`MMG_PARAM_NAMES`, read it here as ``q["name"]``,
-        append what the equations need to the force constants (before ``_N_FORCE_CONSTS``, raising it)
-        and unpack it in :func:`shipid.models._mmg_equations.forces`.
-        """
+    def _particulars_tuple(self) -> tuple:
+        """The particulars in the order :func:`shipid.models._mmg_equations.derived` reads them."""
         P = self.particulars
-        L, d, rho, Dp = P.lpp, P.draught, P.rho, P.D_p
-        q = dict(zip(self.param_names, p))
-        (R0, Xvv, Xvr, Xrr, Xvvvv, Yv, Yr, Yvvv, Yvvr, Yvrr, Yrrr, Nv, Nr, Nvvv, Nvvr, Nvrr, Nrrr,
-         mx, my, Jz, tP, wP0, k0, k1, k2, xP, C1, C2p, C2m,
-         tR, aH, xH, gRm, gRp, lR, eps, kappa, f_alpha) = (q[k] for k in _BASE_PARAM_NAMES)
-        cq = 0.5 * rho * L * d                       # 1/2 rho L d (hull force scale / U^2)
-        w1 = 1.0 - wP0                               # 1 - w_P0
-        eta = Dp / P.H_R
-        m = rho * P.displacement
-        q2 = 0.5 * rho * L * L * d
-        Mx = m + mx * q2                             # m + m_x
-        My = m + my * q2                             # m + m_y
-        B = P.x_G * m                                # x_G m
-        C = m * (P.kzz * L) ** 2 + P.x_G * P.x_G * m + Jz * q2 * L * L  # I_zG + x_G^2 m + J_z
-        det = My * C - B * B
-        return (
-            L, cq, cq * L,
-            R0, Xvv, Xvr, Xrr, Xvvvv, Yv, Yr, Yvvv, Yvvr, Yvrr, Yrrr, Nv, Nr, Nvvv, Nvvr, Nvrr, Nrrr,
-            # propeller wake, eq. (16); C2 = C2p for beta_P > 0, C2m for beta_P < 0, written as
-            # (C2p + C2m)/2 + sign(beta_P) (C2p - C2m)/2 (the value at beta_P = 0 is multiplied by 0)
-            xP, -C1, w1, w1 * (0.5 * (C2p + C2m) - 1.0), w1 * 0.5 * (C2p - C2m),
-            k0 * Dp * Dp, k1 * Dp, k2, rho * Dp * Dp, (1.0 - tP) * rho * Dp * Dp,  # thrust, eqs. (11)-(15)
-            8.0 / math.pi, kappa, eta, 1.0 - eta, eps,                  # rudder inflow, eqs. (23)-(25)
-            # gamma_R = gammaR_m for beta_R < 0 else gammaR_p, as mean + sign(beta_R) half-difference
-            # (v_R = U gamma_R beta_R vanishes at beta_R = 0 either way)
-            lR, 0.5 * (gRp + gRm), 0.5 * (gRp - gRm), 0.5 * rho * P.A_R * f_alpha,  # eqs. (20)-(22), (26)-(27)
-            -(1.0 - tR), -(1.0 + aH), -(P.x_R + aH * xH) * L,          # eqs. (17)-(19)
-            q["delta0"],                                                # rudder neutral angle (_PARAM_DOC)
-            1.0 / Mx, Mx, My, B, C / det, B / det, My / det,           # eq. (4) solved for u', v', r'
-        )
+        return (P.lpp, P.draught, P.rho, P.D_p, P.H_R, P.A_R, P.x_R, P.displacement, P.x_G, P.kzz)
+
+    def _derived(self, p) -> tuple:
+        """Constants of the equations for one parameter set (floats, or arrays for batched/complex ``p``):
+        :func:`shipid.models._mmg_equations.derived` with this ship's particulars.  ``p`` is a sequence
+        of the 39 parameters in :data:`MMG_PARAM_NAMES` order (floats or arrays)."""
+        return _eq.derived(p, self._particulars_tuple())
 
     def _derived_of(self, p, form: str = "floats"):
         """:meth:`_derived` with a cache for real 1-D parameter arrays (keyed by value and particulars).
@@ -481,14 +446,28 @@ class MMGModel(Model):
         J = np.imag(f) / self._H_CS
         return np.swapaxes(J, -1, -2)
 
+    def _jacobian(self, t, x, u, p, which: int):
+        """Complex-step Jacobian (exact to rounding): compiled when numba is enabled, else numpy."""
+        real = x.dtype.kind == "f" and u.dtype.kind == "f" and p.dtype.kind == "f"
+        fast = compiled(_eq.FUNCTIONS_CS, _eq.CMATH, tag="__cs") if real else None
+        if fast is None:
+            return self._cstep(t, x, u, p, "xup"[which])
+        lead = batch_shape(x, u, p)
+        N = int(np.prod(lead))
+        X = np.broadcast_to(x, lead + (6,)).reshape(N, 6)
+        U = np.broadcast_to(u, lead + (2,)).reshape(N, 2)
+        P = p[None] if p.ndim == 1 else np.broadcast_to(p, lead + p.shape[-1:]).reshape(N, -1)
+        J = fast["jacobians"](X, U, P, np.array(self._particulars_tuple()), self._H_CS, which)
+        return J.reshape(lead + J.shape[1:])
+
     def _jac_x(self, t, x, u, p):
-        return self._cstep(t, x, u, p, "x")
+        return self._jacobian(t, x, u, p, 0)
 
     def _jac_u(self, t, x, u, p):
-        return self._cstep(t, x, u, p, "u")
+        return self._jacobian(t, x, u, p, 1)
 
     def _jac_p(self, t, x, u, p):
-        return self._cstep(t, x, u, p, "p")
+        return self._jacobian(t, x, u, p, 2)
 
     @classmethod
     def sample_point(cls, rng, batch=()):
