@@ -19,6 +19,18 @@ import numpy as np
 
 from .kinematics import planar_rates_cs
 
+#: Non-dimensional (prime-system) parameters, in the order :func:`derived` unpacks them
+#: (``shipid.models.mmg.MMG_PARAM_NAMES``).
+PARAM_NAMES = (
+    "R0", "Xvv", "Xvr", "Xrr", "Xvvvv",
+    "Yv", "Yr", "Yvvv", "Yvvr", "Yvrr", "Yrrr",
+    "Nv", "Nr", "Nvvv", "Nvvr", "Nvrr", "Nrrr",
+    "mx", "my", "Jz",
+    "tP", "wP0", "k0", "k1", "k2", "xP", "C1", "C2p", "C2m",
+    "tR", "aH", "xH", "gammaR_m", "gammaR_p", "lR", "eps", "kappa", "f_alpha",
+    "delta0",
+)
+
 #: Number of constants of ``MMGModel._derived`` used by the force equations (the rest: eq. (4)).
 N_FORCE_CONSTS = 43
 
@@ -45,10 +57,10 @@ def derived(p, P):
     parameters and the particulars, folded once so that :func:`forces` and :func:`rates` do the least
     arithmetic per call.
 
-    ``p``: the 39 parameters in ``MMG_PARAM_NAMES`` order (floats, arrays, complex);
+    ``p``: the 39 parameters in :data:`PARAM_NAMES` order (floats, arrays, complex);
     ``P``: the particulars ``(lpp, draught, rho, D_p, H_R, A_R, x_R, displacement, x_G, kzz)``.
     The first :data:`N_FORCE_CONSTS` constants are those of :func:`forces`, the last 7 those of eq. (4).
-    To add a parameter: append its name to ``MMG_PARAM_NAMES``, unpack it here, append what the
+    To add a parameter: append its name to :data:`PARAM_NAMES`, unpack it here, append what the
     equations need to the force constants (raising :data:`N_FORCE_CONSTS`) and unpack it in
     :func:`forces`.
     """

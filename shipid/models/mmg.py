@@ -89,15 +89,7 @@ from .base import Model, batch_shape
 __all__ = ["MMGModel", "MMGParticulars", "MMG_PARAM_NAMES"]
 
 #: Non-dimensional (prime-system) parameters, in order.
-MMG_PARAM_NAMES = (
-    "R0", "Xvv", "Xvr", "Xrr", "Xvvvv",
-    "Yv", "Yr", "Yvvv", "Yvvr", "Yvrr", "Yrrr",
-    "Nv", "Nr", "Nvvv", "Nvvr", "Nvrr", "Nrrr",
-    "mx", "my", "Jz",
-    "tP", "wP0", "k0", "k1", "k2", "xP", "C1", "C2p", "C2m",
-    "tR", "aH", "xH", "gammaR_m", "gammaR_p", "lR", "eps", "kappa", "f_alpha",
-    "delta0",
-)
+MMG_PARAM_NAMES = _eq.PARAM_NAMES
 
 #: Number of constants of :meth:`MMGModel._derived` used by the force equations (the rest: eq. (4)).
 _N_FORCE_CONSTS = _eq.N_FORCE_CONSTS
@@ -271,8 +263,6 @@ class MMGModel(Model):
             particulars = particulars.scaled(lpp)
         self.particulars = particulars
         self._idx = {k: i for i, k in enumerate(self.param_names)}
-        if self._idx["mx"] != 17 or self._idx["Jz"] != 19:  # _rhs unpacks by position
-            raise RuntimeError("MMG_PARAM_NAMES order changed; update MMGModel._rhs")
 
     # ----------------------------------------------------------- conveniences
     @property
