@@ -191,9 +191,10 @@ def test_scalar_and_batch_backends_agree(kvlcc2):
         batch = kvlcc2.rhs(0.0, x, u)  # numpy
         for i in range(9):  # Python floats
             np.testing.assert_allclose(kvlcc2.rhs(0.0, x[i], u[i]), batch[i], rtol=1e-13, atol=1e-15)
-        # per-member parameters always take the numpy path
-        p = np.tile(kvlcc2.params, (9, 1))
+        p = np.tile(kvlcc2.params, (9, 1))  # per-member parameters
         np.testing.assert_allclose(kvlcc2.rhs(0.0, x, u, p), batch, rtol=1e-13, atol=1e-15)
+        pm = p * (1 + 0.05 * rng.normal(size=p.shape))
+        batch_pm = kvlcc2.rhs(0.0, x, u, pm)
     if not _jit.enabled():
         pytest.skip("numba not installed (extra 'fast') or SHIPID_JIT=0: compiled path not tested")
     np.testing.assert_allclose(kvlcc2.rhs(0.0, x, u), batch, rtol=1e-13, atol=1e-15)
@@ -202,6 +203,8 @@ def test_scalar_and_batch_backends_agree(kvlcc2):
         np.testing.assert_allclose(kvlcc2.rhs(0.0, x[i], u[i]), batch[i], rtol=1e-13, atol=1e-15)
         np.testing.assert_allclose(f(0.0, x[i], u[i]), batch[i], rtol=1e-13, atol=1e-15)
     np.testing.assert_allclose(f(0.0, x, u), batch, rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(kvlcc2.rhs(0.0, x, u, pm), batch_pm, rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(kvlcc2._rhs_bound(pm)(0.0, x, u), batch_pm, rtol=1e-13, atol=1e-15)
     with _jit.disabled():  # a broadcast (3, 4) batch through the compiled loop
         b3 = kvlcc2.rhs(0.0, x[:3, None], u[None, :4])
     np.testing.assert_allclose(kvlcc2.rhs(0.0, x[:3, None], u[None, :4]), b3, rtol=1e-13, atol=1e-15)

@@ -151,11 +151,14 @@ def rhs_one(x, u, c):
 
 
 def rhs_rows(x, u, c):
-    """Rates of N samples: ``x (N, 6)``, ``u (N, 2)`` -> ``(N, 6)`` (a loop; used compiled)."""
+    """Rates of N samples: ``x (N, 6)``, ``u (N, 2)``, constants ``c (1, nc)`` shared or ``(N, nc)``
+    per sample -> ``(N, 6)`` (a loop; used compiled)."""
     out = np.empty((x.shape[0], 6))
+    per_sample = c.shape[0] > 1
     for i in range(x.shape[0]):
+        ci = c[i] if per_sample else c[0]
         out[i, 0], out[i, 1], out[i, 2], out[i, 3], out[i, 4], out[i, 5] = rates(
-            x[i, 2], x[i, 3], x[i, 4], x[i, 5], u[i, 0], u[i, 1], c)
+            x[i, 2], x[i, 3], x[i, 4], x[i, 5], u[i, 0], u[i, 1], ci)
     return out
 
 

@@ -348,8 +348,9 @@ class MMGModel(Model):
         """:meth:`_derived` with a cache for real 1-D parameter arrays (keyed by value and particulars).
 
         ``form``: ``"floats"`` (a tuple of Python floats), ``"arrays"`` (a tuple of 0-d float arrays:
-        numpy multiplies those by arrays faster than Python floats) or ``"vector"`` (one float array,
-        for the compiled equations).  Other ``p`` (batched, complex) gives a tuple of arrays.
+        numpy multiplies those by arrays faster than Python floats), ``"vector"`` (one float array,
+        for the compiled equations) or ``"rows"`` (the same as a (1, nc) array).  Other ``p``
+        (batched, complex) gives a tuple of arrays.
         """
         if isinstance(p, np.ndarray) and p.ndim == 1 and p.dtype.kind == "f":
             cache = self.__dict__.setdefault("_derived_cache", {})
@@ -359,8 +360,9 @@ class MMGModel(Model):
                 if len(cache) > 64:
                     cache.clear()
                 val = self._derived(p.tolist())
+                vec = np.array(val, dtype=float)
                 hit = cache[key] = (self.particulars, {"floats": val, "arrays": tuple(np.array(v) for v in val),
-                                                       "vector": np.array(val, dtype=float)})
+                                                       "vector": vec, "rows": vec[None]})
             return hit[1][form]
         return self._derived(p if isinstance(p, (list, tuple)) else _components(p))
 
@@ -380,20 +382,34 @@ class MMGModel(Model):
         """Public view of :meth:`_forces` (forces [N], moments [N m], speeds [m/s], angles [rad])."""
         return self._forces(np.asarray(x, dtype=float), np.asarray(u, dtype=float), self._p(params))
 
+    def _constant_rows(self, p, lead) -> np.ndarray:
+        """The constants of :meth:`_derived` for real parameters ``p`` broadcast to the batch ``lead``:
+        (1, nc) when shared (1-D ``p``), else (N, nc), one row per sample (cached by value)."""
+        if p.ndim == 1:
+            return self._derived_of(p, "rows")
+        P = np.broadcast_to(p, lead + p.shape[-1:]).reshape(-1, p.shape[-1])
+        cache = self.__dict__.setdefault("_rows_cache", {})
+        key = P.tobytes()
+        hit = cache.get(key)
+        if hit is None or hit[0] is not self.particulars:
+            if len(cache) > 16:
+                cache.clear()
+            vals = np.broadcast_arrays(*self._derived(P.T))
+            hit = cache[key] = (self.particulars, np.ascontiguousarray(np.stack(vals, axis=-1), dtype=float))
+        return hit[1]
+
     def _rhs(self, t, x, u, p):
         real = x.dtype.kind == "f" and u.dtype.kind == "f" and p.dtype.kind == "f"
-        if real and p.ndim == 1:
-            fast = compiled(_eq.FUNCTIONS)
-            if fast is not None:  # numba: one compiled loop over the samples
-                c = self._derived_of(p, "vector")
-                if x.ndim == 1 and u.ndim == 1:
-                    return fast["rhs_one"](x, u, c)
-                lead = batch_shape(x, u)
-                X = np.broadcast_to(x, lead + (6,)).reshape(-1, 6)
-                U = np.broadcast_to(u, lead + (2,)).reshape(-1, 2)
-                return fast["rhs_rows"](X, U, c).reshape(lead + (6,))
-            if x.ndim == 1 and u.ndim == 1:  # one sample: Python floats
-                return np.array(_eq.rates(*x[2:].tolist(), *u.tolist(), self._derived_of(p)))
+        fast = compiled(_eq.FUNCTIONS) if real else None
+        if fast is not None:  # numba: one compiled loop over the samples
+            if x.ndim == 1 and u.ndim == 1 and p.ndim == 1:
+                return fast["rhs_one"](x, u, self._derived_of(p, "vector"))
+            lead = batch_shape(x, u, p)
+            X = np.broadcast_to(x, lead + (6,)).reshape(-1, 6)
+            U = np.broadcast_to(u, lead + (2,)).reshape(-1, 2)
+            return fast["rhs_rows"](X, U, self._constant_rows(p, lead)).reshape(lead + (6,))
+        if real and x.ndim == 1 and u.ndim == 1 and p.ndim == 1:  # one sample: Python floats
+            return np.array(_eq.rates(*x[2:].tolist(), *u.tolist(), self._derived_of(p)))
         rates = (_EQ_NUMPY if real else _EQ_COMPLEX)["rates"]
         xc, uc = _components(x), _components(u)
         out = rates(xc[2], xc[3], xc[4], xc[5], uc[0], uc[1], self._derived_of(p, "arrays"))
@@ -405,19 +421,23 @@ class MMGModel(Model):
 
     def _rhs_bound(self, p):
         """``f(t, x, u)`` for fixed parameters; with numba, the compiled kernels with the constants
-        folded once (no per-call parameter handling), for one sample or an (N, 6) batch."""
-        fast = compiled(_eq.FUNCTIONS) if (p.ndim == 1 and p.dtype.kind == "f") else None
+        folded once (no per-call parameter handling), for one sample or an (N, 6) batch with shared
+        or per-member parameters."""
+        fast = compiled(_eq.FUNCTIONS) if (p.dtype.kind == "f" and p.ndim in (1, 2)) else None
         if fast is None:
             return super()._rhs_bound(p)
-        c = self._derived_of(p, "vector")
         one, rows, rhs = fast["rhs_one"], fast["rhs_rows"], self._rhs
+        c = self._derived_of(p, "vector") if p.ndim == 1 else None
+        crow = self._derived_of(p, "rows") if p.ndim == 1 else None
+        if p.ndim == 2:  # per-member parameters: (B, np) rows for a batch x (B, 6)
+            crow = self._constant_rows(p, p.shape[:1])
 
         def f(t, x, u):
             if x.dtype.kind == "f" and u.dtype.kind == "f":
-                if x.ndim == 1 and u.ndim == 1:
+                if c is not None and x.ndim == 1 and u.ndim == 1:
                     return one(x, u, c)
-                if x.ndim == 2 and u.shape == (x.shape[0], 2):
-                    return rows(x, u, c)
+                if x.ndim == 2 and u.shape == (x.shape[0], 2) and crow.shape[0] in (1, x.shape[0]):
+                    return rows(x, u, crow)
             return rhs(t, x, u, p)
 
         return f
