@@ -60,10 +60,14 @@ def test_zero_weight_removes_a_log_and_unit_weights_are_the_plain_sum(two_truths
     assert up_a.result().settings["log_weights"] == [20.0, 1.0]
 
 
-def test_tangent_jacobian_honours_the_weights(two_truths):
-    ta, _, start, logs, x0 = two_truths
+def test_tangent_jacobian_honours_the_weights_and_extra_residuals(two_truths):
+    ta, tb, start, logs, x0 = two_truths
     only_a = _fit(start, logs, x0, log_weights=[1.0, 0.0], jacobian="tangent")
     np.testing.assert_allclose(only_a.coef_[EST], ta.params_series()[EST], rtol=1e-4)
+    i1, c1_b = start.param_index("c1"), tb.params_series()["c1"]
+    pinned = _fit(start, logs, x0, log_weights=[1.0, 0.0], jacobian="tangent",
+                  extra_residuals=lambda p: np.array([(p[i1] - c1_b) / 1e-7]))
+    assert pinned.coef_["c1"] == pytest.approx(c1_b, abs=1e-5) and pinned.cost_ > 1.0
 
 
 def test_bad_log_weights(two_truths):
@@ -72,3 +76,19 @@ def test_bad_log_weights(two_truths):
         _fit(start, logs, x0, log_weights=[1.0])
     with pytest.raises(ValueError, match=r"log_weights\[1\]"):
         _fit(start, logs, x0, log_weights=[1.0, -1.0])
+
+
+def test_extra_residuals_are_appended_to_the_simulation_errors(two_truths, jacobian="fd"):
+    """A zero extra residual changes nothing; a stiff one pinning c1 to log b's truth holds c1 there while
+    c3 is still fitted to log a (then log a cannot be matched exactly: the cost stays > 0)."""
+    ta, tb, start, logs, x0 = two_truths
+    i1 = start.param_index("c1")
+    ref = _fit(start, logs, x0, log_weights=[1.0, 0.0], jacobian=jacobian)
+    zero = _fit(start, logs, x0, log_weights=[1.0, 0.0], jacobian=jacobian, extra_residuals=lambda p: np.zeros(2))
+    np.testing.assert_allclose(zero.coef_[EST], ref.coef_[EST], rtol=1e-8)
+    c1_b = tb.params_series()["c1"]
+    pinned = _fit(start, logs, x0, log_weights=[1.0, 0.0], jacobian=jacobian,
+                  extra_residuals=lambda p: np.array([(p[i1] - c1_b) / 1e-7]))
+    assert pinned.coef_["c1"] == pytest.approx(c1_b, abs=1e-5)
+    assert pinned.cost_ > 1.0 and pinned.coef_["c3"] != pytest.approx(ta.params_series()["c3"], rel=1e-3)
+    assert pinned.result().settings["extra_residuals"] is True

@@ -58,10 +58,18 @@ class OutputErrorRefiner:
         sum, in which long logs dominate).  E.g. ``1 / n_samples_i`` makes every log
         weigh equally.  The reported covariance then treats the weighted residuals as
         white noise (a scaling, not a noise model).
+    extra_residuals : callable, optional
+        ``f(params) -> array (m,)`` of further residuals appended to the simulation
+        errors (``params``: the full parameter vector of the model, shape (np,)), e.g.
+        a prior or the errors of closed-loop manoeuvre metrics against measured ones,
+        already divided by their tolerances.  Differentiated by forward differences
+        (one call per estimated parameter and iteration); non-finite values count as
+        1e6.
     """
 
     def __init__(self, model: Model, *, estimate=None, channels=None, meas_std=None, max_nfev: int = 30,
-                 substeps: int = 1, jacobian: str = "fd", log_weights=None):
+                 substeps: int = 1, jacobian: str = "fd", log_weights=None,
+                 extra_residuals=None):
         self.model = model
         self.estimate = estimate
         self.channels = channels
@@ -70,6 +78,7 @@ class OutputErrorRefiner:
         self.substeps = substeps
         self.jacobian = jacobian
         self.log_weights = log_weights
+        self.extra_residuals = extra_residuals
 
     def fit(self, logs, start=None, x0=None) -> "OutputErrorRefiner":
         """Refine on ``logs``; ``start`` may be a fitted :class:`EKFIdentifier` whose
@@ -190,8 +199,16 @@ class OutputErrorRefiner:
             for a, s, m, w in zip(arrays, sims, masks, rw):
                 e = w * (s - a.Y[None, :, ch_idx]) / sig[ch_idx]
                 rs.append(np.where(m[None], e, 0.0).reshape(theta_batch.shape[0], -1))
+            if self.extra_residuals is not None:
+                rs.append(extra_batch(theta_batch))
             r = np.concatenate(rs, axis=1)
             return np.where(np.isfinite(r), r, 1e6)
+
+        def extra_batch(theta_batch):
+            P = np.broadcast_to(p0, (theta_batch.shape[0], model.np)).copy()
+            P[:, est_idx] = theta_batch * scale
+            out = np.stack([np.asarray(self.extra_residuals(pb.copy()), dtype=float).reshape(-1) for pb in P])
+            return np.where(np.isfinite(out), out, 1e6)
 
         h = 1e-6
 
@@ -200,7 +217,11 @@ class OutputErrorRefiner:
 
         def jac(th):
             if self.jacobian == "tangent":
-                return tangent_jac(th)
+                Jt = tangent_jac(th)
+                if self.extra_residuals is None:
+                    return Jt
+                E = extra_batch(np.vstack([th, th + h * np.eye(th.size)]))
+                return np.vstack([Jt, ((E[1:] - E[0]) / h).T])
             batch = np.vstack([th, th + h * np.eye(th.size)])
             R = residual_batch(batch)
             return ((R[1:] - R[0]) / h).T
@@ -254,7 +275,8 @@ class OutputErrorRefiner:
             coef_std={k: float(v) for k, v in self.coef_std_.items()}, cov=self.cov_.copy(), diagnostics=diag,
             inputs=[dict(m) for m in self.logs_], method="output-error",
             settings={"estimated": self.estimated_, "channels": self.channels_, "max_nfev": self.max_nfev,
-                      "log_weights": None if self.log_weights is None else [float(w) for w in self.log_weights]},
+                      "log_weights": None if self.log_weights is None else [float(w) for w in self.log_weights],
+                      "extra_residuals": self.extra_residuals is not None},
             loglik=None, success=self.success_, message=self.message_, versions=software_versions(),
             created=datetime.now(timezone.utc).isoformat(timespec="seconds"),
             extra={"cost_start": self.cost_start_, "cost": self.cost_,
