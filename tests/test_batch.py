@@ -66,7 +66,7 @@ def test_tangent_jacobian_honours_the_weights_and_extra_residuals(two_truths):
     np.testing.assert_allclose(only_a.coef_[EST], ta.params_series()[EST], rtol=1e-4)
     i1, c1_b = start.param_index("c1"), tb.params_series()["c1"]
     pinned = _fit(start, logs, x0, log_weights=[1.0, 0.0], jacobian="tangent",
-                  extra_residuals=lambda p: np.array([(p[i1] - c1_b) / 1e-7]))
+                  extra_residuals=lambda p: (p[:, i1:i1 + 1] - c1_b) / 1e-7)
     assert pinned.coef_["c1"] == pytest.approx(c1_b, abs=1e-5) and pinned.cost_ > 1.0
 
 
@@ -84,11 +84,11 @@ def test_extra_residuals_are_appended_to_the_simulation_errors(two_truths, jacob
     ta, tb, start, logs, x0 = two_truths
     i1 = start.param_index("c1")
     ref = _fit(start, logs, x0, log_weights=[1.0, 0.0], jacobian=jacobian)
-    zero = _fit(start, logs, x0, log_weights=[1.0, 0.0], jacobian=jacobian, extra_residuals=lambda p: np.zeros(2))
+    zero = _fit(start, logs, x0, log_weights=[1.0, 0.0], jacobian=jacobian, extra_residuals=lambda p: np.zeros((p.shape[0], 2)))
     np.testing.assert_allclose(zero.coef_[EST], ref.coef_[EST], rtol=1e-8)
     c1_b = tb.params_series()["c1"]
     pinned = _fit(start, logs, x0, log_weights=[1.0, 0.0], jacobian=jacobian,
-                  extra_residuals=lambda p: np.array([(p[i1] - c1_b) / 1e-7]))
+                  extra_residuals=lambda p: (p[:, i1:i1 + 1] - c1_b) / 1e-7)
     assert pinned.coef_["c1"] == pytest.approx(c1_b, abs=1e-5)
     assert pinned.cost_ > 1.0 and pinned.coef_["c3"] != pytest.approx(ta.params_series()["c3"], rel=1e-3)
     assert pinned.result().settings["extra_residuals"] is True

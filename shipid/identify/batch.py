@@ -59,12 +59,12 @@ class OutputErrorRefiner:
         weigh equally.  The reported covariance then treats the weighted residuals as
         white noise (a scaling, not a noise model).
     extra_residuals : callable, optional
-        ``f(params) -> array (m,)`` of further residuals appended to the simulation
-        errors (``params``: the full parameter vector of the model, shape (np,)), e.g.
-        a prior or the errors of closed-loop manoeuvre metrics against measured ones,
-        already divided by their tolerances.  Differentiated by forward differences
-        (one call per estimated parameter and iteration); non-finite values count as
-        1e6.
+        ``f(params) -> array (B, m)`` of further residuals appended to the simulation
+        errors, for a batch of full parameter vectors ``params`` of shape (B, np) (the
+        nominal one and its forward-difference perturbations in one call, so ``f`` can
+        simulate them as one batch), e.g. a prior or the errors of closed-loop manoeuvre
+        metrics against measured ones, already divided by their tolerances.
+        Differentiated by forward differences; non-finite values count as 1e6.
     """
 
     def __init__(self, model: Model, *, estimate=None, channels=None, meas_std=None, max_nfev: int = 30,
@@ -207,7 +207,7 @@ class OutputErrorRefiner:
         def extra_batch(theta_batch):
             P = np.broadcast_to(p0, (theta_batch.shape[0], model.np)).copy()
             P[:, est_idx] = theta_batch * scale
-            out = np.stack([np.asarray(self.extra_residuals(pb.copy()), dtype=float).reshape(-1) for pb in P])
+            out = np.asarray(self.extra_residuals(P), dtype=float).reshape(P.shape[0], -1)
             return np.where(np.isfinite(out), out, 1e6)
 
         h = 1e-6
