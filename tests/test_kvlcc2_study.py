@@ -79,6 +79,42 @@ def test_neutral_rudder_angle_of_the_approach_phases(runs):
                                 names=("x",))
 
 
+def test_common_grid_pads_shorter_runs_with_missing_samples():
+    """Two runs of different lengths and time stamps on one grid from each run's start: interpolated
+    inside, measured channels NaN past a run's end, inputs held; bad step refused."""
+    from shipid.logs import TrialLog
+
+    t1, t2 = 100.0 + np.arange(0.0, 10.01, 0.5), np.arange(0.0, 4.01, 0.25)
+    runs = {"a": TrialLog.from_arrays(t1, name="a", u=2.0 + 0.1 * (t1 - 100), delta=0.01 * (t1 - 100), n=np.full(t1.size, 1.5)),
+            "b": TrialLog.from_arrays(t2, name="b", u=3.0 - 0.2 * t2, delta=0.02 * t2, n=np.full(t2.size, 1.0))}
+    a, b = ks.common_grid(runs, ("a", "b"), dt=1.0)
+    np.testing.assert_allclose(a.time, np.arange(11.0))
+    np.testing.assert_array_equal(a.time, b.time)
+    np.testing.assert_allclose(a["u"], 2.0 + 0.1 * a.time)
+    np.testing.assert_allclose(b["u"][:5], 3.0 - 0.2 * np.arange(5.0))
+    assert np.isnan(b["u"][5:]).all() and b["delta"][5:] == pytest.approx(0.08) and (b["n"] == 1.0).all()
+    with pytest.raises(ValueError, match="dt must be a positive"):
+        ks.common_grid(runs, ("a",), dt=0.0)
+
+
+def test_metric_residuals_match_evaluate_and_batch(runs):
+    """The closed-loop metric errors the refinement fits, for the published MMG set: a batch of parameter
+    sets gives the single-set rows, and the zigzag errors equal evaluate()'s divided by the goal tolerances."""
+    from shipid.models import get_model
+
+    _, dec = runs
+    pub = get_model("mmg", "kvlcc2", lpp=320.0)
+    f = ks.metric_residuals(pub, dec, names=("tc_35", "zz_10"))
+    one = f(pub.params)
+    P = np.stack([pub.params, pub.params * np.where(np.array(pub.param_names) == "Nr", 1.05, 1.0)])
+    both = f(P)
+    assert one.shape == (3,) and both.shape == (2, 3)
+    np.testing.assert_allclose(both[0], one, atol=1e-4)  # 1e-4 goal tolerances: the batch ends its chunks elsewhere
+    assert np.all(np.abs(both[1] - one) > 1e-3)  # Nr moves every metric
+    tab = ks.evaluate(pub, dec, names=("zz_10",)).set_index("metric")["error"]
+    np.testing.assert_allclose(one[1:], [tab["overshoot1_deg"] / 2.0, tab["overshoot2_deg"] / 3.0], atol=1e-6)
+
+
 @pytest.mark.slow
 def test_mmg_refit_with_neutral_angle_meets_the_turning_goal(runs, fitted):
     """MMG with the measured neutral angle (delta0 = +0.92 deg from the approach phases, fixed) and the
