@@ -46,8 +46,11 @@ print("MARIN data:", folder.resolve() if HAVE_DATA else "not found -- the rest o
 
 Decimated to every 4th sample (0.54 s at full scale, still far below the ship's time
 constants of ~40 s). The MMG fit re-identifies the linear and main non-linear hull
-derivatives and the resistance, with the rudder neutral angle `delta0` fixed at the
-measured straight-course rudder (section 4); rudder and propeller interaction stay published."""),
+derivatives and the resistance with the EKF, with the rudder neutral angle `delta0` fixed at the
+measured straight-course rudder (section 4); rudder and propeller interaction stay published.
+It then refines them (and `delta0`) by output error on the training replays, with the training
+runs' tactical diameters and overshoots in the objective (`ks.refine_fit`; `refine=None` gives the
+EKF stage alone). The held-out zz±20 enter no fit."""),
     code("""if HAVE_DATA:
     dec = ks.load_runs(folder, decimate=8 if FAST else 4)
     setups = ["kcs-response"] if FAST else list(ks.DEFAULT_SETUPS)

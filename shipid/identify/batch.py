@@ -52,10 +52,24 @@ class OutputErrorRefiner:
     jacobian : {"fd", "tangent"}
         Sensitivities by forward differences in one batched simulation (default) or
         by the exact tangent of the RK4 map.
+    log_weights : sequence of float, optional
+        One non-negative weight per log passed to :meth:`fit`: the cost is
+        ``sum_i w_i * sum(normalised residuals of log i ** 2)`` (default: all 1, a plain
+        sum, in which long logs dominate).  E.g. ``1 / n_samples_i`` makes every log
+        weigh equally.  The reported covariance then treats the weighted residuals as
+        white noise (a scaling, not a noise model).
+    extra_residuals : callable, optional
+        ``f(params) -> array (B, m)`` of further residuals appended to the simulation
+        errors, for a batch of full parameter vectors ``params`` of shape (B, np) (the
+        nominal one and its forward-difference perturbations in one call, so ``f`` can
+        simulate them as one batch), e.g. a prior or the errors of closed-loop manoeuvre
+        metrics against measured ones, already divided by their tolerances.
+        Differentiated by forward differences; non-finite values count as 1e6.
     """
 
     def __init__(self, model: Model, *, estimate=None, channels=None, meas_std=None, max_nfev: int = 30,
-                 substeps: int = 1, jacobian: str = "fd"):
+                 substeps: int = 1, jacobian: str = "fd", log_weights=None,
+                 extra_residuals=None):
         self.model = model
         self.estimate = estimate
         self.channels = channels
@@ -63,6 +77,8 @@ class OutputErrorRefiner:
         self.max_nfev = max_nfev
         self.substeps = substeps
         self.jacobian = jacobian
+        self.log_weights = log_weights
+        self.extra_residuals = extra_residuals
 
     def fit(self, logs, start=None, x0=None) -> "OutputErrorRefiner":
         """Refine on ``logs``; ``start`` may be a fitted :class:`EKFIdentifier` whose
@@ -73,6 +89,16 @@ class OutputErrorRefiner:
             raise ValueError(f"jacobian must be 'fd' or 'tangent', got {self.jacobian!r}")
         model = self.model
         arrays, meas = prepare_logs(model, logs)
+        if self.log_weights is None:
+            wlog = np.ones(len(arrays))
+        else:
+            wlog = np.asarray(self.log_weights, dtype=float).reshape(-1)
+            if wlog.size != len(arrays):
+                raise ValueError(f"log_weights: expected one weight per log ({len(arrays)}), got {wlog.size}")
+            bad = np.flatnonzero(~np.isfinite(wlog) | (wlog < 0))
+            if bad.size:
+                raise ValueError(f"log_weights[{bad[0]}] = {wlog[bad[0]]!r}: weights must be finite and >= 0")
+        rw = np.sqrt(wlog)  # residual multipliers
         names = list(self.estimate) if self.estimate is not None else list(model.param_names)
         est_idx = np.array([model.param_index(n) for n in names])
         p0 = model.params.copy()
@@ -161,7 +187,7 @@ class OutputErrorRefiner:
                         J[:, k + 1] = S[:, st_idx][:, :, est_idx]
                 J = J * scale / sig[ch_idx][:, None]
                 for j, i in enumerate(g):
-                    blocks[i] = np.where(masks[i][:, :, None], J[j], 0.0).reshape(-1, est_idx.size)
+                    blocks[i] = rw[i] * np.where(masks[i][:, :, None], J[j], 0.0).reshape(-1, est_idx.size)
             Jt = np.concatenate(blocks, axis=0)
             return np.where(np.isfinite(Jt), Jt, 0.0)
 
@@ -170,11 +196,19 @@ class OutputErrorRefiner:
         def residual_batch(theta_batch):
             sims = simulate_all(theta_batch)
             rs = []
-            for a, s, m in zip(arrays, sims, masks):
-                e = (s - a.Y[None, :, ch_idx]) / sig[ch_idx]
+            for a, s, m, w in zip(arrays, sims, masks, rw):
+                e = w * (s - a.Y[None, :, ch_idx]) / sig[ch_idx]
                 rs.append(np.where(m[None], e, 0.0).reshape(theta_batch.shape[0], -1))
+            if self.extra_residuals is not None:
+                rs.append(extra_batch(theta_batch))
             r = np.concatenate(rs, axis=1)
             return np.where(np.isfinite(r), r, 1e6)
+
+        def extra_batch(theta_batch):
+            P = np.broadcast_to(p0, (theta_batch.shape[0], model.np)).copy()
+            P[:, est_idx] = theta_batch * scale
+            out = np.asarray(self.extra_residuals(P), dtype=float).reshape(P.shape[0], -1)
+            return np.where(np.isfinite(out), out, 1e6)
 
         h = 1e-6
 
@@ -183,7 +217,11 @@ class OutputErrorRefiner:
 
         def jac(th):
             if self.jacobian == "tangent":
-                return tangent_jac(th)
+                Jt = tangent_jac(th)
+                if self.extra_residuals is None:
+                    return Jt
+                E = extra_batch(np.vstack([th, th + h * np.eye(th.size)]))
+                return np.vstack([Jt, ((E[1:] - E[0]) / h).T])
             batch = np.vstack([th, th + h * np.eye(th.size)])
             R = residual_batch(batch)
             return ((R[1:] - R[0]) / h).T
@@ -191,7 +229,7 @@ class OutputErrorRefiner:
         th0 = p0[est_idx] / scale
         sol = least_squares(fun, th0, jac=jac, method="trf", max_nfev=self.max_nfev, x_scale=1.0)
         J = sol.jac
-        n_obs = int(sum(m.sum() for m in masks))
+        n_obs = int(sum(m.sum() for m, w in zip(masks, wlog) if w > 0))
         dof = max(n_obs - th0.size, 1)
         s2 = float(np.sum(sol.fun**2) / dof)
         cov_s = np.linalg.pinv(J.T @ J) * s2
@@ -236,7 +274,9 @@ class OutputErrorRefiner:
             model=self.model.name, coef={k: float(v) for k, v in self.coef_.items()},
             coef_std={k: float(v) for k, v in self.coef_std_.items()}, cov=self.cov_.copy(), diagnostics=diag,
             inputs=[dict(m) for m in self.logs_], method="output-error",
-            settings={"estimated": self.estimated_, "channels": self.channels_, "max_nfev": self.max_nfev},
+            settings={"estimated": self.estimated_, "channels": self.channels_, "max_nfev": self.max_nfev,
+                      "log_weights": None if self.log_weights is None else [float(w) for w in self.log_weights],
+                      "extra_residuals": self.extra_residuals is not None},
             loglik=None, success=self.success_, message=self.message_, versions=software_versions(),
             created=datetime.now(timezone.utc).isoformat(timespec="seconds"),
             extra={"cost_start": self.cost_start_, "cost": self.cost_,
