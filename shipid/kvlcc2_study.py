@@ -85,7 +85,7 @@ def neutral_rudder_angle(runs: dict[str, TrialLog], names=TRAIN, departure_deg: 
 #: Refinement applied by :func:`fit_model` after the EKF, by set-up: keyword arguments of
 #: :func:`refine_fit`.  For ``mmg`` chosen among the measured variants by the training runs' metrics
 #: only (docs/validation.md); the held-out zz+-20 never entered the choice.
-DEFAULT_REFINE = {"mmg": {"how": "metrics", "free": ("delta0",), "max_nfev": 30}}
+DEFAULT_REFINE = {"mmg": {"how": "metrics", "free": ("delta0",), "max_nfev": 60}}  # converges (xtol) at 35
 
 
 def fit_model(name: str, runs: dict[str, TrialLog], train=TRAIN, n_passes: int = 2, start=None,

@@ -46,10 +46,9 @@ def fitted(runs):
     return get
 
 
-def _evaluated(fit, full, converged=True):
+def _evaluated(fit, full):
     """The fit's hold-out table (printed for the test log) and its tactical-diameter errors [%] by run."""
-    if converged:
-        assert fit.success_, fit.message_
+    assert fit.success_, fit.message_
     tab = ks.evaluate(fit.result(), full)
     print(tab.round(3).to_string())
     return tab, tab[(tab.metric == "tactical_diameter_L")].set_index("run")["rel_error_%"]
@@ -141,10 +140,10 @@ def test_mmg_default_metric_refinement_meets_five_of_six_goals(runs, fitted):
     full, _ = runs
     fit = fitted("mmg")
     assert [m["name"] for m in fit.logs_] == list(ks.TRAIN)  # the held-out runs never enter the fit
-    # iteration-limited, not converged (documented): 30 evaluations, cost 16.4 -> 2.18
-    assert fit.nfev_ == ks.DEFAULT_REFINE["mmg"]["max_nfev"] and fit.cost_ < 0.2 * fit.cost_start_
+    # converged (least_squares' xtol test) after ~35 evaluations; cost 16.4 -> ~2.2
+    assert fit.nfev_ < ks.DEFAULT_REFINE["mmg"]["max_nfev"] and fit.cost_ < 0.2 * fit.cost_start_
     assert np.degrees(fit.coef_["delta0"]) == pytest.approx(0.30, abs=0.1)
-    tab, rel = _evaluated(fit, full, converged=False)
+    tab, rel = _evaluated(fit, full)
     assert abs(rel["tc_35"]) < 5.0 and abs(rel["tc_-35"]) < 5.0, rel          # goal met on both
     assert abs(_err(tab, "zz_20", "overshoot2_deg")) < 3.0                     # goal met
     assert abs(_err(tab, "zz_-20", "overshoot1_deg")) < 2.0                    # goal met
