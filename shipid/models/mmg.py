@@ -353,18 +353,24 @@ class MMGModel(Model):
         (batched, complex) gives a tuple of arrays.
         """
         if isinstance(p, np.ndarray) and p.ndim == 1 and p.dtype.kind == "f":
-            cache = self.__dict__.setdefault("_derived_cache", {})
-            key = p.tobytes()
-            hit = cache.get(key)
-            if hit is None or hit[0] is not self.particulars:
-                if len(cache) > 64:
-                    cache.clear()
+            def build():
                 val = self._derived(p.tolist())
                 vec = np.array(val, dtype=float)
-                hit = cache[key] = (self.particulars, {"floats": val, "arrays": tuple(np.array(v) for v in val),
-                                                       "vector": vec, "rows": vec[None]})
-            return hit[1][form]
+                return {"floats": val, "arrays": tuple(np.array(v) for v in val), "vector": vec, "rows": vec[None]}
+
+            return self._cached("_derived_cache", p.tobytes(), 64, build)[form]
         return self._derived(p if isinstance(p, (list, tuple)) else _components(p))
+
+    def _cached(self, store: str, key: bytes, limit: int, build):
+        """``build()`` cached under ``key`` in this model's dict ``store`` (at most ``limit`` entries;
+        entries made with other particulars are rebuilt)."""
+        cache = self.__dict__.setdefault(store, {})
+        hit = cache.get(key)
+        if hit is None or hit[0] is not self.particulars:
+            if len(cache) > limit:
+                cache.clear()
+            hit = cache[key] = (self.particulars, build())
+        return hit[1]
 
     def _forces(self, x, u, p) -> dict:
         """Forces/moments at midship and intermediate quantities (numpy; complex-step safe).
@@ -388,15 +394,11 @@ class MMGModel(Model):
         if p.ndim == 1:
             return self._derived_of(p, "rows")
         P = np.broadcast_to(p, lead + p.shape[-1:]).reshape(-1, p.shape[-1])
-        cache = self.__dict__.setdefault("_rows_cache", {})
-        key = P.tobytes()
-        hit = cache.get(key)
-        if hit is None or hit[0] is not self.particulars:
-            if len(cache) > 16:
-                cache.clear()
-            vals = np.broadcast_arrays(*self._derived(P.T))
-            hit = cache[key] = (self.particulars, np.ascontiguousarray(np.stack(vals, axis=-1), dtype=float))
-        return hit[1]
+
+        def build():
+            return np.ascontiguousarray(np.stack(np.broadcast_arrays(*self._derived(P.T)), axis=-1), dtype=float)
+
+        return self._cached("_rows_cache", P.tobytes(), 16, build)
 
     def _rhs(self, t, x, u, p):
         real = x.dtype.kind == "f" and u.dtype.kind == "f" and p.dtype.kind == "f"
