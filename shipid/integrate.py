@@ -19,7 +19,7 @@ import numpy as np
 
 from .models.base import Model
 
-__all__ = ["rk4_step", "rk4_step_tangent", "rk4_step_taylor_tangent", "euler_step_tangent", "STEP_TANGENTS",
+__all__ = ["rk4_step", "rk4_map", "rk4_step_tangent", "rk4_step_taylor_tangent", "euler_step_tangent", "STEP_TANGENTS",
            "dopri5", "AdaptiveResult"]
 
 
@@ -37,13 +37,22 @@ def rk4_step(model: Model, t, x, u, p, h):
     Shapes: ``x (..., nx)``, ``u (..., nu)``, ``p (..., np)``; ``h`` scalar or
     ``(...)``.  Returns ``x(t + h)``.
     """
-    h = np.asarray(h, dtype=float)
-    hh = h[..., None] if h.ndim else h
-    f = model._rhs
-    k1 = f(t, x, u, p)
-    k2 = f(t + h / 2, x + hh / 2 * k1, u, p)
-    k3 = f(t + h / 2, x + hh / 2 * k2, u, p)
-    k4 = f(t + h, x + hh * k3, u, p)
+    rhs = model._rhs
+    return rk4_map(lambda tt, xx, uu: rhs(tt, xx, uu, p), t, x, u, h)
+
+
+def rk4_map(f: Callable, t, x, u, h):
+    """The RK4 step of :func:`rk4_step` for a right-hand side ``f(t, x, u)`` with the parameters bound
+    (e.g. ``model._rhs_bound(p)``, which integrators fetch once per run)."""
+    if isinstance(h, float):
+        hh = h
+    else:
+        h = np.asarray(h, dtype=float)
+        hh = h[..., None] if h.ndim else h
+    k1 = f(t, x, u)
+    k2 = f(t + h / 2, x + hh / 2 * k1, u)
+    k3 = f(t + h / 2, x + hh / 2 * k2, u)
+    k4 = f(t + h, x + hh * k3, u)
     return x + hh / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
 
 

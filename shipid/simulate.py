@@ -22,7 +22,7 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from .integrate import dopri5, rk4_step
+from .integrate import dopri5, rk4_map
 from .models.base import Model
 
 __all__ = ["simulate", "SimulationResult", "InputLaw", "replay", "replay_errors", "METHODS"]
@@ -221,19 +221,14 @@ def simulate(
         if law is not None:
             Uout[..., k, :] = law.inputs(tk, x)
             for _ in range(substeps):
-                x = _rk4_law_step(model, law, tk, x, p, h)
+                x = _rk4_law_step(f, law, tk, x, h)
                 tk += h
         else:
             uk = controller(tk, x) if controller is not None else U[..., k, :]
             uk = np.broadcast_to(np.asarray(uk, dtype=float), batch + (model.nu,))
             Uout[..., k, :] = uk
             for _ in range(substeps):
-                # rk4_step inlined (one call less per step; same arithmetic)
-                k1 = f(tk, x, uk)
-                k2 = f(tk + h / 2, x + h / 2 * k1, uk)
-                k3 = f(tk + h / 2, x + h / 2 * k2, uk)
-                k4 = f(tk + h, x + h * k3, uk)
-                x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+                x = rk4_map(f, tk, x, uk, h)
                 tk += h
         X[..., k + 1, :] = x
         if not np.all(np.isfinite(x)):
@@ -248,14 +243,14 @@ def simulate(
                             meta={"method": "rk4"})
 
 
-def _rk4_law_step(model, law, t, x, p, h):
+def _rk4_law_step(f, law, t, x, h):
     """RK4 over [t, t + h] under an InputLaw: input held at its mid-step value; stops inside the step
     and events located within it split the step (events by the Illinois method on the discrete map)."""
     t_end = t + h
     while t < t_end - 1e-12 * max(1.0, abs(t_end)):
         stop = next((s for s in law.stops if t + 1e-12 * max(1.0, abs(t)) < s < t_end), t_end)
         hs = stop - t
-        xn = rk4_step(model, t, x, law.inputs(t + 0.5 * hs, x), p, hs)
+        xn = rk4_map(f, t, x, law.inputs(t + 0.5 * hs, x), hs)
         if law.has_events:
             g0, g1 = law.event(t, x), law.event(t + hs, xn)
             cross = (g0 < 0) & (g1 >= 0)
@@ -265,7 +260,7 @@ def _rk4_law_step(model, law, t, x, p, h):
                 for _ in range(50):  # Illinois on the fraction of the step, per crossing member
                     th = np.clip(np.where(cross, (lo * ghi - hi * glo) / (ghi - glo), 1.0), lo, hi)
                     ths = float(np.min(th[cross]))
-                    xm = rk4_step(model, t, x, law.inputs(t + 0.5 * ths * hs, x), p, ths * hs)
+                    xm = rk4_map(f, t, x, law.inputs(t + 0.5 * ths * hs, x), ths * hs)
                     gm = law.event(t + ths * hs, xm)
                     first = cross & (th == ths)
                     up = gm >= 0
@@ -275,7 +270,7 @@ def _rk4_law_step(model, law, t, x, p, h):
                         break
                 th_ev = float(np.min(hi[cross]))
                 hs = th_ev * hs
-                xn = rk4_step(model, t, x, law.inputs(t + 0.5 * hs, x), p, hs)
+                xn = rk4_map(f, t, x, law.inputs(t + 0.5 * hs, x), hs)
                 mask = cross & (hi <= th_ev + 1e-9)
                 law.on_event(t + hs, xn, mask)
         t, x = t + hs, xn
