@@ -430,9 +430,7 @@ class MMGModel(Model):
             return super()._rhs_bound(p)
         one, rows, rhs = fast["rhs_one"], fast["rhs_rows"], self._rhs
         c = self._derived_of(p, "vector") if p.ndim == 1 else None
-        crow = self._derived_of(p, "rows") if p.ndim == 1 else None
-        if p.ndim == 2:  # per-member parameters: (B, np) rows for a batch x (B, 6)
-            crow = self._constant_rows(p, p.shape[:1])
+        crow = self._constant_rows(p, p.shape[:1])  # (1, nc) shared, or (B, nc) for per-member p (B, np)
 
         def f(t, x, u):
             if x.dtype.kind == "f" and u.dtype.kind == "f":
