@@ -278,10 +278,6 @@ def _interp_rows(a, k, f):
         return np.where((f < 1.0) & (k > 0), a[rows, km] + f * (a[rows, k] - a[rows, km]), a[rows, k])
 
 
-def _interp_at(a, k, f):
-    return a[k - 1] + f * (a[k] - a[k - 1]) if f < 1.0 or k == 0 else a[k]
-
-
 def _at_time_rows(t, a, te):
     """``np.interp(te[b], t, a[b])`` for each row ``b`` of ``a (B, n)`` (``te`` inside ``[t0, t_end]``)."""
     j = np.clip(np.searchsorted(t, te, side="right") - 1, 0, t.size - 2)
