@@ -209,37 +209,31 @@ def metric_residuals(model, runs: dict[str, TrialLog], names=TRAIN, tolerances=N
     ``refine="metrics"``); never pass held-out runs to a fit.
     """
     from .manoeuvres import metrics as manoeuvre_metrics
-    from .manoeuvres import ship_info, steady_rps, turning_circle, zigzag
+    from .manoeuvres import ship_info
+    from .validation import standard_manoeuvre
 
     tol = {**GOAL_TOL, **(tolerances or {})}
     jobs = []
     for k in names:
         lg = runs[k]
-        m = manoeuvre_metrics(lg, lpp=320.0, name=k).to_dict()
+        mm = manoeuvre_metrics(lg, lpp=320.0, name=k)
         rate = getattr(lg.ship, "rudder_rate", None) or ship_info(model).get("rudder_rate")
-        jobs.append((k, m, rate))
+        jobs.append((mm, mm.to_dict(), rate))
 
     def f(params):
         P = np.asarray(params, dtype=float)
         P2 = np.atleast_2d(P)
         B = P2.shape[0]
         cols = []
-        for k, m, rate in jobs:
-            spd = float(m["approach_speed"])
+        for mm, m, rate in jobs:
             turning = m["manoeuvre"] == "turning"
             keys = ("tactical_diameter_L",) if turning else ("overshoot1_deg", "overshoot2_deg")
             block = np.full((B, len(keys)), 1e3)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                try:
-                    n = np.array([steady_rps(model, spd, params=pb)[0] for pb in P2])
-                    if turning:
-                        run = turning_circle(model, abs(float(m["rudder_deg"])), speed=np.full(B, spd), n=n,
-                                             side=m["side"], rudder_rate=rate, lpp=320.0, heading_change_deg=200.0,
-                                             params=P2)
-                    else:
-                        run = zigzag(model, abs(float(m["rudder_deg"])), float(m["switch_deg"]), speed=np.full(B, spd),
-                                     n=n, first=m["first_side"], rudder_rate=rate, lpp=320.0, params=P2)
+                try:  # the turns only need the tactical diameter: 200 deg
+                    run = standard_manoeuvre(model, mm, rudder_rate=rate, lpp=320.0, params=P2,
+                                             heading_change_deg=200.0)
                 except ValueError:
                     run = None
             for b in range(B if run is not None else 0):

@@ -887,7 +887,8 @@ def steady_rps(model: Model, speed, *, params=None, n_max: float = 1e3, xtol: fl
     """Propeller rps holding ``speed`` [m/s] in a straight run (du/dt = 0, delta = 0, v = r = 0).
 
     Vectorised bisection over a batch of speeds through ``model.rhs``; works for any protocol model
-    with states ``u`` and input ``n``.  Raises ValueError when no rps in (0, n_max] gives du/dt = 0.
+    with states ``u`` and input ``n``.  ``params`` may be one parameter vector (np,) or one per speed
+    (B, np).  Raises ValueError when no rps in (0, n_max] gives du/dt = 0.
     """
     _check_model(model)
     speeds = np.atleast_1d(np.asarray(speed, dtype=float))
@@ -906,7 +907,8 @@ def steady_rps(model: Model, speed, *, params=None, n_max: float = 1e3, xtol: fl
     G = grid.size
     ug = np.zeros((speeds.size, G, model.nu))
     ug[..., inn] = grid
-    vals = model.rhs(0.0, np.repeat(x0[:, None, :], G, axis=1), ug, p)[..., iu]  # (B, G), one batched call
+    pg = p[:, None, :] if p.ndim == 2 else p  # per-speed parameters broadcast over the grid
+    vals = model.rhs(0.0, np.repeat(x0[:, None, :], G, axis=1), ug, pg)[..., iu]  # (B, G), one batched call
     lo = np.full(speeds.size, np.nan)
     hi = np.full(speeds.size, np.nan)
     for b in range(speeds.size):

@@ -264,31 +264,49 @@ def validate_one(model: Model, log, *, lpp: float | None = None, rudder_sign: fl
     return res
 
 
-def _standard(model: Model, log, res: LogValidation) -> None:
-    """Closed-loop standard manoeuvre of the model matching the measured one (see :func:`validate`)."""
+def standard_manoeuvre(model: Model, measured, *, rudder_rate=None, lpp=None, params=None,
+                       heading_change_deg: float = 540.0):
+    """The model's closed-loop standard manoeuvre matching a measured one.
+
+    ``measured``: the log's :class:`~shipid.manoeuvres.TurningMetrics` or
+    :class:`~shipid.manoeuvres.ZigzagMetrics` (manoeuvre kind, ordered rudder angle, side, switch
+    angle, approach speed).  ``rudder_rate`` [rad/s] defaults to the model's.  ``params`` (np,) or
+    (B, np): with B parameter sets the B manoeuvres run as one batch, member b with ``params[b]``.
+    ``heading_change_deg``: how far a turning circle runs.  Returns the
+    :class:`~shipid.manoeuvres.ManoeuvreResult`; raises ValueError when the log's approach speed or
+    rudder angle is unknown or the model cannot run the manoeuvre.
+    """
     from .manoeuvres import turning_circle, zigzag
 
+    m = measured
+    rudder, speed = abs(float(m.rudder_deg)), float(m.approach_speed)
+    if not (math.isfinite(speed) and speed > 0) or not rudder > 0:
+        raise ValueError("approach speed or rudder angle of the log unknown")
+    per_member = params is not None and np.ndim(params) == 2
+    spd = np.full(len(params), speed) if per_member else speed  # one member per parameter set
+    if m.manoeuvre == "turning":
+        return turning_circle(model, rudder, speed=spd, side=m.side, rudder_rate=rudder_rate, lpp=lpp,
+                              params=params, heading_change_deg=heading_change_deg)
+    # the rudder reversal is located within the step (shipid.manoeuvres.ZigzagRudder), so the default
+    # step gives the overshoots to ~0.01 deg (tests/test_manoeuvres.py)
+    return zigzag(model, rudder, float(m.switch_deg), speed=spd, first=m.first_side, rudder_rate=rudder_rate,
+                  lpp=lpp, params=params)
+
+
+def _standard(model: Model, log, res: LogValidation) -> None:
+    """Closed-loop standard manoeuvre of the model matching the measured one (see :func:`validate`)."""
     m = res.measured
     ship = getattr(log, "ship", None)
     rate = getattr(ship, "rudder_rate", None) or ship_info(model).get("rudder_rate")
     side = m.side if m.manoeuvre == "turning" else m.first_side
     settings = {"rudder_deg": abs(float(m.rudder_deg)), "speed": float(m.approach_speed), "side": side,
                 "rudder_rate_deg_s": None if rate is None else math.degrees(rate), "lpp": res.lpp}
-    if not (math.isfinite(settings["speed"]) and settings["speed"] > 0) or settings["rudder_deg"] <= 0:
-        res.notes.append("closed-loop manoeuvre skipped: approach speed or rudder angle of the log unknown")
-        return
+    if m.manoeuvre != "turning":
+        settings["switch_deg"] = float(m.switch_deg)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            if m.manoeuvre == "turning":
-                run = turning_circle(model, settings["rudder_deg"], speed=settings["speed"], side=side,
-                                     rudder_rate=rate, lpp=res.lpp)
-            else:
-                settings["switch_deg"] = float(m.switch_deg)
-                # the rudder reversal is located within the step (shipid.manoeuvres.ZigzagRudder), so the
-                # default step gives the overshoots to ~0.01 deg (tests/test_manoeuvres.py)
-                run = zigzag(model, settings["rudder_deg"], settings["switch_deg"], speed=settings["speed"],
-                             first=side, rudder_rate=rate, lpp=res.lpp)
+            run = standard_manoeuvre(model, m, rudder_rate=rate, lpp=res.lpp)
     except ValueError as exc:
         res.notes.append(f"closed-loop manoeuvre not available: {exc}")
         return

@@ -156,6 +156,16 @@ def test_steady_rps_of_the_response_model_is_the_quadratic_root():
     np.testing.assert_allclose(n, truth, rtol=1e-9)
 
 
+def test_steady_rps_with_one_parameter_set_per_speed():
+    """Per-member parameters (B, np) give each speed its own model's rps, as B separate calls do."""
+    m = get_model("mmg", "kvlcc2", lpp=320.0)
+    P = m.params * (1 + 0.05 * np.random.default_rng(0).normal(size=(3, m.np)))
+    batch = steady_rps(m, np.full(3, 7.0), params=P)
+    one = np.array([steady_rps(m, 7.0, params=p)[0] for p in P])
+    np.testing.assert_allclose(batch, one, rtol=1e-9)
+    assert np.ptp(batch) > 0.05  # the members really differ
+
+
 def test_batch_equals_separate_runs():
     m = get_model("mmg")
     both = turning_circle(m, 35.0, speed=[1.0, 1.179], side="starboard", heading_change_deg=200)

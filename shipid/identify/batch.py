@@ -146,11 +146,16 @@ class OutputErrorRefiner:
             else:
                 groups.append([i])
 
+        def params_of(theta_batch):
+            """Full parameter vectors (B, np) for scaled estimates (B, ne)."""
+            P = np.broadcast_to(p0, (theta_batch.shape[0], model.np)).copy()
+            P[:, est_idx] = theta_batch * scale
+            return P
+
         def simulate_all(theta_batch):
             """theta_batch (B, ne) scaled -> list of (B, N, nchan) simulated channels."""
             B = theta_batch.shape[0]
-            P = np.broadcast_to(p0, (B, model.np)).copy()
-            P[:, est_idx] = theta_batch * scale
+            P = params_of(theta_batch)
             out: list = [None] * len(arrays)
             for g in groups:
                 t, G = arrays[g[0]].t, len(g)
@@ -205,8 +210,7 @@ class OutputErrorRefiner:
             return np.where(np.isfinite(r), r, 1e6)
 
         def extra_batch(theta_batch):
-            P = np.broadcast_to(p0, (theta_batch.shape[0], model.np)).copy()
-            P[:, est_idx] = theta_batch * scale
+            P = params_of(theta_batch)
             out = np.asarray(self.extra_residuals(P), dtype=float).reshape(P.shape[0], -1)
             return np.where(np.isfinite(out), out, 1e6)
 
