@@ -69,7 +69,9 @@ def _decode(raw: bytes, p: Path) -> str:
                        "file: export the log as CSV text (UTF-8)", path=p, row=line, value=f"0x{bad.hex()}") from None
 
 
-def _parse_meta(line: str, meta: dict) -> None:
+def _parse_meta(line: str, meta: dict, p: Path | None = None, row: int | None = None) -> None:
+    """``# shipid-log: {...}`` / ``# shipid-ship: {...}`` comment lines -> ``meta`` (malformed JSON is ignored;
+    hostile JSON, nested too deeply to parse, is an error naming the row)."""
     m = re.match(r"#\s*shipid-(log|ship):\s*(.*)$", line)
     if not m:
         return
@@ -77,6 +79,10 @@ def _parse_meta(line: str, meta: dict) -> None:
         meta[m.group(1)] = json.loads(m.group(2))
     except json.JSONDecodeError:
         pass
+    except RecursionError:
+        name = p.name if p is not None else "log"
+        raise LogError(f"`{name}` row {row}: the '# shipid-{m.group(1)}:' line is nested too deeply to be "
+                       "metadata; delete the line or give a flat JSON mapping", path=p, row=row) from None
 
 
 _NA_TOKENS = ["", "nan", "NaN", "NAN", "na", "NA", "n/a", "N/A", "null", "NULL", "Null", "none", "None", "NONE",
@@ -186,3 +192,47 @@ def _to_float(cells: Sequence[str], ours: str, col: str, where: _Where, decimal_
                            "blank for a missing sample", path=where.path, column=ours, row=where.row_of(i),
                            value=s) from None
     return out
+
+
+#: largest schema/ship/metadata text read (bytes); such files are a few hundred bytes
+_MAX_MAPPING_BYTES = 1_000_000
+
+
+def parse_mapping_text(s: str, source: str, *, yaml_text: bool, example: str = "", what: str = "file") -> object:
+    """JSON (or YAML) text -> the parsed object; ValueError naming ``source`` for bad or hostile text
+    (too large, too deeply nested)."""
+    if len(s) > _MAX_MAPPING_BYTES:
+        raise ValueError(f"{source}: {len(s)} characters is far too large for particulars/metadata "
+                         f"(limit {_MAX_MAPPING_BYTES}); give a small mapping")
+    try:
+        if yaml_text:
+            try:
+                import yaml  # type: ignore
+            except ImportError:
+                raise ValueError(f"{source}: reading YAML needs PyYAML (pip install pyyaml); or write the "
+                                 f"{what} as JSON") from None
+            try:
+                return yaml.safe_load(s)
+            except yaml.YAMLError as exc:
+                raise ValueError(f"{source}: not valid YAML ({' '.join(str(exc).split())[:200]})") from None
+        try:
+            return json.loads(s)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"{source} line {exc.lineno}: not valid JSON ({exc.msg})"
+                             + (f"; write e.g. {example}" if example else "")) from None
+    except RecursionError:
+        raise ValueError(f"{source}: nested too deeply to be particulars/metadata; give a flat mapping") from None
+
+
+def load_mapping_file(p: Path, what: str, example: str = "") -> object:
+    """Read a small JSON/YAML file (ship particulars, schema) -> the parsed object."""
+    _check_path(p, what=what)
+    if p.stat().st_size > _MAX_MAPPING_BYTES:
+        raise ValueError(f"`{p.name}`: {p.stat().st_size} bytes is far too large for a {what} "
+                         f"(limit {_MAX_MAPPING_BYTES}); give the small JSON mapping")
+    try:
+        s = p.read_bytes().decode("utf-8-sig")
+    except UnicodeDecodeError:
+        raise ValueError(f"`{p.name}`: {what} is not UTF-8 text; write it as JSON") from None
+    yaml_text = p.suffix.lower() in (".yaml", ".yml")
+    return parse_mapping_text(s, f"`{p.name}`", yaml_text=yaml_text, example=example, what=what)

@@ -3,6 +3,9 @@
 Conventions: two title lines, a blank line, then rows of 11 numbers
 ``time x0 y0 phi psi u v p r delta rev`` in s, m, deg, m/s (earth-fixed
 dx0/dt, dy0/dt), deg/s, deg, rpm; time printed with 3 significant digits.
+The reader returns the file's channels in SI with u, v still earth-fixed; the
+``marin`` schema (:data:`shipid.logs.schema.PRESETS`) states the frame and the
+rudder sign that :func:`shipid.logs.schema.apply_conventions` applies.
 """
 from __future__ import annotations
 
@@ -78,15 +81,10 @@ def _read_marin(text: str, p: Path, units: Mapping[str, str], marin_time: str):
     arrays = {c: a[:, j] for j, c in enumerate(_MARIN_COLS)}
     arrays["time"] = t
     t2, ch, units_in = _convert_units(arrays, ch_units, {}, where)
-    # earth-fixed (dx0/dt, dy0/dt) -> body axes by the heading
-    ue, ve = ch.pop("u_e"), ch.pop("v_e")
-    c, s = np.cos(ch["psi"]), np.sin(ch["psi"])
-    ch_out = {"x": ch["x"], "y": ch["y"], "psi": ch["psi"],
-              "u": ue * c + ve * s, "v": -ue * s + ve * c,
-              "r": ch["r"], "delta": ch["delta"], "n": ch["n"], "phi": ch["phi"], "p": ch["p"]}
-    units_in = {k: units_in.get(k, "") for k in ("time", "x", "y", "psi", "r", "delta", "n", "phi", "p")}
-    units_in["u"] = units_in["v"] = "m/s (earth-fixed)"
-    notes.append("u, v in the file are earth-fixed (dx0/dt, dy0/dt); rotated into body axes by psi")
+    # u, v stay earth-fixed (dx0/dt, dy0/dt) here: the marin schema (velocity_frame="earth") rotates them
+    order = ("x", "y", "psi", "u_e", "v_e", "r", "delta", "n", "phi", "p")
+    ch_out = {c.removesuffix("_e"): ch[c] for c in order}
+    units_in = {c.removesuffix("_e"): units_in.get(c, "") for c in ("time",) + order}
     return t2, ch_out, where, units_in, notes
 
 

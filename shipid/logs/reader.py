@@ -7,9 +7,11 @@ from typing import Mapping, Sequence
 
 from ._text import _check_path, _decode
 from .marin import _looks_marin, _read_marin
-from .ship import ShipParticulars, _as_ship, _bundled_ship
+from .schema import PRESETS, Schema, apply_conventions, check_frame, check_rudder_sign, load_schema, merged
+from .ship import ShipParticulars, _as_ship, _bundled_ship, read_ship
 from .shipid_csv import _read_csv
 from .trial_log import LogError, TrialLog, _finish
+
 
 def read_log(
     path: str | os.PathLike,
@@ -27,6 +29,11 @@ def read_log(
     name: str | None = None,
     unit_checks: bool = True,
     marin_time: str = "uniform",
+    schema: "str | os.PathLike | Schema | Mapping | None" = None,
+    velocity_frame: str | None = None,
+    rudder_sign: float | None = None,
+    skip_rows: int | None = None,
+    header: bool | None = None,
 ) -> TrialLog:
     """Read and validate a trial log.
 
@@ -73,6 +80,24 @@ def read_log(
         (1 s resolution after 100 s).  "uniform" (default) rebuilds the time
         base as ``t0 + k dt`` after verifying that it rounds to every printed
         stamp; "drop" keeps only the first sample of each repeated stamp.
+    schema : str, path, Schema or mapping, optional
+        A preset (``"shipid"``, ``"marin"``, ``"esso-frt"``; see
+        :data:`shipid.logs.schema.PRESETS`) or a schema file (JSON/YAML) that
+        says which column holds which channel, units, velocity frame, rudder
+        sign, rows to skip, header and delimiter.  The other arguments
+        override it (``columns``/``units`` per channel).  Default: the
+        ``shipid`` schema, or ``marin`` for an auto-detected MARIN file.
+    velocity_frame : {"body", "earth"}, optional
+        Axes of the file's u, v; ``"earth"`` (earth-fixed dx/dt, dy/dt) is
+        rotated into body axes by the heading.  Default: the schema's.
+    rudder_sign : {+1, -1}, optional
+        Multiplies the file's rudder angle to give shipid's convention
+        (positive delta turns to starboard).  Default: the schema's.
+    skip_rows : int, optional
+        Lines to skip before the header (or before the data without one).
+    header : bool, optional
+        False when the file has no header line; then ``columns`` gives
+        1-based column numbers and unmapped columns are named ``col<k>``.
 
     Returns
     -------
@@ -98,21 +123,33 @@ def read_log(
     text = _decode(raw, p)
     if fmt not in ("auto", "csv", "marin"):
         raise ValueError(f"fmt={fmt!r}: use 'auto', 'csv' or 'marin'")
-    if fmt == "auto":
-        fmt = "marin" if _looks_marin(text) else "csv"
+    if velocity_frame is not None:
+        check_frame(velocity_frame)
+    if rudder_sign is not None:
+        check_rudder_sign(rudder_sign)
+    if schema is not None:
+        sch = load_schema(schema)
+    elif fmt == "marin" or (fmt == "auto" and _looks_marin(text)):
+        sch = PRESETS["marin"]
+    else:
+        sch = PRESETS["shipid"]
+    sch = merged(sch, fmt=None if fmt == "auto" else fmt, columns=columns, units=units, delimiter=delimiter,
+                 velocity_frame=velocity_frame, rudder_sign=rudder_sign, skip_rows=skip_rows, header=header)
     ship_obj = _as_ship(ship, None)
-    if fmt == "marin":
+    if sch.fmt == "marin":
         if columns:
             raise ValueError("columns= does not apply to MARIN .dat files (their columns are fixed)")
         t, ch, where, units_in, notes = _read_marin(text, p, units or {}, marin_time)
-        if ship_obj is None:
-            ship_obj = _bundled_ship("kvlcc2")
-            notes.append("ship particulars: bundled KVLCC2 (Lpp 320 m); pass ship= or lpp= to override")
         meta = {}
     else:
-        t, ch, where, units_in, notes, meta = _read_csv(text, p, columns or {}, units or {}, required, delimiter)
+        t, ch, where, units_in, notes, meta = _read_csv(text, p, sch.columns, sch.units, required, sch.delimiter,
+                                                        skip_rows=sch.skip_rows, header=sch.header)
         if ship_obj is None and isinstance(meta.get("ship"), Mapping):
             ship_obj = ShipParticulars.from_dict(meta["ship"], source=f"`{p.name}` shipid-ship line")
+    apply_conventions(ch, units_in, notes, sch, where)
+    if ship_obj is None and sch.ship is not None:
+        ship_obj = _schema_ship(sch.ship)
+        notes.append(f"ship particulars: bundled {ship_obj} (schema '{sch.name}'); pass ship= or lpp= to override")
     ship_obj = _as_ship(ship_obj, lpp)
     if name is None:
         name = (meta.get("log") or {}).get("name") if isinstance(meta.get("log"), Mapping) else None
@@ -120,4 +157,13 @@ def read_log(
     where.name = name
     return _finish(t, ch, where=where, name=name, ship=ship_obj, path=p, sha256=sha, inputs=inputs,
                    interpolate_inputs=interpolate_inputs, required=required, min_samples=min_samples,
-                   unit_checks=unit_checks, units_in=units_in, notes=notes, fmt=fmt)
+                   unit_checks=unit_checks, units_in=units_in, notes=notes, fmt=sch.fmt)
+
+
+def _schema_ship(spec: str) -> ShipParticulars:
+    """A schema's ship: a bundled ship name (``shipid/data_ships/NAME.json``) or a ship file path."""
+    from importlib import resources
+
+    if resources.files("shipid").joinpath("data_ships", f"{spec}.json").is_file():
+        return _bundled_ship(spec)
+    return read_ship(spec)

@@ -18,20 +18,32 @@ import numpy as np
 from ._text import (_DELIMS, _ISO_RE, _fast_table, _is_number, _iso_seconds, _mostly_numeric, _parse_meta,
                     _split_header, _to_float)
 from .marin import _looks_marin
-from .trial_log import LogError, _convert_units, _fmt_value, _Where
+from .trial_log import LogError, _convert_units, _fmt_value, _short_list, _Where
 from .units import SCHEMA, SHIP_CHANNELS
 
 def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str, str],
-              required: Sequence[str], delimiter: str | None):
+              required: Sequence[str], delimiter: str | None, *, skip_rows: int = 0, header: bool = True):
+    """Read a delimited or whitespace text table.
+
+    ``skip_rows`` lines are skipped first (a preamble); then ``#`` comment and
+    blank lines; the next line is the header (``header=True``) or the first
+    data row (``header=False``: columns are named ``col1, col2, ...`` and are
+    mapped by number or by those names).
+    """
     lines = text.splitlines()
     meta: dict = {}
     h = None
+    if skip_rows >= len(lines):
+        raise LogError(f"`{p.name}`: skip_rows = {skip_rows} but the file has only {len(lines)} line(s); "
+                       "give a smaller --skip-rows", path=p, value=skip_rows)
     for k, line in enumerate(lines):
+        if k < skip_rows:
+            continue
         s = line.strip()
         if not s:
             continue
         if s.startswith("#"):
-            _parse_meta(s, meta)
+            _parse_meta(s, meta, p, k + 1)
             continue
         h = k
         break
@@ -39,7 +51,7 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
         raise LogError(f"`{p.name}`: file has no header line (only blank or # comment lines); "
                        "give a header like 'time [s], x [m], ...' and data rows", path=p)
     header_line = lines[h]
-    data_idx = [k for k in range(h + 1, len(lines)) if lines[k].strip()]
+    data_idx = [k for k in range(h + (0 if not header else 1), len(lines)) if lines[k].strip()]
     # --- delimiter --------------------------------------------------------------
     if delimiter is None:
         delim = ","
@@ -68,15 +80,18 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
         return next(csv.reader([s], delimiter=delim))
 
     hdr = [c.strip() for c in split(header_line)]
+    if not header:  # no header line: the first data row gives the number of columns
+        hdr = [f"col{j + 1}" for j in range(len(hdr))]
     if not hdr or all(not c for c in hdr):
         raise LogError(f"`{p.name}` row {h + 1}: empty header", path=p, row=h + 1)
     parsed = [_split_header(c) for c in hdr]
     names = [n for n, _ in parsed]
     # numeric header: the file has no header line
-    if all(_is_number(n) for n in names if n):
+    if header and all(_is_number(n) for n in names if n):
         raise LogError(f"`{p.name}` row {h + 1}: the first line is numbers, not a header "
                        f"({_fmt_value(header_line.strip())}); add a header line like "
-                       "'time [s], x [m], y [m], psi [rad], u [m/s], v [m/s], r [rad/s], delta [rad], n [rps]'",
+                       "'time [s], x [m], y [m], psi [rad], u [m/s], v [m/s], r [rad/s], delta [rad], n [rps]', "
+                       "or pass header=False (CLI: --no-header) and map the columns by number",
                        path=p, row=h + 1, value=header_line.strip())
     # --- map file columns to our names ---------------------------------------------
     colmap: dict[str, int] = {}   # our name -> column index
@@ -130,12 +145,14 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
     ncol = len(hdr)
     rows_txt: list = []
     keep_rows: list[int] = []
+    blank_rows: list[int] = []   # rows of empty cells (bare delimiters), dropped with a note
     data_idx = [k for k in data_idx if not lines[k].lstrip().startswith("#")]
     fast = _fast_table(lines, data_idx, delim, ncol)
     if fast is not None:  # all cells numeric or blank, every row complete: pandas' C parser did the work
         table, keep = fast
         rows_txt = [None] * int(keep.sum())
         keep_rows = [k + 1 for k, ok in zip(data_idx, keep) if ok]
+        blank_rows = [k + 1 for k, ok in zip(data_idx, keep) if not ok]
         data_idx = []
     if delim == "whitespace":
         split_rows = (lines[k].split() for k in data_idx)
@@ -144,6 +161,7 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
     for k, cells in zip(data_idx, split_rows):
         s = lines[k]
         if (not cells or not cells[0].strip()) and all(not c.strip() for c in cells):  # bare delimiters
+            blank_rows.append(k + 1)
             continue
         if len(cells) != ncol:
             other = [d for d in (";", "\t") if d != delim and d in s]
@@ -174,6 +192,10 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
     notes: list[str] = []
     if first_stamp is not None:
         notes.append(f"time given as date-time stamps; t = 0 s at {first_stamp}")
+    if blank_rows:
+        trailing = blank_rows[0] > rows[-1]
+        notes.append(f"{len(blank_rows)} {'trailing ' if trailing else ''}row(s) of empty cells dropped "
+                     f"(rows {_short_list(blank_rows, 3)})")
     order = ["time"] + [c for c in SCHEMA[1:] if c in arrays] + [c for c in arrays if c not in SCHEMA]
     arrays = {c: arrays[c] for c in order}
     for j, nm in enumerate(names):

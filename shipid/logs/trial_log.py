@@ -253,6 +253,79 @@ class TrialLog:
             out[c] = SI_UNIT.get(dim, "") if dim else ""
         return out
 
+    # --- derived logs (every channel travels, extra channels such as wind included) -----
+    def _derived(self, data: pd.DataFrame, rows: np.ndarray, note: str) -> "TrialLog":
+        missing = {}
+        for c in data.columns:
+            gap = np.isnan(data[c].to_numpy())
+            if gap.any():
+                missing[c] = [int(r) for r in rows[gap]]
+        t = data["time"].to_numpy()
+        d = np.diff(t)
+        dropouts = []
+        if t.size > 2:
+            med = float(np.median(d))
+            dropouts = [(float(t[k]), float(t[k + 1])) for k in np.flatnonzero(d > 3.0 * med)]
+        return TrialLog(data.reset_index(drop=True), name=self.name, ship=self.ship, path=self.path,
+                        sha256=self.sha256, rows=rows, missing=missing, dropouts=dropouts, units_in=self.units_in,
+                        notes=[*self.notes, note], fmt=self.fmt)
+
+    def window(self, t_start: float | None = None, t_end: float | None = None) -> "TrialLog":
+        """The samples with ``t_start <= time <= t_end`` [s] (None = open end), every channel kept.
+
+        Raises
+        ------
+        ValueError
+            When fewer than 2 samples fall inside.
+        """
+        t = self.time
+        keep = np.ones(t.size, dtype=bool)
+        if t_start is not None:
+            keep &= t >= float(t_start)
+        if t_end is not None:
+            keep &= t <= float(t_end)
+        if keep.sum() < 2:
+            raise ValueError(f"log '{self.name}': window {t_start}..{t_end} s holds {int(keep.sum())} sample(s) "
+                             f"of t = {t[0]:g}..{t[-1]:g} s; choose a window with at least 2 samples")
+        return self._derived(self.data[keep], self.rows[keep], f"window t = {t_start}..{t_end} s")
+
+    def resample(self, dt: float) -> "TrialLog":
+        """The log on a uniform time base ``t0 + k dt`` [s] by linear interpolation, every channel kept.
+
+        Heading ``psi`` is continuous (unwrapped) and is interpolated as is;
+        other angle channels (e.g. ``wind_dir_true``, wrapped to [0, 2 pi)) are
+        interpolated on their unwrapped values and wrapped back into their
+        range ([0, 2 pi) when no value is negative, else [-pi, pi)).  A sample whose
+        neighbours are not both finite is NaN (gaps are not bridged).  ``rows``
+        of the result hold the file row of the nearest earlier sample.
+        """
+        dt = float(dt)
+        if not (math.isfinite(dt) and dt > 0):
+            raise ValueError(f"resample: dt = {dt!r} s must be finite and > 0")
+        t = self.time
+        n = int(math.floor((t[-1] - t[0]) / dt + 1e-9)) + 1
+        if n < 2:
+            raise ValueError(f"resample: dt = {dt:g} s leaves fewer than 2 samples in t = {t[0]:g}..{t[-1]:g} s")
+        tn = t[0] + np.arange(n) * dt
+        j = np.clip(np.searchsorted(t, tn, side="right") - 1, 0, t.size - 2)
+        w = (tn - t[j]) / (t[j + 1] - t[j])
+        units = self.units()
+        out = {"time": tn}
+        for c in self.channels:
+            a = self.data[c].to_numpy()
+            wrapped = units.get(c) == "rad" and c not in SHIP_CHANNELS
+            if wrapped:
+                ok = np.isfinite(a)
+                lo = 0.0 if ok.any() and a[ok].min() >= 0.0 else -math.pi   # [0, 2 pi) or [-pi, pi)
+                a = a.copy()
+                a[ok] = np.unwrap(a[ok])
+            v = a[j] * (1.0 - w) + a[j + 1] * w
+            v = np.where(w == 0.0, a[j], np.where(w == 1.0, a[j + 1], v))  # exact at old samples
+            if wrapped:
+                v = (v - lo) % (2 * math.pi) + lo
+            out[c] = v
+        return self._derived(pd.DataFrame(out), self.rows[j], f"resampled to dt = {dt:g} s (linear)")
+
     def to_pandas(self) -> pd.DataFrame:
         """A copy of :attr:`data` indexed by time [s]."""
         return self.data.set_index("time", drop=True).copy()
