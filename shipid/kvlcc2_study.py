@@ -47,7 +47,6 @@ def load_runs(folder, decimate: int = 1) -> dict[str, TrialLog]:
             warnings.simplefilter("ignore", UserWarning)
             lg = read_log(folder / f"MARIN_FREE_KVLCC2_{k}_m.dat")
         ch = {c: lg[c][::decimate] for c in lg.channels if c != "time"}
-        ch["delta"] = RUDDER_SIGN * ch["delta"]
         out[k] = TrialLog.from_arrays(lg.time[::decimate], name=k, ship=lg.ship, **ch)
     return out
 

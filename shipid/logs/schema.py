@@ -173,9 +173,11 @@ PRESETS: dict[str, Schema] = {
         conventions="shipid CSV: SI/radians unless the header's bracketed unit says otherwise, body-axis u, v, "
                     "rudder positive to starboard"),
     "marin": Schema(
-        name="marin", fmt="marin", ship="kvlcc2", velocity_frame="earth",
-        conventions="MARIN SIMMAN 2008 .dat: degrees, deg/s, rpm; u, v earth-fixed (rotated into body axes); "
-                    "rudder positive to port (flipped)"),
+        name="marin", fmt="marin", ship="kvlcc2", velocity_frame="earth", rudder_sign=-1,
+        conventions="MARIN SIMMAN 2008 .dat: degrees, deg/s, rpm; u, v earth-fixed dx0/dt, dy0/dt (rotated into "
+                    "body axes by psi); the file's rudder is positive to port (flipped: checked on tc_35, whose "
+                    "+35 deg in the file turns the ship to port, r < 0, and reads as delta = -35 deg here; tc_-35 "
+                    "reads +35.1 deg with r > 0)"),
     "esso-frt": Schema(
         name="esso-frt", fmt="csv", ship="esso_osaka_3m",
         columns={"time": "t", "x": "x_position_mid", "y": "y_position_mid", "psi": "psi_hat", "u": "u_velo",
