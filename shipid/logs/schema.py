@@ -22,6 +22,7 @@ turning the ship to starboard (positive r).
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping
@@ -103,7 +104,11 @@ class Schema:
             if isinstance(col, bool) or not isinstance(col, (str, int)):
                 raise ValueError(f"{src}: columns['{ch}'] = {col!r}; give a column name or a 1-based number")
         if not self.header:
-            named = [c for c, col in self.columns.items() if not isinstance(col, int)]
+            # without a header, columns are numbers (1-based; "5" from the CLI counts) or the names col1, col2, ...
+            cols = {c: int(col) if isinstance(col, str) and col.strip().isdigit() else col
+                    for c, col in self.columns.items()}
+            object.__setattr__(self, "columns", cols)
+            named = [c for c, col in cols.items() if not isinstance(col, int) and not re.fullmatch(r"col\d+", col)]
             if named:
                 raise ValueError(f"{src}: header = false but columns {named} are given by name; give column "
                                  "numbers (1-based) when the file has no header line")
