@@ -54,6 +54,9 @@ def add_log_options(p) -> None:
                    help="skip the 'looks like degrees/rpm' heuristics (when a log trips them legitimately)")
     g.add_argument("--marin-time", choices=["uniform", "drop"], default="uniform",
                    help="MARIN .dat: rebuild the 3-digit time stamps (uniform, default) or drop repeats")
+    g.add_argument("--no-consistency-checks", action="store_true",
+                   help="skip the channel-consistency checks (r vs dpsi/dt, u, v vs the track, rudder sign vs the "
+                        "first turn, n vs speed, GNSS freezes, glitches)")
 
 
 def read_logs(paths, args) -> list:
@@ -68,7 +71,8 @@ def read_logs(paths, args) -> list:
               fmt=args.fmt, lpp=args.lpp, ship=args.ship, interpolate_inputs=args.interpolate_inputs,
               delimiter=args.delimiter, unit_checks=not args.no_unit_checks, marin_time=args.marin_time,
               schema=args.schema, skip_rows=args.skip_rows, header=args.header,
-              velocity_frame=args.velocity_frame, rudder_sign=args.rudder_sign)
+              velocity_frame=args.velocity_frame, rudder_sign=args.rudder_sign,
+              consistency_checks=not args.no_consistency_checks)
     logs = []
     for path in paths:
         with warnings.catch_warnings():

@@ -22,6 +22,10 @@ _MARIN_UNITS = {"time": "s", "x": "m", "y": "m", "phi": "deg", "psi": "deg", "u_
                 "p": "deg/s", "r": "deg/s", "delta": "deg", "n": "rpm"}
 
 
+_MARIN_FILE_NAMES = {"x": "x0", "y": "y0", "phi": "phi", "psi": "psi", "u_e": "u", "v_e": "v", "p": "p", "r": "r",
+                     "delta": "delta", "n": "rev"}
+
+
 def _looks_marin(text: str) -> bool:
     return text.lstrip()[:200].upper().startswith("MARIN")
 
@@ -101,6 +105,8 @@ def _read_marin(text: str, p: Path, units: Mapping[str, str], marin_time: str):
     order = ("x", "y", "psi", "u_e", "v_e", "r", "delta", "n", "phi", "p")
     ch_out = {c.removesuffix("_e"): ch[c] for c in order}
     units_in = {c.removesuffix("_e"): units_in.get(c, "") for c in ("time",) + order}
+    where.sources = {c.removesuffix("_e"): f"column {_MARIN_COLS.index(c) + 1} '{_MARIN_FILE_NAMES[c]}'"
+                     for c in order}
     return t2, ch_out, where, units_in, notes
 
 

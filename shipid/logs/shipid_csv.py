@@ -234,6 +234,7 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
         if parsed[j][1] is not None:
             header_units[label] = parsed[j][1]
             file_col[label] = label
+    where.sources = {c: f"column {j + 1} '{hdr[j]}'" for c, j in {**colmap, **extra_at}.items()}
     t, ch, units_in = _convert_units(arrays, units, header_units, where, file_col)
     return t, ch, where, units_in, notes, meta
 
