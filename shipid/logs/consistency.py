@@ -387,8 +387,9 @@ def _check_rudder_sign(c: _Ctx) -> None:
     turn = float(psi[j] - psi[i])
     if not ahead or not math.isfinite(turn):
         return
-    vals = dict(execute_time=float(t[i]), delta_execute=float(d[i]), heading_change=turn)
-    what = (f"the first rudder execute ({c.col('delta')} = {math.degrees(d[i]):+.1f} deg at t = {t[i]:g} s) turned "
+    held = float(d[seg][int(np.nanargmax(np.abs(off[seg])))])
+    vals = dict(execute_time=float(t[i]), delta_held=held, heading_change=turn)
+    what = (f"the first rudder execute ({c.col('delta')} = {math.degrees(held):+.1f} deg from t = {t[i]:g} s) turned "
             f"the ship {'to port' if turn < 0 else 'to starboard'} (heading {math.degrees(turn):+.1f} deg while "
             "the rudder was held)")
     if side * turn <= -_TURN_ERR:

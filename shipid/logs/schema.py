@@ -31,8 +31,8 @@ import numpy as np
 
 __all__ = ["Schema", "PRESETS", "load_schema"]
 
-_KEYS = ("name", "fmt", "columns", "units", "velocity_frame", "rudder_sign", "skip_rows", "header", "delimiter",
-         "ship", "conventions")
+_KEYS = ("name", "fmt", "columns", "units", "velocity_frame", "rudder_sign", "signs", "skip_rows", "header",
+         "delimiter", "ship", "conventions")
 
 
 @dataclass(frozen=True)
@@ -59,6 +59,9 @@ class Schema:
     rudder_sign : {+1, -1}
         Multiplies the file's rudder angle to give the shipid convention
         (positive delta turns to starboard).
+    signs : dict
+        Channel -> +1 or -1: any other channel logged with the opposite sign
+        to shipid's (e.g. ``{"r": -1}`` for a yaw rate positive to port).
     skip_rows : int
         Lines to skip before the header (or before the data without a header).
     header : bool
@@ -81,6 +84,7 @@ class Schema:
     units: Mapping[str, str] = field(default_factory=dict)
     velocity_frame: str = "body"
     rudder_sign: float = 1.0
+    signs: Mapping[str, float] = field(default_factory=dict)
     skip_rows: int = 0
     header: bool = True
     delimiter: str | None = None
@@ -97,7 +101,7 @@ class Schema:
             raise ValueError(f"{src}: skip_rows = {self.skip_rows!r}; give a whole number >= 0")
         if not isinstance(self.header, bool):
             raise ValueError(f"{src}: header = {self.header!r}; give true or false")
-        for what, m in (("columns", self.columns), ("units", self.units)):
+        for what, m in (("columns", self.columns), ("units", self.units), ("signs", self.signs)):
             if not isinstance(m, Mapping):
                 raise ValueError(f"{src}: {what} must be a mapping channel -> value, got {type(m).__name__}")
         for ch, col in self.columns.items():
@@ -112,11 +116,13 @@ class Schema:
             if named:
                 raise ValueError(f"{src}: header = false but columns {named} are given by name; give column "
                                  "numbers (1-based) when the file has no header line")
+        for ch, sg in self.signs.items():
+            check_rudder_sign(sg, f"{src}: signs['{ch}']")
         object.__setattr__(self, "rudder_sign", float(self.rudder_sign))
 
     def to_dict(self) -> dict:
         """Plain dict with the schema-file keys."""
-        return {k: (dict(getattr(self, k)) if k in ("columns", "units") else getattr(self, k)) for k in _KEYS}
+        return {k: (dict(getattr(self, k)) if k in ("columns", "units", "signs") else getattr(self, k)) for k in _KEYS}
 
 
 def earth_to_body(ue: np.ndarray, ve: np.ndarray, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -142,6 +148,10 @@ def apply_conventions(ch: dict, units_in: dict, notes: list, schema: "Schema", w
         units_in["u"] = units_in["v"] = f"{units_in.get('u') or 'm/s'} (earth-fixed)"
         notes.append(f"u, v in the file are earth-fixed (dx/dt, dy/dt; schema '{schema.name}'); rotated into "
                      "body axes by psi")
+    for c, sg in schema.signs.items():
+        if sg == -1 and c in ch:
+            ch[c] = -ch[c]
+            notes.append(f"'{c}' multiplied by -1 (schema '{schema.name}' signs)")
     if schema.rudder_sign == -1 and "delta" in ch:
         ch["delta"] = -ch["delta"]
         notes.append(f"rudder angle multiplied by -1 (schema '{schema.name}': the file's rudder is positive to "
@@ -155,8 +165,8 @@ def check_frame(frame, what: str = "velocity_frame") -> str:
 
 
 def check_rudder_sign(sign, what: str = "rudder_sign") -> float:
-    if isinstance(sign, bool) or sign not in (1, -1):
-        raise ValueError(f"{what} = {sign!r}; use +1 (file already positive to starboard) or -1 (flip)")
+    if isinstance(sign, bool) or not isinstance(sign, (int, float)) or sign not in (1, -1):
+        raise ValueError(f"{what} = {sign!r}; use +1 (file already in shipid's sign) or -1 (flip)")
     return float(sign)
 
 
