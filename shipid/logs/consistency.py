@@ -354,10 +354,15 @@ def _check_velocity_frame(c: _Ctx) -> None:
     st = c.stride   # on ~1024-2048 samples; the integrals at the full rate
     t, x, y, u, v, psi = (a[ok] for a in (c.t, x, y, u, v, psi))
     cs, sn = np.cos(psi), np.sin(psi)
-    V = np.stack([u * cs - v * sn, u * sn + v * cs, u, v, v * cs - u * sn, v * sn + u * cs], axis=1)
     h = np.diff(t)[:, None] * 0.5
-    I = np.concatenate([np.zeros((1, 6)), np.cumsum((V[1:] + V[:-1]) * h, axis=0)])[::st]
-    integ = dict(zip(("ub", "vb", "u", "v", "ubs", "vbs"), I.T))
+    integ: dict = {}
+
+    def integrate(**cols):   # full-rate trapezoidal integrals, then the ~1-2k sample grid
+        V = np.stack(list(cols.values()), axis=1)
+        I = np.concatenate([np.zeros((1, V.shape[1])), np.cumsum((V[1:] + V[:-1]) * h, axis=0)])[::st]
+        integ.update(zip(cols, I.T))
+
+    integrate(ub=u * cs - v * sn, vb=u * sn + v * cs)
     t, x, y = t[::st], x[::st], y[::st]
     step = np.hypot(np.diff(x), np.diff(y))
     lag0 = _lag(x.size, step, max(c.typical_resolution("x"), c.typical_resolution("y"), _quantum(x), _quantum(y)))
@@ -370,17 +375,24 @@ def _check_velocity_frame(c: _Ctx) -> None:
         px, py = _incr(integ[ke], lag), _incr(integ[kn], lag)
         return float(np.median(np.hypot(dx - px, dy - py)) / scale)
 
-    errs = {lag: (err("ub", "vb", lag), err("u", "v", lag)) for lag in _lags(lag0, x.size)}
+    lags = _lags(lag0, x.size)
+    body = {lag: err("ub", "vb", lag) for lag in lags}
+    lag = min(body, key=body.get)
+    uv = f"{c.col('u')}, {c.col('v')}"
+    if body[lag] <= _FRAME_GOOD:
+        c.add("info", "velocity_frame", ("u", "v"),
+              f"body-axis {uv} integrate to the track of x, y (median error {100 * body[lag]:.0f} %)",
+              error_body=body[lag], lag_samples=lag)
+        return
+    # body axes do not fit: earth-fixed? swapped?
+    uf, vf = (a[ok] for a in (c.get("u"), c.get("v")))
+    integrate(u=uf, v=vf, ubs=vf * cs - uf * sn, vbs=vf * sn + uf * cs)
+    errs = {g: (body[g], err("u", "v", g)) for g in lags}
     lag = min(errs, key=lambda g: min(errs[g]))
     e_body, e_earth = errs[lag]
     if not math.isfinite(min(e_body, e_earth)):
         return
     vals = dict(error_body=e_body, error_earth=e_earth, lag_samples=lag)
-    uv = f"{c.col('u')}, {c.col('v')}"
-    if e_body <= _FRAME_GOOD:
-        c.add("info", "velocity_frame", ("u", "v"),
-              f"body-axis {uv} integrate to the track of x, y (median error {100 * e_body:.0f} %)", **vals)
-        return
     if e_earth <= _FRAME_GOOD and e_earth < 0.5 * e_body:
         c.add("error", "velocity_frame", ("u", "v"),
               f"{uv} agree with the earth-fixed dx/dt, dy/dt (median error {100 * e_earth:.0f} %), not with body "
