@@ -177,3 +177,19 @@ def test_measured_files_raise_no_error_false_alarms_counted():
     assert counts["warning"] <= 33
     res = check_consistency(log)
     assert res.message.startswith(f"log '{log.name}'")
+
+
+def test_cli_prints_findings_and_can_turn_them_off(tmp_path, capsys):
+    from shipid.cli import main
+
+    assert main(["log", str(DATA / "kcs_tc_p35.csv")]) == 0
+    out = capsys.readouterr().out
+    assert "consistency: ok (yaw_rate, velocity_frame, rudder_sign, propeller, position_freeze, glitches checked)" in out
+    assert "info: `kcs_tc_p35.csv`: yaw rate 'r' (column 7 'r [rad/s]') agrees with dpsi/dt" in out
+    df = _frame("kcs_tc_p35.csv")
+    p = _write(tmp_path, "rudder.csv", df.assign(delta=-df.delta))
+    assert main(["log", str(p)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "the file's rudder sign is opposite, pass rudder_sign=-1" in err
+    assert main(["log", str(p), "--no-consistency-checks"]) == 0
+    assert main(["log", str(p), "--rudder-sign", "-1"]) == 0
