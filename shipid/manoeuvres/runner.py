@@ -23,7 +23,7 @@ def ship_info(model: Model) -> dict:
 
     Taken from model attributes of those names, then from the default parameter set's
     ``operating_point`` (``lpp_m``, ``u0_m_s``, ``rudder_rate_deg_s``), then from the known
-    ships of SPEC.md; missing ones are absent from the dict.
+    ships of SPEC.md (only for a model of that ship's length); missing ones are absent from the dict.
     """
     info: dict[str, float] = {}
     for k in ("lpp", "rudder_rate", "design_speed"):
@@ -38,8 +38,10 @@ def ship_info(model: Model) -> dict:
     for key, name, conv in (("lpp_m", "lpp", 1.0), ("u0_m_s", "design_speed", 1.0), ("rudder_rate_deg_s", "rudder_rate", math.pi / 180)):
         if name not in info and key in op:
             info[name] = float(op[key]) * conv
-    for k, val in _KNOWN_SHIPS.get(model.name, {}).items():
-        info.setdefault(k, val)
+    known = _KNOWN_SHIPS.get(model.name, {})
+    if "lpp" not in info or abs(info["lpp"] / known.get("lpp", info["lpp"]) - 1.0) < 1e-9:  # only for that ship
+        for k, val in known.items():
+            info.setdefault(k, val)
     return info
 
 
