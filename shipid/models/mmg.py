@@ -37,7 +37,10 @@ Propeller, eqs. (11)-(16): ``X_P = (1 - t_P) T``,
 and ``C2m`` (beta_P < 0).  The thrust is evaluated as the polynomial
 ``rho D_P^2 (k_0 n^2 D_P^2 + k_1 n D_P u_P + k_2 u_P^2)`` with
 ``u_P = u (1 - w_P)`` -- identical to the paper for n > 0 and free of the
-1/n singularity.
+1/n singularity; for n < 0 the thrust is ``rho n|n| D_P^4 K_T(u_P/(|n| D_P))``,
+so it reverses with the propeller (a sign fix, not a four-quadrant model:
+use ``lowspeed`` for astern manoeuvres).  At rest (u = v = 0) the prime
+velocities are set to 0 (no NaN).
 
 Rudder, eqs. (17)-(28): ``X_R = -(1 - t_R) F_N sin(delta)``,
 ``Y_R = -(1 + a_H) F_N cos(delta)``,
