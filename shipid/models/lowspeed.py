@@ -54,7 +54,7 @@ from typing import Mapping
 
 import numpy as np
 
-from .base import Model
+from .base import Model, complex_step_jacobian
 from .kinematics import planar_rates
 from .mmg import MMGParticulars, eq4_mass_matrix
 
@@ -149,7 +149,7 @@ class LowSpeedModel(Model):
     def mass_matrix(self, params=None) -> np.ndarray:
         """Rigid-body plus added mass matrix of eq. (4) at midship, shape ``(..., 3, 3)`` [kg, kg m, kg m^2]
         (rows surge, sway, yaw); used to add external forces (wind) to the model."""
-        c = self._coef(self._p(params))
+        c = self._coef(self.params if params is None else np.asarray(params))  # complex kept (complex step)
         return eq4_mass_matrix(self.particulars, c["mx"], c["my"], c["Jz"])
 
     def forces(self, x, u, params=None) -> dict:
@@ -206,24 +206,14 @@ class LowSpeedModel(Model):
         return _motion(self.particulars, self._coef(p), x, X, Y, N)
 
     # ------------------------------------------------------------- Jacobians
-    _H_CS = 1e-30
-
-    def _cstep(self, t, x, u, p, which):
-        args = {"x": x, "u": u, "p": p}
-        base = args[which]
-        pert = base[..., None, :] + 1j * self._H_CS * np.eye(base.shape[-1])
-        a = {w: (pert if w == which else arr[..., None, :]) for w, arr in args.items()}
-        f = self._rhs(t, a["x"], a["u"], a["p"])
-        return np.swapaxes(np.imag(f) / self._H_CS, -1, -2)
-
     def _jac_x(self, t, x, u, p):
-        return self._cstep(t, x, u, p, "x")
+        return complex_step_jacobian(self._rhs, t, x, u, p, "x")
 
     def _jac_u(self, t, x, u, p):
-        return self._cstep(t, x, u, p, "u")
+        return complex_step_jacobian(self._rhs, t, x, u, p, "u")
 
     def _jac_p(self, t, x, u, p):
-        return self._cstep(t, x, u, p, "p")
+        return complex_step_jacobian(self._rhs, t, x, u, p, "p")
 
     @classmethod
     def sample_point(cls, rng, batch=()):

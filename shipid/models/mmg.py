@@ -325,8 +325,9 @@ class MMGModel(Model):
                 "m_prime": m / q2, "x_G": P.x_G}
 
     def mass_matrix(self, params=None) -> np.ndarray:
-        """Mass matrix of eq. (4), ``(..., 3, 3)`` (:func:`eq4_mass_matrix`) for ``params`` (default own)."""
-        p = self._p(params)
+        """Mass matrix of eq. (4), ``(..., 3, 3)`` (:func:`eq4_mass_matrix`) for ``params`` (default own;
+        complex parameters are kept, for complex-step Jacobians of models that add external forces)."""
+        p = self.params if params is None else np.asarray(params)
         return eq4_mass_matrix(self.particulars, p[..., self._idx["mx"]], p[..., self._idx["my"]], p[..., self._idx["Jz"]])
 
     def to_dimensional(self, speed: float | None = None) -> dict:
