@@ -6,7 +6,7 @@ turns the ship to starboard, i.e. produces positive r with the synthetic set)
 and ``n`` [rps]; 16 parameters::
 
     du/dt = a1 u + a2 v^2 + a3 r^2 + a4 delta^2 + a5 v r + a6 v delta
-            + a7 r delta + a8 u n + a9 n^2
+            + a7 r delta + a8 u n + a9 n|n|
     dv/dt = b1 v + b2 r + b3 delta + b4 u r
     dr/dt = c1 v + c2 r + c3 delta
 
@@ -27,7 +27,7 @@ __all__ = ["KCSResponseModel", "RESPONSE_REGRESSORS", "PRIME_EXPONENTS"]
 #: Regressor of each coefficient, for tables and identifiability messages.
 RESPONSE_REGRESSORS = {
     "a1": "u", "a2": "v^2", "a3": "r^2", "a4": "delta^2", "a5": "v*r", "a6": "v*delta",
-    "a7": "r*delta", "a8": "u*n", "a9": "n^2",
+    "a7": "r*delta", "a8": "u*n", "a9": "n|n|",
     "b1": "v", "b2": "r", "b3": "delta", "b4": "u*r",
     "c1": "v", "c2": "r", "c3": "delta",
 }
@@ -99,7 +99,7 @@ class KCSResponseModel(FroudeScaled, Model):
         a1, a2, a3, a4, a5, a6, a7, a8, a9, b1, b2, b3, b4, c1, c2, c3 = p.T if p.ndim <= 2 else np.moveaxis(p, -1, 0)
         out = np.empty(batch_shape(x, u, p) + (6,))
         out[..., 0], out[..., 1], out[..., 2] = planar_rates(psi, uu, v, r)
-        out[..., 3] = (a1 + a8 * n) * uu + a2 * v * v + a3 * r * r + a4 * d * d + (a5 * r + a6 * d) * v + a7 * r * d + a9 * n * n
+        out[..., 3] = (a1 + a8 * n) * uu + a2 * v * v + a3 * r * r + a4 * d * d + (a5 * r + a6 * d) * v + a7 * r * d + a9 * n * np.abs(n)
         out[..., 4] = b1 * v + (b2 + b4 * uu) * r + b3 * d
         out[..., 5] = c1 * v + c2 * r + c3 * d
         return out
@@ -152,7 +152,7 @@ class KCSResponseModel(FroudeScaled, Model):
         J[..., 3, 5] = v * d
         J[..., 3, 6] = r * d
         J[..., 3, 7] = uu * n
-        J[..., 3, 8] = n * n
+        J[..., 3, 8] = n * np.abs(n)
         J[..., 4, 9] = v
         J[..., 4, 10] = r
         J[..., 4, 11] = d
@@ -167,7 +167,7 @@ class KCSResponseModel(FroudeScaled, Model):
         shape = batch_shape(x, u, p)
         J = np.zeros(shape + (6, 2))
         J[..., 3, 0] = 2 * p[..., 3] * d + p[..., 5] * v + p[..., 6] * r
-        J[..., 3, 1] = p[..., 7] * uu + 2 * p[..., 8] * n
+        J[..., 3, 1] = p[..., 7] * uu + 2 * p[..., 8] * np.abs(n)
         J[..., 4, 0] = p[..., 11]
         J[..., 5, 0] = p[..., 15]
         return J

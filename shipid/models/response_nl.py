@@ -29,7 +29,7 @@ names, same meaning as ``kcs-response``) and adds, in sway and yaw,
 
 Equations (states ``x, y, psi, u, v, r``; inputs ``delta`` [rad], ``n`` [rps])::
 
-    du/dt = a1 u + a2 v^2 + a3 r^2 + a4 delta^2 + a5 v r + a6 v delta + a7 r delta + a8 u n + a9 n^2
+    du/dt = a1 u + a2 v^2 + a3 r^2 + a4 delta^2 + a5 v r + a6 v delta + a7 r delta + a8 u n + a9 n|n|
     dv/dt = b1 v + b2 r + b3 delta + b4 u r
             + b5 u v + b6 v|v| + b7 r|r| + b8 v^2 r/u + b9 v r^2/u + b0 n^2
     dr/dt = c1 v + c2 r + c3 delta
@@ -62,7 +62,7 @@ ASYM_NAMES = ("b0", "c0")
 #: Regressor of each coefficient (for tables and identifiability messages).
 RESPONSE_NL_REGRESSORS = {
     "a1": "u", "a2": "v^2", "a3": "r^2", "a4": "delta^2", "a5": "v*r", "a6": "v*delta", "a7": "r*delta",
-    "a8": "u*n", "a9": "n^2",
+    "a8": "u*n", "a9": "n|n|",
     "b1": "v", "b2": "r", "b3": "delta", "b4": "u*r", "b5": "u*v", "b6": "v|v|", "b7": "r|r|",
     "b8": "v^2 r/u", "b9": "v r^2/u",
     "c1": "v", "c2": "r", "c3": "delta", "c4": "u*v", "c5": "u*r", "c6": "v|v|", "c7": "r|r|",
@@ -146,7 +146,7 @@ class ResponseNLModel(FroudeScaled, Model):
         _, uu, v, r, d, n, q = self._parts(x, u)
         shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1])
         b = lambda a: np.broadcast_to(a, shape)  # noqa: E731
-        ru = np.stack([b(a) for a in (uu, v * v, r * r, d * d, v * r, v * d, r * d, uu * n, n * n)], axis=-1)
+        ru = np.stack([b(a) for a in (uu, v * v, r * r, d * d, v * r, v * d, r * d, uu * n, n * np.abs(n))], axis=-1)
         common = (v * np.abs(v), r * np.abs(r), v * v * r * q, v * r * r * q, n * n)
         rv = np.stack([b(a) for a in (v, r, d, uu * r, uu * v) + common], axis=-1)
         rr = np.stack([b(a) for a in (v, r, d, uu * v, uu * r) + common], axis=-1)
@@ -198,7 +198,7 @@ class ResponseNLModel(FroudeScaled, Model):
         J = np.zeros(shape + (6, 2))
         P = lambda name: p[..., self._pi[name]]  # noqa: E731
         J[..., 3, 0] = 2 * P("a4") * d + P("a6") * v + P("a7") * r
-        J[..., 3, 1] = P("a8") * uu + 2 * P("a9") * n
+        J[..., 3, 1] = P("a8") * uu + 2 * P("a9") * np.abs(n)
         J[..., 4, 0] = P("b3")
         J[..., 5, 0] = P("c3")
         J[..., 4, 1] = 2 * P("b0") * n
