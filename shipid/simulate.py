@@ -360,7 +360,7 @@ def _log_frame(log) -> pd.DataFrame:
     return data
 
 
-def replay(model: Model, log, *, x0=None, substeps: int = 2) -> SimulationResult:
+def replay(model: Model, log, *, x0=None, substeps: int = 2, params=None) -> SimulationResult:
     """Simulate ``model`` with the recorded inputs of ``log`` from its initial state.
 
     Parameters
@@ -374,6 +374,8 @@ def replay(model: Model, log, *, x0=None, substeps: int = 2) -> SimulationResult
         each logged state (0 for states not logged).
     substeps : int
         RK4 steps per sample interval.
+    params : array (np,) or (B, np), optional
+        Parameters (default the model's); B sets replay the log as one batch of B members.
     """
     df = _log_frame(log)
     t = df["time"].to_numpy(dtype=float)
@@ -392,7 +394,9 @@ def replay(model: Model, log, *, x0=None, substeps: int = 2) -> SimulationResult
                 fin = col[np.isfinite(col)][:5]
                 if fin.size:
                     x0[i] = fin.mean()
-    return simulate(model, x0, t, U, substeps=substeps)
+    if params is not None and np.ndim(params) == 2:
+        x0 = np.broadcast_to(np.asarray(x0, dtype=float), (np.shape(params)[0], model.nx))
+    return simulate(model, x0, t, U, substeps=substeps, params=params)
 
 
 def replay_errors(sim: SimulationResult, log) -> pd.DataFrame:
