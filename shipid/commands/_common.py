@@ -5,7 +5,8 @@ import warnings
 
 
 def parse_pairs(items, option: str, convert=str) -> dict:
-    """``["a=1,b=2", "c=3"]`` -> ``{"a": convert("1"), ...}``; ValueError naming the option otherwise."""
+    """``["a=1,b=2", "c=3"]`` -> ``{"a": convert("1"), ...}``; ValueError naming the option otherwise
+    (also for a name given twice, e.g. ``psi=deg,psi=rad``: which one was meant cannot be guessed)."""
     out: dict = {}
     for item in items or []:
         for part in item.split(","):
@@ -14,28 +15,48 @@ def parse_pairs(items, option: str, convert=str) -> dict:
             if "=" not in part:
                 raise ValueError(f"{option} entry '{part}' must look like NAME=VALUE, e.g. psi=deg")
             k, v = part.split("=", 1)
+            k = k.strip()
+            if k in out:
+                raise ValueError(f"{option}: '{k}' is given twice ({k}={out[k]} and {part.strip()}); give it once")
             try:
-                out[k.strip()] = convert(v.strip())
+                out[k] = convert(v.strip())
             except ValueError:
                 raise ValueError(f"{option} entry '{part}': '{v.strip()}' is not a valid value") from None
     return out
 
 
 def add_log_options(p) -> None:
-    """The options that say how to read trial logs (same for every command that reads logs)."""
-    p.add_argument("--lpp", type=float, default=None, help="ship length between perpendiculars [m]")
-    p.add_argument("--ship", default=None, help="ship particulars file (JSON or YAML)")
-    p.add_argument("--units", action="append", metavar="CH=UNIT", help="declare units, e.g. psi=deg,n=rpm")
-    p.add_argument("--columns", "--column", dest="columns", action="append", metavar="CH=COLUMN",
+    """The options that say how to read trial logs: one copy for every command that reads logs
+    (fit, log, metrics, validate, report); :func:`read_logs` applies them."""
+    g = p.add_argument_group("reading the logs")
+    g.add_argument("--lpp", type=float, default=None, help="ship length between perpendiculars [m]")
+    g.add_argument("--ship", default=None, help="ship particulars file (JSON or YAML)")
+    g.add_argument("--schema", default=None, metavar="FILE|PRESET",
+                   help="how the file's columns map to channels: a preset (shipid, marin, esso-frt) or a JSON/YAML "
+                        "schema file (columns, units, velocity_frame, rudder_sign, skip_rows, header, delimiter)")
+    g.add_argument("--units", action="append", metavar="CH=UNIT", help="declare units, e.g. psi=deg,n=rpm")
+    g.add_argument("--columns", "--column", dest="columns", action="append", metavar="CH=COLUMN",
                    help="map a channel to the file's column name (or 1-based number), e.g. psi=heading")
-    p.add_argument("--delimiter", default=None, help="CSV delimiter if not a comma (';', tab or 'whitespace')")
-    p.add_argument("--format", dest="fmt", choices=["auto", "csv", "marin"], default="auto",
+    g.add_argument("--delimiter", default=None, help="CSV delimiter if not a comma (';', tab or 'whitespace')")
+    g.add_argument("--skip-rows", type=int, default=None, metavar="N",
+                   help="skip N preamble lines before the header (or before the data with --no-header)")
+    g.add_argument("--no-header", dest="header", action="store_false", default=None,
+                   help="the file has no header line: map the channels by column number (--columns u=5)")
+    g.add_argument("--velocity-frame", choices=["body", "earth"], default=None,
+                   help="axes of the file's u, v: body (default) or earth-fixed dx/dt, dy/dt (rotated by psi)")
+    g.add_argument("--rudder-sign", type=int, choices=[1, -1], default=None, metavar="{1,-1}",
+                   help="-1 when the file's positive rudder turns the ship to port (flipped to shipid's "
+                        "starboard-positive convention; the marin schema already does this)")
+    g.add_argument("--format", dest="fmt", choices=["auto", "csv", "marin"], default="auto",
                    help="file format (default: auto)")
-    p.add_argument("--interpolate-inputs", action="store_true", help="fill gaps in delta/n by interpolation")
-    p.add_argument("--no-unit-checks", action="store_true",
+    g.add_argument("--interpolate-inputs", action="store_true", help="fill gaps in delta/n by interpolation")
+    g.add_argument("--no-unit-checks", action="store_true",
                    help="skip the 'looks like degrees/rpm' heuristics (when a log trips them legitimately)")
-    p.add_argument("--marin-time", choices=["uniform", "drop"], default="uniform",
+    g.add_argument("--marin-time", choices=["uniform", "drop"], default="uniform",
                    help="MARIN .dat: rebuild the 3-digit time stamps (uniform, default) or drop repeats")
+    g.add_argument("--no-consistency-checks", action="store_true",
+                   help="skip the channel-consistency checks (r vs dpsi/dt, u, v vs the track, rudder sign vs the "
+                        "first turn, n vs speed, GNSS freezes, glitches)")
 
 
 def read_logs(paths, args) -> list:
@@ -43,10 +64,15 @@ def read_logs(paths, args) -> list:
     (they are in each log's ``summary()``)."""
     from ..logs import read_log
 
+    if args.skip_rows is not None and args.skip_rows < 0:
+        raise ValueError(f"--skip-rows {args.skip_rows}: give a number of lines >= 0")
     kw = dict(units=parse_pairs(args.units, "--units") or None,
               columns=parse_pairs(args.columns, "--columns") or None,
               fmt=args.fmt, lpp=args.lpp, ship=args.ship, interpolate_inputs=args.interpolate_inputs,
-              delimiter=args.delimiter, unit_checks=not args.no_unit_checks, marin_time=args.marin_time)
+              delimiter=args.delimiter, unit_checks=not args.no_unit_checks, marin_time=args.marin_time,
+              schema=args.schema, skip_rows=args.skip_rows, header=args.header,
+              velocity_frame=args.velocity_frame, rudder_sign=args.rudder_sign,
+              consistency_checks=not args.no_consistency_checks)
     logs = []
     for path in paths:
         with warnings.catch_warnings():

@@ -11,6 +11,8 @@ import math
 import sys
 from pathlib import Path
 
+from ._common import add_log_options, read_logs
+
 #: Keys printed in the short metric summaries.
 SUMMARY_KEYS = ("advance_L", "transfer_L", "tactical_diameter_L", "steady_diameter_L", "speed_loss",
                 "overshoot1_deg", "overshoot2_deg", "time_second_execute", "initial_turning_L")
@@ -19,7 +21,7 @@ SUMMARY_KEYS = ("advance_L", "transfer_L", "tactical_diameter_L", "steady_diamet
 def register(sub) -> None:
     p = sub.add_parser("metrics", help="standard-manoeuvre metrics (ITTC/IMO) of measured logs -> JSON list")
     p.add_argument("logs", nargs="+", metavar="LOG", help="trial logs (CSV or MARIN .dat)")
-    p.add_argument("--lpp", type=float, default=None, help="ship length [m] (default: from the log's particulars)")
+    add_log_options(p)   # --lpp (default: from the log's particulars), --schema, --units, ...
     p.add_argument("--kind", choices=("auto", "turning", "zigzag"), default="auto")
     p.add_argument("--reference-offset", type=float, default=None, metavar="M",
                    help="logged point's distance forward of midship [m]; positions are moved to midship")
@@ -98,12 +100,10 @@ def _write_or_print(text: str, output, force: bool):
 
 
 def _metrics(args) -> int:
-    from ..logs import read_log
     from ..manoeuvres import metrics
 
     out = []
-    for f in args.logs:
-        log = read_log(f, lpp=args.lpp) if args.lpp else read_log(f)
+    for f, log in zip(args.logs, read_logs(args.logs, args)):
         m = metrics(log, lpp=args.lpp, kind=args.kind, reference_offset=args.reference_offset, name=Path(f).name)
         out.append({"file": str(f), **m.to_dict()})
     _write_or_print(json.dumps(out, indent=2) + "\n", args.output, args.force)

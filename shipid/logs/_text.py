@@ -28,6 +28,9 @@ def _check_path(p: Path, what: str = "log file") -> None:
         raise LogError(f"`{p}`: {what} does not exist; check the path{hint}", path=p)
     if p.is_dir():
         raise LogError(f"`{p}`: is a directory, not a {what}; give the file inside it", path=p)
+    if not p.is_file():   # a FIFO, socket or device: reading it could block forever
+        raise LogError(f"`{p}`: is not a regular file (a pipe, socket or device); give the {what} itself "
+                       "(save the stream to a file first)", path=p)
 
 
 _HEADER_RE = re.compile(r"^\s*(?P<name>.*?)\s*(?:[\[(](?P<unit>[^\])]*)[\])])?\s*$")
