@@ -19,7 +19,7 @@ import numpy as np
 
 from .models.base import Model
 
-__all__ = ["rk4_step", "rk4_map", "rk4_step_tangent", "rk4_step_taylor_tangent", "euler_step_tangent", "STEP_TANGENTS",
+__all__ = ["hold_steps", "rk4_step", "rk4_map", "rk4_step_tangent", "rk4_step_taylor_tangent", "euler_step_tangent", "STEP_TANGENTS",
            "dopri5", "AdaptiveResult"]
 
 
@@ -41,6 +41,27 @@ def _stage_inputs(u, u1):
     if u1 is None:
         return u, u, u
     return u, 0.5 * (u + u1), u1
+
+
+def hold_steps(u0, u1, n: int):
+    """End inputs ``(u_a, u_b)`` of the ``n`` equal steps that cross one sample interval.
+
+    First-order hold (``u1`` given): step ``i`` runs from ``(1 - w_i) u0 + w_i u1`` to the same at
+    ``w_{i+1}``, ``w_i = i / n``; the first starts on ``u0`` and the last ends on ``u1`` exactly.
+    Zero-order hold (``u1`` None): ``(u0, None)`` for every step (the step functions then hold ``u0``).
+    """
+    ua = u0
+    for i in range(n):
+        if u1 is None:
+            yield u0, None
+            continue
+        if i == n - 1:
+            ub = u1
+        else:
+            w = (i + 1) / n
+            ub = (1.0 - w) * u0 + w * u1
+        yield ua, ub
+        ua = ub
 
 
 def rk4_step(model: Model, t, x, u, p, h, u1=None):

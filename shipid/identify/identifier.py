@@ -118,8 +118,8 @@ class EKFIdentifier:
         tune_noise: bool = False,
         substeps: int = 1,
         method: str = "rk4",
-        input_hold: str = "zoh",
-        gate: float | None = None,
+        input_hold: str = "foh",
+        gate: float | None = 5.0,
         gate_run: int = 10,
         progress: bool = False,
     ):
