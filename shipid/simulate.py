@@ -23,7 +23,7 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from .integrate import dopri5, hold_steps, rk4_map
+from .integrate import dopri5, hold_steps, interval_steps, rk4_map
 from .models.base import Model
 
 __all__ = ["simulate", "SimulationResult", "InputLaw", "replay", "replay_errors", "METHODS", "INPUT_HOLDS"]
@@ -151,6 +151,7 @@ def simulate(
     atol=None,
     first_step: float | None = None,
     input_hold: str = "zoh",
+    h_max: float | None = None,
 ) -> SimulationResult:
     """Integrate ``model`` from ``x0`` over the time grid ``t``.
 
@@ -171,7 +172,10 @@ def simulate(
     params : array, shape (np,) or (B, np), optional
         Defaults to ``model.params``.
     substeps : int
-        ``rk4``: steps per output interval.
+        ``rk4``: (least) steps per output interval.
+    h_max : float, optional
+        ``rk4``: largest step [s]; a long interval (a logger dropout) is crossed in
+        ``max(substeps, ceil(dt / h_max))`` steps (:func:`shipid.integrate.interval_steps`, as the EKF).
     method : {"rk4", "dopri5"}
         Fixed-step RK4 (the EKF's map) or adaptive Dormand-Prince 5(4) (see module docstring).
     rtol, atol : float
@@ -226,12 +230,14 @@ def simulate(
     ok, msg = True, "integration finished"
     f = model._rhs_bound(p)
     foh = input_hold == "foh" and U is not None
+    n_int = interval_steps(t, substeps, h_max).tolist()
     for k in range(n_t - 1):
-        h = (t[k + 1] - t[k]) / substeps
+        nk = n_int[k]
+        h = (t[k + 1] - t[k]) / nk
         tk = t[k]
         if law is not None:
             Uout[..., k, :] = law.inputs(tk, x)
-            for _ in range(substeps):
+            for _ in range(nk):
                 x = _rk4_law_step(f, law, tk, x, h)
                 tk += h
         else:
@@ -239,7 +245,7 @@ def simulate(
             uk = np.broadcast_to(np.asarray(uk, dtype=float), batch + (model.nu,))
             Uout[..., k, :] = uk
             u1 = U[..., k + 1, :] if foh else None
-            for i, (ua, ub) in enumerate(hold_steps(uk, u1, substeps)):
+            for i, (ua, ub) in enumerate(hold_steps(uk, u1, nk)):
                 x = rk4_map(f, t[k] + i * h if i else tk, x, ua, h, ub)
         X[..., k + 1, :] = x
         if not np.all(np.isfinite(x)):
@@ -363,7 +369,8 @@ def _log_frame(log) -> pd.DataFrame:
     return data
 
 
-def replay(model: Model, log, *, x0=None, substeps: int = 2, input_hold: str = "foh") -> SimulationResult:
+def replay(model: Model, log, *, x0=None, substeps: int = 2, input_hold: str = "foh",
+           h_max: float | None = None) -> SimulationResult:
     """Simulate ``model`` with the recorded inputs of ``log`` from its initial state.
 
     Parameters
@@ -380,6 +387,9 @@ def replay(model: Model, log, *, x0=None, substeps: int = 2, input_hold: str = "
     input_hold : {"foh", "zoh"}
         Inputs between samples: linear between the logged values (default; a real rudder moves
         between samples, and the EKF assumes the same by default) or held.
+    h_max : float, optional
+        Largest RK4 step [s] (default ``1.5 * median(dt) / substeps``): gaps in the log are crossed in
+        as many steps as they need, as the EKF does.
     """
     df = _log_frame(log)
     t = df["time"].to_numpy(dtype=float)
@@ -398,7 +408,9 @@ def replay(model: Model, log, *, x0=None, substeps: int = 2, input_hold: str = "
                 fin = col[np.isfinite(col)][:5]
                 if fin.size:
                     x0[i] = fin.mean()
-    return simulate(model, x0, t, U, substeps=substeps, input_hold=input_hold)
+    if h_max is None:
+        h_max = 1.5 * float(np.median(np.diff(t))) / substeps
+    return simulate(model, x0, t, U, substeps=substeps, input_hold=input_hold, h_max=h_max)
 
 
 def replay_errors(sim: SimulationResult, log) -> pd.DataFrame:

@@ -26,7 +26,7 @@ import numpy as np
 from scipy.linalg.lapack import dpotrf as _potrf
 from scipy.linalg.lapack import dpotrs as _potrs
 
-from ..integrate import STEP_TANGENTS, hold_steps
+from ..integrate import STEP_TANGENTS, hold_steps, interval_steps
 from ..models.base import Model
 
 __all__ = ["EKFProblem", "EKFOutput", "run_ekf", "rts_smooth", "interval_steps", "INPUT_HOLDS"]
@@ -181,21 +181,6 @@ def _spd_solve(S: np.ndarray, rhs: np.ndarray):
         except np.linalg.LinAlgError:
             pass
     return X, logdet
-
-
-def interval_steps(t: np.ndarray, substeps: int, h_max: float | None) -> np.ndarray:
-    """RK4 steps per sample interval: ``n_k = max(substeps, ceil(dt_k / h_max - 1e-9))``.
-
-    ``t (..., N)`` sample times [s] -> ``(..., N-1)`` int; ``h_max`` None gives ``substeps``
-    everywhere.  The ``1e-9`` keeps an interval of exactly ``m * h_max`` (to rounding) at ``m`` steps.
-    """
-    dt = np.diff(np.asarray(t, dtype=float), axis=-1)
-    n = np.full(dt.shape, int(substeps), dtype=np.int64)
-    if h_max is not None:
-        if not h_max > 0:
-            raise ValueError(f"h_max must be positive or None, got {h_max}")
-        n = np.maximum(n, np.ceil(dt / float(h_max) - 1e-9).astype(np.int64))
-    return n
 
 
 def _cross_interval(step, model, t0, x, u0, u1, p, h, n, scale, est, all_est):
