@@ -388,7 +388,8 @@ def test_prediction_is_the_documented_rk4_map_over_gaps_and_sub_steps(kcs_truth,
 
     noisy = kcs_logs["kcs_zz_p20_rpm"][0].iloc[::1].iloc[:120].copy()
     noisy = noisy.drop(index=range(60, 100))  # a 4 s gap
-    ident = EKFIdentifier(kcs_truth, n_passes=1, init="model", estimate=["c3"], input_hold=hold, substeps=2).fit(noisy)
+    ident = EKFIdentifier(kcs_truth, n_passes=1, init="model", estimate=["c3"], input_hold=hold, substeps=2,
+                          max_gap=None).fit(noisy)  # the gap is integrated across
     prob = replace(ident.problem_, Y=np.full_like(ident.problem_.Y, np.nan))
     assert prob.h_max == pytest.approx(0.075)
     out = run_ekf(prob, store=True)
