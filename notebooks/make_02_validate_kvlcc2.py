@@ -19,7 +19,7 @@ have not seen, with the models' own closed-loop manoeuvres.
 from pathlib import Path
 import numpy as np, pandas as pd, matplotlib.pyplot as plt
 import shipid
-from shipid import kvlcc2_study as ks
+from shipid.studies import kvlcc2 as ks
 from shipid.manoeuvres import metrics
 
 FAST = os.environ.get("SHIPID_FAST") == "1"

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from shipid import kvlcc2_study as ks
+from shipid.studies import kvlcc2 as ks
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,8 @@ import pytest
 from shipid.manoeuvres import turning_circle, zigzag
 from shipid.models import get_model
 from shipid.models.base import Model
-from shipid.models.response_nl import ASYM_NAMES, EXTRA_NAMES, SEED_NAMES, ResponseNLModel, fit_to_model
+from shipid.identify.from_model import fit_to_model
+from shipid.models.response_nl import ASYM_NAMES, EXTRA_NAMES, SEED_NAMES, ResponseNLModel
 
 
 def _point(rng, batch=()):

@@ -55,11 +55,12 @@ def read_logs(paths, args) -> list:
     return logs
 
 
-def json_and_csv_outputs(output, force: bool):
+def json_and_csv_outputs(output, force: bool, inputs=()):
     """``(out.json, out.csv)`` for commands that write a JSON summary with a CSV beside it.
 
-    ValueError when the name does not end in .json, its folder is missing, or
-    either file exists without ``--force``.
+    ValueError when the name does not end in .json, its folder is missing or
+    not writable, either file is one of ``inputs``, or either exists without
+    ``--force`` (checked before any computation).
     """
     from pathlib import Path
 
@@ -68,8 +69,51 @@ def json_and_csv_outputs(output, force: bool):
         raise ValueError(f"{out}: the output must be a .json file (a CSV is written beside it)")
     csv = out.with_suffix(".csv")
     for f in (out, csv):
-        if f.exists() and not force:
-            raise ValueError(f"{f}: output exists; choose another name or pass --force to overwrite it")
-    if not out.parent.exists():
-        raise ValueError(f"{out}: folder {out.parent} does not exist; create it first")
+        check_output_path(f, force=force, inputs=inputs)
     return out, csv
+
+
+def check_output_path(path, *, force: bool, inputs=(), what: str = "output"):
+    """The output checks of :func:`shipid._io.check_output_path` (before a long computation)."""
+    from .._io import check_output_path as check
+
+    return check(path, force=force, inputs=inputs, what=what)
+
+
+def add_progress_option(p) -> None:
+    """``--progress`` / ``--no-progress``; default: on when stderr is a terminal."""
+    p.add_argument("--progress", dest="progress", action="store_true", default=None,
+                   help="show progress (default: on when stderr is a terminal)")
+    p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress output")
+
+
+def progress_on(args) -> bool:
+    """Whether to show progress for ``args`` (see :func:`add_progress_option`)."""
+    import sys
+
+    value = getattr(args, "progress", None)
+    if value is None:
+        return bool(getattr(sys.stderr, "isatty", lambda: False)())
+    return bool(value)
+
+
+def number(text: str, option: str, *, low: float | None = None, low_open: bool = False,
+           integer: bool = False, high: float | None = None):
+    """Parse an option value as a finite number (ValueError naming the option, the value and the range)."""
+    import math
+
+    from .._io import short
+
+    kind = "whole number" if integer else "number"
+    try:
+        v = int(text) if integer else float(text)
+    except (TypeError, ValueError, OverflowError):
+        raise ValueError(f"{option} {short(text, 40)}: not a {kind}; give e.g. {option} "
+                         f"{'10' if integer else '1.5'}") from None
+    if not math.isfinite(v):
+        raise ValueError(f"{option} {text}: give a finite {kind}")
+    if low is not None and (v < low or (low_open and v == low)):
+        raise ValueError(f"{option} {short(text, 40)}: must be {'>' if low_open else '>='} {low:g}")
+    if high is not None and v > high:
+        raise ValueError(f"{option} {short(text, 40)}: must be <= {high:g}")
+    return v

@@ -44,7 +44,7 @@ def kcs_rates(psi, uu, v, r, d, n, p):
     """``(x', y', psi', u', v', r')`` of the seed-002 response model (SPEC.md eq. (3))."""
     a1, a2, a3, a4, a5, a6, a7, a8, a9, b1, b2, b3, b4, c1, c2, c3 = p[:16]
     xd, yd, psid = planar_rates_cs(uu, v, r, cos(psi), sin(psi))
-    du = (a1 + a8 * n) * uu + a2 * v * v + a3 * r * r + a4 * d * d + (a5 * r + a6 * d) * v + a7 * r * d + a9 * n * n
+    du = (a1 + a8 * n) * uu + a2 * v * v + a3 * r * r + a4 * d * d + (a5 * r + a6 * d) * v + a7 * r * d + a9 * n * absf(n)
     dv = b1 * v + (b2 + b4 * uu) * r + b3 * d
     dr = c1 * v + c2 * r + c3 * d
     return xd, yd, psid, du, dv, dr
@@ -69,7 +69,7 @@ KCS_JP_POS = tuple((3, j) for j in range(9)) + ((4, 9), (4, 10), (4, 11), (4, 12
 
 def kcs_jac_p(psi, uu, v, r, d, n, p):
     """Non-zero entries of d rates / d p at :data:`KCS_JP_POS` (the regressors of eq. (3))."""
-    return (uu, v * v, r * r, d * d, v * r, v * d, r * d, uu * n, n * n, v, r, d, uu * r, v, r, d)
+    return (uu, v * v, r * r, d * d, v * r, v * d, r * d, uu * n, n * absf(n), v, r, d, uu * r, v, r, d)
 
 
 KCS_JU_POS = ((3, 0), (3, 1), (4, 0), (5, 0))
@@ -78,7 +78,7 @@ KCS_JU_POS = ((3, 0), (3, 1), (4, 0), (5, 0))
 def kcs_jac_u(psi, uu, v, r, d, n, p):
     """Non-zero entries of d rates / d u at :data:`KCS_JU_POS`."""
     a1, a2, a3, a4, a5, a6, a7, a8, a9, b1, b2, b3, b4, c1, c2, c3 = p[:16]
-    return (2.0 * a4 * d + a6 * v + a7 * r, a8 * uu + 2.0 * a9 * n, b3, c3)
+    return (2.0 * a4 * d + a6 * v + a7 * r, a8 * uu + 2.0 * a9 * absf(n), b3, c3)
 
 
 # ------------------------------------------------------------------ response-nl (29 parameters)
@@ -87,7 +87,7 @@ def nl_regressors(uu, v, r, d, n, uf):
     """Regressors of the u, v and r equations: 9 + 10 + 10 values (order of ``response_nl._U/_V/_R_IDX``)."""
     q = inv_floor(uu, uf)
     vav, rar, vvr, vrr, nn = v * absf(v), r * absf(r), v * v * r * q, v * r * r * q, n * n
-    return (uu, v * v, r * r, d * d, v * r, v * d, r * d, uu * n, nn,
+    return (uu, v * v, r * r, d * d, v * r, v * d, r * d, uu * n, n * absf(n),
             v, r, d, uu * r, uu * v, vav, rar, vvr, vrr, nn,
             v, r, d, uu * v, uu * r, vav, rar, vvr, vrr, nn)
 
@@ -148,7 +148,7 @@ def nl_jac_u(psi, uu, v, r, d, n, p, uf):
     """Non-zero entries of d rates / d u at :data:`NL_JU_POS`."""
     (a1, a2, a3, a4, a5, a6, a7, a8, a9, b1, b2, b3, b4, c1, c2, c3,
      b5, b6, b7, b8, b9, c4, c5, c6, c7, c8, c9, b0, c0) = p[:29]
-    return (2.0 * a4 * d + a6 * v + a7 * r, a8 * uu + 2.0 * a9 * n, b3, c3, 2.0 * b0 * n, 2.0 * c0 * n)
+    return (2.0 * a4 * d + a6 * v + a7 * r, a8 * uu + 2.0 * a9 * absf(n), b3, c3, 2.0 * b0 * n, 2.0 * c0 * n)
 
 
 # ------------------------------------------------------------------ matrices from entries

@@ -6,7 +6,7 @@ turns the ship to starboard, i.e. produces positive r with the synthetic set)
 and ``n`` [rps]; 16 parameters::
 
     du/dt = a1 u + a2 v^2 + a3 r^2 + a4 delta^2 + a5 v r + a6 v delta
-            + a7 r delta + a8 u n + a9 n^2
+            + a7 r delta + a8 u n + a9 n|n|
     dv/dt = b1 v + b2 r + b3 delta + b4 u r
     dr/dt = c1 v + c2 r + c3 delta
 
@@ -21,8 +21,9 @@ import numpy as np
 from .._jit import rebind
 from . import _response_equations as _req
 from .base import Model, batch_shape
+from .prime import FroudeScaled
 
-__all__ = ["KCSResponseModel", "RESPONSE_REGRESSORS"]
+__all__ = ["KCSResponseModel", "RESPONSE_REGRESSORS", "PRIME_EXPONENTS"]
 
 #: The equations (one copy, :mod:`._response_equations`) on numpy arrays.
 _EQ = rebind(_req.FUNCTIONS, _req.NUMPY)
@@ -37,19 +38,50 @@ def _rows(p):
 #: Regressor of each coefficient, for tables and identifiability messages.
 RESPONSE_REGRESSORS = {
     "a1": "u", "a2": "v^2", "a3": "r^2", "a4": "delta^2", "a5": "v*r", "a6": "v*delta",
-    "a7": "r*delta", "a8": "u*n", "a9": "n^2",
+    "a7": "r*delta", "a8": "u*n", "a9": "n|n|",
     "b1": "v", "b2": "r", "b3": "delta", "b4": "u*r",
     "c1": "v", "c2": "r", "c3": "delta",
 }
+#: SI dimension of each coefficient as exponents (metre, second) of ``m^a s^b``, rps counting as 1/s
+#: (from the units below: e.g. ``a9 n^2`` is an acceleration, so a9 is in m; ``c1 v`` is in 1/s^2, so
+#: c1 is in 1/(m s)).  Prime value ``c' = c / (L^a (L/g)^(b/2))`` (:mod:`shipid.models.prime`).
+PRIME_EXPONENTS = {
+    "a1": (0, -1), "a2": (-1, 0), "a3": (1, 0), "a4": (1, -2), "a5": (0, 0), "a6": (0, -1), "a7": (1, -1),
+    "a8": (0, 0), "a9": (1, 0),
+    "b1": (0, -1), "b2": (1, -1), "b3": (1, -2), "b4": (0, 0),
+    "c1": (-1, -1), "c2": (0, -1), "c3": (0, -2),
+}
 
 
-class KCSResponseModel(Model):
+class KCSResponseModel(FroudeScaled, Model):
     """The seed-002 KCS response model (16 coefficients a1..a9, b1..b4, c1..c3).
 
     Parameter sets shipped: ``"synthetic-truth"`` (default; the documented set
     the bundled synthetic logs were generated with, see ``data/README.md``) and
     ``"table3"`` (the paper's Table 3 as printed -- units unstated, does not
     close a turning circle; never use it as a validation truth).
+
+    The coefficients are dimensional (SI) and belong to a ship of length ``lpp``;
+    :meth:`to_prime` / :meth:`from_prime` convert them to and from the Froude
+    non-dimensional system and :meth:`scaled` gives the geometrically similar ship
+    of another length (:data:`PRIME_EXPONENTS`, :mod:`shipid.models.prime`).
+
+    Parameters
+    ----------
+    params : mapping, array, str or None
+        As for every model; default set ``"synthetic-truth"`` (the 4.36 m KCS model).
+    lpp : float, optional
+        Length [m] of the ship the model describes.  A named parameter set (or the
+        default) is Froude-scaled from its own length to ``lpp``; coefficients given
+        as a mapping or array are taken as they are (they belong to that ship).
+    design_speed, rudder_rate : float, optional
+        Approach speed [m/s] and steering rate [rad/s] of that ship (replace the set's).
+
+    Attributes
+    ----------
+    lpp, design_speed, rudder_rate : float or None
+        Ship length [m], approach speed [m/s], steering rate [rad/s] (those of a
+        named set, Froude-scaled; None when unknown).
     """
 
     name = "kcs-response"
@@ -65,6 +97,12 @@ class KCSResponseModel(Model):
         "c1": "1/(m s)", "c2": "1/s", "c3": "1/s^2",
     }
     default_parameter_set = "synthetic-truth"
+    prime_exponents = PRIME_EXPONENTS
+
+    def __init__(self, params=None, *, lpp: float | None = None, design_speed: float | None = None,
+                 rudder_rate: float | None = None):
+        super().__init__(params)
+        self._init_ship(params, lpp, design_speed, rudder_rate)
 
     def _rhs(self, t, x, u, p):
         out = _EQ["kcs_rates"](x[..., 2], x[..., 3], x[..., 4], x[..., 5], u[..., 0], u[..., 1], _rows(p))
