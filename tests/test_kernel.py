@@ -32,7 +32,8 @@ def _close(a, b, name):
     """Equal to 1e-10 relative to the size of the quantity (NaN where the other is NaN)."""
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
     assert np.array_equal(np.isnan(a), np.isnan(b)), f"{name}: NaN pattern differs"
-    ref = np.nanmax(np.abs(b)) if np.isfinite(b).any() else 1.0
+    assert np.array_equal(np.isinf(a), np.isinf(b)) and np.array_equal(a[np.isinf(a)], b[np.isinf(b)]), name
+    ref = np.max(np.abs(b[np.isfinite(b)])) if np.isfinite(b).any() else 1.0
     np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-10 * max(ref, 1e-300), equal_nan=True, err_msg=name)
 
 
@@ -86,19 +87,24 @@ def kcs_problem(kcs_truth, kcs_logs):
     return _problem(kcs_truth, [kcs_logs["kcs_zz_p20_rpm"][0], kcs_logs["kcs_tc_m25_rpm"][0]], None)
 
 
-@pytest.mark.parametrize("method", ["rk4", "rk4-exact", "euler"])
-def test_kcs_response_kernel_equals_numpy(kcs_problem, method):
-    prob = replace(_batch(kcs_problem, 3, np.random.default_rng(5)), method=method, substeps=2)
+@pytest.mark.parametrize("method, hold", [("rk4", "foh"), ("rk4", "zoh"), ("rk4-exact", "foh"), ("euler", "foh")])
+def test_kcs_response_kernel_equals_numpy(kcs_problem, method, hold):
+    """Sub-steps, more steps over the sampling gap (h_max), both input holds, gating."""
+    prob = _batch(kcs_problem, 3, np.random.default_rng(5))
+    Y = prob.Y.copy()
+    Y[0, 20:23, 5] += 0.05  # outliers the gate rejects (member 0)
+    dt = float(np.median(np.diff(prob.t[0])))
+    prob = replace(prob, Y=Y, method=method, substeps=2, h_max=0.75 * dt, input_hold=hold, gate=4.0, gate_run=2)
     assert prob.reset.any() and not np.isfinite(prob.Y).all()
     out = _compare(prob)
-    assert not out.diverged.any()
+    assert not out.diverged.any() and out.gated[0].any()
 
 
 def test_diverging_member_is_frozen_alike(kcs_problem):
     prob = _batch(kcs_problem, 3, np.random.default_rng(6))
     Y = prob.Y.copy()
     Y[1, 120:, 5] += 50.0  # member 1: an absurd yaw-rate jump
-    out = _compare(replace(prob, Y=Y))
+    out = _compare(replace(prob, Y=Y, input_hold="foh"))
     assert list(out.diverged) == [False, True, False] and out.diverged_at[1] == 120
 
 

@@ -54,17 +54,18 @@ def mat_mul(A, B, out):
             out[i, j] = s
 
 
-def tangent(method, t, x, u, p, P, cols, h, scale, xn, Fx, Fp, w):
+def tangent(method, t, x, ua, um, ub, p, P, c, cols, h, scale, xn, Fx, Fp, w):
     """One step of the discrete map and its tangent: ``xn``, ``Fx (nx, nx)``, ``Fp (nx, ne)`` (the
     parameter columns ``cols``, multiplied by ``scale``).  ``method``: 0 RK4 with the second-order
-    Taylor tangent (:func:`shipid.integrate.rk4_step_taylor_tangent`), 1 RK4 with its exact tangent
-    (:func:`~shipid.integrate.rk4_step_tangent`), 2 Euler.  ``w``: work arrays (see :func:`_work`)."""
+    Taylor tangent at the step start (:func:`shipid.integrate.rk4_step_taylor_tangent`), 1 RK4 with
+    its exact tangent (:func:`~shipid.integrate.rk4_step_tangent`), 2 Euler.  Stage inputs ``ua`` (start),
+    ``um`` (middle), ``ub`` (end) as :func:`shipid.integrate._stage_inputs`; ``c = k_consts(p, P)``;
+    ``w``: work arrays (see :func:`_work`)."""
     k1, k2, k3, k4, xs, A, Bp, Ax, Kx, Kp, Kxs, Kps, M, Be = w
     nx = x.shape[0]
     ne = cols.shape[0]
-    c = k_consts(p, P)
-    k_rhs(t, x, u, c, k1)
-    k_jac(t, x, u, p, P, c, cols, A, Bp)
+    k_rhs(t, x, ua, c, k1)
+    k_jac(t, x, ua, p, P, c, cols, A, Bp)
     for j in range(ne):
         for i in range(nx):
             Be[i, j] = Bp[i, cols[j]]
@@ -79,13 +80,13 @@ def tangent(method, t, x, u, p, P, cols, h, scale, xn, Fx, Fp, w):
     if method == 0:
         for i in range(nx):
             xs[i] = x[i] + h / 2 * k1[i]
-        k_rhs(t + h / 2, xs, u, c, k2)
+        k_rhs(t + h / 2, xs, um, c, k2)
         for i in range(nx):
             xs[i] = x[i] + h / 2 * k2[i]
-        k_rhs(t + h / 2, xs, u, c, k3)
+        k_rhs(t + h / 2, xs, um, c, k3)
         for i in range(nx):
             xs[i] = x[i] + h * k3[i]
-        k_rhs(t + h, xs, u, c, k4)
+        k_rhs(t + h, xs, ub, c, k4)
         for i in range(nx):
             xn[i] = x[i] + h / 6 * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i])
         # half = I + h A / 2; Fx = I + h A half; Fp = h half B
@@ -120,8 +121,8 @@ def tangent(method, t, x, u, p, P, cols, h, scale, xn, Fx, Fp, w):
             xs[i] = x[i] + h * a * kprev[i]
         ks = k2 if s_ == 1 else (k3 if s_ == 2 else k4)
         ts = t + h * a
-        cs = c
-        k_jac(ts, xs, u, p, P, cs, cols, A, Bp)
+        us = um if s_ < 3 else ub
+        k_jac(ts, xs, us, p, P, c, cols, A, Bp)
         for j in range(ne):
             for i in range(nx):
                 Be[i, j] = Bp[i, cols[j]]
@@ -143,7 +144,7 @@ def tangent(method, t, x, u, p, P, cols, h, scale, xn, Fx, Fp, w):
                 Fx[i, j] += wgt * Kx[i, j]
             for j in range(ne):
                 Fp[i, j] += wgt * Kp[i, j]
-        k_rhs(ts, xs, u, c, ks)
+        k_rhs(ts, xs, us, c, ks)
         kprev = ks
     for i in range(nx):
         xn[i] = x[i] + h / 6 * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i])
@@ -159,14 +160,52 @@ def _work(nx, n_par, ne):
             np.zeros((nx, nx)), np.zeros((nx, ne)), np.zeros((nx, nx)), np.zeros((nx, ne)))
 
 
-def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, R, z0, P0, p_base, est_idx, scale,
-               meas_idx, Pk, nx, substeps, method, nis_limit, store,
-               z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, div, div_at, d2_at):
-    """The filter over the samples of batch member ``b`` (arrays as in :func:`run_compiled`)."""
+def cross_interval(method, t0, x, u0, u1, foh, n, p, P, c, cols, h, scale, xn, Fx, Fp, Ax, Ap, tmpx, tmpp,
+                   ua, ub, um, w):
+    """Cross one sample interval in ``n`` steps of length ``h`` (as ``ekf._cross_interval``): step ``i``
+    starts at ``t0 + i h``; under first-order hold (``foh``) its end inputs are ``(1 - w) u0 + w u1`` at
+    ``w = i/n, (i+1)/n`` (the last one ``u1`` itself), else ``u0`` throughout.  ``xn``, ``Fx``, ``Fp``
+    receive the end state and the interval's transition (parameter columns scaled)."""
+    nx = x.shape[0]
+    ne = cols.shape[0]
+    nu = u0.shape[0]
+    ua[:] = u0
+    for i in range(n):
+        for j in range(nu):
+            if not foh:
+                ub[j] = u0[j]
+            elif i == n - 1:
+                ub[j] = u1[j]
+            else:
+                wt = (i + 1) / n
+                ub[j] = (1.0 - wt) * u0[j] + wt * u1[j]
+            um[j] = 0.5 * (ua[j] + ub[j]) if foh else ua[j]
+        ti = t0 + i * h if i else t0
+        if i == 0:
+            tangent(method, ti, x, ua, um, ub, p, P, c, cols, h, scale, xn, Fx, Fp, w)
+        else:
+            x[:] = xn
+            tangent(method, ti, x, ua, um, ub, p, P, c, cols, h, scale, xn, Ax, Ap, w)
+            mat_mul(Ax, Fp, tmpp)
+            for r in range(nx):
+                for j in range(ne):
+                    Fp[r, j] = tmpp[r, j] + Ap[r, j]
+            mat_mul(Ax, Fx, tmpx)
+            Fx[:, :] = tmpx
+        ua[:] = ub
+
+
+def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, R, z0, P0, p_base, est_idx, scale,
+               meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store,
+               z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated,
+               div, div_at, d2_at):
+    """The filter over the samples of batch member ``b`` (arrays as in :func:`run_compiled`; the stored
+    arrays arrive NaN-filled, so what a diverged member does not compute stays NaN)."""
     N = t.shape[1]
     nz = z0.shape[1]
     ne = nz - nx
     nm = meas_idx.shape[0]
+    nu = U.shape[2]
     n_par = p_base.shape[1]
     z = z0[b].copy()
     P = P0[b].copy()
@@ -182,10 +221,14 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, R, z0, P
     tmpp = np.zeros((nx, ne))
     x = np.empty(nx)
     xn = np.empty(nx)
+    ua = np.empty(nu)
+    ub = np.empty(nu)
+    um = np.empty(nu)
     M = np.empty((nx, nz))
     Pb = np.empty((ne, nx))
     w = _work(nx, n_par, ne)
     sel = np.empty(nm, dtype=np.int64)
+    run = np.zeros(nm, dtype=np.int64)
     S = np.empty((nm, nm))
     L = np.empty((nm, nm))
     PHt = np.empty((nz, nm))
@@ -194,16 +237,29 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, R, z0, P
     a = np.empty(nm)
     A = np.empty((nz, nz))
     colb = np.empty(nm)
+    z_fin[b] = z
+    P_fin[b] = P
     if store:
         z_prior[b, 0] = z
         P_prior[b, 0] = P
-    diverged = False
     for k in range(N):
-        # ---- update with the measurements of sample k
-        if any_k[k] and not diverged:
+        # ---- update with the measurements of sample k (gated channels count as missing)
+        if gate > 0 and reset[b, k]:
+            run[:] = 0
+        if any_k[k]:
             cnt = 0
             for j in range(nm):
                 if fin[b, k, j]:
+                    ej = Y[b, k, j] - z[meas_idx[j]]
+                    if gate > 0:
+                        Sjj = P[meas_idx[j], meas_idx[j]] + R[b, j]
+                        if ej * ej > gate * gate * Sjj and run[j] < gate_run:
+                            run[j] += 1
+                            gated[b, k, j] = True
+                            innov[b, k, j] = ej
+                            S_diag[b, k, j] = Sjj
+                            continue
+                        run[j] = 0
                     sel[cnt] = j
                     cnt += 1
             d2 = 0.0
@@ -285,7 +341,7 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, R, z0, P
                     S_diag[b, k, ja] = S[a_, a_]
                 nis[b, k] = d2
                 logdet[b, k] = ld
-            # ---- divergence check (NaN fails every comparison)
+            # ---- divergence check (NaN fails every comparison); the member stops here
             tr = 0.0
             for i in range(nz):
                 tr += P[i, i] + 0.0 * z[i]
@@ -293,47 +349,28 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, R, z0, P
                 d2 = np.nan
             margin = min(min(nis_limit - d2, tr), np.inf - tr)
             if not margin > 0:
-                diverged = True
                 div[b] = True
                 div_at[b] = k
                 d2_at[b] = d2
-                if store and k > 0:
-                    z[:] = z_post[b, k - 1]
-                    P[:, :] = P_post[b, k - 1]
-                else:
-                    z[:] = z0[b]
-                    P[:, :] = P0[b]
+                return
         if store:
             z_post[b, k] = z
             P_post[b, k] = P
+        z_fin[b] = z
+        P_fin[b] = P
         if k == N - 1:
             break
-        # ---- predict to sample k+1
-        if diverged:
-            if store:
-                z_prior[b, k + 1] = z
-                P_prior[b, k + 1] = P
-                for i in range(nz):
-                    for j in range(nz):
-                        Fs[b, k, i, j] = 1.0 if i == j else 0.0
-            continue
-        for j in range(ne):
-            p[est_idx[j]] = z[nx + j] * scale[j]
-        h = (t[b, k + 1] - t[b, k]) / substeps
-        tk = t[b, k]
-        x[:] = z[:nx]
-        tangent(method, tk, x, U[b, k], p, Pk, est_idx, h, scale, xn, Fx, Fp, w)
-        for _ in range(substeps - 1):
-            tk = tk + h
-            x[:] = xn
-            tangent(method, tk, x, U[b, k], p, Pk, est_idx, h, scale, xn, Ax, Ap, w)
-            mat_mul(Ax, Fp, tmpp)
-            for i in range(nx):
-                for j in range(ne):
-                    Fp[i, j] = tmpp[i, j] + Ap[i, j]
-            mat_mul(Ax, Fx, tmpx)
-            Fx[:, :] = tmpx
+        # ---- predict to sample k+1 (nothing is integrated into a reset sample)
         rs = reset[b, k + 1]
+        if not rs:
+            for j in range(ne):
+                p[est_idx[j]] = z[nx + j] * scale[j]
+            c = k_consts(p, Pk)
+            n = nsteps[b, k]
+            h = (t[b, k + 1] - t[b, k]) / n
+            x[:] = z[:nx]
+            cross_interval(method, t[b, k], x, U[b, k], U[b, k + 1], foh, n, p, Pk, c, est_idx, h, scale,
+                           xn, Fx, Fp, Ax, Ap, tmpx, tmpp, ua, ub, um, w)
         for i in range(nx):
             zn[i] = x_reset[b, k + 1, i] if rs else xn[i]
             for j in range(nz):
@@ -387,20 +424,20 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, R, z0, P
         for i in range(nz):
             for j in range(nz):
                 Fs[b, N - 1, i, j] = 1.0 if i == j else 0.0
-    z_fin[b] = z
-    P_fin[b] = P
 
 
-def ekf_batch(t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, R, z0, P0, p_base, est_idx, scale,
-              meas_idx, Pk, nx, substeps, method, nis_limit, store,
-              z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, div, div_at, d2_at):
+def ekf_batch(t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, R, z0, P0, p_base, est_idx, scale,
+              meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store,
+              z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated, div, div_at, d2_at):
     for b in range(t.shape[0]):
-        ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, R, z0, P0, p_base, est_idx, scale,
-                   meas_idx, Pk, nx, substeps, method, nis_limit, store,
-                   z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, div, div_at, d2_at)
+        ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, R, z0, P0, p_base, est_idx, scale,
+                   meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store,
+                   z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated,
+                   div, div_at, d2_at)
 
 
-FILTER = {"mat_mul": mat_mul, "tangent": tangent, "_work": _work, "ekf_member": ekf_member, "ekf_batch": ekf_batch}
+FILTER = {"mat_mul": mat_mul, "tangent": tangent, "_work": _work, "cross_interval": cross_interval,
+          "ekf_member": ekf_member, "ekf_batch": ekf_batch}
 
 
 # ------------------------------------------------------------------ RTS smoother (model-free)
@@ -430,7 +467,11 @@ def rts_member(zf, Pf, zp, Pp, F, zs, Ps):
 
 def rts_batch(zf, Pf, zp, Pp, F, zs, Ps):
     for b in range(zf.shape[0]):
-        rts_member(zf[b], Pf[b], zp[b], Pp[b], F[b], zs[b], Ps[b])
+        if np.isfinite(zf[b, -1]).all():
+            rts_member(zf[b], Pf[b], zp[b], Pp[b], F[b], zs[b], Ps[b])
+        else:  # a member that stopped at its divergence: nothing to smooth
+            zs[b] = np.nan
+            Ps[b] = np.nan
 
 
 SMOOTHER = {"rts_member": rts_member, "rts_batch": rts_batch}
@@ -480,10 +521,14 @@ _cache: dict = {}
 def run_compiled(prob, store: bool, nis_limit: float):
     """:func:`shipid.identify.ekf.run_ekf` on the compiled kernel, or ``None`` when it is not available
     (numba off, the model has no compiled equations, or a method the kernel does not implement)."""
-    from .ekf import EKFOutput
+    from .ekf import INPUT_HOLDS, EKFOutput, interval_steps
 
     if prob.method not in METHODS:
         return None
+    if prob.input_hold not in INPUT_HOLDS:
+        raise ValueError(f"input_hold must be one of {INPUT_HOLDS}, got {prob.input_hold!r}")
+    if prob.gate is not None and not float(prob.gate) > 0:
+        raise ValueError(f"gate must be positive or None, got {prob.gate}")
     fns = filter_functions(prob.model)
     if fns is None:
         return None
@@ -502,28 +547,30 @@ def run_compiled(prob, store: bool, nis_limit: float):
     if uniform:
         keep = ~reset[:, 1:].any(axis=0)
         dtq[:, keep] = dt[:, :1]
+    nsteps = interval_steps(t, int(prob.substeps), prob.h_max)
     if N == 1:
-        dtq = np.zeros((B, 1))
+        dtq, nsteps = np.zeros((B, 1)), np.ones((B, 1), dtype=np.int64)
+    nan = lambda *shape: np.full(shape, np.nan)  # noqa: E731
     if store:
-        z_post, z_prior = np.empty((B, N, nz)), np.empty((B, N, nz))
-        P_post, P_prior, Fs = np.empty((B, N, nz, nz)), np.empty((B, N, nz, nz)), np.empty((B, N, nz, nz))
+        z_post, z_prior = nan(B, N, nz), nan(B, N, nz)
+        P_post, P_prior, Fs = nan(B, N, nz, nz), nan(B, N, nz, nz), nan(B, N, nz, nz)
     else:
         z_post = z_prior = np.empty((1, 1, nz))
         P_post = P_prior = Fs = np.empty((1, 1, nz, nz))
     z_fin, P_fin = np.empty((B, nz)), np.empty((B, nz, nz))
-    innov = np.full((B, N, nm), np.nan)
-    S_diag = np.full((B, N, nm), np.nan)
-    nis = np.full((B, N), np.nan)
-    logdet = np.full((B, N), np.nan)
+    innov, S_diag, nis, logdet = nan(B, N, nm), nan(B, N, nm), nan(B, N), nan(B, N)
+    gated = np.zeros((B, N, nm), dtype=np.bool_)
     div = np.zeros(B, dtype=np.bool_)
     div_at = np.full(B, -1, dtype=np.int64)
     d2_at = np.full(B, np.nan)
     fns["ekf_batch"](
         t, f64(prob.U), Y, fin, fin.any(axis=(0, 2)), reset, f64(prob.x_reset), f64(prob.P_reset), f64(prob.q), dtq,
-        f64(prob.R), f64(prob.z0), f64(prob.P0), f64(prob.p_base), np.ascontiguousarray(prob.est_idx, dtype=np.int64),
-        f64(prob.scale), np.ascontiguousarray(prob.meas_idx, dtype=np.int64), f64(prob.model._kernel_constants()),
-        nx, int(prob.substeps), METHODS[prob.method], float(nis_limit), bool(store),
-        z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, div, div_at, d2_at)
+        nsteps, f64(prob.R), f64(prob.z0), f64(prob.P0), f64(prob.p_base),
+        np.ascontiguousarray(prob.est_idx, dtype=np.int64), f64(prob.scale),
+        np.ascontiguousarray(prob.meas_idx, dtype=np.int64), f64(prob.model._kernel_constants()), nx,
+        METHODS[prob.method], prob.input_hold == "foh", -1.0 if prob.gate is None else float(prob.gate),
+        int(prob.gate_run), float(nis_limit), bool(store),
+        z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated, div, div_at, d2_at)
     message = ["ok"] * B
     for b in np.flatnonzero(div):
         k = int(div_at[b])
@@ -531,13 +578,15 @@ def run_compiled(prob, store: bool, nis_limit: float):
         message[b] = (f"filter diverged at sample {k} (t = {tk:.4g} s): normalised innovation {d2_at[b]:.3g}"
                       if np.isfinite(d2_at[b])
                       else f"filter diverged at sample {k} (t = {tk:.4g} s): non-finite state or covariance")
-    cnt = np.isfinite(innov).sum(axis=2)
+    cnt = (np.isfinite(innov) & ~gated).sum(axis=2)
     loglik = -0.5 * np.where(cnt > 0, nis + logdet + cnt * _LOG2PI, 0.0).sum(axis=1)
+    loglik = np.where(div, -np.inf, loglik)
     return EKFOutput(
         z_post=z_post if store else None, P_post=P_post if store else None,
         z_prior=z_prior if store else None, P_prior=P_prior if store else None,
         F=Fs if store else None, z_final=z_fin, P_final=P_fin, innov=innov, S_diag=S_diag,
         loglik=loglik, nis=nis, diverged=div, diverged_at=div_at, message=message,
+        gated=gated, n_gated=gated.sum(axis=1),
     )
 
 
