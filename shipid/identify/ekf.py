@@ -28,6 +28,7 @@ from scipy.linalg.lapack import dpotrs as _potrs
 
 from ..integrate import STEP_TANGENTS, hold_steps, interval_steps
 from ..models.base import Model
+from . import _kernel
 
 __all__ = ["EKFProblem", "EKFOutput", "run_ekf", "rts_smooth", "interval_steps", "INPUT_HOLDS"]
 
@@ -263,6 +264,9 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKF
     ``A - (A H^T - K R) K^T`` with ``A = P - K H P`` -- the same product,
     associated differently, without forming ``I - K H``.
     """
+    fast = _kernel.run_compiled(prob, store, nis_limit)  # the compiled kernel (same semantics), when available
+    if fast is not None:
+        return fast
     model = prob.model
     B, N, nx, ne, nm = prob.shape
     nz = nx + ne
@@ -517,6 +521,9 @@ def rts_smooth(out: EKFOutput, chunk: int = 256) -> tuple[np.ndarray, np.ndarray
     """
     if out.z_post is None:
         raise ValueError("rts_smooth needs an EKF run with store=True")
+    fast = _kernel.smooth_compiled(out)  # compiled backward recursion, when available
+    if fast is not None:
+        return fast
     zf, Pf, zp, Pp, F = out.z_post, out.P_post, out.z_prior, out.P_prior, out.F
     B, N, nz = zf.shape
     zs = np.empty_like(zf)
