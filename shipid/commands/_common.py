@@ -24,6 +24,8 @@ def parse_pairs(items, option: str, convert=str) -> dict:
 def add_log_options(p) -> None:
     """The options that say how to read trial logs (same for every command that reads logs)."""
     p.add_argument("--lpp", type=float, default=None, help="ship length between perpendiculars [m]")
+    p.add_argument("--schema", default=None, metavar="PRESET|FILE",
+                   help="log schema: a preset (shipid, marin, esso-frt) or a schema file")
     p.add_argument("--ship", default=None, help="ship particulars file (JSON or YAML)")
     p.add_argument("--units", action="append", metavar="CH=UNIT", help="declare units, e.g. psi=deg,n=rpm")
     p.add_argument("--columns", "--column", dest="columns", action="append", metavar="CH=COLUMN",
@@ -47,6 +49,8 @@ def read_logs(paths, args) -> list:
               columns=parse_pairs(args.columns, "--columns") or None,
               fmt=args.fmt, lpp=args.lpp, ship=args.ship, interpolate_inputs=args.interpolate_inputs,
               delimiter=args.delimiter, unit_checks=not args.no_unit_checks, marin_time=args.marin_time)
+    if getattr(args, "schema", None):
+        kw["schema"] = args.schema
     logs = []
     for path in paths:
         with warnings.catch_warnings():
