@@ -30,6 +30,11 @@ def register(sub) -> None:
     p.add_argument("--passes", type=int, default=2, help="EKF passes (default 2)")
     p.add_argument("--tune-noise", action="store_true", help="tune noise levels by innovation likelihood")
     p.add_argument("--refine", action="store_true", help="refine with an output-error least-squares fit")
+    p.add_argument("--wind", nargs="?", const="auto", default=None, metavar="GEOMETRY",
+                   help="add wind forces (Fujiwara) with the logs' true wind as inputs: 'esso-osaka-3m' or a JSON "
+                        "file of shipid.environment.WindForce fields (bare --wind: from the logs' ship)")
+    p.add_argument("--current", nargs="?", const="constant", default=None, choices=("constant", "random-walk"),
+                   help="estimate a uniform earth-fixed current as two extra states (bare --current: constant)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(handler=_fit)
 
@@ -87,8 +92,13 @@ def _fit(args) -> int:
     for lg in logs:
         if lg.missing or lg.dropouts:
             print(f"note: {lg.summary()}", file=sys.stderr)
+    extra = {}
+    if args.wind or args.current:
+        from ..environment.cli import environment_model
+
+        model, extra = environment_model(model, logs, wind=args.wind, current=args.current)
     ident = EKFIdentifier(model, estimate=_names(args.estimate) or None, fixed=_fixed(args, model),
-                          n_passes=args.passes, tune_noise=args.tune_noise, progress=not args.no_progress)
+                          n_passes=args.passes, tune_noise=args.tune_noise, progress=not args.no_progress, **extra)
     ident.fit(logs)
     result = ident.result()
     if args.refine:

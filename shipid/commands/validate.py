@@ -32,6 +32,11 @@ def register(sub) -> None:
                                    "ITTC/IMO manoeuvre metrics of the log and of the replay.")
     _common(p)
     p.add_argument("-o", "--output", required=True, help="JSON file to write (a list, one object per log)")
+    p.add_argument("--horizon", default="10,30,60", metavar="SECONDS",
+                   help="multi-start open-loop prediction horizons [s], comma-separated (default 10,30,60; "
+                        "'none' to skip): per log a 'horizon' entry with median/p90 position and median heading "
+                        "errors from starts every --start-every s")
+    p.add_argument("--start-every", type=float, default=5.0, help="spacing of the horizon starts [s] (default 5)")
     p.set_defaults(handler=_validate)
 
     r = sub.add_parser("report", help="write a self-contained HTML validation report of a fitted model",
@@ -74,7 +79,21 @@ def _validate(args) -> int:
     from ..validation import validate
 
     out = _check(args)
-    res = validate(args.result, read_logs(args.logs, args), args.lpp, closed_loop=not args.no_closed_loop)
+    horizons = _horizons(args.horizon)
+    logs = read_logs(args.logs, args)
+    res = validate(args.result, logs, args.lpp, closed_loop=not args.no_closed_loop)
+    if horizons:
+        from ..validation import resolve_model
+        from ..validation_horizon import horizon_prediction
+
+        model, _ = resolve_model(args.result)
+        for d, lg in zip(res, logs):
+            h = horizon_prediction(model, lg, horizons=horizons, start_every=args.start_every)
+            d["horizon"] = h.summary()
+            print(f"{d['name']}: horizon " + ", ".join(
+                f"{e['seconds']:g} s median {e['position_error_median_m']:.3g} m ({e['n_starts']} starts"
+                f"{', %d blow-ups' % e['n_blowups'] if e['n_blowups'] else ''})"
+                for e in d["horizon"] if e["position_error_median_m"] is not None))
     atomic_write_text(out, json.dumps(res, indent=2, allow_nan=False) + "\n", force=args.force)
     for d in res:
         print(_line(d))
@@ -86,6 +105,18 @@ def _validate(args) -> int:
         print(f"shipid validate: warning: replay diverged for {', '.join(bad)}", file=sys.stderr)
         return 1
     return 0
+
+
+def _horizons(text: str) -> list[float]:
+    if text is None or text.strip().lower() in ("", "none", "off", "0"):
+        return []
+    try:
+        out = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise ValueError(f"--horizon {text}: give comma-separated seconds, e.g. 10,30,60") from None
+    if not out or not all(math.isfinite(v) and v > 0 for v in out):
+        raise ValueError(f"--horizon {text}: horizons must be positive numbers of seconds, e.g. 10,30,60")
+    return out
 
 
 def _report(args) -> int:
