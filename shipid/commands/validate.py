@@ -31,6 +31,9 @@ def register(sub) -> None:
                                    "ITTC/IMO manoeuvre metrics of the log and of the replay.")
     _common(p)
     p.add_argument("-o", "--output", required=True, help="JSON file to write (a list, one object per log)")
+    from .uncertainty import add_draws_option
+
+    add_draws_option(p)
     p.set_defaults(handler=_validate)
 
     r = sub.add_parser("report", help="write a self-contained HTML validation report of a fitted model",
@@ -70,11 +73,14 @@ def _line(d: dict) -> str:
 
 def _validate(args) -> int:
     from .._io import atomic_write_text
-    from ..validation import validate
+    from ..validation import validate_logs
+    from .uncertainty import validate_draws
 
     out = _check(args)
-    res = validate(args.result, args.logs, args.lpp, rudder_sign=args.rudder_sign,
-                   closed_loop=not args.no_closed_loop)
+    vals = validate_logs(args.result, args.logs, args.lpp, rudder_sign=args.rudder_sign,
+                         closed_loop=not args.no_closed_loop)
+    res = [v.to_dict() for v in vals]
+    validate_draws(args, args.result, vals, res)  # --draws N: intervals inside each "predicted" block
     atomic_write_text(out, json.dumps(res, indent=2, allow_nan=False) + "\n", force=args.force)
     for d in res:
         print(_line(d))
