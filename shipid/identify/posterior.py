@@ -429,7 +429,7 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
     fn = like if vectorize else (lambda th: like(th))
     sampler = emcee.EnsembleSampler(nw, k, fn, vectorize=vectorize)
     sampler._random = np.random.mtrand.RandomState(int(rng.integers(2**31 - 1)))  # emcee's own stream, seeded
-    sampler.run_mcmc(p0, steps, progress=progress)
+    sampler.run_mcmc(emcee.State(p0, log_prob=lp0), steps, progress=progress)  # start values evaluated once
     chain = sampler.get_chain(discard=burn, thin=thin)
     diag = chain_diagnostics(chain, sampler.acceptance_fraction, names, steps)
     diag["n_simulations"] = int(like.n_sims)
