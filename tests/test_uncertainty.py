@@ -124,3 +124,13 @@ def test_validate_draws_inside_predicted(known_result, tmp_path):
     lo, hi = pred["tactical_diameter_L_ci"]
     assert lo <= hi and pred["draws"] == {"n": 30, "n_failed": 0, "messages": {}}
     assert pred["imo_probability"]["tactical_diameter"]["n_evaluated"] == 30
+
+
+def test_report_draws_section(known_result, tmp_path):
+    log = Path(__file__).resolve().parents[1] / "data" / "kcs_tc_p35.csv"
+    rp = known_result.to_json(tmp_path / "res.json")
+    out = tmp_path / "r.html"
+    assert main(["report", str(rp), str(log), "--lpp", "4.36", "-o", str(out), "--draws", "12",
+                 "--no-closed-loop"]) == 0
+    text = out.read_text()
+    assert "Prediction uncertainty" in text and "95 % interval" in text and "IMO MSC.137(76) criterion is met" in text

@@ -43,6 +43,9 @@ def register(sub) -> None:
     _common(r)
     r.add_argument("-o", "--output", required=True, help="HTML file to write")
     r.add_argument("--title", default=None, help="report title")
+    from .uncertainty import add_draws_option
+
+    add_draws_option(r)
     r.set_defaults(handler=_report)
 
 
@@ -103,7 +106,10 @@ def _report(args) -> int:
     model, res = resolve_model(args.result)
     vals = [validate_one(model, lg, lpp=args.lpp, rudder_sign=args.rudder_sign, closed_loop=not args.no_closed_loop)
             for lg in load_logs(args.logs, lpp=args.lpp)]
-    text = render_report(res, args.logs, title=args.title, validations=vals)
+    from .uncertainty import check_draws
+
+    unc = {"draws": check_draws(args), "seed": args.draws_seed, "samples": args.samples} if check_draws(args) else None
+    text = render_report(res, args.logs, title=args.title, validations=vals, uncertainty=unc)
     atomic_write_text(out, text, force=args.force)
     for v in vals:
         print(_line(v.to_dict()))
