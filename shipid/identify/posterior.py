@@ -356,7 +356,8 @@ def chain_diagnostics(chain: np.ndarray, acceptance: np.ndarray, names, n_total_
 
 def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2000, burn: int | None = None,
                      thin: int = 1, seed=0, vectorize: bool = True, channels=None, substeps: int = 1,
-                     start_scale: float = 1.0, use_prior: bool = True, progress: bool = False) -> PosteriorSamples:
+                     start_scale: float = 1.0, use_prior: bool = True, moves: str = "de",
+                     progress: bool = False) -> PosteriorSamples:
     """Sample the posterior of a fit's estimated coefficients with emcee (optional extra ``mcmc``).
 
     Parameters
@@ -376,6 +377,11 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
     substeps : int  -- RK4 steps per log sample
     start_scale : float  -- spread of the start relative to the EKF posterior
     use_prior : bool  -- include the result's prior (Gaussian, see module docstring)
+    moves : {"de", "stretch"}
+        emcee proposal: "de" (default) the mixture 0.8 differential evolution + 0.2 DE snooker
+        (ter Braak 2006; ter Braak & Vrugt 2008), which decorrelates faster than "stretch", the
+        Goodman & Weare (2010) move, on these near-Gaussian, strongly correlated posteriors
+        (benchmarks/bench_uncertainty.py measures both)
     progress : bool  -- emcee's tqdm progress bar
 
     Returns
@@ -427,7 +433,10 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
         raise ValueError("the EKF posterior gives non-finite likelihoods for some walkers after 20 re-draws; "
                          "check the fit (success, covariance) and the logs")
     fn = like if vectorize else (lambda th: like(th))
-    sampler = emcee.EnsembleSampler(nw, k, fn, vectorize=vectorize)
+    if moves not in ("de", "stretch"):
+        raise ValueError(f"moves={moves!r}: use 'de' or 'stretch'")
+    mv = [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)] if moves == "de" else emcee.moves.StretchMove()
+    sampler = emcee.EnsembleSampler(nw, k, fn, vectorize=vectorize, moves=mv)
     sampler._random = np.random.mtrand.RandomState(int(rng.integers(2**31 - 1)))  # emcee's own stream, seeded
     sampler.run_mcmc(emcee.State(p0, log_prob=lp0), steps, progress=progress)  # start values evaluated once
     chain = sampler.get_chain(discard=burn, thin=thin)
@@ -439,7 +448,7 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
         "NOT converged: " + "; ".join(diag["not_converged_because"]) + " -- run longer (more steps) or check the fit"
     if not ok:
         warnings.warn(f"sample_posterior: {msg}", RuntimeWarning, stacklevel=2)
-    settings = {"walkers": nw, "steps": steps, "burn": burn, "thin": thin, "seed": seed if isinstance(seed, int) else None,
+    settings = {"walkers": nw, "steps": steps, "moves": moves, "burn": burn, "thin": thin, "seed": seed if isinstance(seed, int) else None,
                 "vectorize": bool(vectorize), "channels": like.channels, "substeps": int(substeps),
                 "meas_std": dict(zip(like.channels, map(float, like.sig))), "start_scale": float(start_scale),
                 "prior": ({"kind": "gaussian", "mean": "fit estimate", "std": dict(zip(names, map(float, prior_std)))}
