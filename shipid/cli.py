@@ -29,6 +29,7 @@ COMMAND_MODULES: list[str] = [
     "shipid.commands.glider",
     "shipid.commands.validate",
     "shipid.commands.control",
+    "shipid.commands.uncertainty",
 ]
 
 

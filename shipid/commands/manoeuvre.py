@@ -39,6 +39,11 @@ def register(sub) -> None:
                    help="turning side / side of the first zigzag execute")
     p.add_argument("-o", "--output", default=None, help="CSV of the time series (all members, column 'member')")
     p.add_argument("--force", action="store_true", help="overwrite the output file")
+    from .uncertainty import add_draws_option
+
+    add_draws_option(p)
+    p.add_argument("--metrics-output", default=None, metavar="FILE",
+                   help="with --draws: JSON of the metrics with 95 %% intervals and IMO probabilities")
     p.set_defaults(handler=_simulate)
 
     p = sub.add_parser("sweep", help="turning-diameter sweep over rudder angle x approach speed (one batch)")
@@ -121,7 +126,12 @@ def _summary(label, d) -> str:
 
 def _simulate(args) -> int:
     from ..manoeuvres import turning_circle, zigzag
+    from .uncertainty import check_draws, simulate_draws
 
+    if check_draws(args):
+        return simulate_draws(args, args.model)
+    if args.metrics_output:
+        raise ValueError("--metrics-output needs --draws N (the intervals of N parameter draws)")
     model = load_model(args.model)
     rate = math.radians(args.rudder_rate) if args.rudder_rate is not None else None
     if args.turning is not None:

@@ -37,6 +37,9 @@ def register(sub) -> None:
                         "'none' to skip): per log a 'horizon' entry with median/p90 position and median heading "
                         "errors from starts every --start-every s")
     p.add_argument("--start-every", type=float, default=5.0, help="spacing of the horizon starts [s] (default 5)")
+    from .uncertainty import add_draws_option
+
+    add_draws_option(p)
     p.set_defaults(handler=_validate)
 
     r = sub.add_parser("report", help="write a self-contained HTML validation report of a fitted model",
@@ -46,6 +49,9 @@ def register(sub) -> None:
     _common(r)
     r.add_argument("-o", "--output", required=True, help="HTML file to write")
     r.add_argument("--title", default=None, help="report title")
+    from .uncertainty import add_draws_option
+
+    add_draws_option(r)
     r.set_defaults(handler=_report)
 
 
@@ -76,12 +82,15 @@ def _line(d: dict) -> str:
 
 def _validate(args) -> int:
     from .._io import atomic_write_text
-    from ..validation import validate
+    from ..validation import validate_logs
+    from .uncertainty import validate_draws
 
     out = _check(args)
     horizons = _horizons(args.horizon)
     logs = read_logs(args.logs, args)
-    res = validate(args.result, logs, args.lpp, closed_loop=not args.no_closed_loop)
+    vals = validate_logs(args.result, logs, args.lpp, closed_loop=not args.no_closed_loop)
+    res = [v.to_dict() for v in vals]
+    validate_draws(args, args.result, vals, res)  # --draws N: intervals inside each "predicted" block
     if horizons:
         from ..validation import resolve_model
         from ..validation_horizon import horizon_prediction
@@ -128,7 +137,10 @@ def _report(args) -> int:
     model, res = resolve_model(args.result)
     vals = [validate_one(model, lg, lpp=args.lpp, closed_loop=not args.no_closed_loop)
             for lg in read_logs(args.logs, args)]
-    text = render_report(res, args.logs, title=args.title, validations=vals)
+    from .uncertainty import check_draws
+
+    unc = {"draws": check_draws(args), "seed": args.draws_seed, "samples": args.samples} if check_draws(args) else None
+    text = render_report(res, args.logs, title=args.title, validations=vals, uncertainty=unc)
     atomic_write_text(out, text, force=args.force)
     for v in vals:
         print(_line(v.to_dict()))

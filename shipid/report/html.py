@@ -337,11 +337,13 @@ def _section_versions(result) -> str:
 # ----------------------------------------------------------------------------- public
 def render_report(result, logs, *, identifier=None, title: str | None = None, lpp: float | None = None,
                   rudder_sign: float = 1.0, closed_loop: bool = True,
-                  validations: list[LogValidation] | None = None) -> str:
+                  validations: list[LogValidation] | None = None, uncertainty: dict | None = None) -> str:
     """The report as an HTML string (see :func:`write_report`).
 
     ``validations`` (from :func:`shipid.validation.validate_logs`) reuses replays already computed;
-    ``logs``, ``lpp``, ``rudder_sign`` and ``closed_loop`` are then ignored.
+    ``logs``, ``lpp``, ``rudder_sign`` and ``closed_loop`` are then ignored.  ``uncertainty``
+    (``{"draws": N, "seed": s, "samples": None}``) adds the prediction-uncertainty section
+    (:func:`shipid.report.uncertainty.uncertainty_section`).
     """
     if result is None:
         if identifier is None:
@@ -353,6 +355,11 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
     if validations is None:
         validations = [validate_one(model, lg, lpp=lpp, rudder_sign=rudder_sign, closed_loop=closed_loop)
                        for lg in load_logs(logs, lpp=lpp)]
+    extra = []
+    if uncertainty:
+        from .uncertainty import uncertainty_section
+
+        extra.append(uncertainty_section(res, validations, **uncertainty))
     title = title or f"Validation report: {res.model} model"
     stamp = datetime.now(timezone.utc).isoformat(timespec="seconds")
     n_ok = sum(v.success for v in validations)
@@ -367,7 +374,9 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
             f"({n_ok} replayed with both metric sets). Report written {_e(stamp)} by shipid "
             f"{_e(_versions_now().get('shipid'))}.</p>",
             f"<nav>{nav}</nav>",
-            _section_summary(validations), _section_imo(validations), _section_coefficients(res),
+            _section_summary(validations), _section_imo(validations),
+            *extra,
+            _section_coefficients(res),
             _section_identifiability(res), _section_model(res, model),
             "<h2 id=\"logs\">Measured vs simulated, per log</h2>",
             *[_section_log(v, i, identifier) for i, v in enumerate(validations)],
