@@ -36,6 +36,7 @@ import numpy as np
 __all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_write_set", "sha256_file", "OutputExistsError",
            "dumps_json", "to_jsonable", "read_json", "loads_yaml", "short", "check_keys", "as_number", "as_int",
            "as_mapping", "as_string", "as_bool", "check_output_path", "install_signal_cleanup", "MAX_DEPTH",
+           "check_memory", "memory_limit_bytes", "loads_json",
            "MAX_FILE_BYTES"]
 
 #: Deepest nesting accepted in a JSON/YAML file the program reads.
@@ -313,6 +314,29 @@ def loads_yaml(text: str, where: str, what: str = "YAML"):
     if not _depth_ok(doc, MAX_DEPTH):  # aliases can nest without tokens
         raise ValueError(f"{where}: nested more than {MAX_DEPTH} levels deep; not a {what} file")
     return doc
+
+
+def memory_limit_bytes() -> float:
+    """Memory a single computation may plan to use: half of the physical memory
+    (``SHIPID_MEMORY_LIMIT_GB`` overrides it)."""
+    env = os.environ.get("SHIPID_MEMORY_LIMIT_GB")
+    if env:
+        try:
+            return float(env) * 2**30
+        except ValueError:
+            raise ValueError(f"SHIPID_MEMORY_LIMIT_GB={short(env, 20)}: give a number of GiB, e.g. 4") from None
+    try:
+        return 0.5 * os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return 4.0 * 2**30
+
+
+def check_memory(nbytes: float, what: str, advice: str) -> None:
+    """ValueError ``"{what} needs about X GiB ... {advice}"`` when ``nbytes`` exceeds :func:`memory_limit_bytes`."""
+    limit = memory_limit_bytes()
+    if nbytes > limit:
+        raise ValueError(f"{what} needs about {nbytes / 2**30:.3g} GiB of memory (limit {limit / 2**30:.3g} GiB, "
+                         f"half of this machine's; SHIPID_MEMORY_LIMIT_GB sets it); {advice}")
 
 
 # ----------------------------------------------------------------- schema checks

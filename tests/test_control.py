@@ -200,7 +200,7 @@ def test_cli_plan_problem_json(tmp_path):
     assert doc["method"] == "direct-slsqp" and doc["switch_time_s"] is None
     assert doc["max_constraint_violation"] <= 1e-2 and 3.0 < doc["final_time_s"] < 30.0
     csv = (tmp_path / "plan.csv").read_text().splitlines()
-    assert csv[0].startswith("time,x,y,psi,u,v,r,delta,n") and len(csv) > 20
+    assert csv[0] == "time [s],x [m],y [m],psi [rad],u [m/s],v [m/s],r [rad/s],delta [rad],n [rps]" and len(csv) > 20
     assert pf.read_text() == before
     # existing output is not overwritten without --force
     assert main(["plan", str(pf), "-o", str(out)]) == 2
@@ -210,7 +210,7 @@ def test_cli_bad_inputs(tmp_path, capsys):
     bad = tmp_path / "p.json"
     bad.write_text(json.dumps({"model": "kcs-response", "input_bounds": {"delta": [-0.5, 0.5]}, "colour": 1}))
     assert main(["plan", str(bad), "-o", str(tmp_path / "o.json")]) == 2
-    assert "unknown key(s) ['colour']" in capsys.readouterr().err
+    assert "unknown key(s) 'colour'" in capsys.readouterr().err
     bad.write_text(json.dumps({"model": "kcs-response", "input_bounds": {"delta": [-0.5, 0.5]}}))
     assert main(["plan", str(bad), "-o", str(tmp_path / "o.json")]) == 2
     assert "every input needs finite bounds; missing for ['n']" in capsys.readouterr().err

@@ -121,3 +121,68 @@ def test_hostile_result_file(build, needles, command, tmp_path, capsys):
             "validate": ["validate", r, LOG, "-o", tmp_path / "v.json"],
             "fit-params": ["fit", LOG, "--params", r, "-o", tmp_path / "f.json", "--no-progress"]}[command]
     _check(argv, tmp_path, needles, capsys)
+
+
+# --------------------------------------------------------------------------- PROBLEM.json (shipid plan)
+def _problem(**changes) -> dict:
+    doc = json.loads((REPO / "data" / "my_turn.json").read_text())
+    for k, v in changes.items():
+        if v is _DROP:
+            doc.pop(k)
+        else:
+            doc[k] = v
+    return doc
+
+
+def _problem_case(**changes):
+    return lambda tmp: _write_json(tmp, "p.json", _problem(**changes))
+
+
+PROBLEM_CASES = [
+    ("input-bounds-list", _problem_case(input_bounds=[1, 2]), ["p.json", "input_bounds", "object"]),
+    ("input-bounds-pair", _problem_case(input_bounds={"delta": [1], "n": [5, 13]}), ["p.json", "input_bounds['delta']", "[lo, hi]"]),
+    ("input-bounds-true", _problem_case(input_bounds={"delta": [True, 1], "n": [5, 13]}), ["p.json", "input_bounds['delta']", "number"]),
+    ("final-time-soon", _problem_case(final_time="soon"), ["p.json", "final_time", "number"]),
+    ("final-time-negative", _problem_case(final_time=-3), ["p.json", "final_time", "> 0"]),
+    ("model-list", _problem_case(model=["kcs-response"]), ["p.json", "model", "string"]),
+    ("model-unknown", _problem_case(model="boat"), ["p.json", "boat"]),
+    ("params-int", _problem_case(params=3), ["p.json", "params"]),
+    ("unknown-key", _problem_case(finaltime=3), ["p.json", "unknown key", "finaltime"]),
+    ("x0-string", _problem_case(x0="fast"), ["p.json", "x0"]),
+    ("x0-unknown-state", _problem_case(x0={"w": 1.0}), ["p.json", "w"]),
+    ("terminal-string", _problem_case(terminal={"psi": "north"}), ["p.json", "terminal['psi']", "number"]),
+    ("rate-negative", _problem_case(input_rate_bounds={"delta": -1}), ["p.json", "input_rate_bounds['delta']", "> 0"]),
+    ("intervals-1e9", _problem_case(n_intervals=1_000_000_000), ["p.json", "n_intervals", "GiB"]),
+    ("intervals-ten", _problem_case(n_intervals="ten"), ["p.json", "n_intervals", "number"]),
+    ("intervals-half", _problem_case(n_intervals=10.5), ["p.json", "n_intervals", "whole number"]),
+    ("substeps-0", _problem_case(substeps=0), ["p.json", "substeps", ">= 1"]),
+    ("tf-bounds-string", _problem_case(tf_bounds="wide"), ["p.json", "tf_bounds"]),
+    ("tf-bounds-order", _problem_case(tf_bounds=[600, 1]), ["p.json", "tf_bounds"]),
+    ("model-options-list", _problem_case(model_options=[1]), ["p.json", "model_options"]),
+    ("fit-result-missing", _problem_case(model=_DROP, params=_DROP, fit_result="nothere.json"), ["p.json", "nothere.json"]),
+    ("fit-result-bad", lambda tmp: (_write_json(tmp, "fr.json", {"model": "kcs-response", "coef": []}),
+                                    _write_json(tmp, "p.json", _problem(model=_DROP, params=_DROP, fit_result="fr.json")))[1],
+     ["fr.json", "coef"]),
+    ("u-guess-string", _problem_case(u_guess="middle"), ["p.json", "u_guess"]),
+    ("deep", lambda tmp: _write_json(tmp, "p.json", DEEP), ["p.json", "nested"]),
+    ("not-json", lambda tmp: _write_json(tmp, "p.json", "{"), ["p.json", "not valid JSON"]),
+]
+
+
+@pytest.mark.parametrize("build,needles", [(b, n) for _, b, n in PROBLEM_CASES], ids=[c[0] for c in PROBLEM_CASES])
+def test_hostile_problem_file(build, needles, tmp_path, capsys):
+    p = build(tmp_path)
+    _check(["plan", p, "-o", tmp_path / "plan.json"], tmp_path, needles, capsys)
+
+
+def test_plan_intervals_option_bounded_by_memory(tmp_path, capsys):
+    _check(["plan", "paper-2", "--intervals", "1000000000", "-o", tmp_path / "plan.json"], tmp_path,
+           ["n_intervals 1000000000", "GiB", "fewer"], capsys)
+
+
+def test_indirect_at_iteration_limit_is_not_success():
+    from shipid.control import paper_problem, solve_indirect
+
+    res = solve_indirect(paper_problem(1, n_intervals=8, substeps=2), max_iter=2, n_penalty=2)
+    assert not res.success and res.status in (1, 2)
+    assert "iteration limit" in res.message

@@ -1,11 +1,9 @@
 """``shipid plan``: time-optimal manoeuvres (seed 000's scenarios or a PROBLEM.json)."""
 from __future__ import annotations
 
-import json
-
 import numpy as np
 
-from ._common import json_and_csv_outputs
+from ._common import json_and_csv_outputs, units_header
 
 
 def register(sub) -> None:
@@ -30,10 +28,10 @@ def register(sub) -> None:
 
 
 def _plan(args) -> int:
-    from .._io import atomic_write_text
+    from .._io import atomic_write_set, dumps_json
     from ..control import SCENARIOS, load_problem, paper_problem, solve_direct, solve_indirect
 
-    out, csv = json_and_csv_outputs(args.output, args.force)
+    out, csv = json_and_csv_outputs(args.output, args.force, inputs=[args.problem])
     if args.intervals is not None and args.intervals < 2:
         raise ValueError(f"--intervals must be >= 2, got {args.intervals}")
     if args.substeps is not None and args.substeps < 1:
@@ -60,8 +58,9 @@ def _plan(args) -> int:
     doc = res.summary()
     doc["trajectory_csv"] = csv.name
     doc["tolerance"] = args.tol
-    atomic_write_text(csv, res.to_pandas().to_csv(float_format="%.6g"), force=args.force)
-    atomic_write_text(out, json.dumps(doc, indent=2, default=float) + "\n", force=args.force)
+    # the CSV and the JSON are published as a set (both or neither)
+    atomic_write_set([(csv, units_header(res.to_pandas(), res.problem.model).to_csv(float_format="%.6g")),
+                      (out, dumps_json(doc))], force=args.force)
     print(f"{problem.name}: {res.method} final time {res.final_time:.2f} s, switch "
           f"{'none' if res.switch_time is None else f'{res.switch_time:.2f} s'}, max violation "
           f"{res.max_constraint_violation:.2e}, {res.nit} iterations -> {out}")

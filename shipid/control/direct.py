@@ -277,8 +277,12 @@ def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int | N
         from .ipopt import solve_ipopt
 
         return solve_ipopt(problem, n_segments=n_segments, max_iter=max_iter, tol=tol, U0=U0, tf0=tf0)
+    from .spec import check_problem_size
+
+    nseg = problem.shooting_segments if n_segments is None else n_segments
+    check_problem_size(problem.model, problem.n_intervals, problem.substeps, problem.name, n_segments=nseg)
     t0 = time.perf_counter()
-    ms = _MS(problem, problem.shooting_segments if n_segments is None else n_segments)
+    ms = _MS(problem, nseg)
     U = problem.initial_controls() if U0 is None else np.clip(np.asarray(U0, float), problem.u_lo, problem.u_hi)
     tf = problem.initial_tf() if tf0 is None else float(tf0)
     _, X, _ = problem.simulate(U, tf)

@@ -218,14 +218,18 @@ def solve_indirect(problem: Problem, *, method: str = "bfgs", r0: float = 1.0, c
     Returns
     -------
     ControlResult
-        ``success`` means every constraint holds within ``tol`` after the last
-        penalty stage (the penalty method has no other convergence test); the
-        message carries the inner optimiser's status of the last stage.
+        ``success`` means the last penalty stage converged (L-BFGS-B's own
+        convergence test, or the projected gradient below ``gtol``; a stage that
+        stopped at ``max_iter`` is not converged) and every constraint holds within
+        ``tol``; the message carries the inner optimiser's status of the last stage.
     """
     if method not in ("bfgs", "steepest"):
         raise ValueError(f"solve_indirect: method must be 'bfgs' or 'steepest', got {method!r}")
     if not 0.0 < c_factor < 1.0:
         raise ValueError(f"solve_indirect: c_factor must be in (0, 1), got {c_factor!r}")
+    from .spec import check_problem_size
+
+    check_problem_size(problem.model, problem.n_intervals, problem.substeps, problem.name, n_segments=1)
     t0 = time.perf_counter()
     aug = _Augmented(problem)
     U = problem.initial_controls() if U0 is None else np.clip(np.asarray(U0, float), problem.u_lo, problem.u_hi)
@@ -248,8 +252,10 @@ def solve_indirect(problem: Problem, *, method: str = "bfgs", r0: float = 1.0, c
         if method == "bfgs":
             res = minimize(fun, z, jac=True, method="L-BFGS-B", bounds=list(zip(lb, ub)),
                            options={"maxiter": max_iter, "gtol": gtol, "ftol": ftol})
-            z, it, ok = res.x, res.nit, bool(res.success) or res.status == 1
+            z, it, ok = res.x, res.nit, bool(res.success)  # status 1 = iteration limit: not converged
             msg = res.message if isinstance(res.message, str) else str(res.message)
+            if res.status == 1:
+                msg = f"iteration limit of the stage reached ({max_iter}; raise max_iter)"
         else:
             z, it, ok = _steepest(fun, z, lb, ub, max_iter, gtol)
             msg = "projected gradient below gtol" if ok else "iteration limit of the stage reached"
@@ -261,5 +267,5 @@ def solve_indirect(problem: Problem, *, method: str = "bfgs", r0: float = 1.0, c
         r *= c_factor
     U, tf = aug.unpack(z)
     return ControlResult(problem=problem, method=f"indirect-{method}", controls=U, final_time=tf, nit=nit,
-                         nfev=aug.nfev, optimizer_success=True, optimizer_message=f"{n_penalty} LEPF stages; last: {msg}",
+                         nfev=aug.nfev, optimizer_success=ok, optimizer_message=f"{n_penalty} LEPF stages; last: {msg}",
                          wall_time=time.perf_counter() - t0, tol=tol, history=history)

@@ -174,6 +174,9 @@ class Problem:
         self.u_fixed = hi == lo
         if self.n_intervals < 2 or self.substeps < 1:
             raise ValueError(f"n_intervals must be >= 2 and substeps >= 1, got {self.n_intervals}, {self.substeps}")
+        from .spec import check_problem_size
+
+        check_problem_size(m, self.n_intervals, self.substeps, self.name, n_segments=self.shooting_segments)
         if self.final_time is not None and not self.final_time > 0:
             raise ValueError(f"final_time must be positive [s], got {self.final_time!r}")
         a, b = self.tf_bounds
