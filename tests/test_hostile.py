@@ -186,3 +186,76 @@ def test_indirect_at_iteration_limit_is_not_success():
     res = solve_indirect(paper_problem(1, n_intervals=8, substeps=2), max_iter=2, n_penalty=2)
     assert not res.success and res.status in (1, 2)
     assert "iteration limit" in res.message
+
+
+# --------------------------------------------------------------------------- routing problems (shipid route)
+def _pso(**changes) -> dict:
+    doc = {"type": "pso", "start": [0, 0], "goal": [0, -300],
+           "obstacles": [{"x": 10, "y": -80, "radius": 20}, {"x": -12, "y": -160, "radius": 25}],
+           "current": {"type": "uniform", "speed": 0.5, "direction_deg": 90}, "n_particles": 6, "max_iter": 5}
+    for k, v in changes.items():
+        if v is _DROP:
+            doc.pop(k)
+        else:
+            doc[k] = v
+    return doc
+
+
+def _zermelo(**changes) -> dict:
+    doc = {"type": "zermelo", "speed": 1.0, "start": [0, 0], "target": [1000, 500],
+           "current": {"type": "uniform", "velocity": [0.2, 0.0]}, "solver": "pmp"}
+    doc.update(changes)
+    return doc
+
+
+def _route_case(doc):
+    return lambda tmp: _write_json(tmp, "q.json", doc)
+
+
+ROUTE_CASES = [
+    ("unknown-key", _route_case(_pso(replan_time=[10])), ["q.json", "unknown key", "replan_time"]),
+    ("max-iter-negative", _route_case(_pso(max_iter=-1)), ["q.json", "max_iter", ">= 1"]),
+    ("n-particles-1e8", _route_case(_pso(n_particles=100_000_000)), ["q.json", "n_particles", "GiB"]),
+    ("n-particles-true", _route_case(_pso(n_particles=True)), ["q.json", "n_particles", "number"]),
+    ("r-min-negative", _route_case(_pso(r_min=-15)), ["q.json", "r_min", ">= 0"]),
+    ("obstacles-int", _route_case(_pso(obstacles=5)), ["q.json", "obstacles", "list"]),
+    ("obstacle-unknown-key", _route_case(_pso(obstacles=[{"x": 1, "y": -80, "r": 3}])), ["q.json", "obstacles[0]", "'r'"]),
+    ("obstacle-radius-negative", _route_case(_pso(obstacles=[{"x": 1, "y": -80, "radius": -3}])), ["q.json", "radius", "> 0"]),
+    ("vessel-string", _route_case(_pso(vessel="paper")), ["q.json", "vessel", "object"]),
+    ("vessel-unknown-key", _route_case(_pso(vessel={"type": "paper", "power": 3})), ["q.json", "vessel", "power"]),
+    ("replan-times-string", _route_case(_pso(replan_times="often")), ["q.json", "replan_times", "list"]),
+    ("replan-times-order", _route_case(_pso(replan_times=[50, 10])), ["q.json", "replan_times", "increase"]),
+    ("kinematics", _route_case(_pso(kinematics="walk")), ["q.json", "kinematics"]),
+    ("start-string", _route_case(_pso(start="here")), ["q.json", "start", "2 numbers"]),
+    ("field-unknown-key", _route_case(_pso(current={"type": "uniform", "speed": 1, "direction": 90})), ["q.json", "current", "direction"]),
+    ("field-type", _route_case(_pso(current={"type": "tidal"})), ["q.json", "current.type", "tidal"]),
+    ("field-speed-string", _route_case(_pso(current={"type": "uniform", "speed": "fast", "direction_deg": 0})), ["q.json", "current.speed", "number"]),
+    ("grid-csv-missing", _route_case(_zermelo(current={"type": "grid_csv", "path": "nothere.csv"})), ["q.json", "nothere.csv"]),
+    ("grid-csv-columns", lambda tmp: ((tmp / "c.csv").write_text("a,b\n1,2\n"),
+                                      _write_json(tmp, "q.json", _zermelo(current={"type": "grid_csv", "path": "c.csv"})))[1],
+     ["c.csv", "column"]),
+    ("zermelo-solver", _route_case(_zermelo(solver="fast")), ["q.json", "solver"]),
+    ("zermelo-n-huge", _route_case(_zermelo(n=10**9)), ["q.json", "n", "<= 100000"]),
+    ("zermelo-speed-zero", _route_case(_zermelo(speed=0)), ["q.json", "speed", "> 0"]),
+    ("type-missing", _route_case({"speed": 1}), ["q.json", "'type'"]),
+    ("deep", lambda tmp: _write_json(tmp, "q.json", DEEP), ["q.json", "nested"]),
+]
+
+
+@pytest.mark.parametrize("build,needles", [(b, n) for _, b, n in ROUTE_CASES], ids=[c[0] for c in ROUTE_CASES])
+def test_hostile_route_file(build, needles, tmp_path, capsys):
+    q = build(tmp_path)
+    _check(["route", q, "-o", tmp_path / "route.json"], tmp_path, needles, capsys)
+
+
+def test_route_replan_times_are_used(tmp_path, capsys):
+    q = _write_json(tmp_path, "q.json", _pso(replan_times=[20.0, 60.0]))
+    main(["route", str(q), "-o", str(tmp_path / "r.json")])
+    doc = json.loads((tmp_path / "r.json").read_text())
+    assert [e["time"] for e in doc["replanning"]] == [20.0, 60.0]
+
+
+def test_route_pso_paper_says_what_the_default_is():
+    from shipid.commands.routing import PSO_FRAMING, PSO_PAPER_NOTE
+
+    assert "worst of the 64" in PSO_FRAMING and "10.37" in PSO_FRAMING and PSO_FRAMING[:20].lower() in PSO_PAPER_NOTE.lower()
