@@ -88,6 +88,11 @@ def main(argv: list[str] | None = None) -> int:
     warnings.showwarning = _show_warning(prog)
     try:
         return int(args.handler(args) or 0)
+    except BrokenPipeError:  # `shipid models | head`: the reader left; not an error of ours
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except (ValueError, OSError) as exc:
         print(one_line(f"{prog}: error: {exc}"), file=sys.stderr)
         return 2

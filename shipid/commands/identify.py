@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import add_log_options, read_logs
+from ._common import add_log_options, add_progress_option, check_output_path, parse_pairs, progress_on, read_logs
 
 
 def _names(items) -> list[str]:
@@ -30,7 +30,10 @@ def register(sub) -> None:
     p.add_argument("--passes", type=int, default=2, help="EKF passes (default 2)")
     p.add_argument("--tune-noise", action="store_true", help="tune noise levels by innovation likelihood")
     p.add_argument("--refine", action="store_true", help="refine with an output-error least-squares fit")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--meas-std", action="append", metavar="CH=STD",
+                   help="measurement noise standard deviation per channel in SI units (m, rad, m/s, rad/s), "
+                        "e.g. psi=0.002,r=0.0005; default: estimated from the data")
+    add_progress_option(p)
     p.set_defaults(handler=_fit)
 
     d = sub.add_parser("demo", help="fit the bundled synthetic KCS logs and print the results")
@@ -47,7 +50,7 @@ def _start_model(args):
     opts = {"lpp": args.lpp} if (args.lpp is not None and "lpp" in cls.__init__.__code__.co_varnames) else {}
     if args.params is None:
         return cls(**opts)
-    if args.params.endswith(".json"):
+    if args.params.endswith(".json") or Path(args.params).is_file():
         return model_from(args.params, model=args.model)[0]
     return get_model(args.model, args.params, **opts)
 
@@ -64,7 +67,11 @@ def _fixed(args, model):
                 try:
                     values[k.strip()] = float(v)
                 except ValueError:
-                    raise ValueError(f"--fixed {part}: '{v}' is not a number") from None
+                    raise ValueError(f"--fixed {part[:60]}: '{v[:30]}' is not a number; give NAME=VALUE, "
+                                     "e.g. --fixed a8=0") from None
+                if not np.isfinite(values[k.strip()]):
+                    raise ValueError(f"--fixed {part[:60]}: give a finite value (or NAME alone to hold the "
+                                     "start value)")
             else:
                 names.append(part)
     if values:
@@ -77,19 +84,34 @@ def _fixed(args, model):
 def _fit(args) -> int:
     from ..identify import EKFIdentifier
 
-    out = Path(args.output)
-    if out.exists() and not args.force:
-        raise ValueError(f"{out}: output exists; choose another name or pass --force to overwrite it")
+    out = check_output_path(args.output, force=args.force, inputs=[*args.logs, args.params, args.ship],
+                            what="result")
     if args.passes < 1:
         raise ValueError(f"--passes must be >= 1, got {args.passes}")
+    if args.lpp is not None and not (np.isfinite(args.lpp) and args.lpp > 0):
+        raise ValueError(f"--lpp {args.lpp}: give the ship length between perpendiculars in metres (a positive number)")
+    meas_std = parse_pairs(args.meas_std, "--meas-std", float) or None
+    for k, v in (meas_std or {}).items():
+        if not (np.isfinite(v) and v > 0):
+            raise ValueError(f"--meas-std {k}={v}: give a positive standard deviation in SI units, e.g. psi=0.002")
     model = _start_model(args)
     logs = read_logs(args.logs, args)
     for lg in logs:
         if lg.missing or lg.dropouts:
             print(f"note: {lg.summary()}", file=sys.stderr)
     ident = EKFIdentifier(model, estimate=_names(args.estimate) or None, fixed=_fixed(args, model),
-                          n_passes=args.passes, tune_noise=args.tune_noise, progress=not args.no_progress)
-    ident.fit(logs)
+                          n_passes=args.passes, tune_noise=args.tune_noise, progress=progress_on(args),
+                          meas_std=meas_std)
+    try:
+        ident.fit(logs)
+    except ValueError as exc:
+        msg = str(exc)
+        if "give meas_std=" in msg:  # the library's advice in the CLI's words
+            msg = msg.replace("give meas_std={...}", "pass --meas-std CH=STD, e.g. --meas-std psi=0.002")
+        elif "not finite in the initial point" in msg:
+            msg = (f"the model cannot be evaluated at the start values ({msg.rstrip('.')}); check --fixed "
+                   "and --params values")
+        raise ValueError(msg) from None
     result = ident.result()
     if args.refine:
         from ..identify.batch import OutputErrorRefiner

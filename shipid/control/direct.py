@@ -27,7 +27,7 @@ import warnings
 import numpy as np
 from scipy.optimize import BFGS, Bounds, NonlinearConstraint, minimize
 
-from .problem import Problem, rk4_sensitivities
+from .problem import Problem, one_blas_thread, rk4_sensitivities
 from .result import ControlResult
 
 __all__ = ["solve_direct"]
@@ -290,7 +290,7 @@ def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int | N
     lb, ub = ms.bounds()
     w0 = np.clip(ms.pack(U, S, tf), lb, ub)
     has_ineq = ms.n_ineq() > 0
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), one_blas_thread():
         warnings.simplefilter("ignore", RuntimeWarning)
         if method == "slsqp":
             cons = [{"type": "eq", "fun": ms.eq, "jac": ms.eq_jac}]

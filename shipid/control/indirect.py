@@ -38,7 +38,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from ..integrate import rk4_step
-from .problem import Problem, rk4_sensitivities
+from .problem import Problem, one_blas_thread, rk4_sensitivities
 from .result import ControlResult
 
 __all__ = ["solve_indirect", "lepf"]
@@ -252,8 +252,9 @@ def solve_indirect(problem: Problem, *, method: str = "bfgs", r0: float = 1.0, c
     for stage in range(n_penalty):
         fun = lambda zz, rr=r: aug(zz, rr)  # noqa: E731
         if method == "bfgs":
-            res = minimize(fun, z, jac=True, method="L-BFGS-B", bounds=list(zip(lb, ub)),
-                           options={"maxiter": max_iter, "gtol": gtol, "ftol": ftol})
+            with one_blas_thread():  # iterates independent of the BLAS thread count
+                res = minimize(fun, z, jac=True, method="L-BFGS-B", bounds=list(zip(lb, ub)),
+                               options={"maxiter": max_iter, "gtol": gtol, "ftol": ftol})
             z, it, ok = res.x, res.nit, bool(res.success)  # status 1 = iteration limit: not converged
             msg = res.message if isinstance(res.message, str) else str(res.message)
             if res.status == 1:
