@@ -259,3 +259,39 @@ def test_route_pso_paper_says_what_the_default_is():
     from shipid.commands.routing import PSO_FRAMING, PSO_PAPER_NOTE
 
     assert "worst of the 64" in PSO_FRAMING and "10.37" in PSO_FRAMING and PSO_FRAMING[:20].lower() in PSO_PAPER_NOTE.lower()
+
+
+# --------------------------------------------------------------------------- sizes and options of other commands
+OPTION_CASES = [
+    ("glider-dt-1e-9", ["glider", "launch", "--speed", "5", "--angle", "45", "--dt", "1e-9", "-o", "{tmp}/g.json"],
+     ["dt 1e-09", "GiB", "--dt"]),
+    ("glider-speed-nan", ["glider", "launch", "--speed", "nan", "--angle", "45", "-o", "{tmp}/g.json"], ["--speed nan"]),
+    ("glider-popsize", ["glider", "optimise", "--popsize", "100000", "-o", "{tmp}/g.json"], ["--popsize 100000"]),
+    ("glider-params-bad", ["glider", "launch", "--speed", "5", "--angle", "45", "--params", "{tmp}/r.json", "-o",
+                           "{tmp}/g.json"], ["r.json"]),
+    ("route-seed-negative", ["route", "pso-paper", "--seed", "-3", "-o", "{tmp}/ps.json"], ["--seed -3"]),
+    ("validate-output-is-log", ["validate", "{tmp}/r.json", "{log}", "-o", "{log}", "--force"], ["would replace"]),
+    ("plan-output-is-problem", ["plan", "{tmp}/p.json", "-o", "{tmp}/p.json", "--force"], ["would replace"]),
+    ("route-output-exists", ["route", "zermelo-paper", "-o", "{tmp}/old.json"], ["old.json", "--force"]),
+    ("route-csv-exists", ["route", "zermelo-paper", "-o", "{tmp}/old2.json"], ["old2.csv", "--force"]),
+    ("ship-file-deep", ["fit", "{log}", "--ship", "{tmp}/deep.json", "-o", "{tmp}/f.json"], ["deep.json"]),
+    ("fit-log-fifo", ["fit", "{tmp}/fifo.csv", "-o", "{tmp}/f.json"], ["fifo.csv"]),
+]
+
+
+@pytest.mark.parametrize("argv,needles", [(a, n) for _, a, n in OPTION_CASES], ids=[c[0] for c in OPTION_CASES])
+def test_hostile_options(argv, needles, tmp_path, capsys):
+    _write_json(tmp_path, "r.json", {"model": "kcs-response", "coef": []})
+    _write_json(tmp_path, "p.json", _problem())
+    _write_json(tmp_path, "deep.json", DEEP)
+    (tmp_path / "old.json").write_text("{}")
+    (tmp_path / "old2.csv").write_text("keep\n")
+    log = tmp_path / "log.csv"
+    log.write_bytes(LOG.read_bytes())
+    if "fifo" in " ".join(argv):
+        if not hasattr(os, "mkfifo"):
+            pytest.skip("no FIFOs on this platform")
+        os.mkfifo(tmp_path / "fifo.csv")
+        pytest.skip("reading a FIFO as a log is helper `logs`' item (shipid/logs.py); see the report")
+    argv = [a.format(tmp=tmp_path, log=log) for a in argv]
+    _check(argv, tmp_path, needles, capsys)
