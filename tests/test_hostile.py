@@ -295,3 +295,107 @@ def test_hostile_options(argv, needles, tmp_path, capsys):
         pytest.skip("reading a FIFO as a log is helper `logs`' item (shipid/logs.py); see the report")
     argv = [a.format(tmp=tmp_path, log=log) for a in argv]
     _check(argv, tmp_path, needles, capsys)
+
+
+# --------------------------------------------------------------------------- the write side
+def test_no_clobber_is_atomic_between_racing_writers(tmp_path):
+    """Two writers that both passed an 'exists' check: exactly one wins, the other is told."""
+    target = tmp_path / "out.json"
+    tmp_a, tmp_b = _io._tmp_for(target), _io._tmp_for(target)  # both prepared before either publishes
+    _io._fill(tmp_a, b"A")
+    _io._fill(tmp_b, b"B")
+    _io._publish(tmp_a, target, force=False)
+    with pytest.raises(_io.OutputExistsError, match="output exists"):
+        _io._publish(tmp_b, target, force=False)
+    _io._drop(tmp_b)
+    assert target.read_bytes() == b"A" and sorted(p.name for p in tmp_path.iterdir()) == ["out.json"]
+
+
+def test_racing_processes_lose_no_result_silently(tmp_path):
+    code = ("import sys; from shipid._io import atomic_write_text, OutputExistsError\n"
+            "try:\n    atomic_write_text(sys.argv[1], sys.argv[2] * 2_000_000)\nexcept OutputExistsError:\n"
+            "    sys.exit(3)\n")
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    target = tmp_path / "r.txt"
+    procs = [subprocess.Popen([sys.executable, "-c", code, str(target), c], env=env) for c in "abcd"]
+    codes = [p.wait(60) for p in procs]
+    assert sorted(codes) == [0, 3, 3, 3], codes
+    text = target.read_text()
+    assert len(set(text)) == 1 and len(text) == 2_000_000
+    assert [p.name for p in tmp_path.iterdir()] == ["r.txt"]
+
+
+def test_file_set_is_rolled_back_when_a_member_exists(tmp_path):
+    (tmp_path / "b.json").write_text("old")
+    with pytest.raises(_io.OutputExistsError):
+        _io.atomic_write_set([(tmp_path / "a.csv", "x"), (tmp_path / "b.json", "y")])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b.json"] and (tmp_path / "b.json").read_text() == "old"
+    # the exists check happens first; a member appearing between the links is rolled back too
+    orig = _io._publish
+
+    def racing(tmp, path, force):
+        if path.name == "d.json":
+            path.write_text("someone else")
+        return orig(tmp, path, force)
+
+    _io._publish = racing
+    try:
+        with pytest.raises(_io.OutputExistsError):
+            _io.atomic_write_set([(tmp_path / "c.csv", "x"), (tmp_path / "d.json", "y")])
+    finally:
+        _io._publish = orig
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b.json", "d.json"]
+    assert (tmp_path / "d.json").read_text() == "someone else"
+
+
+def test_strict_json_writer():
+    text = _io.dumps_json({"loglik": float("nan"), "a": np.float32(1.5), "b": np.arange(2), "c": [np.inf, True]})
+    assert json.loads(text, parse_constant=lambda c: pytest.fail(f"non-strict token {c}")) == \
+        {"loglik": None, "a": 1.5, "b": [0, 1], "c": [None, True]}
+
+
+def test_fit_result_with_nan_loglik_is_strict_json(tmp_path):
+    from shipid.identify.result import FitResult, load_result
+
+    doc = {**_good_result(), "loglik": None}
+    res = FitResult.from_dict(doc)
+    res.loglik = float("nan")
+    res.coef_std["a1"] = float("nan")
+    res.to_json(tmp_path / "r.json")
+    text = (tmp_path / "r.json").read_text()
+    assert "NaN" not in text and json.loads(text)["loglik"] is None
+    back = load_result(tmp_path / "r.json")
+    assert back.loglik is None and np.isnan(back.coef_std["a1"])
+
+
+def test_sigterm_removes_temporary_files(tmp_path):
+    """A run killed by SIGTERM while writing leaves no hidden .tmp file (SIGKILL cannot be caught)."""
+    code = ("import sys, time\nfrom shipid import _io\n_io.install_signal_cleanup()\n"
+            "orig = _io._fill\n"
+            "def slow(tmp, data):\n    orig(tmp, data)\n    print('written', flush=True)\n    time.sleep(60)\n"
+            "_io._fill = slow\n_io.atomic_write_text(sys.argv[1], 'x' * 10_000_000)\n")
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    p = subprocess.Popen([sys.executable, "-c", code, str(tmp_path / "big.csv")], env=env, stdout=subprocess.PIPE, text=True)
+    assert p.stdout.readline().strip() == "written"
+    assert any(f.name.endswith(".tmp") for f in tmp_path.iterdir())
+    p.send_signal(signal.SIGTERM)
+    assert p.wait(30) == 128 + signal.SIGTERM
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_output_folder_checked_before_the_computation(tmp_path, capsys, monkeypatch):
+    import shipid.control as control
+
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    real_access = os.access
+    monkeypatch.setattr(_io.os, "access", lambda p, mode: False if Path(p) == folder else real_access(p, mode))
+    monkeypatch.setattr(control, "solve_direct", lambda *a, **k: pytest.fail("solved before checking the output"))
+    _check(["plan", "paper-2", "-o", folder / "plan.json"], tmp_path, ["ro", "not writable"], capsys)
+
+
+def test_unwritable_folder_is_one_line_without_tmp_name(tmp_path, monkeypatch):
+    monkeypatch.setattr(_io.tempfile, "mkstemp", lambda **kw: (_ for _ in ()).throw(PermissionError(13, "Permission denied", ".r.json.x.tmp")))
+    with pytest.raises(PermissionError, match="cannot write in folder") as e:
+        _io.atomic_write_text(tmp_path / "r.json", "x")
+    assert ".tmp" not in str(e.value)
