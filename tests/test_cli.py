@@ -181,8 +181,13 @@ def test_demo_runs_and_recovers_the_truth(tmp_path, monkeypatch, capsys):
     out = capsys.readouterr().out
     assert "16/16 coefficients within 3 sigma" in out
     (folder,) = list(tmp_path.glob("shipid-demo-*"))
-    for f in ("result.json", "coefficients.csv", "replay_rmse.csv", "replay.png"):
+    for f in ("result.json", "coefficients.csv", "replay_rmse.csv", "replay.png", "report_known_truth.html",
+              "report.html"):
         assert (folder / f).stat().st_size > 0
+    # each report says what it demonstrates
+    part1 = (folder / "report_known_truth.html").read_text()
+    assert "known coefficients" in part1 and "16/16 coefficients are within 3 standard deviations" in part1
+    assert "cannot represent exactly" in (folder / "report.html").read_text()
 
 
 def test_fit_meas_std_option_reaches_the_filter(tmp_path):
