@@ -373,7 +373,10 @@ def as_number(value, where: str, *, low: float | None = None, high: float | None
         return None
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise ValueError(f"{where}: expected a number, got {type(value).__name__} {short(value, 40)}")
-    v = float(value)
+    try:
+        v = float(value)
+    except OverflowError:
+        raise ValueError(f"{where}: a {len(str(value))}-digit number is too large") from None
     if finite and not math.isfinite(v):
         raise ValueError(f"{where}: expected a finite number, got {v}")
     if low is not None and (v < low or (low_open and v == low)):
@@ -389,10 +392,11 @@ def as_int(value, where: str, *, low: int | None = None, high: int | None = None
     if v != int(v):
         raise ValueError(f"{where}: expected a whole number, got {v:g}")
     v = int(v)
+    shown = f"{v}" if abs(v) < 10**12 else f"{v:.3g}"  # never echo a 300-digit number
     if low is not None and v < low:
-        raise ValueError(f"{where}: must be >= {low}, got {v}")
+        raise ValueError(f"{where}: must be >= {low}, got {shown}")
     if high is not None and v > high:
-        raise ValueError(f"{where}: must be <= {high}, got {v}")
+        raise ValueError(f"{where}: must be <= {high}, got {shown}")
     return v
 
 

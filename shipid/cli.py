@@ -114,6 +114,10 @@ def main(argv: list[str] | None = None) -> int:
         print(one_line(f"{prog}: error: an input file is nested too deeply to read ({_input_files(args)}); "
                        "check that it is the file you meant"), file=sys.stderr)
         return 2
+    except OverflowError:
+        print(one_line(f"{prog}: error: a number given is too large to compute with ({_input_files(args)}); "
+                       "check the options and files"), file=sys.stderr)
+        return 2
     except MemoryError:
         print(f"{prog}: error: out of memory; reduce the problem size (intervals, particles, samples)",
               file=sys.stderr)

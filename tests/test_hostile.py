@@ -399,3 +399,20 @@ def test_unwritable_folder_is_one_line_without_tmp_name(tmp_path, monkeypatch):
     with pytest.raises(PermissionError, match="cannot write in folder") as e:
         _io.atomic_write_text(tmp_path / "r.json", "x")
     assert ".tmp" not in str(e.value)
+
+
+@pytest.mark.parametrize("argv,needles", [
+    (["fit", "{log}", "--passes", "9" * 300, "-o", "{tmp}/f.json"], ["--passes 1e+300", "1 to 100"]),
+    (["plan", "paper-1", "--intervals", "9" * 300, "-o", "{tmp}/p.json"], ["GiB"]),
+], ids=["passes-300-digits", "intervals-300-digits"])
+def test_huge_numbers_are_not_echoed(argv, needles, tmp_path, capsys):
+    log = tmp_path / "log.csv"
+    log.write_bytes(LOG.read_bytes())
+    err = _check([a.format(tmp=tmp_path, log=log) for a in argv], tmp_path, needles, capsys)
+    assert "9" * 30 not in err
+
+
+def test_json_integer_with_300_digits_is_not_echoed(tmp_path, capsys):
+    p = _write_json(tmp_path, "p.json", json.dumps(_problem()).replace('"n_intervals": 12', '"n_intervals": ' + "9" * 300))
+    err = _check(["plan", p, "-o", tmp_path / "plan.json"], tmp_path, ["p.json", "n_intervals"], capsys)
+    assert "9" * 30 not in err

@@ -86,8 +86,9 @@ def _fit(args) -> int:
 
     out = check_output_path(args.output, force=args.force, inputs=[*args.logs, args.params, args.ship],
                             what="result")
-    if args.passes < 1:
-        raise ValueError(f"--passes must be >= 1, got {args.passes}")
+    if not 1 <= args.passes <= 100:
+        raise ValueError(f"--passes {args.passes if abs(args.passes) < 10**6 else f'{args.passes:.3g}'}: "
+                         "give a number of EKF passes from 1 to 100 (default 2)")
     if args.lpp is not None and not (np.isfinite(args.lpp) and args.lpp > 0):
         raise ValueError(f"--lpp {args.lpp}: give the ship length between perpendiculars in metres (a positive number)")
     meas_std = parse_pairs(args.meas_std, "--meas-std", float) or None

@@ -157,9 +157,13 @@ def check_problem_size(model, n_intervals: int, substeps: int, where: str = "pro
     (N * nu + n_segments * nx)`` doubles) and its quasi-Newton matrix (``(N * nu + ...)**2``).
     """
     N, ns, nx, nu = int(n_intervals), int(substeps), model.nx, model.nu
+    if N > 10**9 or ns > 10**9:
+        N, ns = min(N, 10**9), min(ns, 10**9)  # (the estimate below already refuses these; no float overflow)
     nvar = N * nu + n_segments * nx + 1
     need = 8.0 * max(N * ns * max(N // n_segments, 1) * nx * nu, (N * ns + 2 * N * nu) * nvar, nvar ** 2)
-    check_memory(need, f"{where}: n_intervals {N} x substeps {ns}", "use fewer n_intervals or substeps")
+    shown = ", ".join(f"{k} {v if v < 10**12 else f'{v:.3g}'}" for k, v in
+                      (("n_intervals", int(n_intervals)), ("substeps", int(substeps))))
+    check_memory(need, f"{where}: {shown}", "use fewer n_intervals or substeps")
 
 
 def load_problem(path: str | Path) -> Problem:
