@@ -246,3 +246,15 @@ def test_missing_casadi_gives_a_clear_error(monkeypatch, capsys, tmp_path):
     assert "pip install shipid[casadi]" in capsys.readouterr().err
     # the rest of the control layer does not need CasADi
     assert solve_direct(paper_problem(1, n_intervals=4, substeps=2), max_iter=2).method == "direct-slsqp"
+
+
+def test_plan_progress_on_request_and_quiet_off_a_terminal(tmp_path, capsys):
+    args = ["plan", "paper-1", "--intervals", "6", "--substeps", "2"]
+    assert main([*args, "-o", str(tmp_path / "a.json")]) in (0, 1)
+    assert capsys.readouterr().err == ""  # stderr is not a terminal here: no progress by default
+    assert main([*args, "--progress", "-o", str(tmp_path / "b.json")]) in (0, 1)
+    assert "paper-1 (slsqp)" in capsys.readouterr().err
+    solve_indirect(paper_problem(1, n_intervals=6, substeps=2), n_penalty=2, max_iter=5, progress=True)
+    assert "LEPF stages" in capsys.readouterr().err
+    assert main([*args, "--tol", "nan", "-o", str(tmp_path / "d.json")]) == 2
+    assert "--tol nan" in capsys.readouterr().err

@@ -192,7 +192,8 @@ def _steepest(fun, z0, lb, ub, max_iter, gtol):
 
 def solve_indirect(problem: Problem, *, method: str = "bfgs", r0: float = 1.0, c_factor: float = 0.2,
                    n_penalty: int = 10, max_iter: int = 300, gtol: float = 1e-7, ftol: float = 1e-13, tol: float = 1e-2,
-                   U0: np.ndarray | None = None, tf0: float | None = None, callback=None) -> ControlResult:
+                   U0: np.ndarray | None = None, tf0: float | None = None, callback=None,
+                   progress: bool = False) -> ControlResult:
     """Solve ``problem`` by the paper's indirect method.
 
     Parameters
@@ -216,6 +217,8 @@ def solve_indirect(problem: Problem, *, method: str = "bfgs", r0: float = 1.0, c
         Largest admissible scaled constraint violation for ``success``.
     U0, tf0 : optional
         Warm start (controls (n_intervals, nu) and final time).
+    progress : bool
+        Show a progress bar over the penalty stages (tqdm, on stderr).
 
     Returns
     -------
@@ -249,6 +252,11 @@ def solve_indirect(problem: Problem, *, method: str = "bfgs", r0: float = 1.0, c
     ok = True
     msg = ""
     r = r0
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=n_penalty, desc=f"{problem.name} (LEPF stages)", unit="stage", leave=False)
     for stage in range(n_penalty):
         fun = lambda zz, rr=r: aug(zz, rr)  # noqa: E731
         if method == "bfgs":
@@ -267,7 +275,12 @@ def solve_indirect(problem: Problem, *, method: str = "bfgs", r0: float = 1.0, c
         history.append({"stage": stage, "r": r, "nit": it, "tf": float(tfc), "J_a": float(fun(z)[0]), "message": msg})
         if callback is not None:
             callback(stage, Uc, tfc)
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(iterations=nit)
         r *= c_factor
+    if bar is not None:
+        bar.close()
     U, tf = aug.unpack(z)
     return ControlResult(problem=problem, method=f"indirect-{method}", controls=U, final_time=tf, nit=nit,
                          nfev=aug.nfev, optimizer_success=ok, optimizer_message=f"{n_penalty} LEPF stages; last: {msg}",
