@@ -416,3 +416,18 @@ def test_json_integer_with_300_digits_is_not_echoed(tmp_path, capsys):
     p = _write_json(tmp_path, "p.json", json.dumps(_problem()).replace('"n_intervals": 12', '"n_intervals": ' + "9" * 300))
     err = _check(["plan", p, "-o", tmp_path / "plan.json"], tmp_path, ["p.json", "n_intervals"], capsys)
     assert "9" * 30 not in err
+
+
+def test_deep_yaml_and_json_are_refused_in_one_line():
+    pytest.importorskip("yaml")
+    for text in ("[" * 100_000 + "]" * 100_000, "a:\n" + "".join("  " * i + f"k{i}:\n" for i in range(1, 200)) + "  " * 200 + "v: 1\n"):
+        with pytest.raises(ValueError, match="ship.yaml: nested more than 64 levels") as e:
+            _io.loads_yaml(text, "ship.yaml")
+        assert len(str(e.value)) < 120
+    with pytest.raises(ValueError, match="x.json: nested more than 64 levels"):
+        _io.loads_json("[" * 100_000 + "]" * 100_000, "x.json")
+    with pytest.raises(ValueError, match="x.json: nested more than 64 levels"):
+        _io.loads_json("[" * 70 + "]" * 70, "x.json")
+    assert _io.loads_yaml("lpp: 4.36\nname: kcs\n", "ship.yaml") == {"lpp": 4.36, "name": "kcs"}
+    with pytest.raises(ValueError, match="ship.yaml: not valid YAML .* line 2"):
+        _io.loads_yaml("a: [1, 2\n", "ship.yaml")
