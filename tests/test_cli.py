@@ -6,6 +6,7 @@ input bytes unchanged and write no output."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -273,3 +274,23 @@ def test_models_lists_meanings_and_units(capsys):
     assert main(["models"]) == 0
     out = capsys.readouterr().out
     assert "u [m/s]" in out and "delta [rad]" in out and "n [rps]" in out
+
+
+def test_models_kcs_equation_text_matches_the_model():
+    """The equations `shipid models` prints for kcs-response are the model's (evaluated and compared)."""
+    from shipid.commands.core import PARAMETER_NOTES
+    from shipid.models import get_model
+
+    m = get_model("kcs-response", "synthetic-truth")
+    rng = np.random.default_rng(1)
+    x = rng.normal(size=6)
+    u = rng.normal(size=2)
+    env = {**dict(zip(m.param_names, m.params)), **dict(zip(m.state_names, x)), **dict(zip(m.input_names, u))}
+    text = PARAMETER_NOTES["kcs-response"].split(" (seed")[0]
+    got = {}
+    for eq in text.split(";"):
+        lhs, rhs = eq.split("=")
+        expr = re.sub(r"(?<=[\w)])\s+(?=[\w(])", "*", rhs.strip().replace("^", "**"))  # implicit products
+        got[lhs.strip()] = eval(expr, {}, env)
+    f = m.rhs(0.0, x, u)
+    np.testing.assert_allclose([got["du/dt"], got["dv/dt"], got["dr/dt"]], f[3:], rtol=1e-12)

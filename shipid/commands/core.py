@@ -8,6 +8,14 @@ MEANINGS = {
     "p": "roll rate", "q": "pitch rate", "r": "yaw rate", "delta": "rudder angle",
     "n": "propeller revolutions", "T": "thrust", "phi_p": "thrust direction angle",
 }
+#: What the parameters of a model are (the term each multiplies), for ``shipid models``.
+PARAMETER_NOTES = {
+    "kcs-response": ("du/dt = (a1 + a8 n) u + a2 v^2 + a3 r^2 + a4 delta^2 + (a5 r + a6 delta) v + a7 r delta + a9 n^2; "
+                     "dv/dt = b1 v + (b2 + b4 u) r + b3 delta; dr/dt = c1 v + c2 r + c3 delta (seed 002, SPEC section 1)"),
+    "mmg": ("non-dimensional (prime) hull derivatives X.., Y.., N.., added masses mx, my, Jz, propeller (tP, wP0, "
+            "k0-k2, xP) and rudder (tR, aH, xH, gammaR, lR, eps, kappa, f_alpha) coefficients in the notation of "
+            "Yasukawa & Yoshimura (2015)"),
+}
 #: Per-model exceptions to :data:`MEANINGS`.
 MODEL_MEANINGS = {"glider": {"delta": "fin incidence", "x": "horizontal position"}}
 
@@ -40,7 +48,9 @@ def _models(args) -> int:
             mean = {**MEANINGS, **MODEL_MEANINGS.get(name, {})}
             print(f"  {kind}: " + ", ".join(f"{label(n)} {mean[n]}" if n in mean else label(n) for n in names))
         print(f"  parameters ({m.np}): {', '.join(label(n) for n in m.param_names)}")
-        print(f"    (the term each parameter multiplies: help({cls.__module__}.{cls.__name__}))")
+        if name in PARAMETER_NOTES:
+            print(f"    {PARAMETER_NOTES[name]}")
+        print(f"    (equations and sources: help({cls.__module__}.{cls.__name__}))")
         sets = cls.parameter_sets()
         if sets:
             print(f"  parameter sets: {', '.join(sets)}")
