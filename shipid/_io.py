@@ -36,6 +36,7 @@ import numpy as np
 __all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_write_set", "sha256_file", "OutputExistsError",
            "dumps_json", "to_jsonable", "read_json", "loads_yaml", "short", "check_keys", "as_number", "as_int",
            "as_mapping", "as_string", "as_bool", "check_output_path", "install_signal_cleanup", "MAX_DEPTH",
+           "check_memory", "memory_limit_bytes", "loads_json",
            "MAX_FILE_BYTES"]
 
 #: Deepest nesting accepted in a JSON/YAML file the program reads.
@@ -315,6 +316,29 @@ def loads_yaml(text: str, where: str, what: str = "YAML"):
     return doc
 
 
+def memory_limit_bytes() -> float:
+    """Memory a single computation may plan to use: half of the physical memory
+    (``SHIPID_MEMORY_LIMIT_GB`` overrides it)."""
+    env = os.environ.get("SHIPID_MEMORY_LIMIT_GB")
+    if env:
+        try:
+            return float(env) * 2**30
+        except ValueError:
+            raise ValueError(f"SHIPID_MEMORY_LIMIT_GB={short(env, 20)}: give a number of GiB, e.g. 4") from None
+    try:
+        return 0.5 * os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return 4.0 * 2**30
+
+
+def check_memory(nbytes: float, what: str, advice: str) -> None:
+    """ValueError ``"{what} needs about X GiB ... {advice}"`` when ``nbytes`` exceeds :func:`memory_limit_bytes`."""
+    limit = memory_limit_bytes()
+    if nbytes > limit:
+        raise ValueError(f"{what} needs about {nbytes / 2**30:.3g} GiB of memory (limit {limit / 2**30:.3g} GiB, "
+                         f"half of this machine's; SHIPID_MEMORY_LIMIT_GB sets it); {advice}")
+
+
 # ----------------------------------------------------------------- schema checks
 def check_keys(doc: dict, allowed, where: str) -> None:
     """ValueError naming the first unknown keys of ``doc`` and the allowed ones."""
@@ -349,7 +373,10 @@ def as_number(value, where: str, *, low: float | None = None, high: float | None
         return None
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise ValueError(f"{where}: expected a number, got {type(value).__name__} {short(value, 40)}")
-    v = float(value)
+    try:
+        v = float(value)
+    except OverflowError:
+        raise ValueError(f"{where}: a {len(str(value))}-digit number is too large") from None
     if finite and not math.isfinite(v):
         raise ValueError(f"{where}: expected a finite number, got {v}")
     if low is not None and (v < low or (low_open and v == low)):
@@ -365,10 +392,11 @@ def as_int(value, where: str, *, low: int | None = None, high: int | None = None
     if v != int(v):
         raise ValueError(f"{where}: expected a whole number, got {v:g}")
     v = int(v)
+    shown = f"{v}" if abs(v) < 10**12 else f"{v:.3g}"  # never echo a 300-digit number
     if low is not None and v < low:
-        raise ValueError(f"{where}: must be >= {low}, got {v}")
+        raise ValueError(f"{where}: must be >= {low}, got {shown}")
     if high is not None and v > high:
-        raise ValueError(f"{where}: must be <= {high}, got {v}")
+        raise ValueError(f"{where}: must be <= {high}, got {shown}")
     return v
 
 

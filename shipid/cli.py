@@ -64,6 +64,20 @@ def one_line(text: str, limit: int = MAX_MESSAGE) -> str:
     return msg[:head] + " ... " + msg[len(msg) - (limit - head - 5):]
 
 
+def _input_files(args) -> str:
+    """The existing files named on the command line (for errors that cannot say which one)."""
+    import os
+
+    names = []
+    for key, val in sorted(vars(args).items()):
+        if key in ("output", "trajectory", "handler"):
+            continue
+        for v in val if isinstance(val, list) else [val]:
+            if isinstance(v, str) and v and os.path.isfile(v):
+                names.append(os.path.basename(v))
+    return ", ".join(names[:4]) + (" ..." if len(names) > 4 else "") if names else "no file named"
+
+
 def _show_warning(prog: str):
     def show(message, category, filename, lineno, file=None, line=None):
         print(one_line(f"{prog}: warning: {message}"), file=sys.stderr if file is None else file)
@@ -89,12 +103,21 @@ def main(argv: list[str] | None = None) -> int:
     warnings.showwarning = _show_warning(prog)
     try:
         return int(args.handler(args) or 0)
+    except BrokenPipeError:  # `shipid models | head`: the reader left; not an error of ours
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except (ValueError, OSError) as exc:
         print(one_line(f"{prog}: error: {exc}"), file=sys.stderr)
         return 2
     except RecursionError:
-        print(one_line(f"{prog}: error: an input is nested too deeply to read; check the files given"),
-              file=sys.stderr)
+        print(one_line(f"{prog}: error: an input file is nested too deeply to read ({_input_files(args)}); "
+                       "check that it is the file you meant"), file=sys.stderr)
+        return 2
+    except OverflowError:
+        print(one_line(f"{prog}: error: a number given is too large to compute with ({_input_files(args)}); "
+                       "check the options and files"), file=sys.stderr)
         return 2
     except MemoryError:
         print(f"{prog}: error: out of memory; reduce the problem size (intervals, particles, samples)",

@@ -143,3 +143,25 @@ def number(text: str, option: str, *, low: float | None = None, low_open: bool =
     if high is not None and v > high:
         raise ValueError(f"{option} {short(text, 40)}: must be <= {high:g}")
     return v
+
+
+#: Units of the channels that appear in CSV outputs (SI, radians), for the headers.
+CHANNEL_UNITS = {"time": "s", "t": "s", "x": "m", "y": "m", "psi": "rad", "u": "m/s", "v": "m/s", "r": "rad/s",
+                 "p": "rad/s", "phi": "rad", "delta": "rad", "n": "rps", "T": "N", "phi_p": "rad"}
+
+
+def units_header(frame, model=None):
+    """``frame`` with ``name [unit]`` column (and index) names where the unit is known
+    (the model's ``units`` first, then :data:`CHANNEL_UNITS`); other names unchanged."""
+    units = dict(CHANNEL_UNITS)
+    if model is not None:
+        units.update(getattr(model, "units", {}) or {})
+
+    def label(name):
+        unit = units.get(str(name))
+        return f"{name} [{unit}]" if unit and "[" not in str(name) else name
+
+    out = frame.rename(columns=label)
+    if out.index.name is not None:
+        out.index = out.index.rename(label(out.index.name))
+    return out

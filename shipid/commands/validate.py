@@ -6,7 +6,6 @@ Both replay the model with each log's recorded rudder and propeller inputs
 """
 from __future__ import annotations
 
-import json
 import math
 import sys
 from pathlib import Path
@@ -56,11 +55,9 @@ def register(sub) -> None:
 
 
 def _check(args) -> Path:
-    out = Path(args.output)
-    if out.exists() and not args.force:
-        raise ValueError(f"{out}: output exists; choose another name or pass --force to overwrite it")
-    if out.resolve() in {Path(p).resolve() for p in [args.result, *args.logs]}:
-        raise ValueError(f"{out}: the output would replace an input file; choose another name")
+    from ._common import check_output_path
+
+    out = check_output_path(args.output, force=args.force, inputs=[args.result, *args.logs])
     if args.lpp is not None and not (math.isfinite(args.lpp) and args.lpp > 0):
         raise ValueError(f"--lpp {args.lpp}: give the ship length in metres (a positive number)")
     return out
@@ -81,7 +78,7 @@ def _line(d: dict) -> str:
 
 
 def _validate(args) -> int:
-    from .._io import atomic_write_text
+    from .._io import atomic_write_text, dumps_json
     from ..validation import validate_logs
     from .uncertainty import validate_draws
 
@@ -103,7 +100,7 @@ def _validate(args) -> int:
                 f"{e['seconds']:g} s median {e['position_error_median_m']:.3g} m ({e['n_starts']} starts"
                 f"{', %d blow-ups' % e['n_blowups'] if e['n_blowups'] else ''})"
                 for e in d["horizon"] if e["position_error_median_m"] is not None))
-    atomic_write_text(out, json.dumps(res, indent=2, allow_nan=False) + "\n", force=args.force)
+    atomic_write_text(out, dumps_json(res), force=args.force)
     for d in res:
         print(_line(d))
         for n in d["notes"]:
