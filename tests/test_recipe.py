@@ -59,3 +59,61 @@ def test_every_ship_model_predicts_froude_scaled_manoeuvres(name):
     xa, xb = a.simulation.x[0, :n], b.simulation.x[0, :n]
     np.testing.assert_allclose(xb[:, :2] / lam, xa[:, :2], rtol=1e-9, atol=1e-9 * L1)
     np.testing.assert_allclose(xb[:, 2], xa[:, 2], rtol=0, atol=1e-9)
+
+
+# ----------------------------------------------------------------------------- particulars travel
+def marin_csv(tmp_path, run: str, *, every: int = 1, t_end: float | None = None):
+    """A MARIN KVLCC2 run as a shipid CSV in ``tmp_path`` with the rudder in the models' sign convention
+    (the MARIN files' positive rudder turns to port; the one place that flips it until the MARIN
+    adapter does), optionally every ``every``-th sample up to ``t_end`` [s]."""
+    import warnings
+
+    from conftest import MARIN_DIR
+
+    from shipid.logs import TrialLog, read_log
+
+    path = MARIN_DIR / f"MARIN_FREE_KVLCC2_{run}_m.dat"
+    if not path.is_file():
+        pytest.skip(f"measured KVLCC2 data not found at {MARIN_DIR} (../shared/data/kvlcc2_marin beside the repo)")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        lg = read_log(path)
+    keep = np.arange(0, lg.time.size, every)
+    if t_end is not None:
+        keep = keep[lg.time[keep] <= t_end]
+    ch = {c: lg[c][keep] for c in lg.channels if c != "time"}
+    ch["delta"] = -ch["delta"]
+    return TrialLog.from_arrays(lg.time[keep], name=lg.name, ship=lg.ship, **ch).to_csv(tmp_path / f"{run}.csv")
+
+
+def test_cli_fit_carries_the_logs_particulars_through_refinement(tmp_path, capsys):
+    """``shipid fit`` on a MARIN zigzag (320 m) with kcs-response: the start is the shipped 4.36 m set
+    Froude-scaled to the logs' 320 m, the EKF and the refined result both state Lpp 320 m (model options
+    and ship), ``shipid simulate r.json --turning 35`` simulates the 320 m ship with no --lpp, and the
+    refined result reloads from JSON to the same model."""
+    from shipid.cli import main
+    from shipid.manoeuvres import ship_info, turning_circle
+
+    log = marin_csv(tmp_path, "zz_10", every=4, t_end=260.0)
+    out = tmp_path / "r.json"
+    code = main(["fit", str(log), "--model", "kcs-response", "--fixed", "a8=0", "--passes", "1", "--refine",
+                 "--no-progress", "-o", str(out)])
+    assert code in (0, 1)  # 1: the refinement hit its iteration limit (said so); the result is written either way
+    res = load_result(out)
+    assert res.method == "output-error"
+    assert res.model_options["lpp"] == 320.0 and res.ship["lpp"] == 320.0 and res.ship["name"] == "KVLCC2"
+    assert res.model_options["design_speed"] == pytest.approx(7.974)  # the logs' particulars
+    model = res.to_model()
+    assert ship_info(model)["lpp"] == 320.0
+    again = FitResult.from_dict(json.loads(out.read_text()))
+    assert again.to_dict() == res.to_dict()
+    np.testing.assert_array_equal(again.to_model().params, model.params)
+    capsys.readouterr()
+    main(["simulate", str(out), "--turning", "35", "--side", "starboard"])
+    printed = capsys.readouterr()
+    assert "kcs-response member 0: turning (starboard)" in printed.out
+    run = turning_circle(model, 35.0, side="starboard", heading_change_deg=200.0)
+    assert run.metrics[0].lpp == 320.0 and run.settings["speed"].iloc[0] == pytest.approx(7.974)
+    # asked for another ship: Froude-scaled to it (and said so)
+    main(["simulate", str(out), "--turning", "35", "--side", "starboard", "--lpp", "7.0"])
+    assert "Froude-scaled from Lpp 320 m to 7 m" in capsys.readouterr().err

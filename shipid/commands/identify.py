@@ -39,16 +39,33 @@ def register(sub) -> None:
     d.set_defaults(handler=_demo)
 
 
-def _start_model(args):
+def _logs_lpp(logs):
+    """The one ship length [m] of the logs' particulars (None when unknown; ValueError when they differ)."""
+    lpps = {float(lg.ship.lpp) for lg in logs if getattr(lg, "ship", None) is not None and lg.ship.lpp}
+    if len(lpps) > 1:
+        raise ValueError(f"the logs belong to ships of different lengths {sorted(lpps)} m; fit one ship at a time "
+                         "(or pass --lpp)")
+    return lpps.pop() if lpps else None
+
+
+def _start_model(args, lpp=None):
+    """The start model at the logs' ship length ``lpp`` (a named parameter set is Froude-scaled to it, an
+    earlier result of another length too): a start never comes from another ship's scale."""
     from ..identify import model_from
     from ..models import get_model, model_class
 
     cls = model_class(args.model)
-    opts = {"lpp": args.lpp} if (args.lpp is not None and "lpp" in cls.__init__.__code__.co_varnames) else {}
+    L = args.lpp if args.lpp is not None else lpp
+    opts = {"lpp": L} if (L is not None and "lpp" in cls.__init__.__code__.co_varnames) else {}
     if args.params is None:
         return cls(**opts)
     if args.params.endswith(".json"):
-        return model_from(args.params, model=args.model)[0]
+        model = model_from(args.params, model=args.model)[0]
+        ml = getattr(model, "lpp", None)
+        if L is not None and ml is not None and abs(ml / L - 1.0) > 1e-9 and hasattr(model, "scaled"):
+            print(f"note: start values {args.params} (Lpp {ml:g} m) Froude-scaled to the logs' {L:g} m", file=sys.stderr)
+            model = model.scaled(L)
+        return model
     return get_model(args.model, args.params, **opts)
 
 
@@ -82,8 +99,8 @@ def _fit(args) -> int:
         raise ValueError(f"{out}: output exists; choose another name or pass --force to overwrite it")
     if args.passes < 1:
         raise ValueError(f"--passes must be >= 1, got {args.passes}")
-    model = _start_model(args)
     logs = read_logs(args.logs, args)
+    model = _start_model(args, _logs_lpp(logs))
     for lg in logs:
         if lg.missing or lg.dropouts:
             print(f"note: {lg.summary()}", file=sys.stderr)

@@ -11,6 +11,8 @@ import math
 import sys
 from pathlib import Path
 
+from ._common import parse_zigzag
+
 #: Keys printed in the short metric summaries.
 SUMMARY_KEYS = ("advance_L", "transfer_L", "tactical_diameter_L", "steady_diameter_L", "speed_loss",
                 "overshoot1_deg", "overshoot2_deg", "time_second_execute", "initial_turning_L")
@@ -21,6 +23,9 @@ def register(sub) -> None:
     p.add_argument("logs", nargs="+", metavar="LOG", help="trial logs (CSV or MARIN .dat)")
     p.add_argument("--lpp", type=float, default=None, help="ship length [m] (default: from the log's particulars)")
     p.add_argument("--kind", choices=("auto", "turning", "zigzag"), default="auto")
+    p.add_argument("--zigzag", metavar="D/C", default=None,
+                   help="nominal rudder/check angles [deg] of zigzag logs, e.g. 10/5 (default: read from each log, "
+                        "the check angle from the heading deviation at the rudder reversals)")
     p.add_argument("--reference-offset", type=float, default=None, metavar="M",
                    help="logged point's distance forward of midship [m]; positions are moved to midship")
     p.add_argument("-o", "--output", default=None, help="JSON file to write (default: print)")
@@ -31,7 +36,7 @@ def register(sub) -> None:
     p.add_argument("model", metavar="MODEL", help="fit-result JSON or model name[:parameter-set]")
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--turning", type=float, metavar="DEG", help="turning circle with this rudder angle [deg]")
-    g.add_argument("--zigzag", metavar="D/P", help="zigzag rudder/heading angles [deg], e.g. 20/20")
+    g.add_argument("--zigzag", metavar="D/C", help="zigzag rudder/check (heading) angles [deg], e.g. 20/20 or 10/5")
     _common(p)
     p.add_argument("--side", choices=("both", "starboard", "port"), default="both",
                    help="turning side / side of the first zigzag execute")
@@ -44,7 +49,8 @@ def register(sub) -> None:
     p.add_argument("--rudder", default="10,15,25", help="rudder angles [deg], comma separated")
     p.add_argument("--speed", default=None, help="approach speeds [m/s], comma separated (default: design speed)")
     p.add_argument("--side", choices=("both", "starboard", "port"), default="starboard")
-    p.add_argument("--lpp", type=float, default=None, help="ship length [m] (default: the model's)")
+    p.add_argument("--lpp", type=float, default=None,
+                   help="ship length [m]: Froude-scale the model to this ship (default: the length it was fitted at)")
     p.add_argument("--rudder-rate", type=float, default=None, metavar="DEG_S", help="rudder rate [deg/s]")
     _integrator(p)
     p.add_argument("-o", "--output", default=None, help="CSV to write (default: print)")
@@ -54,7 +60,8 @@ def register(sub) -> None:
 
 def _common(p):
     p.add_argument("--speed", type=float, default=None, help="approach speed [m/s] (default: design speed)")
-    p.add_argument("--lpp", type=float, default=None, help="ship length [m] (default: the model's)")
+    p.add_argument("--lpp", type=float, default=None,
+                   help="ship length [m]: Froude-scale the model to this ship (default: the length it was fitted at)")
     p.add_argument("--rudder-rate", type=float, default=None, metavar="DEG_S", help="rudder rate [deg/s]")
     _integrator(p)
 
@@ -71,11 +78,19 @@ def _rtol(args) -> float:
     return args.rtol
 
 
-def load_model(spec: str):
-    """Model from a fit-result JSON path or ``name[:parameter-set]`` (ValueError naming the problem)."""
+def load_model(spec: str, lpp: float | None = None):
+    """Model from a fit-result JSON path or ``name[:parameter-set]`` (ValueError naming the problem), at
+    the ship length it was fitted at, or Froude-scaled to ``lpp`` [m] when given and the model can be
+    (``scaled``); a model that cannot be rescaled keeps its coefficients and ``lpp`` only sets the
+    length of the manoeuvre (step, execute time, non-dimensional metrics), as before."""
     from ..identify.result import model_from
 
-    return model_from(spec)[0]
+    model = model_from(spec)[0]
+    ml = getattr(model, "lpp", None)
+    if lpp is not None and ml is not None and abs(ml / lpp - 1.0) > 1e-12 and hasattr(model, "scaled"):
+        print(f"note: {model.name} Froude-scaled from Lpp {ml:g} m to {lpp:g} m", file=sys.stderr)
+        model = model.scaled(lpp)
+    return model
 
 
 def _floats(text: str, what: str) -> list[float]:
@@ -104,7 +119,9 @@ def _metrics(args) -> int:
     out = []
     for f in args.logs:
         log = read_log(f, lpp=args.lpp) if args.lpp else read_log(f)
-        m = metrics(log, lpp=args.lpp, kind=args.kind, reference_offset=args.reference_offset, name=Path(f).name)
+        rud, chk = parse_zigzag(args.zigzag) if args.zigzag else (None, None)
+        m = metrics(log, lpp=args.lpp, kind=args.kind, reference_offset=args.reference_offset, name=Path(f).name,
+                    rudder_deg=rud, check_deg=chk)
         out.append({"file": str(f), **m.to_dict()})
     _write_or_print(json.dumps(out, indent=2) + "\n", args.output, args.force)
     if args.output:
@@ -122,7 +139,7 @@ def _summary(label, d) -> str:
 def _simulate(args) -> int:
     from ..manoeuvres import turning_circle, zigzag
 
-    model = load_model(args.model)
+    model = load_model(args.model, args.lpp)
     rate = math.radians(args.rudder_rate) if args.rudder_rate is not None else None
     if args.turning is not None:
         if not args.turning > 0:
@@ -130,10 +147,7 @@ def _simulate(args) -> int:
         res = turning_circle(model, args.turning, speed=args.speed, side=args.side, rudder_rate=rate, lpp=args.lpp,
                              method=args.method, rtol=_rtol(args))
     else:
-        try:
-            d, p = (float(v) for v in args.zigzag.split("/"))
-        except ValueError:
-            raise ValueError(f"--zigzag '{args.zigzag}': give rudder/heading angles in degrees, e.g. 20/20") from None
+        d, p = parse_zigzag(args.zigzag)
         res = zigzag(model, d, p, speed=args.speed, first=args.side, rudder_rate=rate, lpp=args.lpp,
                      method=args.method, rtol=_rtol(args))
     for i, m in enumerate(res.metrics):
@@ -156,7 +170,7 @@ def _simulate(args) -> int:
 def _sweep(args) -> int:
     from ..manoeuvres import ship_info, turning_sweep
 
-    model = load_model(args.model)
+    model = load_model(args.model, args.lpp)
     rud = _floats(args.rudder, "--rudder")
     if args.speed is None:
         u0 = ship_info(model).get("design_speed")

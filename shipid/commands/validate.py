@@ -19,6 +19,8 @@ def _common(p) -> None:
     p.add_argument("--rudder-sign", type=float, choices=(1.0, -1.0), default=1.0, metavar="{1,-1}",
                    help="multiply the logged rudder angle by this before the replay (-1 for the MARIN KVLCC2 files, "
                         "whose positive rudder turns to port)")
+    p.add_argument("--zigzag", metavar="D/C", default=None,
+                   help="nominal rudder/check angles [deg] of the zigzag logs, e.g. 10/5 (default: read from each log)")
     p.add_argument("--no-closed-loop", action="store_true",
                    help="skip the model's own closed-loop standard manoeuvre matching each log (replay only)")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
@@ -54,6 +56,12 @@ def _check(args) -> Path:
     return out
 
 
+def _zigzag(args):
+    from ._common import parse_zigzag
+
+    return parse_zigzag(args.zigzag) if args.zigzag else None
+
+
 def _line(d: dict) -> str:
     rm = d["rmse"]
     parts = [f"{d['name']}: {d['manoeuvre'] or 'no standard manoeuvre'}"]
@@ -74,7 +82,7 @@ def _validate(args) -> int:
 
     out = _check(args)
     res = validate(args.result, args.logs, args.lpp, rudder_sign=args.rudder_sign,
-                   closed_loop=not args.no_closed_loop)
+                   closed_loop=not args.no_closed_loop, zigzag_angles=_zigzag(args))
     atomic_write_text(out, json.dumps(res, indent=2, allow_nan=False) + "\n", force=args.force)
     for d in res:
         print(_line(d))
@@ -95,8 +103,8 @@ def _report(args) -> int:
 
     out = _check(args)
     model, res = resolve_model(args.result)
-    vals = [validate_one(model, lg, lpp=args.lpp, rudder_sign=args.rudder_sign, closed_loop=not args.no_closed_loop)
-            for lg in load_logs(args.logs, lpp=args.lpp)]
+    vals = [validate_one(model, lg, lpp=args.lpp, rudder_sign=args.rudder_sign, closed_loop=not args.no_closed_loop,
+                         zigzag_angles=_zigzag(args)) for lg in load_logs(args.logs, lpp=args.lpp)]
     text = render_report(res, args.logs, title=args.title, validations=vals)
     atomic_write_text(out, text, force=args.force)
     for v in vals:

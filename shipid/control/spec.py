@@ -56,7 +56,10 @@ def problem_from_dict(doc: dict, *, where: str = "problem", base_dir: Path | Non
             raise ValueError(f"{where}: fit_result '{p}' is not valid JSON ({exc})") from None
         if "model" not in fit or "coef" not in fit:
             raise ValueError(f"{where}: fit_result '{p}' needs keys 'model' and 'coef' (a `shipid fit` result)")
-        model = get_model(fit["model"], {k: float(v) for k, v in fit["coef"].items()})
+        from ..identify.result import FitResult
+
+        # the result's model_options carry the ship it was fitted at (lpp, particulars)
+        model = FitResult.from_dict(fit, source=str(p)).to_model()
     elif "model" in doc:
         model = get_model(doc["model"], doc.get("params"), **dict(doc.get("model_options", {})))
     else:
