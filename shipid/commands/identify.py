@@ -29,7 +29,18 @@ def register(sub) -> None:
     p.add_argument("--fixed", action="append", metavar="NAME[=VALUE]", help="parameters to hold fixed")
     p.add_argument("--passes", type=int, default=2, help="EKF passes (default 2)")
     p.add_argument("--tune-noise", action="store_true", help="tune noise levels by innovation likelihood")
-    p.add_argument("--refine", action="store_true", help="refine with an output-error least-squares fit")
+    p.add_argument("--refine", nargs="?", const="output-error", default="auto",
+                   choices=("auto", "none", "output-error", "metrics"),
+                   help="refinement after the EKF: 'metrics' (output error + the training runs' own standard-manoeuvre "
+                        "metrics), 'output-error', 'none'; default 'auto' = metrics when the logs hold turning circles "
+                        "and zigzags, else none; a bare --refine means output-error")
+    p.add_argument("--max-nfev", type=int, default=60, help="evaluation limit of the refinement (default 60)")
+    p.add_argument("--dt", default="auto", metavar="auto|K",
+                   help="use every K-th sample; default auto: >= 25 steps per fastest time constant of the model")
+    p.add_argument("--no-neutral", action="store_true",
+                   help="do not take the rudder neutral angle (delta0) from the straight approaches of the logs")
+    p.add_argument("--start", choices=("staged", "given"), default="staged",
+                   help="staged start values (response-nl: the seed terms first) or the start model as given")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(handler=_fit)
 
@@ -91,27 +102,38 @@ def _fixed(args, model):
     return names or None
 
 
+def _dt(args):
+    if args.dt == "auto":
+        return "auto"
+    try:
+        k = int(args.dt)
+    except ValueError:
+        k = 0
+    if k < 1:
+        raise ValueError(f"--dt {args.dt}: give 'auto' or a positive whole number of samples, e.g. --dt 4")
+    return k
+
+
 def _fit(args) -> int:
-    from ..identify import EKFIdentifier
+    from ..identify.recipe import fit_logs
 
     out = Path(args.output)
     if out.exists() and not args.force:
         raise ValueError(f"{out}: output exists; choose another name or pass --force to overwrite it")
     if args.passes < 1:
         raise ValueError(f"--passes must be >= 1, got {args.passes}")
+    if args.max_nfev < 1:
+        raise ValueError(f"--max-nfev must be >= 1, got {args.max_nfev}")
     logs = read_logs(args.logs, args)
     model = _start_model(args, _logs_lpp(logs))
     for lg in logs:
         if lg.missing or lg.dropouts:
             print(f"note: {lg.summary()}", file=sys.stderr)
-    ident = EKFIdentifier(model, estimate=_names(args.estimate) or None, fixed=_fixed(args, model),
-                          n_passes=args.passes, tune_noise=args.tune_noise, progress=not args.no_progress)
-    ident.fit(logs)
-    result = ident.result()
-    if args.refine:
-        from ..identify.batch import OutputErrorRefiner
-
-        result = OutputErrorRefiner(ident.to_model(), estimate=ident.estimated_).fit(logs, start=ident).result()
+    fit = fit_logs(logs, model, lpp=args.lpp, estimate=_names(args.estimate) or None, fixed=_fixed(args, model),
+                   start=args.start, neutral=not args.no_neutral, dt=_dt(args),
+                   refine=None if args.refine == "none" else args.refine, n_passes=args.passes,
+                   max_nfev=args.max_nfev, tune_noise=args.tune_noise, progress=not args.no_progress, log=print)
+    result = fit.result()
     result.to_json(out, force=args.force)
     _print_result(result)
     print(f"wrote {out}")
