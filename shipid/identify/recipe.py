@@ -80,7 +80,14 @@ class RecipeFit:
 
     @property
     def final(self):
+        """The last stage that ran (the refiner, else the EKF)."""
         return self.refiner if self.refiner is not None else self.ekf
+
+    def __getattr__(self, key):
+        # the fitted attributes of the last stage (coef_, coef_std_, success_, message_, logs_, ...)
+        if key.endswith("_") and not key.startswith("_"):
+            return getattr(self.final, key)
+        raise AttributeError(f"RecipeFit has no attribute {key!r}")
 
     @property
     def success(self) -> bool:
