@@ -25,6 +25,21 @@ def parse_pairs(items, option: str, convert=str) -> dict:
     return out
 
 
+def parse_zigzag(text: str, option: str = "--zigzag") -> tuple[float, float]:
+    """``"10/5"`` -> ``(10.0, 5.0)``: a zigzag's rudder and check (heading) angles [deg], both positive;
+    ``"10"`` means 10/10.  ValueError naming the option otherwise."""
+    parts = str(text).split("/")
+    try:
+        vals = [float(v) for v in parts]
+    except ValueError:
+        vals = []
+    if len(vals) == 1:
+        vals = vals * 2
+    if len(vals) != 2 or not all(v > 0 for v in vals):
+        raise ValueError(f"{option} '{text}': give rudder/heading angles in degrees (rudder/check), e.g. 20/20 or 10/5")
+    return vals[0], vals[1]
+
+
 def add_log_options(p) -> None:
     """The options that say how to read trial logs: one copy for every command that reads logs
     (fit, log, metrics, validate, report); :func:`read_logs` applies them."""

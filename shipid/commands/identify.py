@@ -29,7 +29,18 @@ def register(sub) -> None:
     p.add_argument("--fixed", action="append", metavar="NAME[=VALUE]", help="parameters to hold fixed")
     p.add_argument("--passes", type=int, default=2, help="EKF passes (default 2)")
     p.add_argument("--tune-noise", action="store_true", help="tune noise levels by innovation likelihood")
-    p.add_argument("--refine", action="store_true", help="refine with an output-error least-squares fit")
+    p.add_argument("--refine", nargs="?", const="output-error", default="auto",
+                   choices=("auto", "none", "output-error", "metrics"),
+                   help="refinement after the EKF: 'metrics' (output error + the training runs' own standard-manoeuvre "
+                        "metrics), 'output-error', 'none'; default 'auto' = metrics when the logs hold turning circles "
+                        "and zigzags, else none; a bare --refine means output-error")
+    p.add_argument("--max-nfev", type=int, default=60, help="evaluation limit of the refinement (default 60)")
+    p.add_argument("--dt", default="auto", metavar="auto|K",
+                   help="use every K-th sample; default auto: >= 25 steps per fastest time constant of the model")
+    p.add_argument("--no-neutral", action="store_true",
+                   help="do not take the rudder neutral angle (delta0) from the straight approaches of the logs")
+    p.add_argument("--start", choices=("staged", "given"), default="staged",
+                   help="staged start values (response-nl: the seed terms first) or the start model as given")
     p.add_argument("--wind", nargs="?", const="auto", default=None, metavar="GEOMETRY",
                    help="add wind forces (Fujiwara) with the logs' true wind as inputs: 'esso-osaka-3m' or a JSON "
                         "file of shipid.environment.WindForce fields (bare --wind: from the logs' ship)")
@@ -47,16 +58,33 @@ def register(sub) -> None:
     d.set_defaults(handler=_demo)
 
 
-def _start_model(args):
+def _logs_lpp(logs):
+    """The one ship length [m] of the logs' particulars (None when unknown; ValueError when they differ)."""
+    lpps = {float(lg.ship.lpp) for lg in logs if getattr(lg, "ship", None) is not None and lg.ship.lpp}
+    if len(lpps) > 1:
+        raise ValueError(f"the logs belong to ships of different lengths {sorted(lpps)} m; fit one ship at a time "
+                         "(or pass --lpp)")
+    return lpps.pop() if lpps else None
+
+
+def _start_model(args, lpp=None):
+    """The start model at the logs' ship length ``lpp`` (a named parameter set is Froude-scaled to it, an
+    earlier result of another length too): a start never comes from another ship's scale."""
     from ..identify import model_from
     from ..models import get_model, model_class
 
     cls = model_class(args.model)
-    opts = {"lpp": args.lpp} if (args.lpp is not None and "lpp" in cls.__init__.__code__.co_varnames) else {}
+    L = args.lpp if args.lpp is not None else lpp
+    opts = {"lpp": L} if (L is not None and "lpp" in cls.__init__.__code__.co_varnames) else {}
     if args.params is None:
         return cls(**opts)
     if args.params.endswith(".json") or Path(args.params).is_file():
-        return model_from(args.params, model=args.model)[0]
+        model = model_from(args.params, model=args.model)[0]
+        ml = getattr(model, "lpp", None)
+        if L is not None and ml is not None and abs(ml / L - 1.0) > 1e-9 and hasattr(model, "scaled"):
+            print(f"note: start values {args.params} (Lpp {ml:g} m) Froude-scaled to the logs' {L:g} m", file=sys.stderr)
+            model = model.scaled(L)
+        return model
     return get_model(args.model, args.params, **opts)
 
 
@@ -86,8 +114,34 @@ def _fixed(args, model):
     return names or None
 
 
+def _dt(args):
+    if args.dt == "auto":
+        return "auto"
+    try:
+        k = int(args.dt)
+    except ValueError:
+        k = 0
+    if k < 1:
+        raise ValueError(f"--dt {args.dt}: give 'auto' or a positive whole number of samples, e.g. --dt 4")
+    return k
+
+
+def _lib_errors(call):
+    """Run ``call()``; the library's advice re-worded for the CLI."""
+    try:
+        return call()
+    except ValueError as exc:
+        msg = str(exc)
+        if "give meas_std=" in msg:  # the library's advice in the CLI's words
+            msg = msg.replace("give meas_std={...}", "pass --meas-std CH=STD, e.g. --meas-std psi=0.002")
+        elif "not finite in the initial point" in msg:
+            msg = (f"the model cannot be evaluated at the start values ({msg.rstrip('.')}); check --fixed "
+                   "and --params values")
+        raise ValueError(msg) from None
+
+
 def _fit(args) -> int:
-    from ..identify import EKFIdentifier
+    from ..identify.recipe import fit_logs
 
     out = check_output_path(args.output, force=args.force, inputs=[*args.logs, args.params, args.ship],
                             what="result")
@@ -100,34 +154,31 @@ def _fit(args) -> int:
     for k, v in (meas_std or {}).items():
         if not (np.isfinite(v) and v > 0):
             raise ValueError(f"--meas-std {k}={v}: give a positive standard deviation in SI units, e.g. psi=0.002")
-    model = _start_model(args)
+    if args.max_nfev < 1:
+        raise ValueError(f"--max-nfev must be >= 1, got {args.max_nfev}")
     logs = read_logs(args.logs, args)
+    model = _start_model(args, _logs_lpp(logs))
     for lg in logs:
         if lg.missing or lg.dropouts:
             print(f"note: {lg.summary()}", file=sys.stderr)
-    extra = {}
     if args.wind or args.current:
+        # wind/current models: the EKF alone (the recipe's staged starts and refinement are not wired
+        # for the environment wrappers yet)
         from ..environment.cli import environment_model
+        from ..identify import EKFIdentifier
 
         model, extra = environment_model(model, logs, wind=args.wind, current=args.current)
-    ident = EKFIdentifier(model, estimate=_names(args.estimate) or None, fixed=_fixed(args, model),
-                          n_passes=args.passes, tune_noise=args.tune_noise, progress=progress_on(args),
-                          meas_std=meas_std, **extra)
-    try:
-        ident.fit(logs)
-    except ValueError as exc:
-        msg = str(exc)
-        if "give meas_std=" in msg:  # the library's advice in the CLI's words
-            msg = msg.replace("give meas_std={...}", "pass --meas-std CH=STD, e.g. --meas-std psi=0.002")
-        elif "not finite in the initial point" in msg:
-            msg = (f"the model cannot be evaluated at the start values ({msg.rstrip('.')}); check --fixed "
-                   "and --params values")
-        raise ValueError(msg) from None
-    result = ident.result()
-    if args.refine:
-        from ..identify.batch import OutputErrorRefiner
-
-        result = OutputErrorRefiner(ident.to_model(), estimate=ident.estimated_).fit(logs, start=ident).result()
+        ident = EKFIdentifier(model, estimate=_names(args.estimate) or None, fixed=_fixed(args, model),
+                              n_passes=args.passes, tune_noise=args.tune_noise, progress=progress_on(args),
+                              meas_std=meas_std, **extra)
+        fit = _lib_errors(lambda: ident.fit(logs))
+    else:
+        fit = _lib_errors(lambda: fit_logs(
+            logs, model, lpp=args.lpp, estimate=_names(args.estimate) or None, fixed=_fixed(args, model),
+            start=args.start, neutral=not args.no_neutral, dt=_dt(args),
+            refine=None if args.refine == "none" else args.refine, n_passes=args.passes, max_nfev=args.max_nfev,
+            tune_noise=args.tune_noise, progress=progress_on(args), meas_std=meas_std, log=print))
+    result = fit.result()
     result.to_json(out, force=args.force)
     _print_result(result)
     print(f"wrote {out}")

@@ -10,7 +10,7 @@ import math
 import sys
 from pathlib import Path
 
-from ._common import add_log_options, check_output_path, read_logs
+from ._common import add_log_options, check_output_path, parse_zigzag, read_logs
 
 #: Keys printed in the short metric summaries.
 SUMMARY_KEYS = ("advance_L", "transfer_L", "tactical_diameter_L", "steady_diameter_L", "speed_loss",
@@ -24,6 +24,9 @@ def register(sub) -> None:
     p.add_argument("--kind", choices=("auto", "turning", "zigzag"), default="auto",
                    help="manoeuvre in the log: turning circle, zigzag, or auto (detected from the rudder "
                         "history, default)")
+    p.add_argument("--zigzag", metavar="D/C", default=None,
+                   help="nominal rudder/check angles [deg] of zigzag logs, e.g. 10/5 (default: read from each log, "
+                        "the check angle from the heading deviation at the rudder reversals)")
     p.add_argument("--reference-offset", type=float, default=None, metavar="M",
                    help="logged point's distance forward of midship [m]; positions are moved to midship")
     p.add_argument("-o", "--output", default=None, help="JSON file to write (default: print)")
@@ -34,7 +37,7 @@ def register(sub) -> None:
     p.add_argument("model", metavar="MODEL", help="fit-result JSON or model name[:parameter-set]")
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--turning", type=float, metavar="DEG", help="turning circle with this rudder angle [deg]")
-    g.add_argument("--zigzag", metavar="D/P", help="zigzag rudder/heading angles [deg], e.g. 20/20")
+    g.add_argument("--zigzag", metavar="D/C", help="zigzag rudder/check (heading) angles [deg], e.g. 20/20 or 10/5")
     _common(p)
     p.add_argument("--side", choices=("both", "starboard", "port"), default="both",
                    help="turning side / side of the first zigzag execute")
@@ -53,7 +56,8 @@ def register(sub) -> None:
     p.add_argument("--rudder", default="10,15,25", help="rudder angles [deg], comma separated")
     p.add_argument("--speed", default=None, help="approach speeds [m/s], comma separated (default: design speed)")
     p.add_argument("--side", choices=("both", "starboard", "port"), default="starboard")
-    p.add_argument("--lpp", type=float, default=None, help="ship length [m] (default: the model's)")
+    p.add_argument("--lpp", type=float, default=None,
+                   help="ship length [m]: Froude-scale the model to this ship (default: the length it was fitted at)")
     p.add_argument("--rudder-rate", type=float, default=None, metavar="DEG_S", help="rudder rate [deg/s]")
     _integrator(p)
     p.add_argument("-o", "--output", default=None, help="CSV to write (default: print)")
@@ -63,7 +67,8 @@ def register(sub) -> None:
 
 def _common(p):
     p.add_argument("--speed", type=float, default=None, help="approach speed [m/s] (default: design speed)")
-    p.add_argument("--lpp", type=float, default=None, help="ship length [m] (default: the model's)")
+    p.add_argument("--lpp", type=float, default=None,
+                   help="ship length [m]: Froude-scale the model to this ship (default: the length it was fitted at)")
     p.add_argument("--rudder-rate", type=float, default=None, metavar="DEG_S", help="rudder rate [deg/s]")
     _integrator(p)
 
@@ -80,11 +85,19 @@ def _rtol(args) -> float:
     return args.rtol
 
 
-def load_model(spec: str):
-    """Model from a fit-result JSON path or ``name[:parameter-set]`` (ValueError naming the problem)."""
+def load_model(spec: str, lpp: float | None = None):
+    """Model from a fit-result JSON path or ``name[:parameter-set]`` (ValueError naming the problem), at
+    the ship length it was fitted at, or Froude-scaled to ``lpp`` [m] when given and the model can be
+    (``scaled``); a model that cannot be rescaled keeps its coefficients and ``lpp`` only sets the
+    length of the manoeuvre (step, execute time, non-dimensional metrics), as before."""
     from ..identify.result import model_from
 
-    return model_from(spec)[0]
+    model = model_from(spec)[0]
+    ml = getattr(model, "lpp", None)
+    if lpp is not None and ml is not None and abs(ml / lpp - 1.0) > 1e-12 and hasattr(model, "scaled"):
+        print(f"note: {model.name} Froude-scaled from Lpp {ml:g} m to {lpp:g} m", file=sys.stderr)
+        model = model.scaled(lpp)
+    return model
 
 
 def _floats(text: str, what: str) -> list[float]:
@@ -119,8 +132,10 @@ def _metrics(args) -> int:
         raise ValueError(f"--reference-offset {args.reference_offset}: give the logged point's distance forward "
                          "of midship in metres (a finite number)")
     out = []
+    rud, chk = parse_zigzag(args.zigzag) if args.zigzag else (None, None)
     for f, log in zip(args.logs, read_logs(args.logs, args)):
-        m = metrics(log, lpp=args.lpp, kind=args.kind, reference_offset=args.reference_offset, name=Path(f).name)
+        m = metrics(log, lpp=args.lpp, kind=args.kind, reference_offset=args.reference_offset, name=Path(f).name,
+                    rudder_deg=rud, check_deg=chk)
         out.append({"file": str(f), **m.to_dict()})
     _write_or_print(dumps_json(out), args.output, args.force)
     if args.output:
@@ -159,7 +174,7 @@ def _simulate(args) -> int:
         return simulate_draws(args, args.model)
     if args.metrics_output:
         raise ValueError("--metrics-output needs --draws N (the intervals of N parameter draws)")
-    model = load_model(args.model)
+    model = load_model(args.model, args.lpp)
     rate = math.radians(args.rudder_rate) if args.rudder_rate is not None else None
     if args.turning is not None:
         if not (math.isfinite(args.turning) and 0 < args.turning <= 90):
@@ -167,10 +182,7 @@ def _simulate(args) -> int:
         res = turning_circle(model, args.turning, speed=args.speed, side=args.side, rudder_rate=rate, lpp=args.lpp,
                              method=args.method, rtol=_rtol(args))
     else:
-        try:
-            d, p = (float(v) for v in args.zigzag.split("/"))
-        except ValueError:
-            raise ValueError(f"--zigzag '{args.zigzag}': give rudder/heading angles in degrees, e.g. 20/20") from None
+        d, p = parse_zigzag(args.zigzag)
         res = zigzag(model, d, p, speed=args.speed, first=args.side, rudder_rate=rate, lpp=args.lpp,
                      method=args.method, rtol=_rtol(args))
     for m in res.metrics:
@@ -197,7 +209,7 @@ def _sweep(args) -> int:
     from ..manoeuvres import ship_info, turning_sweep
 
     _check_common(args)
-    model = load_model(args.model)
+    model = load_model(args.model, args.lpp)
     rud = _floats(args.rudder, "--rudder")
     if args.speed is None:
         u0 = ship_info(model).get("design_speed")

@@ -19,6 +19,8 @@ def _common(p) -> None:
     # --lpp (default: from the log, then the model), --rudder-sign (-1: the file's rudder is positive to port;
     # the MARIN reader flips by itself), --schema, --units, ...: read exactly as `shipid fit` reads
     add_log_options(p)
+    p.add_argument("--zigzag", metavar="D/C", default=None,
+                   help="nominal rudder/check angles [deg] of the zigzag logs, e.g. 10/5 (default: read from each log)")
     p.add_argument("--no-closed-loop", action="store_true",
                    help="skip the model's own closed-loop standard manoeuvre matching each log (replay only)")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
@@ -63,6 +65,12 @@ def _check(args) -> Path:
     return out
 
 
+def _zigzag(args):
+    from ._common import parse_zigzag
+
+    return parse_zigzag(args.zigzag) if args.zigzag else None
+
+
 def _line(d: dict) -> str:
     rm = d["rmse"]
     parts = [f"{d['name']}: {d['manoeuvre'] or 'no standard manoeuvre'}"]
@@ -85,7 +93,8 @@ def _validate(args) -> int:
     out = _check(args)
     horizons = _horizons(args.horizon)
     logs = read_logs(args.logs, args)
-    vals = validate_logs(args.result, logs, args.lpp, closed_loop=not args.no_closed_loop)
+    vals = validate_logs(args.result, logs, args.lpp, closed_loop=not args.no_closed_loop,
+                         zigzag_angles=_zigzag(args))
     res = [v.to_dict() for v in vals]
     validate_draws(args, args.result, vals, res)  # --draws N: intervals inside each "predicted" block
     if horizons:
@@ -132,7 +141,8 @@ def _report(args) -> int:
 
     out = _check(args)
     model, res = resolve_model(args.result)
-    vals = [validate_one(model, lg, lpp=args.lpp, closed_loop=not args.no_closed_loop)
+    vals = [validate_one(model, lg, lpp=args.lpp, closed_loop=not args.no_closed_loop,
+                         zigzag_angles=_zigzag(args))
             for lg in read_logs(args.logs, args)]
     from .uncertainty import check_draws
 

@@ -26,7 +26,7 @@ from ..simulate import simulate
 from .data import noise_std_from_data, prepare_logs
 from .diagnostics import identifiability
 from .identifier import NotFittedError
-from .result import FitResult, diagnostics_to_json, software_versions
+from .result import FitResult, _inputs, diagnostics_to_json, fitted_ship, software_versions
 
 __all__ = ["OutputErrorRefiner"]
 
@@ -286,10 +286,11 @@ class OutputErrorRefiner:
         if not hasattr(self, "coef_"):
             raise NotFittedError("this OutputErrorRefiner is not fitted yet: call fit(logs) first")
         diag = diagnostics_to_json(self.diagnostics_)
+        opts, ship = fitted_ship(self.model, self.logs_)
         return FitResult(
             model=self.model.name, coef={k: float(v) for k, v in self.coef_.items()},
             coef_std={k: float(v) for k, v in self.coef_std_.items()}, cov=self.cov_.copy(), diagnostics=diag,
-            inputs=[dict(m) for m in self.logs_], method="output-error",
+            inputs=_inputs(self.logs_), method="output-error",
             settings={"estimated": self.estimated_, "channels": self.channels_, "max_nfev": self.max_nfev,
                       "input_hold": self.input_hold,
                       "log_weights": None if self.log_weights is None else [float(w) for w in self.log_weights],
@@ -298,4 +299,5 @@ class OutputErrorRefiner:
             created=datetime.now(timezone.utc).isoformat(timespec="seconds"),
             extra={"cost_start": self.cost_start_, "cost": self.cost_,
                    "rms_normalised_residual": self.rms_normalised_residual_},
+            model_options=opts, ship=ship,
         )
