@@ -25,6 +25,21 @@ def parse_pairs(items, option: str, convert=str) -> dict:
     return out
 
 
+def parse_zigzag(text: str, option: str = "--zigzag") -> tuple[float, float]:
+    """``"10/5"`` -> ``(10.0, 5.0)``: a zigzag's rudder and check (heading) angles [deg], both positive;
+    ``"10"`` means 10/10.  ValueError naming the option otherwise."""
+    parts = str(text).split("/")
+    try:
+        vals = [float(v) for v in parts]
+    except ValueError:
+        vals = []
+    if len(vals) == 1:
+        vals = vals * 2
+    if len(vals) != 2 or not all(v > 0 for v in vals):
+        raise ValueError(f"{option} '{text}': give rudder/heading angles in degrees (rudder/check), e.g. 20/20 or 10/5")
+    return vals[0], vals[1]
+
+
 def add_log_options(p) -> None:
     """The options that say how to read trial logs: one copy for every command that reads logs
     (fit, log, metrics, validate, report); :func:`read_logs` applies them."""
@@ -81,11 +96,12 @@ def read_logs(paths, args) -> list:
     return logs
 
 
-def json_and_csv_outputs(output, force: bool):
+def json_and_csv_outputs(output, force: bool, inputs=()):
     """``(out.json, out.csv)`` for commands that write a JSON summary with a CSV beside it.
 
-    ValueError when the name does not end in .json, its folder is missing, or
-    either file exists without ``--force``.
+    ValueError when the name does not end in .json, its folder is missing or
+    not writable, either file is one of ``inputs``, or either exists without
+    ``--force`` (checked before any computation).
     """
     from pathlib import Path
 
@@ -94,8 +110,73 @@ def json_and_csv_outputs(output, force: bool):
         raise ValueError(f"{out}: the output must be a .json file (a CSV is written beside it)")
     csv = out.with_suffix(".csv")
     for f in (out, csv):
-        if f.exists() and not force:
-            raise ValueError(f"{f}: output exists; choose another name or pass --force to overwrite it")
-    if not out.parent.exists():
-        raise ValueError(f"{out}: folder {out.parent} does not exist; create it first")
+        check_output_path(f, force=force, inputs=inputs)
     return out, csv
+
+
+def check_output_path(path, *, force: bool, inputs=(), what: str = "output"):
+    """The output checks of :func:`shipid._io.check_output_path` (before a long computation)."""
+    from .._io import check_output_path as check
+
+    return check(path, force=force, inputs=inputs, what=what)
+
+
+def add_progress_option(p) -> None:
+    """``--progress`` / ``--no-progress``; default: on when stderr is a terminal."""
+    p.add_argument("--progress", dest="progress", action="store_true", default=None,
+                   help="show progress (default: on when stderr is a terminal)")
+    p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress output")
+
+
+def progress_on(args) -> bool:
+    """Whether to show progress for ``args`` (see :func:`add_progress_option`)."""
+    import sys
+
+    value = getattr(args, "progress", None)
+    if value is None:
+        return bool(getattr(sys.stderr, "isatty", lambda: False)())
+    return bool(value)
+
+
+def number(text: str, option: str, *, low: float | None = None, low_open: bool = False,
+           integer: bool = False, high: float | None = None):
+    """Parse an option value as a finite number (ValueError naming the option, the value and the range)."""
+    import math
+
+    from .._io import short
+
+    kind = "whole number" if integer else "number"
+    try:
+        v = int(text) if integer else float(text)
+    except (TypeError, ValueError, OverflowError):
+        raise ValueError(f"{option} {short(text, 40)}: not a {kind}; give e.g. {option} "
+                         f"{'10' if integer else '1.5'}") from None
+    if not math.isfinite(v):
+        raise ValueError(f"{option} {text}: give a finite {kind}")
+    if low is not None and (v < low or (low_open and v == low)):
+        raise ValueError(f"{option} {short(text, 40)}: must be {'>' if low_open else '>='} {low:g}")
+    if high is not None and v > high:
+        raise ValueError(f"{option} {short(text, 40)}: must be <= {high:g}")
+    return v
+
+
+#: Units of the channels that appear in CSV outputs (SI, radians), for the headers.
+CHANNEL_UNITS = {"time": "s", "t": "s", "x": "m", "y": "m", "psi": "rad", "u": "m/s", "v": "m/s", "r": "rad/s",
+                 "p": "rad/s", "phi": "rad", "delta": "rad", "n": "rps", "T": "N", "phi_p": "rad"}
+
+
+def units_header(frame, model=None):
+    """``frame`` with ``name [unit]`` column (and index) names where the unit is known
+    (the model's ``units`` first, then :data:`CHANNEL_UNITS`); other names unchanged."""
+    units = dict(CHANNEL_UNITS)
+    if model is not None:
+        units.update(getattr(model, "units", {}) or {})
+
+    def label(name):
+        unit = units.get(str(name))
+        return f"{name} [{unit}]" if unit and "[" not in str(name) else name
+
+    out = frame.rename(columns=label)
+    if out.index.name is not None:
+        out.index = out.index.rename(label(out.index.name))
+    return out
