@@ -25,6 +25,7 @@ result is kept as ``log.consistency``.  docs/logs.md explains every message.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -139,8 +140,14 @@ class _Ctx:
         self.stride = max(1, self.t.size // 1024)
 
     def col(self, c: str) -> str:
+        """``'r' (column 7)``, or ``'r' (column 7 'r_angvelo')`` when the file names it differently."""
         src = self.log.sources.get(c)
-        return f"'{c}' ({src})" if src else f"'{c}'"
+        if not src:
+            return f"'{c}'"
+        m = re.match(r"column (\d+) '(.*?)\s*(?:[\[(].*)?'$", src)
+        if not m:
+            return f"'{c}' ({src})"
+        return f"'{c}' (column {m.group(1)})" if m.group(2) in ("", c) else f"'{c}' (column {m.group(1)} '{m.group(2)}')"
 
     def add(self, level, check, channels, text, **values):
         self.findings.append(Finding(level, check, tuple(channels), f"{self.label}: {text}", values))
@@ -292,7 +299,7 @@ def _check_yaw_rate(c: _Ctx) -> None:
     if e_fit <= _FIT_GOOD and k < -0.5:
         c.add("error", "yaw_rate", ("r", "psi"),
               f"{who} has the opposite sign to dpsi/dt of {c.col('psi')} (rho = {shown}, dpsi/dt = {k:.3g} r): "
-              "one sign convention is flipped; negate r (schema \"signs\": {\"r\": -1}) or the heading", **vals)
+              "negate r (schema \"signs\": {\"r\": -1}) or the heading", **vals)
         return
     if e_fit > _FIT_GOOD:
         # r does not explain the heading: which other column does?
@@ -316,17 +323,16 @@ def _check_yaw_rate(c: _Ctx) -> None:
         elif e_fit > _FIT_BAD:
             c.add("error", "yaw_rate", ("r", "psi"),
                   f"{who} does not agree with dpsi/dt of {c.col('psi')} (rho = {shown}; no other column does): "
-                  "check that the column is the yaw rate, its unit, and that psi is the heading", **vals)
+                  "check the column, its unit and the heading", **vals)
         else:
             c.add("warning", "yaw_rate", ("r", "psi"),
                   f"{who} agrees only loosely with dpsi/dt of {c.col('psi')} (rho = {shown}, {100 * e_fit:.0f} % "
-                  "unexplained): check the column and its filtering/time alignment", **vals)
+                  "unexplained): check the column, its filtering and time alignment", **vals)
         return
     if 40.0 < k < 80.0 or 1 / 80.0 < k < 1 / 40.0:
-        unit = "psi is in degrees" if k > 1 else "r is in deg/s"
-        c.add("error", "yaw_rate", ("r", "psi"),
-              f"dpsi/dt = {k:.4g} x {who} (57.3 = deg/rad): {unit} but declared in radians; declare the unit "
-              "(units={'psi': 'deg'} / {'r': 'deg/s'}, CLI --units)", **vals)
+        fix = "psi is in degrees: declare units={'psi': 'deg'} (CLI: --units psi=deg)" if k > 1 else \
+            "r is in deg/s: declare units={'r': 'deg/s'} (CLI: --units r=deg/s)"
+        c.add("error", "yaw_rate", ("r", "psi"), f"dpsi/dt = {k:.4g} x {who} (57.3 = deg/rad): {fix}", **vals)
         return
     if abs(k - 1.0) > 0.1:
         c.add("warning", "yaw_rate", ("r", "psi"),
@@ -395,15 +401,14 @@ def _check_velocity_frame(c: _Ctx) -> None:
     vals = dict(error_body=e_body, error_earth=e_earth, lag_samples=lag)
     if e_earth <= _FRAME_GOOD and e_earth < 0.5 * e_body:
         c.add("error", "velocity_frame", ("u", "v"),
-              f"{uv} agree with the earth-fixed dx/dt, dy/dt (median error {100 * e_earth:.0f} %), not with body "
-              f"axes ({100 * e_body:.0f} %): the file's u, v are earth-fixed; pass velocity_frame='earth' "
-              "(CLI: --velocity-frame earth)", **vals)
+              f"{uv} agree with the earth-fixed dx/dt, dy/dt (error {100 * e_earth:.0f} %), not with body axes "
+              f"({100 * e_body:.0f} %): pass velocity_frame='earth' (CLI: --velocity-frame earth)", **vals)
         return
     e_swap = err("ubs", "vbs", lag)
     if e_swap <= _FRAME_GOOD:
         c.add("error", "velocity_frame", ("u", "v"),
-              f"{uv} look swapped: (v, u) integrate to the track (median error {100 * e_swap:.0f} %), (u, v) do not "
-              f"({100 * e_body:.0f} %); map u and v to each other's column", error_swapped=e_swap, **vals)
+              f"{uv} look swapped: (v, u) fit the track (error {100 * e_swap:.0f} %), (u, v) do not "
+              f"({100 * e_body:.0f} %): map u and v to each other's column", error_swapped=e_swap, **vals)
         return
     c.add("warning", "velocity_frame", ("u", "v", "x", "y"),
           f"{uv} agree with neither the body-axis ({100 * e_body:.0f} %) nor the earth-fixed ({100 * e_earth:.0f} %) "
@@ -438,13 +443,11 @@ def _check_rudder_sign(c: _Ctx) -> None:
         return
     held = float(d[seg][int(np.nanargmax(np.abs(off[seg])))])
     vals = dict(execute_time=float(t[i]), delta_held=held, heading_change=turn)
-    what = (f"the first rudder execute ({c.col('delta')} = {math.degrees(held):+.1f} deg from t = {t[i]:g} s) turned "
-            f"the ship {'to port' if turn < 0 else 'to starboard'} (heading {math.degrees(turn):+.1f} deg while "
-            "the rudder was held)")
+    what = (f"the first rudder execute ({c.col('delta')} {math.degrees(held):+.1f} deg, t = {t[i]:.4g} s) turned the "
+            f"ship to {'port' if turn < 0 else 'starboard'} (heading {math.degrees(turn):+.0f} deg)")
     if side * turn <= -_TURN_ERR:
         c.add("error", "rudder_sign", ("delta",),
-              f"{what}; in shipid a positive rudder turns to starboard: the file's rudder sign is opposite, pass "
-              "rudder_sign=-1 (CLI: --rudder-sign -1)", **vals)
+              f"{what}: rudder sign opposite to shipid's; pass rudder_sign=-1 (CLI: --rudder-sign -1)", **vals)
     elif side * turn <= -_TURN_WARN:
         c.add("warning", "rudder_sign", ("delta",),
               f"{what}, against shipid's convention (positive rudder to starboard); check the rudder sign "
@@ -465,7 +468,7 @@ def _check_propeller(c: _Ctx) -> None:
     if neg > 0.8:
         c.add("warning", "propeller", ("n",),
               f"{c.col('n')} is negative (astern) in {100 * neg:.0f} % of the samples while the ship moves ahead "
-              f"(u up to {umax:.3g} m/s): the propeller sign is probably flipped (shipid: n > 0 ahead); negate n",
+              f"(u up to {umax:.3g} m/s): propeller sign flipped? (shipid: n > 0 ahead); negate n",
               fraction_negative=neg)
         return
     # n u [rps m/s] ~ g Fn^2 / (J D/L): 1..150 for displacement ships and their models at any scale
@@ -477,12 +480,12 @@ def _check_propeller(c: _Ctx) -> None:
             return   # the ship's length says rps (checked when reading)
     if score > _NU_ERR:
         c.add("error", "propeller", ("n",),
-              f"{c.col('n')} looks like rpm: n x u = {score:.0f} rps m/s while moving ahead (ships and their models "
-              "stay within ~1-150); declare units={'n': 'rpm'} (CLI: --units n=rpm)", **vals)
+              f"{c.col('n')} looks like rpm: n x u = {score:.0f} rps m/s while moving ahead (ships and models: "
+              "~1-150); declare units={'n': 'rpm'} (CLI: --units n=rpm)", **vals)
     elif score > _NU_WARN:
         c.add("warning", "propeller", ("n",),
-              f"{c.col('n')} may be in rpm: n x u = {score:.0f} rps m/s while moving ahead (ships and their models "
-              "stay within ~1-150; fast craft may exceed it); declare units={'n': 'rpm'} if so, or give lpp", **vals)
+              f"{c.col('n')} may be in rpm: n x u = {score:.0f} rps m/s while moving ahead (ships and models: "
+              "~1-150; fast craft more); if so declare units={'n': 'rpm'}, or give lpp", **vals)
 
 
 def _sig_digits(f: np.ndarray) -> int:
@@ -521,9 +524,9 @@ def _check_position_freeze(c: _Ctx) -> None:
                 max_jump_m=max(jumps) if jumps else 0.0)
     level = "warning" if frac > _FREEZE_WARN else "info"
     c.add(level, "position_freeze", ("x", "y"),
-          f"positions {c.col('x')}, {c.col('y')} freeze while the ship moves on {nf} samples ({100 * frac:.1f} %, "
-          f"{starts.size} stretches, longest {longest:.3g} s) and then jump (up to {vals['max_jump_m']:.3g} m): "
-          "GNSS freezes; give x, y little weight in the fit or drop them", **vals)
+          f"positions {c.col('x')}, {c.col('y')} freeze on {nf} samples while the ship moves ({100 * frac:.1f} %, "
+          f"{starts.size} stretches, longest {longest:.3g} s), then jump (up to {vals['max_jump_m']:.3g} m): "
+          "GNSS freezes; give x, y little weight", **vals)
 
 
 def _check_glitches(c: _Ctx) -> None:
@@ -577,8 +580,7 @@ def _check_glitches(c: _Ctx) -> None:
     parts = ", ".join(f"{c.col(ch)} {k} (first at row {first[ch]})" for ch, k in counts.items())
     level = "warning" if total > max(2, 0.001 * len(c.log)) else "info"
     c.add(level, "glitches", tuple(counts),
-          f"single-sample spikes (a sample far from both neighbours, which agree): {parts}; check the sensor or "
-          "blank those cells", counts=counts, first_rows=first)
+          f"single-sample spikes: {parts}; check the sensor or blank those cells", counts=counts, first_rows=first)
 
 
 _RUN = {"yaw_rate": _check_yaw_rate, "velocity_frame": _check_velocity_frame, "rudder_sign": _check_rudder_sign,
