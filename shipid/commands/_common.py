@@ -76,7 +76,7 @@ def add_log_options(p) -> None:
 
 def read_logs(paths, args) -> list:
     """Read ``paths`` with the options of :func:`add_log_options`; gap warnings are left to the caller
-    (they are in each log's ``summary()``)."""
+    (they are in each log's ``summary()``), consistency warnings are re-issued (one per finding)."""
     from ..logs import read_log
 
     if args.skip_rows is not None and args.skip_rows < 0:
@@ -93,6 +93,9 @@ def read_logs(paths, args) -> list:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)
             logs.append(read_log(path, **kw))
+        # consistency warnings (GNSS freezes, a loose yaw rate, rpm?) matter to every command: one line each
+        for f in (logs[-1].consistency.warnings if logs[-1].consistency is not None else []):
+            warnings.warn(f.message, UserWarning, stacklevel=2)
     return logs
 
 
