@@ -59,8 +59,8 @@ def test_a_2mb_text_cell(tmp_path, capsys):
     lines = [ln if ln.startswith("#") else ln + (",remark" if ln.startswith("time") else ",ok") for ln in _lines()]
     lines[5] = lines[5][:-2] + '"' + "x" * 2_000_000 + '"'
     p = _write(tmp_path, "big.csv", lines)
-    n = len(lines[5])
-    msg = f"`big.csv` row 6: a cell of more than 131072 characters (the row has {n}); a log cell holds a number"
+    msg = (f"`big.csv` row 6: a cell of more than 131072 characters (the row has {len(lines[5])}); "
+           "a log cell holds a number")
     with pytest.raises(LogError, match=msg.replace("(", r"\(").replace(")", r"\)")):
         read_log(p)
     _cli_one_line(["log", str(p)], capsys, msg)
