@@ -78,13 +78,13 @@ def test_deeply_nested_metadata_line_and_ship_files(tmp_path, capsys):
     _cli_one_line(["log", str(p)], capsys, msg)
     sj = tmp_path / "ship.json"
     sj.write_text('{"lpp": ' + "[" * 100_000 + "]" * 100_000 + "}")
-    with pytest.raises(ValueError, match=r"`ship.json`: nested too deeply to be particulars/metadata"):
+    with pytest.raises(ValueError, match=r"`ship.json`: nested more than 64 levels deep; not a ship file"):
         read_ship(sj)
-    _cli_one_line(["log", str(SRC), "--ship", str(sj)], capsys, "`ship.json`: nested too deeply")
+    _cli_one_line(["log", str(SRC), "--ship", str(sj)], capsys, "`ship.json`: nested more than 64 levels deep")
     pytest.importorskip("yaml", reason="PyYAML not installed: YAML ship files untested")
     sy = tmp_path / "ship.yaml"
     sy.write_text("a: " + "[" * 100_000 + "]" * 100_000 + "\n")
-    _cli_one_line(["log", str(SRC), "--ship", str(sy)], capsys, "`ship.yaml`: nested too deeply")
+    _cli_one_line(["log", str(SRC), "--ship", str(sy)], capsys, "`ship.yaml`: nested more than 64 levels deep")
 
 
 def test_true_is_not_a_length(tmp_path, capsys):
