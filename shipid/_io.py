@@ -266,13 +266,16 @@ def _read_text(path: Path, what: str) -> str:
         raise ValueError(f"{path}: not UTF-8 text (byte {exc.start}); give a {what} file") from None
 
 
-def loads_json(text: str, where: str, what: str = "JSON"):
-    """``json.loads`` with one-line errors naming ``where`` and a nesting limit of :data:`MAX_DEPTH`."""
+def loads_json(text: str, where: str, what: str = "JSON", *, advice: str | None = None):
+    """``json.loads`` with one-line errors naming ``where`` and a nesting limit of :data:`MAX_DEPTH`.
+
+    A syntax error reads ``"{where}: not a {what} (not valid JSON: {reason} at line L column C); {advice}"``.
+    """
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise ValueError(f"{where}: not valid JSON ({exc.msg} at line {exc.lineno} column {exc.colno}); "
-                         f"give a {what} file") from None
+        raise ValueError(f"{where}: not a {what} (not valid JSON: {exc.msg} at line {exc.lineno} column "
+                         f"{exc.colno}); {advice or f'give a {what} file'}") from None
     except RecursionError:
         doc = None
         ok = False
@@ -283,10 +286,10 @@ def loads_json(text: str, where: str, what: str = "JSON"):
     return doc
 
 
-def read_json(path, what: str = "JSON"):
+def read_json(path, what: str = "JSON file", *, advice: str | None = None):
     """Read a JSON file the user gave (size, encoding, syntax and depth checked; one-line errors)."""
     path = Path(path)
-    return loads_json(_read_text(path, what), str(path), what)
+    return loads_json(_read_text(path, what), str(path), what, advice=advice)
 
 
 def loads_yaml(text: str, where: str, what: str = "YAML"):

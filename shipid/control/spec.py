@@ -171,7 +171,7 @@ def load_problem(path: str | Path) -> Problem:
     path = Path(path)
     if not path.exists():
         raise ValueError(f"problem file '{path}' not found; give paper-1, paper-2, paper-3 or a PROBLEM.json")
-    doc = read_json(path, "PROBLEM.json")
+    doc = read_json(path, "PROBLEM.json file", advice="see docs/control.md for the format")
     return problem_from_dict(doc, where=f"{path}", base_dir=path.parent)
 
 

@@ -195,7 +195,7 @@ def load_result(path) -> FitResult:
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(f"{p}: no such result file; run `shipid fit` first or check the path")
-    doc = read_json(p, "shipid fit result")
+    doc = read_json(p, "JSON fit result", advice="pass the file written by `shipid fit -o`")
     return FitResult.from_dict(doc, source=str(p))
 
 
