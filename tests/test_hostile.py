@@ -431,3 +431,9 @@ def test_deep_yaml_and_json_are_refused_in_one_line():
     assert _io.loads_yaml("lpp: 4.36\nname: kcs\n", "ship.yaml") == {"lpp": 4.36, "name": "kcs"}
     with pytest.raises(ValueError, match="ship.yaml: not valid YAML .* line 2"):
         _io.loads_yaml("a: [1, 2\n", "ship.yaml")
+
+
+def test_cli_restores_the_signal_handlers(tmp_path):
+    before = signal.getsignal(signal.SIGTERM)
+    main(["models"])
+    assert signal.getsignal(signal.SIGTERM) is before
