@@ -97,28 +97,6 @@ def progress_on(args) -> bool:
     return bool(value)
 
 
-def number(text: str, option: str, *, low: float | None = None, low_open: bool = False,
-           integer: bool = False, high: float | None = None):
-    """Parse an option value as a finite number (ValueError naming the option, the value and the range)."""
-    import math
-
-    from .._io import short
-
-    kind = "whole number" if integer else "number"
-    try:
-        v = int(text) if integer else float(text)
-    except (TypeError, ValueError, OverflowError):
-        raise ValueError(f"{option} {short(text, 40)}: not a {kind}; give e.g. {option} "
-                         f"{'10' if integer else '1.5'}") from None
-    if not math.isfinite(v):
-        raise ValueError(f"{option} {text}: give a finite {kind}")
-    if low is not None and (v < low or (low_open and v == low)):
-        raise ValueError(f"{option} {short(text, 40)}: must be {'>' if low_open else '>='} {low:g}")
-    if high is not None and v > high:
-        raise ValueError(f"{option} {short(text, 40)}: must be <= {high:g}")
-    return v
-
-
 #: Units of the channels that appear in CSV outputs (SI, radians), for the headers.
 CHANNEL_UNITS = {"time": "s", "t": "s", "x": "m", "y": "m", "psi": "rad", "u": "m/s", "v": "m/s", "r": "rad/s",
                  "p": "rad/s", "phi": "rad", "delta": "rad", "n": "rps", "T": "N", "phi_p": "rad"}
