@@ -166,6 +166,13 @@ PROBLEM_CASES = [
     ("u-guess-string", _problem_case(u_guess="middle"), ["p.json", "u_guess"]),
     ("deep", lambda tmp: _write_json(tmp, "p.json", DEEP), ["p.json", "nested"]),
     ("not-json", lambda tmp: _write_json(tmp, "p.json", "{"), ["p.json", "not valid JSON"]),
+    ("u-guess-shape", _problem_case(u_guess=[1, 2, 3]), ["p.json", "u_guess", "shape"]),
+    ("model-options-string", _problem_case(model="mmg", params="kvlcc2", model_options={"lpp": "big"}),
+     ["p.json", "model_options", "number"]),
+    ("state-bounds-order", _problem_case(state_bounds={"r": [0.2, -0.2]}), ["p.json", "state_bounds['r']", "lo <= hi"]),
+    ("fit-result-deep", lambda tmp: (_write_json(tmp, "fr.json", DEEP),
+                                     _write_json(tmp, "p.json", _problem(model=_DROP, params=_DROP, fit_result="fr.json")))[1],
+     ["fr.json", "nested"]),
 ]
 
 
