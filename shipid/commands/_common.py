@@ -87,6 +87,15 @@ def add_progress_option(p) -> None:
     p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress output")
 
 
+def progress_iter(items, args, desc: str):
+    """``items`` wrapped in a tqdm bar when :func:`progress_on` (else unchanged)."""
+    if not progress_on(args):
+        return items
+    from tqdm.auto import tqdm
+
+    return tqdm(items, desc=desc, leave=False)
+
+
 def progress_on(args) -> bool:
     """Whether to show progress for ``args`` (see :func:`add_progress_option`)."""
     import sys

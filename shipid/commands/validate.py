@@ -10,6 +10,8 @@ import math
 import sys
 from pathlib import Path
 
+from ._common import add_progress_option, progress_iter
+
 
 def _common(p) -> None:
     p.add_argument("result", metavar="RESULT.json", help="fit result written by `shipid fit -o`")
@@ -39,6 +41,7 @@ def register(sub) -> None:
     _common(r)
     r.add_argument("-o", "--output", required=True, help="HTML file to write")
     r.add_argument("--title", default=None, help="report title")
+    add_progress_option(r)
     r.set_defaults(handler=_report)
 
 
@@ -93,7 +96,7 @@ def _report(args) -> int:
     out = _check(args)
     model, res = resolve_model(args.result)
     vals = [validate_one(model, lg, lpp=args.lpp, rudder_sign=args.rudder_sign, closed_loop=not args.no_closed_loop)
-            for lg in load_logs(args.logs, lpp=args.lpp)]
+            for lg in progress_iter(load_logs(args.logs, lpp=args.lpp), args, "replaying logs")]
     text = render_report(res, args.logs, title=args.title, validations=vals)
     atomic_write_text(out, text, force=args.force)
     for v in vals:
