@@ -305,6 +305,12 @@ def test_hostile_options(argv, needles, tmp_path, capsys):
 
 
 # --------------------------------------------------------------------------- the write side
+#: Load shipid/_io.py alone in a child process (it needs only numpy): fast start-up for the process tests.
+_LOAD_IO = ("import sys, importlib.util\n"
+            f"spec = importlib.util.spec_from_file_location('shipid_io', {str(REPO / 'shipid' / '_io.py')!r})\n"
+            "_io = importlib.util.module_from_spec(spec)\nspec.loader.exec_module(_io)\n")
+
+
 def test_no_clobber_is_atomic_between_racing_writers(tmp_path):
     """Two writers that both passed an 'exists' check: exactly one wins, the other is told."""
     target = tmp_path / "out.json"
@@ -319,9 +325,8 @@ def test_no_clobber_is_atomic_between_racing_writers(tmp_path):
 
 
 def test_racing_processes_lose_no_result_silently(tmp_path):
-    code = ("import sys; from shipid._io import atomic_write_text, OutputExistsError\n"
-            "try:\n    atomic_write_text(sys.argv[1], sys.argv[2] * 2_000_000)\nexcept OutputExistsError:\n"
-            "    sys.exit(3)\n")
+    code = (_LOAD_IO + "try:\n    _io.atomic_write_text(sys.argv[1], sys.argv[2] * 2_000_000)\n"
+            "except _io.OutputExistsError:\n    sys.exit(3)\n")
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     target = tmp_path / "r.txt"
     procs = [subprocess.Popen([sys.executable, "-c", code, str(target), c], env=env) for c in "abcd"]
@@ -377,7 +382,7 @@ def test_fit_result_with_nan_loglik_is_strict_json(tmp_path):
 
 def test_sigterm_removes_temporary_files(tmp_path):
     """A run killed by SIGTERM while writing leaves no hidden .tmp file (SIGKILL cannot be caught)."""
-    code = ("import sys, time\nfrom shipid import _io\n_io.install_signal_cleanup()\n"
+    code = (_LOAD_IO + "import time\n_io.install_signal_cleanup()\n"
             "orig = _io._fill\n"
             "def slow(tmp, data):\n    orig(tmp, data)\n    print('written', flush=True)\n    time.sleep(60)\n"
             "_io._fill = slow\n_io.atomic_write_text(sys.argv[1], 'x' * 10_000_000)\n")
