@@ -86,7 +86,7 @@ def _show_warning(prog: str):
 
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI; returns the exit code (0 ok, 1 numerical failure, 2 bad input)."""
-    from ._io import install_signal_cleanup
+    from ._io import install_signal_cleanup, restore_signal_handlers
 
     parser = build_parser()
     try:
@@ -97,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "command", None):
         parser.print_help()
         return 2
-    install_signal_cleanup()
+    handlers = install_signal_cleanup()
     prog = f"shipid {args.command}"
     old_show = warnings.showwarning
     warnings.showwarning = _show_warning(prog)
@@ -128,6 +128,7 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     finally:
         warnings.showwarning = old_show
+        restore_signal_handlers(handlers)
 
 
 if __name__ == "__main__":  # pragma: no cover

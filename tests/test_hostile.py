@@ -166,6 +166,13 @@ PROBLEM_CASES = [
     ("u-guess-string", _problem_case(u_guess="middle"), ["p.json", "u_guess"]),
     ("deep", lambda tmp: _write_json(tmp, "p.json", DEEP), ["p.json", "nested"]),
     ("not-json", lambda tmp: _write_json(tmp, "p.json", "{"), ["p.json", "not valid JSON"]),
+    ("u-guess-shape", _problem_case(u_guess=[1, 2, 3]), ["p.json", "u_guess", "shape"]),
+    ("model-options-string", _problem_case(model="mmg", params="kvlcc2", model_options={"lpp": "big"}),
+     ["p.json", "model_options", "number"]),
+    ("state-bounds-order", _problem_case(state_bounds={"r": [0.2, -0.2]}), ["p.json", "state_bounds['r']", "lo <= hi"]),
+    ("fit-result-deep", lambda tmp: (_write_json(tmp, "fr.json", DEEP),
+                                     _write_json(tmp, "p.json", _problem(model=_DROP, params=_DROP, fit_result="fr.json")))[1],
+     ["fr.json", "nested"]),
 ]
 
 
@@ -298,6 +305,12 @@ def test_hostile_options(argv, needles, tmp_path, capsys):
 
 
 # --------------------------------------------------------------------------- the write side
+#: Load shipid/_io.py alone in a child process (it needs only numpy): fast start-up for the process tests.
+_LOAD_IO = ("import sys, importlib.util\n"
+            f"spec = importlib.util.spec_from_file_location('shipid_io', {str(REPO / 'shipid' / '_io.py')!r})\n"
+            "_io = importlib.util.module_from_spec(spec)\nspec.loader.exec_module(_io)\n")
+
+
 def test_no_clobber_is_atomic_between_racing_writers(tmp_path):
     """Two writers that both passed an 'exists' check: exactly one wins, the other is told."""
     target = tmp_path / "out.json"
@@ -312,9 +325,8 @@ def test_no_clobber_is_atomic_between_racing_writers(tmp_path):
 
 
 def test_racing_processes_lose_no_result_silently(tmp_path):
-    code = ("import sys; from shipid._io import atomic_write_text, OutputExistsError\n"
-            "try:\n    atomic_write_text(sys.argv[1], sys.argv[2] * 2_000_000)\nexcept OutputExistsError:\n"
-            "    sys.exit(3)\n")
+    code = (_LOAD_IO + "try:\n    _io.atomic_write_text(sys.argv[1], sys.argv[2] * 2_000_000)\n"
+            "except _io.OutputExistsError:\n    sys.exit(3)\n")
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     target = tmp_path / "r.txt"
     procs = [subprocess.Popen([sys.executable, "-c", code, str(target), c], env=env) for c in "abcd"]
@@ -370,7 +382,7 @@ def test_fit_result_with_nan_loglik_is_strict_json(tmp_path):
 
 def test_sigterm_removes_temporary_files(tmp_path):
     """A run killed by SIGTERM while writing leaves no hidden .tmp file (SIGKILL cannot be caught)."""
-    code = ("import sys, time\nfrom shipid import _io\n_io.install_signal_cleanup()\n"
+    code = (_LOAD_IO + "import time\n_io.install_signal_cleanup()\n"
             "orig = _io._fill\n"
             "def slow(tmp, data):\n    orig(tmp, data)\n    print('written', flush=True)\n    time.sleep(60)\n"
             "_io._fill = slow\n_io.atomic_write_text(sys.argv[1], 'x' * 10_000_000)\n")
@@ -431,3 +443,9 @@ def test_deep_yaml_and_json_are_refused_in_one_line():
     assert _io.loads_yaml("lpp: 4.36\nname: kcs\n", "ship.yaml") == {"lpp": 4.36, "name": "kcs"}
     with pytest.raises(ValueError, match="ship.yaml: not valid YAML .* line 2"):
         _io.loads_yaml("a: [1, 2\n", "ship.yaml")
+
+
+def test_cli_restores_the_signal_handlers(tmp_path):
+    before = signal.getsignal(signal.SIGTERM)
+    main(["models"])
+    assert signal.getsignal(signal.SIGTERM) is before

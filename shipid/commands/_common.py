@@ -131,6 +131,15 @@ def add_progress_option(p) -> None:
     p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress output")
 
 
+def progress_iter(items, args, desc: str):
+    """``items`` wrapped in a tqdm bar when :func:`progress_on` (else unchanged)."""
+    if not progress_on(args):
+        return items
+    from tqdm.auto import tqdm
+
+    return tqdm(items, desc=desc, leave=False)
+
+
 def progress_on(args) -> bool:
     """Whether to show progress for ``args`` (see :func:`add_progress_option`)."""
     import sys
@@ -139,28 +148,6 @@ def progress_on(args) -> bool:
     if value is None:
         return bool(getattr(sys.stderr, "isatty", lambda: False)())
     return bool(value)
-
-
-def number(text: str, option: str, *, low: float | None = None, low_open: bool = False,
-           integer: bool = False, high: float | None = None):
-    """Parse an option value as a finite number (ValueError naming the option, the value and the range)."""
-    import math
-
-    from .._io import short
-
-    kind = "whole number" if integer else "number"
-    try:
-        v = int(text) if integer else float(text)
-    except (TypeError, ValueError, OverflowError):
-        raise ValueError(f"{option} {short(text, 40)}: not a {kind}; give e.g. {option} "
-                         f"{'10' if integer else '1.5'}") from None
-    if not math.isfinite(v):
-        raise ValueError(f"{option} {text}: give a finite {kind}")
-    if low is not None and (v < low or (low_open and v == low)):
-        raise ValueError(f"{option} {short(text, 40)}: must be {'>' if low_open else '>='} {low:g}")
-    if high is not None and v > high:
-        raise ValueError(f"{option} {short(text, 40)}: must be <= {high:g}")
-    return v
 
 
 #: Units of the channels that appear in CSV outputs (SI, radians), for the headers.

@@ -10,7 +10,7 @@ import math
 import sys
 from pathlib import Path
 
-from ._common import add_log_options, read_logs
+from ._common import add_log_options, add_progress_option, progress_iter, read_logs
 
 
 def _common(p) -> None:
@@ -53,6 +53,7 @@ def register(sub) -> None:
     from .uncertainty import add_draws_option
 
     add_draws_option(r)
+    add_progress_option(r)
     r.set_defaults(handler=_report)
 
 
@@ -143,7 +144,7 @@ def _report(args) -> int:
     model, res = resolve_model(args.result)
     vals = [validate_one(model, lg, lpp=args.lpp, closed_loop=not args.no_closed_loop,
                          zigzag_angles=_zigzag(args))
-            for lg in read_logs(args.logs, args)]
+            for lg in progress_iter(read_logs(args.logs, args), args, "replaying logs")]
     from .uncertainty import check_draws
 
     unc = {"draws": check_draws(args), "seed": args.draws_seed, "samples": args.samples} if check_draws(args) else None

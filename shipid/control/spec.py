@@ -65,7 +65,10 @@ def _pairs(doc, key, where):
         w = f"{where}: {key}[{short(name, 20)}]"
         if not (isinstance(val, list) and len(val) == 2):
             raise ValueError(f"{w} must be [lo, hi], got {short(val, 40)}")
-        out[name] = tuple(None if v is None else as_number(v, w) for v in val)
+        lo, hi = (None if v is None else as_number(v, w) for v in val)
+        if lo is not None and hi is not None and lo > hi:
+            raise ValueError(f"{w}: lo {lo:g} > hi {hi:g}; give [lo, hi] with lo <= hi")
+        out[name] = (lo, hi)
     return out
 
 
@@ -100,6 +103,8 @@ def problem_from_dict(doc: dict, *, where: str = "problem", base_dir: Path | Non
         except TypeError as exc:
             raise ValueError(f"{where}: model_options {short(opts, 60)}: {exc}") from None
         except ValueError as exc:
+            if opts and "could not convert" in str(exc):
+                raise ValueError(f"{where}: model_options {short(opts, 60)}: every value must be a number ({exc})") from None
             raise ValueError(f"{where}: {exc}") from None
     else:
         raise ValueError(f"{where}: give 'model' (+ optional 'params') or 'fit_result'")
@@ -143,9 +148,11 @@ def problem_from_dict(doc: dict, *, where: str = "problem", base_dir: Path | Non
     kw["substeps"] = as_int(doc.get("substeps", 4), f"{where}: substeps", low=1)
     check_problem_size(model, kw["n_intervals"], kw["substeps"], where)
     try:
-        return Problem(**kw)
+        problem = Problem(**kw)
+        problem.initial_controls()  # checks the shape of u_guess now, not in the solver
     except (ValueError, IndexError) as exc:
         raise ValueError(f"{where}: {exc}") from None
+    return problem
 
 
 def check_problem_size(model, n_intervals: int, substeps: int, where: str = "problem",
@@ -171,7 +178,7 @@ def load_problem(path: str | Path) -> Problem:
     path = Path(path)
     if not path.exists():
         raise ValueError(f"problem file '{path}' not found; give paper-1, paper-2, paper-3 or a PROBLEM.json")
-    doc = read_json(path, "PROBLEM.json")
+    doc = read_json(path, "PROBLEM.json file", advice="see docs/control.md for the format")
     return problem_from_dict(doc, where=f"{path}", base_dir=path.parent)
 
 
