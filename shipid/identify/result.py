@@ -25,6 +25,21 @@ def diagnostics_to_json(d: dict) -> dict:
     return out
 
 
+def _strict(obj):
+    """A copy of ``obj`` with every non-finite float (NaN, +-inf) replaced by None (JSON null)."""
+    if isinstance(obj, dict):
+        return {k: _strict(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_strict(v) for v in obj]
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if np.isfinite(obj) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    return obj
+
+
 def software_versions() -> dict:
     """Versions of Python and the packages a result depends on."""
     import filterpy
@@ -104,8 +119,10 @@ class FitResult:
         }
 
     def to_json(self, path, *, force: bool = False) -> Path:
-        """Write atomically; an existing file is replaced only with ``force=True``."""
-        return atomic_write_text(path, json.dumps(self.to_dict(), indent=2, allow_nan=True) + "\n", force=force)
+        """Write atomically; an existing file is replaced only with ``force=True``.  Strict JSON:
+        non-finite numbers (a diverged fit's log-likelihood, an undefined statistic) are written as null."""
+        return atomic_write_text(path, json.dumps(_strict(self.to_dict()), indent=2, allow_nan=False) + "\n",
+                                 force=force)
 
     @classmethod
     def from_dict(cls, doc: dict, source: str = "result") -> "FitResult":
