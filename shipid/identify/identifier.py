@@ -476,15 +476,50 @@ class EKFIdentifier:
         return var
 
     def _tune(self, theta_s):
-        qs = 10.0 ** np.arange(-3.0, 2.01, 1.0)
-        rs = np.array([0.5, 1.0, 2.0])
-        Q, Rm = np.meshgrid(qs, rs, indexing="ij")
-        prob = self._problem(theta_s, Q.ravel(), Rm.ravel())
-        out = run_ekf(prob, store=False)
-        ll = np.where(out.diverged, -np.inf, out.loglik)
-        b = int(np.argmax(ll))
-        table = pd.DataFrame({"q_mult": Q.ravel(), "r_mult": Rm.ravel(), "loglik": out.loglik, "diverged": out.diverged})
-        return float(Q.ravel()[b]), float(Rm.ravel()[b]), table
+        """Noise multipliers by innovation likelihood over a grid, evaluated as one batch per round.
+
+        Start grid: process noise x 10^-3 .. 10^2, measurement noise x 0.5, 1, 2.  When the best point
+        lies on an edge of the grid, the grid grows past that edge (three decades of process noise, two
+        octaves of measurement noise) and is evaluated again, up to four times; an optimum still on the
+        edge is reported in ``tuning_note_``.
+        """
+        q_exp = list(np.arange(-3.0, 2.01, 1.0))
+        r_exp = [-1.0, 0.0, 1.0]
+        rows, seen = [], set()
+        self.tuning_note_ = ""
+        for it in range(5):
+            cand = [(q, r) for q in q_exp for r in r_exp if (q, r) not in seen]
+            if cand:
+                Qm = 10.0 ** np.array([c[0] for c in cand])
+                Rm = 2.0 ** np.array([c[1] for c in cand])
+                out = run_ekf(self._problem(theta_s, Qm, Rm), store=False)
+                for (q, r), ll, dv in zip(cand, out.loglik, out.diverged):
+                    seen.add((q, r))
+                    rows.append({"q_mult": 10.0**q, "r_mult": 2.0**r, "loglik": float(ll), "diverged": bool(dv),
+                                 "q_exp": q, "r_exp": r})
+            table = pd.DataFrame(rows)
+            ll = np.where(table["diverged"], -np.inf, table["loglik"])
+            best = table.iloc[int(np.argmax(ll))]
+            grow = False
+            if best["q_exp"] == min(q_exp):
+                q_exp = [min(q_exp) - d for d in (3.0, 2.0, 1.0)] + q_exp
+                grow = True
+            elif best["q_exp"] == max(q_exp):
+                q_exp = q_exp + [max(q_exp) + d for d in (1.0, 2.0, 3.0)]
+                grow = True
+            if best["r_exp"] == min(r_exp):
+                r_exp = [min(r_exp) - d for d in (2.0, 1.0)] + r_exp
+                grow = True
+            elif best["r_exp"] == max(r_exp):
+                r_exp = r_exp + [max(r_exp) + d for d in (1.0, 2.0)]
+                grow = True
+            if not grow:
+                break
+        else:
+            self.tuning_note_ = (f"noise tuning: the best multipliers (process x {best['q_mult']:.3g}, measurement x "
+                                 f"{best['r_mult']:.3g}) are still on the edge of the widened grid")
+        table = table.drop(columns=["q_exp", "r_exp"])
+        return float(best["q_mult"]), float(best["r_mult"]), table
 
     def _finish(self, out: EKFOutput, zs, Ps, prob: EKFProblem, history, used_eq, q_mult, r_mult):
         s = self._setup
@@ -548,6 +583,8 @@ class EKFIdentifier:
         self.diagnostics_ = identifiability(est, cov_s, s["prior_cov_s"], notes=notes)
         self.diagnostics_["nis_mean"] = float(np.nanmean(out.nis[0]))
         self.diagnostics_["nis_expected"] = float(np.mean((np.isfinite(out.innov[0]) & ~out.gated[0]).sum(axis=1)))
+        if self.tune_noise and getattr(self, "tuning_note_", ""):
+            self.diagnostics_["warnings"].append(self.tuning_note_)
         self.diagnostics_["n_gated"] = {m: int(c) for m, c in zip(s["meas"], out.n_gated[0])}
         self.diagnostics_["noise"] = {m: {k: (float(v) if np.isfinite(v) else None) for k, v in row.items()}
                                       for m, row in self.noise_.to_dict(orient="index").items()}
