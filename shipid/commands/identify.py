@@ -17,7 +17,11 @@ def _names(items) -> list[str]:
 def register(sub) -> None:
     p = sub.add_parser("fit", help="identify model coefficients from trial logs (augmented-state EKF)",
                        description="Identify a model's coefficients from one or more trial logs (CSV in the "
-                                   "shipid schema, or MARIN .dat) with the augmented-state EKF.")
+                                   "shipid schema, or MARIN .dat) with the augmented-state EKF.",
+                       epilog="exit status: 0 fit consistent with its noise model; 1 the output-error refinement "
+                              "failed; 2 bad input or option; 3 fit done but NOT consistent (a warning names the "
+                              "channels and likely causes; the result JSON has diagnostics.consistency); "
+                              "4 the filter diverged (result = start values, success false).")
     p.add_argument("logs", nargs="+", metavar="LOG", help="trial log files (.csv, MARIN .dat)")
     p.add_argument("--model", default="kcs-response", help="registered model (see `shipid models`)")
     p.add_argument("--params", default=None, metavar="SET|RESULT.json",
@@ -182,7 +186,31 @@ def _fit(args) -> int:
     result.to_json(out, force=args.force)
     _print_result(result)
     print(f"wrote {out}")
-    return 0 if result.success else 1
+    if not ident.success_:
+        return EXIT_DIVERGED
+    verdict = ident.diagnostics_.get("consistency", {})
+    if not verdict.get("consistent", True):
+        print(_inconsistency_warning(verdict), file=sys.stderr)
+    if not result.success:
+        return 1
+    return 0 if verdict.get("consistent", True) else EXIT_INCONSISTENT
+
+
+#: ``shipid fit`` exit status of a fit that is not consistent with its noise model, and of a diverged filter.
+EXIT_INCONSISTENT, EXIT_DIVERGED = 3, 4
+
+
+def _inconsistency_warning(verdict: dict) -> str:
+    """One plain warning for an inconsistent fit: the channels, the findings, the likely causes."""
+    from ..identify.diagnostics import likely_causes
+
+    reasons = verdict.get("reasons", [])
+    chans = [c for c in verdict.get("channels", {}) if any(f"'{c}'" in r for r in reasons)]
+    where = f" in channel(s) {', '.join(chans)}" if chans else ""
+    causes = likely_causes(reasons)
+    return (f"warning: the fit is not consistent with its noise model{where}: " + "; ".join(reasons)
+            + (f". Likely causes: {causes}." if causes else ".") + " Do not use these coefficients before the cause "
+            "is found (exit status 3).")
 
 
 def _print_result(result) -> None:

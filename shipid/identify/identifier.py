@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 
 from ..models.base import Model
-from .data import LogArrays, noise_std_from_data, prepare_logs
+from .data import LogArrays, frozen_mask, noise_std_from_data, prepare_logs, resolution_std
 from .diagnostics import coefficient_plausibility, consistency, identifiability
 from .ekf import EKFOutput, EKFProblem, rts_smooth, run_ekf
 from .initial import equation_error_fit
@@ -102,6 +102,17 @@ class EKFIdentifier:
         "auto": 10 median sampling intervals.  None: every gap is integrated
         across (with as many RK4 steps as it needs, inputs as ``input_hold``),
         right when the inputs are known to be steady over the gaps.
+    adapt_noise : bool
+        Raise the measurement noise of a channel (not given in ``meas_std``) whose
+        first-pass innovations are wider than predicted: its level is multiplied
+        by ``robust std(innovations) / sqrt(median S)`` when that exceeds 1.5,
+        up to three first passes (never lowered).  Second differences of a
+        pre-filtered channel estimate far too little noise, and the filter
+        then trusts the model more than the data allow.
+    drop_frozen : bool
+        Treat exact repeats of the previous value as missing in channels whose
+        values otherwise change at >= 90 % of the samples (a frozen GNSS fix;
+        :func:`~shipid.identify.data.frozen_mask`).
     progress : bool
         Show a tqdm progress bar over passes.
     """
@@ -129,6 +140,8 @@ class EKFIdentifier:
         gate: float | None = 5.0,
         gate_run: int = 10,
         max_gap: float | str | None = "auto",
+        adapt_noise: bool = True,
+        drop_frozen: bool = True,
         progress: bool = False,
     ):
         self.model = model
@@ -151,6 +164,8 @@ class EKFIdentifier:
         self.gate = gate
         self.gate_run = gate_run
         self.max_gap = max_gap
+        self.adapt_noise = adapt_noise
+        self.drop_frozen = drop_frozen
         self.progress = progress
 
     # ----------------------------------------------------------------- setup
@@ -249,19 +264,25 @@ class EKFIdentifier:
         nx = model.nx
         meas_idx = np.array([model.state_index(s) for s in meas])
 
+        # frozen sensor values are not measurements (the arrays are the identifier's own copies)
+        n_frozen = np.zeros(len(meas), dtype=int)
+        if self.drop_frozen:
+            for a in arrays:
+                for j in range(len(meas)):
+                    fm = frozen_mask(a.Y[:, j])
+                    a.Y[fm, j] = np.nan
+                    n_frozen[j] += int(fm.sum())
         # noise levels
         sig = noise_std_from_data(arrays)
-        for k, v in _as_dict(self.meas_std, meas, "meas_std").items():
+        sig_data = sig.copy()
+        given_sig = _as_dict(self.meas_std, meas, "meas_std")
+        for k, v in given_sig.items():
             sig[meas.index(k)] = v
         bad = [m for m, s in zip(meas, sig) if not (np.isfinite(s) and s > 0)]
         if bad:
             raise ValueError(f"cannot estimate the noise of channel(s) {bad} from the data; give meas_std={{...}}")
         dt = float(np.median(np.concatenate([np.diff(a.t) for a in arrays])))
-        qx = np.full(nx, self.unmeasured_process_std**2)
-        for j, i in enumerate(meas_idx):
-            qx[i] = (0.1 * sig[j]) ** 2 / dt
-        for k, v in _as_dict(self.process_std, model.state_names, "process_std").items():
-            qx[model.state_index(k)] = v**2
+        qx = self._process_noise(sig, meas_idx, dt)
 
         # start values and prior
         theta0 = p_base[est_idx].copy()
@@ -303,6 +324,30 @@ class EKFIdentifier:
                            est_names=est_names, sig=sig, qx=qx, scale=scale, prior_cov_s=prior_cov_s, dt=dt,
                            pieces=pieces)
 
+        # noise levels raised where the first-pass innovations are wider than predicted
+        factors = np.ones(len(meas))
+        if self.adapt_noise:
+            free = np.array([m not in given_sig for m in meas])
+            for _ in range(3):
+                out0 = run_ekf(self._problem(theta0 / scale), store=False)
+                e, S = out0.innov[0], out0.S_diag[0]
+                f = np.ones(len(meas))
+                for j in np.flatnonzero(free):
+                    ok = np.isfinite(e[:, j]) & np.isfinite(S[:, j])
+                    if ok.sum() >= 10:
+                        spread = 1.4826 * np.median(np.abs(e[ok, j]))
+                        f[j] = spread / np.sqrt(np.median(S[ok, j]))
+                f = np.where(f > 1.5, f, 1.0)
+                if np.all(f == 1.0):
+                    break
+                sig = sig * f
+                factors *= f
+                qx = self._process_noise(sig, meas_idx, dt)
+                self._setup.update(sig=sig, qx=qx)
+        res = resolution_std(arrays)
+        self.noise_ = pd.DataFrame({"second_difference": sig_data, "resolution": res, "innovation_factor": factors,
+                                    "used": sig, "n_frozen": n_frozen}, index=meas)
+
         # optional noise tuning (one batched filter pass over a grid of multipliers)
         q_mult, r_mult = 1.0, 1.0
         if self.tune_noise:
@@ -343,6 +388,17 @@ class EKFIdentifier:
         self.problem_, self.output_ = prob, out
         self._finish(out, zs, Ps, prob, history, used_eq, q_mult, r_mult)
         return self
+
+    def _process_noise(self, sig, meas_idx, dt) -> np.ndarray:
+        """Process-noise intensities of the ship states: ``(0.1 meas_std)^2 / dt`` for measured states,
+        ``unmeasured_process_std^2`` for the others, ``process_std`` where given."""
+        model = self.model
+        qx = np.full(model.nx, self.unmeasured_process_std**2)
+        for j, i in enumerate(meas_idx):
+            qx[i] = (0.1 * sig[j]) ** 2 / dt
+        for k, v in _as_dict(self.process_std, model.state_names, "process_std").items():
+            qx[model.state_index(k)] = v**2
+        return qx
 
     def _problem(self, theta_s: np.ndarray, q_mult=1.0, r_mult=1.0) -> EKFProblem:
         """Build the (batch of) EKF problems: logs concatenated with resets.
@@ -420,15 +476,50 @@ class EKFIdentifier:
         return var
 
     def _tune(self, theta_s):
-        qs = 10.0 ** np.arange(-3.0, 2.01, 1.0)
-        rs = np.array([0.5, 1.0, 2.0])
-        Q, Rm = np.meshgrid(qs, rs, indexing="ij")
-        prob = self._problem(theta_s, Q.ravel(), Rm.ravel())
-        out = run_ekf(prob, store=False)
-        ll = np.where(out.diverged, -np.inf, out.loglik)
-        b = int(np.argmax(ll))
-        table = pd.DataFrame({"q_mult": Q.ravel(), "r_mult": Rm.ravel(), "loglik": out.loglik, "diverged": out.diverged})
-        return float(Q.ravel()[b]), float(Rm.ravel()[b]), table
+        """Noise multipliers by innovation likelihood over a grid, evaluated as one batch per round.
+
+        Start grid: process noise x 10^-3 .. 10^2, measurement noise x 0.5, 1, 2.  When the best point
+        lies on an edge of the grid, the grid grows past that edge (three decades of process noise, two
+        octaves of measurement noise) and is evaluated again, up to four times; an optimum still on the
+        edge is reported in ``tuning_note_``.
+        """
+        q_exp = list(np.arange(-3.0, 2.01, 1.0))
+        r_exp = [-1.0, 0.0, 1.0]
+        rows, seen = [], set()
+        self.tuning_note_ = ""
+        for it in range(5):
+            cand = [(q, r) for q in q_exp for r in r_exp if (q, r) not in seen]
+            if cand:
+                Qm = 10.0 ** np.array([c[0] for c in cand])
+                Rm = 2.0 ** np.array([c[1] for c in cand])
+                out = run_ekf(self._problem(theta_s, Qm, Rm), store=False)
+                for (q, r), ll, dv in zip(cand, out.loglik, out.diverged):
+                    seen.add((q, r))
+                    rows.append({"q_mult": 10.0**q, "r_mult": 2.0**r, "loglik": float(ll), "diverged": bool(dv),
+                                 "q_exp": q, "r_exp": r})
+            table = pd.DataFrame(rows)
+            ll = np.where(table["diverged"], -np.inf, table["loglik"])
+            best = table.iloc[int(np.argmax(ll))]
+            grow = False
+            if best["q_exp"] == min(q_exp):
+                q_exp = [min(q_exp) - d for d in (3.0, 2.0, 1.0)] + q_exp
+                grow = True
+            elif best["q_exp"] == max(q_exp):
+                q_exp = q_exp + [max(q_exp) + d for d in (1.0, 2.0, 3.0)]
+                grow = True
+            if best["r_exp"] == min(r_exp):
+                r_exp = [min(r_exp) - d for d in (2.0, 1.0)] + r_exp
+                grow = True
+            elif best["r_exp"] == max(r_exp):
+                r_exp = r_exp + [max(r_exp) + d for d in (1.0, 2.0)]
+                grow = True
+            if not grow:
+                break
+        else:
+            self.tuning_note_ = (f"noise tuning: the best multipliers (process x {best['q_mult']:.3g}, measurement x "
+                                 f"{best['r_mult']:.3g}) are still on the edge of the widened grid")
+        table = table.drop(columns=["q_exp", "r_exp"])
+        return float(best["q_mult"]), float(best["r_mult"]), table
 
     def _finish(self, out: EKFOutput, zs, Ps, prob: EKFProblem, history, used_eq, q_mult, r_mult):
         s = self._setup
@@ -492,7 +583,11 @@ class EKFIdentifier:
         self.diagnostics_ = identifiability(est, cov_s, s["prior_cov_s"], notes=notes)
         self.diagnostics_["nis_mean"] = float(np.nanmean(out.nis[0]))
         self.diagnostics_["nis_expected"] = float(np.mean((np.isfinite(out.innov[0]) & ~out.gated[0]).sum(axis=1)))
+        if self.tune_noise and getattr(self, "tuning_note_", ""):
+            self.diagnostics_["warnings"].append(self.tuning_note_)
         self.diagnostics_["n_gated"] = {m: int(c) for m, c in zip(s["meas"], out.n_gated[0])}
+        self.diagnostics_["noise"] = {m: {k: (float(v) if np.isfinite(v) else None) for k, v in row.items()}
+                                      for m, row in self.noise_.to_dict(orient="index").items()}
         self.diagnostics_["consistency"] = self._consistency(out, r_mult)
         self.logs_ = [a.meta for a in s["arrays"]]
 
