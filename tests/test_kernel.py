@@ -135,3 +135,26 @@ def test_models_without_compiled_equations_fall_back_with_one_notice(kcs_truth):
         assert _kernel.filter_functions(model) is None
     msgs = [str(w.message) for w in rec]
     assert len(msgs) == 1 and "plain-kcs" in msgs[0] and "numpy path" in msgs[0]
+
+
+@pytest.mark.parametrize("name", ["kcs-response", "response-nl"])
+def test_linear_equation_error_start_equals_the_iterated_one(name, kcs_logs):
+    """Models linear in their parameters take one least-squares solve for the start values; it lands
+    where the iterative solver converges (relative to the standard errors)."""
+    from shipid.identify.data import prepare_logs
+    from shipid.identify.initial import equation_error_fit
+
+    model = get_model(name)
+    arrays, meas = prepare_logs(model, [f for f, _ in kcs_logs.values()])
+    est = np.arange(model.np)
+    p0 = model.params * 1.2
+    prior = np.where(p0 != 0, 0.5 * np.abs(p0), 1.0)
+    lin = equation_error_fit(model, arrays, meas, est, p0, prior, linear="auto")
+    it = equation_error_fit(model, arrays, meas, est, p0, prior, linear=False, max_nfev=200)
+    assert lin[2] == it[2]
+    ok = np.isfinite(lin[1]) & (lin[1] > 0)
+    assert ok.sum() >= model.np - 2
+    dz = np.abs(lin[0] - it[0])[ok] / lin[1][ok]
+    print(name, "max |linear - iterated| / se:", dz.max())
+    assert dz.max() < 1e-6, dz
+    np.testing.assert_allclose(lin[1], it[1], rtol=1e-4)

@@ -199,8 +199,8 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
                meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store,
                z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated,
                div, div_at, d2_at):
-    """The filter over the samples of batch member ``b`` (arrays as in :func:`run_compiled`; the stored
-    arrays arrive NaN-filled, so what a diverged member does not compute stays NaN)."""
+    """The filter over the samples of batch member ``b`` (arrays as in :func:`run_compiled`; what a
+    diverged member does not compute is set NaN)."""
     N = t.shape[1]
     nz = z0.shape[1]
     ne = nz - nx
@@ -352,6 +352,12 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
                 div[b] = True
                 div_at[b] = k
                 d2_at[b] = d2
+                if store:  # not computed from here on
+                    z_post[b, k:] = np.nan
+                    P_post[b, k:] = np.nan
+                    z_prior[b, k + 1:] = np.nan
+                    P_prior[b, k + 1:] = np.nan
+                    Fs[b, k:] = np.nan
                 return
         if store:
             z_post[b, k] = z
@@ -551,9 +557,9 @@ def run_compiled(prob, store: bool, nis_limit: float):
     if N == 1:
         dtq, nsteps = np.zeros((B, 1)), np.ones((B, 1), dtype=np.int64)
     nan = lambda *shape: np.full(shape, np.nan)  # noqa: E731
-    if store:
-        z_post, z_prior = nan(B, N, nz), nan(B, N, nz)
-        P_post, P_prior, Fs = nan(B, N, nz, nz), nan(B, N, nz, nz), nan(B, N, nz, nz)
+    if store:  # every entry is written by the kernel (np.empty: the pages are touched once)
+        z_post, z_prior = np.empty((B, N, nz)), np.empty((B, N, nz))
+        P_post, P_prior, Fs = np.empty((B, N, nz, nz)), np.empty((B, N, nz, nz)), np.empty((B, N, nz, nz))
     else:
         z_post = z_prior = np.empty((1, 1, nz))
         P_post = P_prior = Fs = np.empty((1, 1, nz, nz))
