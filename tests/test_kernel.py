@@ -158,3 +158,23 @@ def test_linear_equation_error_start_equals_the_iterated_one(name, kcs_logs):
     print(name, "max |linear - iterated| / se:", dz.max())
     assert dz.max() < 1e-6, dz
     np.testing.assert_allclose(lin[1], it[1], rtol=1e-4)
+
+
+def test_a_run_that_would_not_fit_is_refused_with_the_numbers(kcs_problem, monkeypatch):
+    """The smoother's storage is estimated before the filter starts; above the limit the run is refused
+    with a message naming the need, the limit and what avoids it (a ValueError too: CLI exit 2)."""
+    from shipid.identify._memory import MemoryLimitError, ekf_bytes
+
+    B, N, nx, ne, nm = kcs_problem.shape
+    need = ekf_bytes(B, N, nx + ne, nm, True)
+    assert need > N * 4 * (nx + ne) ** 2 * 8
+    monkeypatch.setenv("SHIPID_MEMORY_LIMIT", str(need - 1))
+    with pytest.raises(MemoryLimitError, match=r"needs ~.* GB .*above the limit .*SHIPID_MEMORY_LIMIT.*store=False"):
+        run_ekf(kcs_problem, store=True)
+    assert isinstance(MemoryLimitError("x"), ValueError)
+    run_ekf(kcs_problem, store=False)  # the filter alone fits
+    monkeypatch.setenv("SHIPID_MEMORY_LIMIT", "1G")
+    run_ekf(kcs_problem, store=True)
+    monkeypatch.setenv("SHIPID_MEMORY_LIMIT", "lots")
+    with pytest.raises(ValueError, match="SHIPID_MEMORY_LIMIT='lots'"):
+        run_ekf(kcs_problem, store=True)
