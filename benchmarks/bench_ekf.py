@@ -1,6 +1,6 @@
-"""EKF speed: shipid's kernel vs a plain loop of filterpy's ExtendedKalmanFilter.
+"""EKF speed: shipid's kernel (compiled and numpy paths) vs a plain loop of filterpy's ExtendedKalmanFilter.
 
-    python benchmarks/bench_ekf.py [--samples 6000] [--batch 64]
+    python benchmarks/bench_ekf.py [--samples 6000] [--batch 64] [--repeat 3] [--no-compile-time]
 
 Same problem for both (kcs-response, 16 estimated coefficients -> 22 augmented
 states, 6 measured channels, RK4 transition with the second-order tangent).
@@ -8,15 +8,27 @@ Both sides call the same model functions to propagate the mean and build F;
 what differs is the filter machinery around them.  Prints microseconds per
 EKF step, total time, and the throughput of one batched run over B logs,
 each as a ratio to the filterpy loop measured in the same run, on two clocks:
-the process's CPU time (fair on a shared machine) and wall time.
+the process's CPU time (fair on a shared machine) and wall time.  Rows for the
+compiled kernel (numba, ``shipid[fast]``) and for the numpy path
+(``shipid._jit.disabled()``), the arithmetic floor of a 22-state step
+(~2 nz^3 flops ~ 5 us on one core), and, in fresh subprocesses, the first-call
+compile time (empty numba cache) and the start time with the cache filled.
+Run with ``OPENBLAS_NUM_THREADS=1``; timings on a shared machine are noisy,
+so only ratios measured in the same run mean anything.
 """
 from __future__ import annotations
 
 import argparse
+import os
+import subprocess
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
+from shipid import _jit
 from shipid.identify import EKFIdentifier, run_ekf
 from shipid.integrate import rk4_step_taylor_tangent
 from shipid.models import get_model
@@ -62,11 +74,41 @@ def filterpy_loop(prob):
     return ekf.x[:, 0]
 
 
+_START = """
+import time, numpy as np
+from shipid.identify import EKFIdentifier, run_ekf
+from shipid.models import get_model
+from shipid.synthetic import TrialRecipe, make_trial
+from shipid import _jit
+truth = get_model("kcs-response", "synthetic-truth")
+log, _ = make_trial(truth, TrialRecipe("zz", "zigzag", 20.0, 30.0, ((0.0, 10.0),), psi_deg=20.0), np.random.default_rng(1))
+with _jit.disabled():
+    prob = EKFIdentifier(truth, n_passes=1, init="model").fit(log).problem_
+c0 = time.process_time()
+run_ekf(prob, store=True)
+print(time.process_time() - c0)
+"""
+
+
+def compile_times(samples: int):
+    """CPU seconds of the first compiled run_ekf in a fresh process with an empty numba cache, and again
+    with the cache that run filled (``NUMBA_CACHE_DIR`` pointed at a temporary folder)."""
+    with tempfile.TemporaryDirectory() as cache:
+        env = {**os.environ, "NUMBA_CACHE_DIR": cache, "OPENBLAS_NUM_THREADS": "1"}
+        root = str(Path(__file__).resolve().parents[1])
+        env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
+        run = lambda: float(subprocess.run([sys.executable, "-c", _START], env=env, capture_output=True,  # noqa: E731
+                                           text=True, check=True).stdout.split()[-1])
+        return run(), run()
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--samples", type=int, default=6000)
     ap.add_argument("--batch", type=int, default=64)
     ap.add_argument("--repeat", type=int, default=3, help="best of N timings (the machine may be shared)")
+    ap.add_argument("--no-compile-time", dest="compile_time", action="store_false",
+                    help="skip the first-call compile / cached-start measurement (two subprocesses)")
     args = ap.parse_args(argv)
     truth = get_model("kcs-response", "synthetic-truth")
     dur = (args.samples - 1) * 0.1
@@ -83,18 +125,34 @@ def main(argv=None) -> int:
         res = fn()
         return time.perf_counter() - w0, time.process_time() - c0, res
 
+    compiled = _jit.enabled()
+
+    def numpy_path(fn):
+        def run():
+            with _jit.disabled():
+                return fn()
+        return run
+
+    kernel = lambda: run_ekf(prob, store=False)  # noqa: E731
+    fit = lambda: EKFIdentifier(truth, n_passes=1, init="model").fit(log)  # noqa: E731
+    contenders = [("filterpy", lambda: filterpy_loop(prob)), ("kernel-np", numpy_path(kernel)),
+                  ("fit-np", numpy_path(fit))]
+    if compiled:
+        kernel(), fit()  # compile / load the cache before timing
+        contenders += [("kernel", kernel), ("fit", fit)]
     # interleave the contenders so that load from other processes hits all alike; keep the best of N
-    best = {k: [np.inf, np.inf] for k in ("filterpy", "kernel", "fit")}
+    best = {k: [np.inf, np.inf] for k, _ in contenders}
+    outs = {}
     for _ in range(args.repeat):
-        for key, fn in (("filterpy", lambda: filterpy_loop(prob)), ("kernel", lambda: run_ekf(prob, store=False)),
-                        ("fit", lambda: EKFIdentifier(truth, n_passes=1, init="model").fit(log))):
+        for key, fn in contenders:
             w, c, res = timed(fn)
             best[key] = [min(best[key][0], w), min(best[key][1], c)]
-            if key == "filterpy":
-                x_fp = res
-            elif key == "kernel":
-                out = res
+            outs[key] = res
+    x_fp = outs["filterpy"]
+    out = outs["kernel" if compiled else "kernel-np"]
     agree = np.max(np.abs(x_fp - out.z_final[0]) / (1 + np.abs(out.z_final[0])))
+    z_np = outs["kernel-np"].z_final[0]
+    agree_np = np.max(np.abs(z_np - out.z_final[0]) / (1 + np.abs(out.z_final[0])))
 
     # batch: B logs (different noise) in one run
     B = args.batch
@@ -108,26 +166,42 @@ def main(argv=None) -> int:
     bprob = replace(prob, p_base=rep(prob.p_base), t=rep(prob.t), U=rep(prob.U), Y=Yb, R=rep(prob.R), q=rep(prob.q),
                     z0=rep(prob.z0), P0=rep(prob.P0), reset=rep(prob.reset), x_reset=rep(prob.x_reset),
                     P_reset=rep(prob.P_reset))
-    bt = [np.inf, np.inf]
+    bt = {"batch": [np.inf, np.inf], "batch-np": [np.inf, np.inf]}
     for _ in range(args.repeat):
-        w, c, bout = timed(lambda: run_ekf(bprob, store=False))
-        bt = [min(bt[0], w), min(bt[1], c)]
+        for key, fn in (("batch", lambda: run_ekf(bprob, store=False)),
+                        ("batch-np", numpy_path(lambda: run_ekf(bprob, store=False)))):
+            if key == "batch" and not compiled:
+                continue
+            w, c, bout = timed(fn)
+            bt[key] = [min(bt[key][0], w), min(bt[key][1], c)]
 
     fp_w, fp_c = best["filterpy"]
     us = lambda s: 1e6 * s / N  # noqa: E731
-    print(f"kcs-response, {N} samples, augmented state {prob.z0.shape[1]}, {len(prob.meas_idx)} channels; "
-          f"best of {args.repeat}, interleaved")
-    print(f"{'':38s}{'CPU us/step':>12s}{'CPU s':>8s}{'vs filterpy':>13s}{'wall s':>9s}{'vs filterpy':>13s}")
-    rows = [("filterpy ExtendedKalmanFilter loop", best["filterpy"], 1),
-            ("shipid kernel, 1 log (filter only)", best["kernel"], 1),
-            ("shipid EKFIdentifier.fit, 1 pass", best["fit"], 1),
-            (f"shipid kernel, batch of {B} logs", bt, B)]
+    nz = prob.z0.shape[1]
+    print(f"kcs-response, {N} samples, augmented state {nz}, {len(prob.meas_idx)} channels; best of {args.repeat}, "
+          f"interleaved; compiled path {'available (numba)' if compiled else 'NOT available (numba missing or SHIPID_JIT=0)'}")
+    print(f"{'':44s}{'CPU us/step':>12s}{'CPU s':>8s}{'vs filterpy':>13s}{'wall s':>9s}{'vs filterpy':>13s}")
+    rows = [("filterpy ExtendedKalmanFilter loop", best["filterpy"], 1)]
+    if compiled:
+        rows += [("shipid compiled kernel, 1 log (filter only)", best["kernel"], 1),
+                 ("shipid EKFIdentifier.fit, 1 pass (compiled)", best["fit"], 1),
+                 (f"shipid compiled kernel, batch of {B} logs", bt["batch"], B)]
+    rows += [("shipid numpy kernel, 1 log (filter only)", best["kernel-np"], 1),
+             ("shipid EKFIdentifier.fit, 1 pass (numpy)", best["fit-np"], 1),
+             (f"shipid numpy kernel, batch of {B} logs", bt["batch-np"], B)]
     for name, (w, c), nb in rows:
         # ratios are throughput ratios (log-steps per second) against the filterpy loop
-        print(f"{name:38s}{us(c) / nb:12.1f}{c:8.2f}{fp_c * nb / c:12.2f}x{w:9.2f}{fp_w * nb / w:12.2f}x")
+        print(f"{name:44s}{us(c) / nb:12.1f}{c:8.2f}{fp_c * nb / c:12.2f}x{w:9.2f}{fp_w * nb / w:12.2f}x")
+    print(f"  arithmetic floor of one step: ~2 nz^3 = {2 * nz ** 3} flops ~ 5 us on one core; "
+          + (f"compiled filter {us(best['kernel'][1]) / 5.0:.1f}x the floor" if compiled else ""))
     print("  (fit = filter with stored covariances + RTS smoother + diagnostics + result tables; "
           "batch ratios are throughput: B logs per run)")
-    print(f"final-state agreement filterpy vs shipid (1 log): {agree:.1e}; batch diverged members: {int(bout.diverged.sum())}")
+    print(f"final-state agreement (1 log): filterpy vs shipid {agree:.1e}, compiled vs numpy {agree_np:.1e}; "
+          f"batch diverged members: {int(bout.diverged.sum())}")
+    if compiled and args.compile_time:
+        first, cached = compile_times(args.samples)
+        print(f"compiled kernel start in a fresh process (CPU s: import + build problem + first run_ekf): "
+              f"empty numba cache {first:.2f} s (compiles), filled cache {cached:.2f} s")
     return 0
 
 

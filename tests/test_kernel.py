@@ -135,3 +135,46 @@ def test_models_without_compiled_equations_fall_back_with_one_notice(kcs_truth):
         assert _kernel.filter_functions(model) is None
     msgs = [str(w.message) for w in rec]
     assert len(msgs) == 1 and "plain-kcs" in msgs[0] and "numpy path" in msgs[0]
+
+
+@pytest.mark.parametrize("name", ["kcs-response", "response-nl"])
+def test_linear_equation_error_start_equals_the_iterated_one(name, kcs_logs):
+    """Models linear in their parameters take one least-squares solve for the start values; it lands
+    where the iterative solver converges (relative to the standard errors)."""
+    from shipid.identify.data import prepare_logs
+    from shipid.identify.initial import equation_error_fit
+
+    model = get_model(name)
+    arrays, meas = prepare_logs(model, [f for f, _ in kcs_logs.values()])
+    est = np.arange(model.np)
+    p0 = model.params * 1.2
+    prior = np.where(p0 != 0, 0.5 * np.abs(p0), 1.0)
+    lin = equation_error_fit(model, arrays, meas, est, p0, prior, linear="auto")
+    it = equation_error_fit(model, arrays, meas, est, p0, prior, linear=False, max_nfev=200)
+    assert lin[2] == it[2]
+    ok = np.isfinite(lin[1]) & (lin[1] > 0)
+    assert ok.sum() >= model.np - 2
+    dz = np.abs(lin[0] - it[0])[ok] / lin[1][ok]
+    print(name, "max |linear - iterated| / se:", dz.max())
+    assert dz.max() < 1e-6, dz
+    np.testing.assert_allclose(lin[1], it[1], rtol=1e-4)
+
+
+def test_a_run_that_would_not_fit_is_refused_with_the_numbers(kcs_problem, monkeypatch):
+    """The smoother's storage is estimated before the filter starts; above the limit the run is refused
+    with a message naming the need, the limit and what avoids it (a ValueError too: CLI exit 2)."""
+    from shipid.identify._memory import MemoryLimitError, ekf_bytes
+
+    B, N, nx, ne, nm = kcs_problem.shape
+    need = ekf_bytes(B, N, nx + ne, nm, True)
+    assert need > N * 4 * (nx + ne) ** 2 * 8
+    monkeypatch.setenv("SHIPID_MEMORY_LIMIT", str(need - 1))
+    with pytest.raises(MemoryLimitError, match=r"needs ~.* GB .*above the limit .*SHIPID_MEMORY_LIMIT.*store=False"):
+        run_ekf(kcs_problem, store=True)
+    assert isinstance(MemoryLimitError("x"), ValueError)
+    run_ekf(kcs_problem, store=False)  # the filter alone fits
+    monkeypatch.setenv("SHIPID_MEMORY_LIMIT", "1G")
+    run_ekf(kcs_problem, store=True)
+    monkeypatch.setenv("SHIPID_MEMORY_LIMIT", "lots")
+    with pytest.raises(ValueError, match="SHIPID_MEMORY_LIMIT='lots'"):
+        run_ekf(kcs_problem, store=True)

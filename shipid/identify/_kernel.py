@@ -199,8 +199,8 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
                meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store,
                z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated,
                div, div_at, d2_at):
-    """The filter over the samples of batch member ``b`` (arrays as in :func:`run_compiled`; the stored
-    arrays arrive NaN-filled, so what a diverged member does not compute stays NaN)."""
+    """The filter over the samples of batch member ``b`` (arrays as in :func:`run_compiled`; what a
+    diverged member does not compute is set NaN)."""
     N = t.shape[1]
     nz = z0.shape[1]
     ne = nz - nx
@@ -225,7 +225,6 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
     ub = np.empty(nu)
     um = np.empty(nu)
     M = np.empty((nx, nz))
-    Pb = np.empty((ne, nx))
     w = _work(nx, n_par, ne)
     sel = np.empty(nm, dtype=np.int64)
     run = np.zeros(nm, dtype=np.int64)
@@ -235,7 +234,7 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
     Kt = np.empty((nm, nz))
     e = np.empty(nm)
     a = np.empty(nm)
-    A = np.empty((nz, nz))
+    A = np.empty((nz, nm))
     colb = np.empty(nm)
     z_fin[b] = z
     P_fin[b] = P
@@ -316,22 +315,25 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
                         for c_ in range(cnt):
                             s += Kt[c_, i] * e[c_]
                         z[i] += s
-                    # A = P - K H P  (H P = PHt^T)
+                    # Joseph form A - (A H^T - K R) K^T with A = P - K H P (H P = PHt^T); the result is
+                    # symmetric, so the lower triangle is computed and mirrored (P stays exactly symmetric)
+                    for i in range(nz):  # the columns of A the correction needs: A H^T
+                        for d_ in range(cnt):
+                            s = PHt[i, d_]
+                            for c_ in range(cnt):
+                                s -= Kt[c_, i] * PHt[meas_idx[sel[d_]], c_]
+                            A[i, d_] = s
                     for i in range(nz):
-                        for j in range(nz):
+                        for c_ in range(cnt):
+                            colb[c_] = A[i, c_] - Kt[c_, i] * R[b, sel[c_]]
+                        for j in range(i + 1):
                             s = P[i, j]
                             for c_ in range(cnt):
                                 s -= Kt[c_, i] * PHt[j, c_]
-                            A[i, j] = s
-                    # P = A - (A H^T - K R) K^T
-                    for i in range(nz):
-                        for c_ in range(cnt):
-                            colb[c_] = A[i, meas_idx[sel[c_]]] - Kt[c_, i] * R[b, sel[c_]]
-                        for j in range(nz):
-                            s = A[i, j]
                             for c_ in range(cnt):
                                 s -= colb[c_] * Kt[c_, j]
                             P[i, j] = s
+                            P[j, i] = s
                 else:
                     d2 = np.nan
                     ld = np.nan
@@ -352,6 +354,12 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
                 div[b] = True
                 div_at[b] = k
                 d2_at[b] = d2
+                if store:  # not computed from here on
+                    z_post[b, k:] = np.nan
+                    P_post[b, k:] = np.nan
+                    z_prior[b, k + 1:] = np.nan
+                    P_prior[b, k + 1:] = np.nan
+                    Fs[b, k:] = np.nan
                 return
         if store:
             z_post[b, k] = z
@@ -377,35 +385,26 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
                 Ftop[i, j] = 0.0 if rs else (Fx[i, j] if j < nx else Fp[i, j - nx])
         for i in range(nx, nz):
             zn[i] = z[i]
-        # P_next = F P F^T with F = [[Ftop], [0 I]], symmetrised, + Q
+        # P_next = F P F^T with F = [[Ftop], [0 I]] + Q (P is exactly symmetric, so is P_next)
         for i in range(nx):  # M = top rows of F P (nx, nz)
             for j in range(nz):
                 s = 0.0
                 for m in range(nz):
                     s += Ftop[i, m] * P[m, j]
                 M[i, j] = s
-        for i in range(ne):  # Pb = bottom-left block of F P F^T (ne, nx)
-            for j in range(nx):
+        for i in range(nx):  # top-left block M F_top^T (symmetric: P is)
+            for j in range(i + 1):
                 s = 0.0
                 for m in range(nz):
-                    s += P[nx + i, m] * Ftop[j, m]
-                Pb[i, j] = s
-        for i in range(nx):  # top-left block M F_top^T, symmetrised
-            for j in range(i + 1):
-                s1 = 0.0
-                s2 = 0.0
-                for m in range(nz):
-                    s1 += M[i, m] * Ftop[j, m]
-                    s2 += M[j, m] * Ftop[i, m]
-                Pn[i, j] = 0.5 * (s1 + s2)
-                Pn[j, i] = Pn[i, j]
-            for j in range(ne):
-                v = 0.5 * (M[i, nx + j] + Pb[j, i])
-                Pn[i, nx + j] = v
-                Pn[nx + j, i] = v
+                    s += M[i, m] * Ftop[j, m]
+                Pn[i, j] = s
+                Pn[j, i] = s
+            for j in range(ne):  # off-diagonal blocks: the top rows of F P, mirrored
+                Pn[i, nx + j] = M[i, nx + j]
+                Pn[nx + j, i] = M[i, nx + j]
         for i in range(ne):
             for j in range(ne):
-                Pn[nx + i, nx + j] = 0.5 * (P[nx + i, nx + j] + P[nx + j, nx + i])
+                Pn[nx + i, nx + j] = P[nx + i, nx + j]
         for i in range(nz):
             Pn[i, i] += 0.0 if (rs and i < nx) else q[b, i] * dtq[b, k]
         if rs:
@@ -551,9 +550,9 @@ def run_compiled(prob, store: bool, nis_limit: float):
     if N == 1:
         dtq, nsteps = np.zeros((B, 1)), np.ones((B, 1), dtype=np.int64)
     nan = lambda *shape: np.full(shape, np.nan)  # noqa: E731
-    if store:
-        z_post, z_prior = nan(B, N, nz), nan(B, N, nz)
-        P_post, P_prior, Fs = nan(B, N, nz, nz), nan(B, N, nz, nz), nan(B, N, nz, nz)
+    if store:  # every entry is written by the kernel (np.empty: the pages are touched once)
+        z_post, z_prior = np.empty((B, N, nz)), np.empty((B, N, nz))
+        P_post, P_prior, Fs = np.empty((B, N, nz, nz)), np.empty((B, N, nz, nz)), np.empty((B, N, nz, nz))
     else:
         z_post = z_prior = np.empty((1, 1, nz))
         P_post = P_prior = Fs = np.empty((1, 1, nz, nz))

@@ -28,7 +28,7 @@ from scipy.linalg.lapack import dpotrs as _potrs
 
 from ..integrate import STEP_TANGENTS, hold_steps, interval_steps
 from ..models.base import Model
-from . import _kernel
+from . import _kernel, _memory
 
 __all__ = ["EKFProblem", "EKFOutput", "run_ekf", "rts_smooth", "interval_steps", "INPUT_HOLDS"]
 
@@ -264,6 +264,7 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKF
     ``A - (A H^T - K R) K^T`` with ``A = P - K H P`` -- the same product,
     associated differently, without forming ``I - K H``.
     """
+    _memory.check(*prob.shape[:2], prob.shape[2] + prob.shape[3], prob.shape[4], store)  # refuse what cannot fit
     fast = _kernel.run_compiled(prob, store, nis_limit)  # the compiled kernel (same semantics), when available
     if fast is not None:
         return fast

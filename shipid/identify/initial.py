@@ -1,8 +1,10 @@
 """Equation-error start values for the identifier.
 
 Differentiates the measured states with a Savitzky-Golay filter and fits the
-model's state equations to the derivatives by (regularised) nonlinear least
-squares on the parameters.  Cheap, needs no start value of its own, and puts
+model's state equations to the derivatives by (regularised) least squares on
+the parameters: one linear solve when the model is linear in its parameters
+(the response models), else iterated with the model's analytic or compiled
+Jacobians.  Cheap, needs no start value of its own, and puts
 the EKF close enough to the answer that its linearisation holds.  Only
 equations whose right-hand side depends solely on measured states are used.
 """
@@ -41,6 +43,7 @@ def equation_error_fit(
     derivatives: list[np.ndarray] | None = None,
     regularisation: float = 1e-3,
     max_nfev: int = 50,
+    linear="auto",
 ):
     """Least-squares fit of the estimated parameters to numerical derivatives.
 
@@ -56,6 +59,12 @@ def equation_error_fit(
         residuals of unit size (0 turns it off: a plain least-squares fit).
     max_nfev : int
         Iteration limit of the least-squares solver.
+    linear : "auto", True or False
+        Residuals linear in the parameters (models linear in their parameters, like the response
+        models, whose parameter Jacobian is the regressor matrix): solve the regularised linear
+        least-squares problem in one step instead of iterating.  ``"auto"`` checks linearity
+        numerically (a random step of two prior widths must change the residuals by exactly
+        ``J step``, to 1e-9); False always iterates (trust-region reflective, ``max_nfev``).
 
     Returns
     -------
@@ -153,16 +162,36 @@ def equation_error_fit(
         return np.vstack([J, np.diag(regularisation * np.sqrt(T.size) / prior_std)])
 
     th0 = p0[est_idx]
-    sol = least_squares(resid, th0, jac=jac, x_scale=prior_std, method="trf", max_nfev=max_nfev)
-    cost0 = 0.5 * float(np.sum(resid(th0) ** 2))
-    if not (np.all(np.isfinite(sol.x)) and np.isfinite(sol.cost) and sol.cost <= cost0):
+    r0 = resid(th0)
+    cost0 = 0.5 * float(np.sum(r0**2))
+    J0 = jac(th0) if linear in ("auto", True) else None
+    if linear is True or (linear == "auto" and _is_linear(resid, J0, th0, prior_std, r0)):
+        # residuals linear in theta (e.g. the response models): one regularised linear least-squares
+        # solve gives the minimum the iterative solver converges to
+        step = np.linalg.lstsq(J0 * prior_std, -r0, rcond=None)[0] * prior_std
+        x = th0 + step
+        fun = resid(x)
+        sol_x, sol_cost, sol_fun, J = x, 0.5 * float(np.sum(fun**2)), fun, J0
+    else:
+        jac0 = (lambda th: J0 if J0 is not None and np.array_equal(th, th0) else jac(th))  # noqa: E731
+        sol = least_squares(resid, th0, jac=jac0, x_scale=prior_std, method="trf", max_nfev=max_nfev)
+        sol_x, sol_cost, sol_fun, J = sol.x, sol.cost, sol.fun, sol.jac
+    if not (np.all(np.isfinite(sol_x)) and np.isfinite(sol_cost) and sol_cost <= cost0):
         # the start values explain the derivatives better: keep them
         return th0.copy(), np.full(est_idx.size, np.inf), [model.state_names[i] for i in use], natural
-    J = sol.jac
     dof = max(J.shape[0] - J.shape[1], 1)
-    s2 = float(np.sum(sol.fun**2) / dof)
+    s2 = float(np.sum(sol_fun**2) / dof)
     try:
         se = np.sqrt(np.clip(np.diag(np.linalg.pinv(J.T @ J)) * s2, 0, None))
     except np.linalg.LinAlgError:
         se = np.full(est_idx.size, np.inf)
-    return sol.x, se, [model.state_names[i] for i in use], natural
+    return sol_x, se, [model.state_names[i] for i in use], natural
+
+
+def _is_linear(resid, J, th0, prior_std, r0) -> bool:
+    """The residuals are linear in theta: a step of two prior widths in a random direction changes
+    them by exactly ``J step`` (to rounding)."""
+    step = 2.0 * prior_std * np.random.default_rng(0).uniform(0.5, 1.0, th0.size)
+    r1 = resid(th0 + step)
+    err = np.max(np.abs(r1 - (r0 + J @ step)))
+    return bool(np.isfinite(err) and err <= 1e-9 * max(np.max(np.abs(r1 - r0)), 1e-300))

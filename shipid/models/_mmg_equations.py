@@ -213,6 +213,17 @@ def jacobians(x, u, p, P, h, which):
     cols = X_COLS if which == 0 else np.arange(2 if which == 1 else p.shape[1])
     out = np.zeros((N, 6, 6 if which == 0 else cols.shape[0]))
     c = derived(pc[0], Pc)
+    if which == 2 and p.shape[0] == 1:
+        # shared parameters: the perturbed constants are derived once per column, not once per sample
+        for j in range(cols.shape[0]):
+            pc[0, j] += 1j * h
+            cj = derived(pc[0], Pc)
+            pc[0, j] -= 1j * h
+            for i in range(N):
+                f = rates(xc[i, 2], xc[i, 3], xc[i, 4], xc[i, 5], uc[i, 0], uc[i, 1], cj)
+                for m in range(6):
+                    out[i, m, j] = f[m].imag / h
+        return out
     for i in range(N):
         ip = i if p.shape[0] > 1 else 0
         if p.shape[0] > 1 and which != 2:

@@ -158,6 +158,15 @@ def fill(J, pos, vals):
         J[pos[k, 0], pos[k, 1]] = vals[k]
 
 
+def stack_numpy(shape, vals) -> np.ndarray:
+    """``vals`` (arrays broadcast to ``shape``) stacked along a new last axis (cheaper than ``np.stack``
+    of broadcast arrays: one allocation, one assignment per component)."""
+    out = np.empty(tuple(shape) + (len(vals),))
+    for i, val in enumerate(vals):
+        out[..., i] = val
+    return out
+
+
 def fill_numpy(shape, pos, vals) -> np.ndarray:
     """A zero matrix stack of ``shape`` (..., rows, cols) with the entries ``vals`` (arrays broadcast to
     the leading axes) at ``pos``."""

@@ -106,7 +106,7 @@ class KCSResponseModel(FroudeScaled, Model):
 
     def _rhs(self, t, x, u, p):
         out = _EQ["kcs_rates"](x[..., 2], x[..., 3], x[..., 4], x[..., 5], u[..., 0], u[..., 1], _rows(p))
-        return np.stack(np.broadcast_arrays(*out), axis=-1)
+        return _req.stack_numpy(batch_shape(x, u, p), out)
 
     def identifiability_notes(self, arrays, estimated) -> list[str]:
         """Warn when n is constant over all logs: u, u*n and n^2 are then collinear."""

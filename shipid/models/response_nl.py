@@ -150,7 +150,7 @@ class ResponseNLModel(FroudeScaled, Model):
     def _rhs(self, t, x, u, p):
         out = _EQ["nl_rates"](x[..., 2], x[..., 3], x[..., 4], x[..., 5], u[..., 0], u[..., 1], _rows(p),
                               self.u_floor)
-        return np.stack(np.broadcast_arrays(*out), axis=-1)
+        return _req.stack_numpy(batch_shape(x, u, p), out)
 
     # ------------------------------------------------------------- Jacobians
     def _jacobian(self, x, u, p, which: str, ncol: int):

@@ -1,0 +1,71 @@
+"""Memory the EKF with its smoother needs, checked before it starts.
+
+The stored filter (means, covariances and transitions at every sample) and
+the smoothed covariances grow as ``N nz^2``: a long log with many estimated
+parameters can need more memory than the machine has.  :func:`check` refuses
+such a run up front with the numbers, instead of swapping for minutes and
+dying without a message.
+"""
+from __future__ import annotations
+
+import os
+
+__all__ = ["MemoryLimitError", "ekf_bytes", "memory_limit", "check"]
+
+#: Environment variable overriding the limit: bytes, or a number with K, M, G or T (powers of 1024).
+ENV = "SHIPID_MEMORY_LIMIT"
+
+
+class MemoryLimitError(MemoryError, ValueError):
+    """The run would need more memory than the limit (a ``ValueError`` too: the CLI reports it, exit 2)."""
+
+
+def ekf_bytes(B: int, N: int, nz: int, nm: int, store: bool) -> int:
+    """Bytes of the arrays :func:`shipid.identify.ekf.run_ekf` allocates (and, with ``store``, those
+    :func:`~shipid.identify.ekf.rts_smooth` adds): per member and sample 3 ``nz x nz`` (filtered and
+    predicted covariances, transition) and 2 ``nz`` (means) stored, plus the smoothed means and
+    covariances; innovations, their variances and flags in any case."""
+    per = 2 * nm * 8 + nm + 2 * 8
+    if store:
+        per += (4 * nz * nz + 3 * nz) * 8
+    return int(B) * int(N) * per
+
+
+def memory_limit() -> int | None:
+    """The limit in bytes: ``SHIPID_MEMORY_LIMIT`` if set, else 90 % of the memory the kernel reports
+    available (``MemAvailable`` in ``/proc/meminfo``); None when neither is known."""
+    txt = os.environ.get(ENV, "").strip()
+    if txt:
+        mult = {"K": 1024, "M": 1024**2, "G": 1024**3, "T": 1024**4}
+        unit = txt[-1].upper()
+        try:
+            return int(float(txt[:-1]) * mult[unit]) if unit in mult else int(float(txt))
+        except ValueError:
+            raise ValueError(f"{ENV}={txt!r}: give bytes or a number with K, M, G or T (e.g. 8G)") from None
+    try:
+        with open("/proc/meminfo", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(0.9 * int(line.split()[1]) * 1024)
+    except OSError:
+        pass
+    return None
+
+
+def _gb(n: float) -> str:
+    return f"{n / 1024**3:.3g} GB"
+
+
+def check(B: int, N: int, nz: int, nm: int, store: bool) -> None:
+    """Raise :class:`MemoryLimitError` when :func:`ekf_bytes` exceeds :func:`memory_limit`."""
+    need = ekf_bytes(B, N, nz, nm, store)
+    limit = memory_limit()
+    if limit is None or need <= limit:
+        return
+    src = f"{ENV}" if os.environ.get(ENV, "").strip() else f"90 % of the available memory; {ENV} sets it"
+    per = need / max(B * N, 1) / 1024
+    raise MemoryLimitError(
+        f"the EKF {'with its smoother ' if store else ''}over {B} x {N} samples of {nz} augmented states needs "
+        f"~{_gb(need)} ({per:.0f} KB per sample), above the limit of {_gb(limit)} ({src}); fit fewer samples "
+        "(shorter or decimated logs) or estimate fewer parameters (the stored covariances grow with their "
+        "square)" + ("" if not store else ", or run the filter alone (run_ekf(store=False): no smoother)"))
