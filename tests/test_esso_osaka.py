@@ -60,3 +60,39 @@ def test_study_fast_mode():
     assert t10.loc["lowspeed + wind + current fitted", "random"] < t10.loc["dead reckoning", "random"]
     assert set(res.currents.columns) >= {"cx", "cx_std", "cy", "cy_std"}
     assert (res.currents.cx_std > 0).all()
+
+
+@pytest.mark.slow
+def test_cli_fit_wind_current_then_validate_and_report_with_horizons(tmp_path, capsys):
+    import json
+
+    import pandas as pd
+
+    from shipid.cli import main
+
+    src = DATA / "random" / "random_31-Jul-2020_12_29_58.csv"
+    short = tmp_path / "random_short.csv"
+    pd.read_csv(src).iloc[:900].to_csv(short, index=False)  # 90 s of a measured run, the file's own columns
+    res = tmp_path / "fit.json"
+    rc = main(["fit", str(short), "--schema", "esso-frt", "--model", "lowspeed", "--wind", "--current",
+               "--estimate", "Yv,Nr,wY1", "--passes", "1", "--no-progress", "-o", str(res)])
+    assert rc == 0
+    doc = json.loads(res.read_text())
+    assert doc["model"] == "with-environment" and doc["model_options"]["current"] == "constant"
+    assert doc["model_options"]["wind"]["A_L"] == pytest.approx(0.52038)
+    out = tmp_path / "val.json"
+    rc = main(["validate", str(res), str(short), "--schema", "esso-frt", "--horizon", "10,30", "--no-closed-loop",
+               "-o", str(out)])
+    assert rc == 0
+    h = json.loads(out.read_text())[0]["horizon"]
+    assert [e["seconds"] for e in h] == [10.0, 30.0]
+    assert set(h[0]) == {"seconds", "position_error_median_m", "position_error_p90_m", "heading_error_median_deg",
+                         "n_starts", "n_blowups"}
+    assert h[0]["n_starts"] == 18 - 2 and h[1]["n_starts"] == 18 - 6  # starts every 5 s that reach the horizon
+    html = tmp_path / "r.html"
+    assert main(["report", str(res), str(short), "--schema", "esso-frt", "--horizon", "10", "--no-closed-loop",
+                 "-o", str(html)]) == 0
+    assert "Open-loop prediction from the measured state" in html.read_text()
+    assert main(["validate", str(res), str(short), "--schema", "esso-frt", "--horizon", "ten", "-o",
+                 str(tmp_path / "x.json")]) == 2
+    assert "--horizon ten" in capsys.readouterr().err

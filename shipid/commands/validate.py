@@ -22,6 +22,12 @@ def _common(p) -> None:
     p.add_argument("--no-closed-loop", action="store_true",
                    help="skip the model's own closed-loop standard manoeuvre matching each log (replay only)")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.add_argument("--schema", default=None, metavar="PRESET|FILE", help="log schema (e.g. esso-frt)")
+    p.add_argument("--horizon", default="10,30,60", metavar="SECONDS",
+                   help="multi-start open-loop prediction horizons [s], comma-separated (default 10,30,60; "
+                        "'none' to skip): per log median/p90 position and median heading errors from starts "
+                        "every --start-every s")
+    p.add_argument("--start-every", type=float, default=5.0, help="spacing of the horizon starts [s] (default 5)")
 
 
 def register(sub) -> None:
@@ -31,12 +37,6 @@ def register(sub) -> None:
                                    "ITTC/IMO manoeuvre metrics of the log and of the replay.")
     _common(p)
     p.add_argument("-o", "--output", required=True, help="JSON file to write (a list, one object per log)")
-    p.add_argument("--schema", default=None, metavar="PRESET|FILE", help="log schema (e.g. esso-frt)")
-    p.add_argument("--horizon", default="10,30,60", metavar="SECONDS",
-                   help="multi-start open-loop prediction horizons [s], comma-separated (default 10,30,60; "
-                        "'none' to skip): per log a 'horizon' entry with median/p90 position and median heading "
-                        "errors from starts every --start-every s")
-    p.add_argument("--start-every", type=float, default=5.0, help="spacing of the horizon starts [s] (default 5)")
     p.set_defaults(handler=_validate)
 
     r = sub.add_parser("report", help="write a self-contained HTML validation report of a fitted model",
@@ -83,13 +83,9 @@ def _validate(args) -> int:
     logs = _read(args)
     res = validate(args.result, logs, args.lpp, rudder_sign=args.rudder_sign, closed_loop=not args.no_closed_loop)
     if horizons:
-        from ..validation import resolve_model
-        from ..validation_horizon import horizon_prediction
-
-        model, _ = resolve_model(args.result)
-        for d, lg in zip(res, logs):
-            h = horizon_prediction(model, lg, horizons=horizons, start_every=args.start_every,
-                                   rudder_sign=args.rudder_sign)
+        for d, (h, _) in zip(res, _horizon_results(args, horizons, logs)):
+            if h is None:
+                continue
             d["horizon"] = h.summary()
             print(f"{d['name']}: horizon " + ", ".join(
                 f"{e['seconds']:g} s median {e['position_error_median_m']:.3g} m ({e['n_starts']} starts"
@@ -120,6 +116,24 @@ def _horizons(text: str) -> list[float]:
     return out
 
 
+def _horizon_results(args, horizons, logs) -> list:
+    """``(HorizonResult, log)`` per log for ``--horizon``."""
+    from ..validation import resolve_model
+    from ..validation_horizon import horizon_prediction
+
+    model, _ = resolve_model(args.result)
+    out = []
+    for lg in logs:
+        if not {"x", "y", "psi"} <= set(getattr(lg, "data", lg).columns):
+            print(f"note: {getattr(lg, 'name', 'log')}: no x, y, psi channels; horizon prediction skipped",
+                  file=sys.stderr)
+            out.append((None, lg))
+            continue
+        out.append((horizon_prediction(model, lg, horizons=horizons, start_every=args.start_every,
+                                       rudder_sign=args.rudder_sign), lg))
+    return out
+
+
 def _read(args) -> list:
     """The logs, read with ``--schema`` when given (else by :func:`shipid.validation.load_logs`)."""
     from ..validation import load_logs
@@ -138,13 +152,16 @@ def _read(args) -> list:
 def _report(args) -> int:
     from .._io import atomic_write_text
     from ..report import render_report
-    from ..validation import load_logs, resolve_model, validate_one
+    from ..validation import resolve_model, validate_one
 
     out = _check(args)
     model, res = resolve_model(args.result)
+    logs = _read(args)
     vals = [validate_one(model, lg, lpp=args.lpp, rudder_sign=args.rudder_sign, closed_loop=not args.no_closed_loop)
-            for lg in load_logs(args.logs, lpp=args.lpp)]
-    text = render_report(res, args.logs, title=args.title, validations=vals)
+            for lg in logs]
+    horizons = _horizons(args.horizon)
+    hz = [h for h in _horizon_results(args, horizons, logs) if h[0] is not None] if horizons else None
+    text = render_report(res, args.logs, title=args.title, validations=vals, horizons=hz)
     atomic_write_text(out, text, force=args.force)
     for v in vals:
         print(_line(v.to_dict()))
