@@ -188,3 +188,22 @@ def test_fit_without_environment_is_biased():
     z_plain = {k: (plain.summary().loc[k, "value"] - tp[k]) / plain.summary().loc[k, "std"] for k in est}
     assert all(abs(z) < 3 for z in z_env.values()), z_env
     assert max(abs(z) for z in z_plain.values()) > 5, z_plain
+
+
+def test_fit_command_helpers_name_what_is_missing(tmp_path):
+    import pandas as pd
+
+    from shipid.environment.cli import environment_model, wind_geometry
+
+    df = pd.DataFrame({"time": [0.0, 0.1], "u": [0.1, 0.1], "delta": [0.0, 0.0], "n": [5.0, 5.0]})
+    with pytest.raises(ValueError, match=r"has no channel\(s\) \['wind_speed_true', 'wind_dir_true'\].*--schema esso-frt"):
+        environment_model(get_model("lowspeed"), [df], wind="esso-osaka-3m")
+    with pytest.raises(ValueError, match="no shipped above-water geometry"):
+        wind_geometry("auto", [df])
+    f = tmp_path / "w.json"
+    f.write_text('{"lpp": 3.0, "breadth": 0.5, "A_T": 0.1, "A_L": 0.5, "A_OD": 0.1, "C": 0.0, "C_BR": -0.1, '
+                 '"H_BR": 0.3, "H_C": 0.1, "colour": 1}')
+    with pytest.raises(ValueError, match=r"unknown field\(s\) \['colour'\]"):
+        wind_geometry(str(f))
+    m, extra = environment_model(get_model("lowspeed"), [df], current="random-walk")
+    assert m.state_names[-2:] == ("cx", "cy") and extra["process_std"]["cx"] == m.current_walk
