@@ -59,3 +59,4 @@ def test_every_ship_model_predicts_froude_scaled_manoeuvres(name):
     xa, xb = a.simulation.x[0, :n], b.simulation.x[0, :n]
     np.testing.assert_allclose(xb[:, :2] / lam, xa[:, :2], rtol=1e-9, atol=1e-9 * L1)
     np.testing.assert_allclose(xb[:, 2], xa[:, 2], rtol=0, atol=1e-9)
+
