@@ -150,7 +150,7 @@ def _fit(model, logs, estimate, start, every=1, substeps=1):
     extra = model.identifier_settings() if hasattr(model, "identifier_settings") else {}
     logs = [lg.iloc[::every].reset_index(drop=True) for lg in logs]
     return EKFIdentifier(model.with_params(start), estimate=estimate, init="model", meas_std=NOISE_STD, n_passes=2,
-                         substeps=substeps, **extra).fit(logs)
+                         substeps=substeps, input_hold="zoh", **extra).fit(logs)  # the synthetic inputs are held
 
 
 def test_synthetic_wind_and_current_recovered_within_3_sigma():

@@ -20,7 +20,9 @@ Choices (made once, before looking at any held-out error, and the same for every
 * estimated coefficients :data:`ESTIMATE` (hull, thrust ahead and astern, astern side force, rudder
   lift) and, with wind, :data:`ESTIMATE_WIND`; prior = ``esso-osaka-prior`` with 100 % prior std;
 * current: constant per run (reset at each run), estimated with prior std 0.05 m/s; in prediction the
-  held-out run starts with the training runs' mean current.
+  held-out run starts with the training runs' mean current;
+* EKF inputs held over each interval (``input_hold="zoh"``, the hold the predictions use) and no
+  innovation gating (``gate=None``): the settings the documented run was made with.
 """
 from __future__ import annotations
 
@@ -116,7 +118,7 @@ def _fit(model, frames, estimate, substeps):
     extra = model.identifier_settings() if hasattr(model, "identifier_settings") else {}
     pstd = dict(PROCESS_STD, **extra.pop("process_std", {}))
     ident = EKFIdentifier(model, estimate=list(estimate), init="model", meas_std=MEAS_STD, process_std=pstd,
-                          n_passes=2, substeps=substeps, **extra)
+                          n_passes=2, substeps=substeps, input_hold="zoh", gate=None, **extra)
     t0 = time.time()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
