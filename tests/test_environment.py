@@ -207,3 +207,20 @@ def test_fit_command_helpers_name_what_is_missing(tmp_path):
         wind_geometry(str(f))
     m, extra = environment_model(get_model("lowspeed"), [df], current="random-walk")
     assert m.state_names[-2:] == ("cx", "cy") and extra["process_std"]["cx"] == m.current_walk
+
+
+def test_apparent_only_log_gets_the_true_wind_at_the_edge():
+    import pandas as pd
+
+    from shipid.environment.cli import environment_model
+
+    rng = np.random.default_rng(5)
+    n = 50
+    psi, u, v = rng.uniform(-3, 3, n), rng.uniform(0, 0.4, n), rng.normal(0, 0.05, n)
+    Vt, dt = np.full(n, 1.5), np.full(n, 0.7)
+    Va, ga = apparent_wind(Vt, dt, psi, u, v)
+    df = pd.DataFrame({"time": np.arange(n) * 0.1, "psi": psi, "u": u, "v": v, "delta": 0.0, "n": 8.0,
+                       "wind_speed_rel": Va, "wind_dir_rel": ga})
+    environment_model(get_model("lowspeed"), [df], wind="esso-osaka-3m")
+    np.testing.assert_allclose(df["wind_speed_true"], Vt, rtol=1e-10)
+    np.testing.assert_allclose(np.angle(np.exp(1j * (df["wind_dir_true"] - dt))), 0.0, atol=1e-10)
