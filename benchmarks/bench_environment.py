@@ -26,7 +26,7 @@ WIND = ["wX1", "wY1", "wN2"]
 
 def _time_fit(model, logs, estimate, substeps, extra):
     ident = EKFIdentifier(model, estimate=estimate, init="model", meas_std=NOISE_STD, n_passes=2, substeps=substeps,
-                          **extra)
+                          input_hold="zoh", **extra)
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)

@@ -150,7 +150,7 @@ def _fit(model, logs, estimate, start, every=1, substeps=1):
     extra = model.identifier_settings() if hasattr(model, "identifier_settings") else {}
     logs = [lg.iloc[::every].reset_index(drop=True) for lg in logs]
     return EKFIdentifier(model.with_params(start), estimate=estimate, init="model", meas_std=NOISE_STD, n_passes=2,
-                         substeps=substeps, **extra).fit(logs)
+                         substeps=substeps, input_hold="zoh", **extra).fit(logs)  # the synthetic inputs are held
 
 
 def test_synthetic_wind_and_current_recovered_within_3_sigma():
@@ -188,3 +188,39 @@ def test_fit_without_environment_is_biased():
     z_plain = {k: (plain.summary().loc[k, "value"] - tp[k]) / plain.summary().loc[k, "std"] for k in est}
     assert all(abs(z) < 3 for z in z_env.values()), z_env
     assert max(abs(z) for z in z_plain.values()) > 5, z_plain
+
+
+def test_fit_command_helpers_name_what_is_missing(tmp_path):
+    import pandas as pd
+
+    from shipid.environment.cli import environment_model, wind_geometry
+
+    df = pd.DataFrame({"time": [0.0, 0.1], "u": [0.1, 0.1], "delta": [0.0, 0.0], "n": [5.0, 5.0]})
+    with pytest.raises(ValueError, match=r"has no channel\(s\) \['wind_speed_true', 'wind_dir_true'\].*--schema esso-frt"):
+        environment_model(get_model("lowspeed"), [df], wind="esso-osaka-3m")
+    with pytest.raises(ValueError, match="no shipped above-water geometry"):
+        wind_geometry("auto", [df])
+    f = tmp_path / "w.json"
+    f.write_text('{"lpp": 3.0, "breadth": 0.5, "A_T": 0.1, "A_L": 0.5, "A_OD": 0.1, "C": 0.0, "C_BR": -0.1, '
+                 '"H_BR": 0.3, "H_C": 0.1, "colour": 1}')
+    with pytest.raises(ValueError, match=r"unknown field\(s\) \['colour'\]"):
+        wind_geometry(str(f))
+    m, extra = environment_model(get_model("lowspeed"), [df], current="random-walk")
+    assert m.state_names[-2:] == ("cx", "cy") and extra["process_std"]["cx"] == m.current_walk
+
+
+def test_apparent_only_log_gets_the_true_wind_at_the_edge():
+    import pandas as pd
+
+    from shipid.environment.cli import environment_model
+
+    rng = np.random.default_rng(5)
+    n = 50
+    psi, u, v = rng.uniform(-3, 3, n), rng.uniform(0, 0.4, n), rng.normal(0, 0.05, n)
+    Vt, dt = np.full(n, 1.5), np.full(n, 0.7)
+    Va, ga = apparent_wind(Vt, dt, psi, u, v)
+    df = pd.DataFrame({"time": np.arange(n) * 0.1, "psi": psi, "u": u, "v": v, "delta": 0.0, "n": 8.0,
+                       "wind_speed_rel": Va, "wind_dir_rel": ga})
+    environment_model(get_model("lowspeed"), [df], wind="esso-osaka-3m")
+    np.testing.assert_allclose(df["wind_speed_true"], Vt, rtol=1e-10)
+    np.testing.assert_allclose(np.angle(np.exp(1j * (df["wind_dir_true"] - dt))), 0.0, atol=1e-10)

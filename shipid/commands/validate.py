@@ -24,6 +24,11 @@ def _common(p) -> None:
     p.add_argument("--no-closed-loop", action="store_true",
                    help="skip the model's own closed-loop standard manoeuvre matching each log (replay only)")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.add_argument("--horizon", default="10,30,60", metavar="SECONDS",
+                   help="multi-start open-loop prediction horizons [s], comma-separated (default 10,30,60; "
+                        "'none' to skip): per log median/p90 position and median heading errors from starts "
+                        "every --start-every s")
+    p.add_argument("--start-every", type=float, default=5.0, help="spacing of the horizon starts [s] (default 5)")
 
 
 def register(sub) -> None:
@@ -33,11 +38,6 @@ def register(sub) -> None:
                                    "ITTC/IMO manoeuvre metrics of the log and of the replay.")
     _common(p)
     p.add_argument("-o", "--output", required=True, help="JSON file to write (a list, one object per log)")
-    p.add_argument("--horizon", default="10,30,60", metavar="SECONDS",
-                   help="multi-start open-loop prediction horizons [s], comma-separated (default 10,30,60; "
-                        "'none' to skip): per log a 'horizon' entry with median/p90 position and median heading "
-                        "errors from starts every --start-every s")
-    p.add_argument("--start-every", type=float, default=5.0, help="spacing of the horizon starts [s] (default 5)")
     from .uncertainty import add_draws_option
 
     add_draws_option(p)
@@ -99,12 +99,9 @@ def _validate(args) -> int:
     res = [v.to_dict() for v in vals]
     validate_draws(args, args.result, vals, res)  # --draws N: intervals inside each "predicted" block
     if horizons:
-        from ..validation import resolve_model
-        from ..validation_horizon import horizon_prediction
-
-        model, _ = resolve_model(args.result)
-        for d, lg in zip(res, logs):
-            h = horizon_prediction(model, lg, horizons=horizons, start_every=args.start_every)
+        for d, (h, _) in zip(res, _horizon_results(args, horizons, logs)):
+            if h is None:
+                continue
             d["horizon"] = h.summary()
             print(f"{d['name']}: horizon " + ", ".join(
                 f"{e['seconds']:g} s median {e['position_error_median_m']:.3g} m ({e['n_starts']} starts"
@@ -135,6 +132,23 @@ def _horizons(text: str) -> list[float]:
     return out
 
 
+def _horizon_results(args, horizons, logs) -> list:
+    """``(HorizonResult, log)`` per log for ``--horizon``."""
+    from ..validation import resolve_model
+    from ..validation_horizon import horizon_prediction
+
+    model, _ = resolve_model(args.result)
+    out = []
+    for lg in logs:
+        if not {"x", "y", "psi"} <= set(getattr(lg, "data", lg).columns):
+            print(f"note: {getattr(lg, 'name', 'log')}: no x, y, psi channels; horizon prediction skipped",
+                  file=sys.stderr)
+            out.append((None, lg))
+            continue
+        out.append((horizon_prediction(model, lg, horizons=horizons, start_every=args.start_every), lg))
+    return out
+
+
 def _report(args) -> int:
     from .._io import atomic_write_text
     from ..report import render_report
@@ -142,13 +156,16 @@ def _report(args) -> int:
 
     out = _check(args)
     model, res = resolve_model(args.result)
+    logs = read_logs(args.logs, args)
     vals = [validate_one(model, lg, lpp=args.lpp, closed_loop=not args.no_closed_loop,
                          zigzag_angles=_zigzag(args))
-            for lg in progress_iter(read_logs(args.logs, args), args, "replaying logs")]
+            for lg in progress_iter(logs, args, "replaying logs")]
     from .uncertainty import check_draws
 
     unc = {"draws": check_draws(args), "seed": args.draws_seed, "samples": args.samples} if check_draws(args) else None
-    text = render_report(res, args.logs, title=args.title, validations=vals, uncertainty=unc)
+    horizons = _horizons(args.horizon)
+    hz = [h for h in _horizon_results(args, horizons, logs) if h[0] is not None] if horizons else None
+    text = render_report(res, args.logs, title=args.title, validations=vals, uncertainty=unc, horizons=hz)
     atomic_write_text(out, text, force=args.force)
     for v in vals:
         print(_line(v.to_dict()))

@@ -5,9 +5,9 @@ import json
 from pathlib import Path
 
 from .model import with_environment
-from .wind import WindForce
+from .wind import WindForce, true_wind_from_apparent
 
-__all__ = ["environment_model", "wind_geometry"]
+__all__ = ["environment_model", "wind_geometry", "add_true_wind"]
 
 
 def wind_geometry(spec: str, logs=()) -> WindForce:
@@ -39,8 +39,20 @@ def environment_model(model, logs, *, wind=None, current=None):
         for lg in logs:
             data = getattr(lg, "data", lg)
             miss = [c for c in ("wind_speed_true", "wind_dir_true") if c not in data.columns]
+            if miss and {"wind_speed_rel", "wind_dir_rel", "psi", "u", "v"} <= set(data.columns):
+                add_true_wind(data)  # converted at the edge (in memory; the file is not touched)
+                miss = []
             if miss:
                 raise ValueError(f"--wind: log '{getattr(lg, 'name', '?')}' has no channel(s) {miss}; read it with a "
                                  "schema that maps the wind columns (e.g. --schema esso-frt) or --columns")
     env = with_environment(model, wind=geom, current=current)
     return env, env.identifier_settings()
+
+
+def add_true_wind(frame) -> None:
+    """Add ``wind_speed_true``, ``wind_dir_true`` to a log frame that has only the apparent wind
+    (``wind_speed_rel``, ``wind_dir_rel``), using its ``psi, u, v`` as the ship's motion over ground
+    (:func:`~shipid.environment.wind.true_wind_from_apparent`; right for GNSS-based velocities)."""
+    V, d = true_wind_from_apparent(frame["wind_speed_rel"].to_numpy(float), frame["wind_dir_rel"].to_numpy(float),
+                                   frame["psi"].to_numpy(float), frame["u"].to_numpy(float), frame["v"].to_numpy(float))
+    frame["wind_speed_true"], frame["wind_dir_true"] = V, d

@@ -339,10 +339,34 @@ def _section_versions(result) -> str:
 
 
 # ----------------------------------------------------------------------------- public
+def _section_horizon(horizons) -> str:
+    """Multi-start open-loop prediction errors (:func:`shipid.validation_horizon.horizon_prediction`) and
+    predicted-vs-measured track overlays; ``horizons`` is a list of ``(HorizonResult, log)``."""
+    if not horizons:
+        return ""
+    import matplotlib.pyplot as plt
+
+    rows, figs = [], []
+    for h, log in horizons:
+        for e in h.summary():
+            rows.append([_e(h.name), _f(e["seconds"], "{:g}"), _f(e["position_error_median_m"], "{:.3f}"),
+                         _f(e["position_error_p90_m"], "{:.3f}"), _f(e["heading_error_median_deg"], "{:.2f}"),
+                         _f(e["n_starts"], "{:.0f}"), (_f(e["n_blowups"], "{:.0f}"), "bad" if e["n_blowups"] else "")])
+        ax = h.plot(log, every=max(1, len(h.start_times) // 12))
+        ax.set_title(f"{h.name}: predictions over {h.horizons.max():g} s")
+        figs.append(_fig(ax.figure, f"predicted vs measured tracks, {h.name}"))
+        plt.close(ax.figure)
+    return ('<h2 id="horizon">Open-loop prediction from the measured state</h2><p>From starts every few seconds '
+            "the model runs open loop with the measured inputs; errors at each horizon (blow-ups count with "
+            "infinite error).</p>" + _table(["log", "horizon [s]", "median position error [m]", "p90 [m]",
+                                               "median heading error [deg]", "starts", "blow-ups"], rows)
+            + "".join(figs))
+
+
 def render_report(result, logs, *, identifier=None, title: str | None = None, lpp: float | None = None,
                   rudder_sign: float = 1.0, closed_loop: bool = True,
                   validations: list[LogValidation] | None = None, uncertainty: dict | None = None,
-                  intro: str | None = None) -> str:
+                  intro: str | None = None, horizons=None) -> str:
     """The report as an HTML string (see :func:`write_report`).
 
     ``intro`` is plain text shown under the title (what the report demonstrates); blank
@@ -351,7 +375,8 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
     ``validations`` (from :func:`shipid.validation.validate_logs`) reuses replays already computed;
     ``logs``, ``lpp``, ``rudder_sign`` and ``closed_loop`` are then ignored.  ``uncertainty``
     (``{"draws": N, "seed": s, "samples": None}``) adds the prediction-uncertainty section
-    (:func:`shipid.report.uncertainty.uncertainty_section`).
+    (:func:`shipid.report.uncertainty.uncertainty_section`).  ``horizons``: a list of
+    ``(HorizonResult, log)`` adds the open-loop prediction section.
     """
     if result is None:
         if identifier is None:
@@ -383,7 +408,7 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
             f"{_e(_versions_now().get('shipid'))}.</p>",
             *[f"<p class=\"intro\">{_e(par.strip())}</p>" for par in (intro or "").split("\n\n") if par.strip()],
             f"<nav>{nav}</nav>",
-            _section_summary(validations), _section_imo(validations),
+            _section_summary(validations), _section_horizon(horizons), _section_imo(validations),
             *extra,
             _section_coefficients(res),
             _section_identifiability(res), _section_model(res, model),

@@ -20,7 +20,9 @@ Choices (made once, before looking at any held-out error, and the same for every
 * estimated coefficients :data:`ESTIMATE` (hull, thrust ahead and astern, astern side force, rudder
   lift) and, with wind, :data:`ESTIMATE_WIND`; prior = ``esso-osaka-prior`` with 100 % prior std;
 * current: constant per run (reset at each run), estimated with prior std 0.05 m/s; in prediction the
-  held-out run starts with the training runs' mean current.
+  held-out run starts with the training runs' mean current;
+* EKF inputs held over each interval (``input_hold="zoh"``, the hold the predictions use) and no
+  innovation gating (``gate=None``): the settings the documented run was made with.
 """
 from __future__ import annotations
 
@@ -92,6 +94,8 @@ class EssoStudy:
         Measured vs predicted (replayed) turning metrics of the turning runs.
     fits : dict
         Per fold and model: ``success``, ``message``, ``seconds``.
+    models : dict
+        Per fold, the fitted models.
     """
 
     horizon: pd.DataFrame
@@ -99,6 +103,7 @@ class EssoStudy:
     currents: pd.DataFrame
     turning: pd.DataFrame
     fits: dict = field(default_factory=dict)
+    models: dict = field(default_factory=dict)
     settings: dict = field(default_factory=dict)
 
     def table(self, seconds: float = 30.0) -> pd.DataFrame:
@@ -113,12 +118,49 @@ def _fit(model, frames, estimate, substeps):
     extra = model.identifier_settings() if hasattr(model, "identifier_settings") else {}
     pstd = dict(PROCESS_STD, **extra.pop("process_std", {}))
     ident = EKFIdentifier(model, estimate=list(estimate), init="model", meas_std=MEAS_STD, process_std=pstd,
-                          n_passes=2, substeps=substeps, **extra)
+                          n_passes=2, substeps=substeps, input_hold="zoh", gate=None, **extra)
     t0 = time.time()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         ident.fit(frames)
     return ident, time.time() - t0
+
+
+def _turning_rows(lg, models, every) -> list[dict]:
+    """Steady turning of a measured turning run against each model's replay of its inputs (from the
+    run's first state, open loop over the whole run): steady diameter / L, steady speed, time to
+    turn 360 deg in the steady part (from the mean yaw rate of the last half of the turn)."""
+    from ..manoeuvres.run_metrics import metrics
+    from ..simulate import replay
+
+    d = _frame(lg, every)
+    out = []
+
+    def row(name, frame):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            m = metrics(frame, lpp=3.0, kind="turning").to_dict()
+        psi = np.unwrap(frame["psi"].to_numpy(dtype=float))
+        t = frame["time"].to_numpy(dtype=float)
+        half = t >= t[0] + 0.5 * (t[-1] - t[0])
+        rate = abs(np.polyfit(t[half], psi[half], 1)[0]) if half.sum() > 2 else np.nan
+        out.append({"run": lg.name, "model": name, "steady_diameter_L": m.get("steady_diameter_L"),
+                    "steady_speed": m.get("steady_speed"), "time_360_s": 2 * np.pi / rate if rate > 0 else np.nan,
+                    "success": m.get("success")})
+
+    row("measured", d)
+    for name, model in models.items():
+        if model.nu == 0:
+            continue
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            sim = replay(model, d, substeps=1)
+        if not sim.success:
+            out.append({"run": lg.name, "model": name, "success": False})
+            continue
+        f = sim.to_pandas().reset_index()
+        row(name, f.assign(delta=d["delta"].to_numpy()))
+    return out
 
 
 def run_study(data_dir=DATA_DIR, *, folds: int = 3, fit_every: int = 20, eval_every: int = 2,
@@ -150,7 +192,7 @@ def run_study(data_dir=DATA_DIR, *, folds: int = 3, fit_every: int = 20, eval_ev
     fixed_models = {"dead reckoning": dead_reckoning(), "mmg kvlcc2 (Froude-scaled, no fit)":
                     get_model("mmg", "kvlcc2", lpp=prior.lpp), "lowspeed prior (no fit)": prior,
                     "lowspeed prior + Fujiwara wind (no fit)": with_environment(prior, wind="esso-osaka-3m")}
-    rows, coefs, currents, fits = [], [], [], {}
+    rows, coefs, currents, fits, models, turning = [], [], [], {}, {}, []
     errs: dict = {}
 
     def record(model_name, lg, model, initial=None):
@@ -192,9 +234,12 @@ def run_study(data_dir=DATA_DIR, *, folds: int = 3, fit_every: int = 20, eval_ev
             cc.append((row["cx"], row["cy"]))
         c_mean = np.mean(cc, axis=0) if cc else (0.0, 0.0)
         m_plain, m_env = plain.to_model(), env.to_model()
+        models[k] = {"lowspeed fitted (no environment)": m_plain, "lowspeed + wind + current fitted": m_env}
         for lg in test:
             record("lowspeed fitted (no environment)", lg, m_plain)
             record("lowspeed + wind + current fitted", lg, m_env, initial={"cx": c_mean[0], "cy": c_mean[1]})
+            if lg.run_type == "turning":
+                turning.extend(_turning_rows(lg, {**fixed_models, **models[k]}, eval_every))
     for (model_name, kind), results in errs.items():
         for j, H in enumerate(results[0].horizons):
             pe = np.concatenate([r.position_error[:, j] for r in results])
@@ -206,7 +251,7 @@ def run_study(data_dir=DATA_DIR, *, folds: int = 3, fit_every: int = 20, eval_ev
                          "position_error_p90_m": float(np.percentile(pe[ok], 90)) if ok.any() else np.nan,
                          "heading_error_median_deg": float(np.median(he[ok])) if ok.any() else np.nan})
     return EssoStudy(horizon=pd.DataFrame(rows), coefficients=pd.DataFrame(coefs), currents=pd.DataFrame(currents),
-                     turning=pd.DataFrame(), fits=fits,
+                     turning=pd.DataFrame(turning), fits=fits, models=models,
                      settings={"folds": folds, "fit_every": fit_every, "eval_every": eval_every,
                                "start_every": start_every, "runs": [lg.name for lg in runs],
                                "fold_of": fold_of})
@@ -222,4 +267,5 @@ if __name__ == "__main__":  # pragma: no cover - the full study (slow): python -
         print(res.horizon.to_string())
         print(res.coefficients.pivot(index="parameter", columns="fold", values="value").to_string())
         print(res.currents.to_string())
+        print(res.turning.to_string())
         print(res.fits)
