@@ -36,6 +36,7 @@ import numpy as np
 
 from .problem import Problem
 from .result import ControlResult
+from .shooting import _MS
 
 __all__ = ["solve_ipopt", "MissingExtraError", "have_casadi"]
 
@@ -218,8 +219,6 @@ def solve_ipopt(problem: Problem, *, n_segments: int | None = None, max_iter: in
         ``method="direct-ipopt"``; ``nit`` IPOPT iterations, ``nfev`` evaluations of the constraints.
     """
     ca = _casadi()
-    from .direct import _MS
-
     t0 = time.perf_counter()
     pr = problem
     ms = _MS(pr, pr.shooting_segments if n_segments is None else n_segments)
@@ -254,7 +253,7 @@ def solve_ipopt(problem: Problem, *, n_segments: int | None = None, max_iter: in
         for sub in range(s):
             nodes.append(out[sub * nx:(sub + 1) * nx, :])
         x = nodes[-1]
-    # constraints, in the order of direct._MS: continuity, terminal equalities, then inequalities
+    # constraints, in the order of shooting._MS: continuity, terminal equalities, then inequalities
     g, lbg, ubg = [], [], []
     cont = (x - S) / ca.repmat(xs, 1, nseg)
     g.append(ca.vec(cont))
@@ -292,7 +291,7 @@ def solve_ipopt(problem: Problem, *, n_segments: int | None = None, max_iter: in
         Mf = _batched_callback(ca, "mayer", mayer, mayer_jac, nx, 1, 1, 1, keep)
         J = J + Mf(S[:, -1], tf)
     if pr.running is not None:
-        # rectangle rule on the interval starts, as direct._MS.cost
+        # rectangle rule on the interval starts, as shooting._MS.cost
         Xs = ca.horzcat(*[starts[l][:, q] for q in range(nseg) for l in range(L)])
 
         def run(xx, uu):

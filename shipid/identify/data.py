@@ -39,6 +39,7 @@ def _frame(log) -> tuple[pd.DataFrame, dict]:
     ship = getattr(log, "ship", None)
     if ship is not None:
         meta["lpp"] = getattr(ship, "lpp", None)
+        meta["ship"] = ship.to_dict() if hasattr(ship, "to_dict") else {"lpp": meta["lpp"]}
     return data, meta
 
 

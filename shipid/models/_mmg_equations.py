@@ -52,6 +52,12 @@ def sqrt_pos(z):
     return math.sqrt(z) if z > 0 else 0.0
 
 
+def inv_pos(z):
+    """1/z for z > 0, else 0 (the prime-system velocities v' = v/U, r' = r L/U are set to 0 at U = 0,
+    where the hull polynomial has no defined value; the model is not valid there)."""
+    return 1.0 / z if z > 0 else 0.0
+
+
 def derived(p, P):
     """Constants ``c`` of the equations for one parameter set: everything that depends only on the
     parameters and the particulars, folded once so that :func:`forces` and :func:`rates` do the least
@@ -104,7 +110,7 @@ def forces(uu, v, r, delta, n, c):
     # hull, eqs. (7)-(10): v' = v/U, r' = r L/U, beta = asin(-v')
     U2 = uu * uu + v * v
     U = sqrt(U2)
-    iU = 1.0 / U
+    iU = inv_pos(U)  # 0 at rest (u = v = 0): no NaN; the MMG hull model itself is not valid there
     vp = v * iU
     rp = (r * L) * iU
     beta = -arcsin(vp)
@@ -118,13 +124,15 @@ def forces(uu, v, r, delta, n, c):
     one_m_wP = w1 + (wcA + wcD * sP) * (1.0 - exp(mC1 * (betaP * sP)))
     uP = uu * one_m_wP
     uP2 = uP * uP
-    KTn2D2 = (kT0 * n + kT1 * uP) * n + k2 * uP2     # K_T n^2 D_P^2, free of the 1/n in J_P
+    # K_T n|n| D_P^2 with J_P = u_P/(|n| D_P): the thrust reverses with n (astern), free of the 1/n in J_P
+    sn = sign_nn(n)
+    KTn2D2 = (kT0 * (n * sn) + kT1 * uP) * n + k2 * uP2 * sn
     # rudder, eqs. (17)-(28)
     a = uP + kappa * (sqrt_pos(uP2 + c8pi * KTn2D2) - uP)
     uR = eps * sqrt(eta * (a * a) + one_m_eta * uP2)
     betaR = beta - lR * rp
     vR = (U * (gRA + gRD * sign_nn(betaR))) * betaR
-    alphaR = delta - delta0 - arctan(vR / uR)  # delta0: rudder neutral angle (not in the standard)
+    alphaR = delta - delta0 - arctan(vR * inv_pos(uR))  # delta0: rudder neutral angle (not in the standard)
     FN = cF * (uR * uR + vR * vR) * sin(alphaR)
     FNcd = FN * cos(delta)
     return (XH, YH, NH, cXP * KTn2D2, cXR * FN * sin(delta), cYR * FNcd, cNR * FNcd, FN, cT * KTn2D2,
@@ -162,6 +170,36 @@ def rhs_rows(x, u, c):
     return out
 
 
+def cs_columns(xc, uc, pc, Pc, c, h, which, cols, out):
+    """Complex-step derivatives of the rates of one sample, columns ``cols`` into ``out (6, k)``.
+
+    ``xc (6,)``, ``uc (2,)``, ``pc (39,)``, ``Pc`` complex copies of the state, inputs, parameters and
+    particulars (perturbed in place and restored); ``c`` the constants of ``pc``; ``which``: 0 -> d/dx,
+    1 -> d/du, 2 -> d/dp (the constants are re-derived for each perturbed parameter).
+    """
+    ih = 1j * h
+    for jj in range(cols.shape[0]):
+        j = cols[jj]
+        if which == 0:
+            xc[j] += ih
+            f = rates(xc[2], xc[3], xc[4], xc[5], uc[0], uc[1], c)
+            xc[j] -= ih
+        elif which == 1:
+            uc[j] += ih
+            f = rates(xc[2], xc[3], xc[4], xc[5], uc[0], uc[1], c)
+            uc[j] -= ih
+        else:
+            pc[j] += ih
+            f = rates(xc[2], xc[3], xc[4], xc[5], uc[0], uc[1], derived(pc, Pc))
+            pc[j] -= ih
+        for m in range(6):
+            out[m, j] = f[m].imag / h
+
+
+#: The state columns the rates depend on (x and y do not enter them).
+X_COLS = np.arange(2, 6)
+
+
 def jacobians(x, u, p, P, h, which):
     """Complex-step Jacobians of the rates of N samples (used compiled, with complex-safe globals).
 
@@ -172,31 +210,14 @@ def jacobians(x, u, p, P, h, which):
     N = x.shape[0]
     xc, uc, pc = x.astype(np.complex128), u.astype(np.complex128), p.astype(np.complex128)
     Pc = P.astype(np.complex128)
-    k = 6 if which == 0 else (2 if which == 1 else p.shape[1])
-    out = np.zeros((N, 6, k))
-    ih = 1j * h
+    cols = X_COLS if which == 0 else np.arange(2 if which == 1 else p.shape[1])
+    out = np.zeros((N, 6, 6 if which == 0 else cols.shape[0]))
     c = derived(pc[0], Pc)
     for i in range(N):
         ip = i if p.shape[0] > 1 else 0
         if p.shape[0] > 1 and which != 2:
             c = derived(pc[ip], Pc)
-        for j in range(k):
-            if which == 0:
-                if j < 2:  # x, y do not enter the rates
-                    continue
-                xc[i, j] += ih
-                f = rates(xc[i, 2], xc[i, 3], xc[i, 4], xc[i, 5], uc[i, 0], uc[i, 1], c)
-                xc[i, j] -= ih
-            elif which == 1:
-                uc[i, j] += ih
-                f = rates(xc[i, 2], xc[i, 3], xc[i, 4], xc[i, 5], uc[i, 0], uc[i, 1], c)
-                uc[i, j] -= ih
-            else:
-                pc[ip, j] += ih
-                f = rates(xc[i, 2], xc[i, 3], xc[i, 4], xc[i, 5], uc[i, 0], uc[i, 1], derived(pc[ip], Pc))
-                pc[ip, j] -= ih
-            for m in range(6):
-                out[i, m, j] = f[m].imag / h
+        cs_columns(xc[i], uc[i], pc[ip], Pc, c, h, which, cols, out[i])
     return out
 
 
@@ -214,15 +235,19 @@ def sqrt_pos_cs(z):
     return cmath.sqrt(z) if z.real > 0 else 0j
 
 
+def inv_pos_cs(z):
+    return 1.0 / z if z.real > 0 else 0j
+
+
 #: The functions of this module in dependency order (what :func:`shipid._jit.rebind` rebinds).
-FUNCTIONS = {"sign": sign, "sign_nn": sign_nn, "sqrt_pos": sqrt_pos, "planar_rates_cs": planar_rates_cs,
+FUNCTIONS = {"sign": sign, "sign_nn": sign_nn, "sqrt_pos": sqrt_pos, "inv_pos": inv_pos, "planar_rates_cs": planar_rates_cs,
              "derived": derived, "forces": forces, "rates": rates, "rhs_one": rhs_one, "rhs_rows": rhs_rows}
 
 #: The complex-step set compiled for the Jacobians: the same equations with complex-safe elementary
 #: functions (``sign`` and friends branch on the real part), and the driver :func:`jacobians`.
-FUNCTIONS_CS = {"sign": sign_cs, "sign_nn": sign_nn_cs, "sqrt_pos": sqrt_pos_cs,
+FUNCTIONS_CS = {"sign": sign_cs, "sign_nn": sign_nn_cs, "sqrt_pos": sqrt_pos_cs, "inv_pos": inv_pos_cs,
                 "planar_rates_cs": planar_rates_cs, "derived": derived, "forces": forces, "rates": rates,
-                "jacobians": jacobians}
+                "cs_columns": cs_columns, "jacobians": jacobians}
 #: Globals of the compiled complex-step set (``cmath``).
 CMATH = {"sqrt": cmath.sqrt, "exp": cmath.exp, "arcsin": cmath.asin, "arctan": cmath.atan, "sin": cmath.sin,
          "cos": cmath.cos}
@@ -232,9 +257,38 @@ _NUMPY_BASE = {"sqrt": np.sqrt, "exp": np.exp, "arcsin": np.arcsin, "arctan": np
 
 #: Globals of the batched numpy backend (real arrays).
 NUMPY = {**_NUMPY_BASE, "sign": np.sign, "sign_nn": lambda z: np.copysign(1.0, z),
-         "sqrt_pos": lambda z: np.sqrt(np.maximum(z, 0.0))}
+         "sqrt_pos": lambda z: np.sqrt(np.maximum(z, 0.0)),
+         "inv_pos": lambda z: np.divide(1.0, z, out=np.zeros(np.shape(z)), where=np.asarray(z) > 0)}
 
 #: Globals of the complex-step backend: signs and branches from the real part.
 COMPLEX_STEP = {**_NUMPY_BASE, "sign": lambda z: np.sign(np.real(z)),
                 "sign_nn": lambda z: np.copysign(1.0, np.real(z)),
-                "sqrt_pos": lambda z: np.sqrt(z * (np.real(z) > 0))}
+                "sqrt_pos": lambda z: np.sqrt(z * (np.real(z) > 0)),
+                "inv_pos": lambda z: np.where(np.real(z) > 0, 1.0 / np.where(np.real(z) > 0, z, 1.0), 0.0)}
+
+
+# ------------------------------------------------------------------ the EKF kernel's protocol
+# (see shipid.models._response_equations and shipid.identify._kernel): constants once per step,
+# the rates of one sample, and the complex-step Jacobians of one sample (``cs_columns`` and
+# ``derived_cs`` are the complex-step set's compiled functions, given as globals by the model).
+#: Complex step of the compiled Jacobians (as ``MMGModel._H_CS``).
+H_CS = 1e-30
+
+
+def k_consts(p, P):
+    return np.array(derived(p, P))
+
+
+def k_rhs(t, x, u, c, out):
+    out[0], out[1], out[2], out[3], out[4], out[5] = rates(x[2], x[3], x[4], x[5], u[0], u[1], c)
+
+
+def k_jac(t, x, u, p, P, c, cols, Jx, Jp):
+    xc, uc, pc, Pc = x.astype(np.complex128), u.astype(np.complex128), p.astype(np.complex128), P.astype(np.complex128)
+    cc = derived_cs(pc, Pc)
+    cs_columns(xc, uc, pc, Pc, cc, H_CS, 0, X_COLS, Jx)
+    cs_columns(xc, uc, pc, Pc, cc, H_CS, 2, cols, Jp)
+
+
+#: The kernel-protocol set (dependency order); needs the globals ``cs_columns`` and ``derived_cs``.
+KERNEL = {**FUNCTIONS, "k_consts": k_consts, "k_rhs": k_rhs, "k_jac": k_jac}

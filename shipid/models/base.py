@@ -260,6 +260,20 @@ class Model:
         rhs = self._rhs
         return lambda t, x, u: rhs(t, x, u, p)
 
+    #: The model's equations for the compiled EKF kernel (:mod:`shipid.identify._kernel`): functions
+    #: (name -> function, dependency order, rebound by :func:`shipid._jit.rebind`) including the
+    #: kernel protocol ``k_consts``, ``k_rhs``, ``k_jac`` (see :mod:`shipid.models._response_equations`).
+    #: ``None``: no compiled path (the EKF uses numpy and says so once).
+    _equations: ClassVar[dict | None] = None
+
+    def _equations_namespace(self) -> dict:
+        """Extra globals of :attr:`_equations` (e.g. already compiled helpers)."""
+        return {}
+
+    def _kernel_constants(self) -> np.ndarray:
+        """Fixed constants ``P`` the kernel protocol receives (e.g. MMG particulars)."""
+        return np.zeros(0)
+
     def _rhs(self, t, x, u, p) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError(f"{type(self).__name__} must implement _rhs")
 
@@ -325,3 +339,14 @@ def _index(names: Sequence[str], name: str, kind: str, model: str) -> int:
         return list(names).index(name)
     except ValueError:
         raise ValueError(f"model '{model}' has no {kind} '{name}'; its {kind}s are {list(names)}") from None
+
+
+def complex_step_jacobian(rhs, t, x, u, p, which: str, h: float = 1e-30) -> np.ndarray:
+    """Jacobian of ``rhs(t, x, u, p)`` w.r.t. ``which`` (``"x"``, ``"u"`` or ``"p"``) by the complex step,
+    all columns in one vectorised call: shape ``(..., nx, k)``, exact to rounding for equations written
+    with complex-safe operations (branches on real parts)."""
+    args = {"x": x, "u": u, "p": p}
+    base = args[which]
+    pert = base[..., None, :] + 1j * h * np.eye(base.shape[-1])
+    a = {w: (pert if w == which else arr[..., None, :]) for w, arr in args.items()}
+    return np.swapaxes(np.imag(rhs(t, a["x"], a["u"], a["p"])) / h, -1, -2)

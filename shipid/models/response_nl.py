@@ -29,7 +29,7 @@ names, same meaning as ``kcs-response``) and adds, in sway and yaw,
 
 Equations (states ``x, y, psi, u, v, r``; inputs ``delta`` [rad], ``n`` [rps])::
 
-    du/dt = a1 u + a2 v^2 + a3 r^2 + a4 delta^2 + a5 v r + a6 v delta + a7 r delta + a8 u n + a9 n^2
+    du/dt = a1 u + a2 v^2 + a3 r^2 + a4 delta^2 + a5 v r + a6 v delta + a7 r delta + a8 u n + a9 n|n|
     dv/dt = b1 v + b2 r + b3 delta + b4 u r
             + b5 u v + b6 v|v| + b7 r|r| + b8 v^2 r/u + b9 v r^2/u + b0 n^2
     dr/dt = c1 v + c2 r + c3 delta
@@ -37,22 +37,24 @@ Equations (states ``x, y, psi, u, v, r``; inputs ``delta`` [rad], ``n`` [rps])::
 
 plus the kinematics of ``kcs-response``.  Linear in the 29 parameters, so
 ``jac_p`` is the regressor matrix and an equation-error fit is a linear least
-squares problem (:func:`fit_to_model`); all Jacobians are analytic.
+squares problem (:func:`shipid.identify.from_model.fit_to_model`); all Jacobians are analytic.
 
 The default parameter set ``"mmg-kcs-fit"`` was obtained with
-:func:`fit_to_model` from the ``mmg`` model's KCS set (recipe and achieved
+:func:`shipid.identify.from_model.fit_to_model` from the ``mmg`` model's KCS set (recipe and achieved
 accuracy in the parameter file and docs/validation.md).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .base import Model
-from .kinematics import planar_jacobian, planar_rates
+from .._jit import rebind
+from . import _response_equations as _req
+from .base import Model, batch_shape
+from .prime import FroudeScaled
+from .response import PRIME_EXPONENTS as _SEED_EXPONENTS
+from .response import _rows
 
-__all__ = ["ResponseNLModel", "RESPONSE_NL_REGRESSORS", "PRIME_EXPONENTS", "fit_to_model", "ASYM_NAMES"]
-
-G = 9.80665  # m/s^2, standard gravity (Froude non-dimensionalisation)
+__all__ = ["ResponseNLModel", "RESPONSE_NL_REGRESSORS", "PRIME_EXPONENTS", "ASYM_NAMES"]
 
 SEED_NAMES = ("a1", "a2", "a3", "a4", "a5", "a6", "a7", "a8", "a9", "b1", "b2", "b3", "b4", "c1", "c2", "c3")
 EXTRA_NAMES = ("b5", "b6", "b7", "b8", "b9", "c4", "c5", "c6", "c7", "c8", "c9")
@@ -62,7 +64,7 @@ ASYM_NAMES = ("b0", "c0")
 #: Regressor of each coefficient (for tables and identifiability messages).
 RESPONSE_NL_REGRESSORS = {
     "a1": "u", "a2": "v^2", "a3": "r^2", "a4": "delta^2", "a5": "v*r", "a6": "v*delta", "a7": "r*delta",
-    "a8": "u*n", "a9": "n^2",
+    "a8": "u*n", "a9": "n|n|",
     "b1": "v", "b2": "r", "b3": "delta", "b4": "u*r", "b5": "u*v", "b6": "v|v|", "b7": "r|r|",
     "b8": "v^2 r/u", "b9": "v r^2/u",
     "c1": "v", "c2": "r", "c3": "delta", "c4": "u*v", "c5": "u*r", "c6": "v|v|", "c7": "r|r|",
@@ -72,20 +74,21 @@ RESPONSE_NL_REGRESSORS = {
 #: (Froude non-dimensional) value is ``c' = c / (L^a (L/g)^(b/2))`` for ``c`` in m^a s^b, so under
 #: Froude scaling to ``lam`` times the length a coefficient scales by ``lam^(a + b/2)``.
 PRIME_EXPONENTS = {
-    "a1": (0, -1), "a2": (-1, 0), "a3": (1, 0), "a4": (1, -2), "a5": (0, 0), "a6": (0, -1), "a7": (1, -1),
-    "a8": (0, 0), "a9": (1, 0),
-    "b1": (0, -1), "b2": (1, -1), "b3": (1, -2), "b4": (0, 0), "b5": (-1, 0), "b6": (-1, 0), "b7": (1, 0),
-    "b8": (0, 0), "b9": (1, 0), "b0": (1, 0),
-    "c1": (-1, -1), "c2": (0, -1), "c3": (0, -2), "c4": (-2, 0), "c5": (-1, 0), "c6": (-2, 0), "c7": (0, 0),
-    "c8": (-1, 0), "c9": (0, 0), "c0": (0, 0),
+    **_SEED_EXPONENTS,
+    "b5": (-1, 0), "b6": (-1, 0), "b7": (1, 0), "b8": (0, 0), "b9": (1, 0), "b0": (1, 0),
+    "c4": (-2, 0), "c5": (-1, 0), "c6": (-2, 0), "c7": (0, 0), "c8": (-1, 0), "c9": (0, 0), "c0": (0, 0),
 }
 # parameter index -> (equation row 3/4/5, regressor position in that row)
 _U_IDX = [0, 1, 2, 3, 4, 5, 6, 7, 8]
 _V_IDX = [9, 10, 11, 12, 16, 17, 18, 19, 20, 27]      # b1 b2 b3 b4 b5 b6 b7 b8 b9 b0
 _R_IDX = [13, 14, 15, 21, 22, 23, 24, 25, 26, 28]     # c1 c2 c3 c4 c5 c6 c7 c8 c9 c0
 
+#: The equations (one copy, :mod:`._response_equations`) on numpy arrays.
+_EQ = rebind(_req.FUNCTIONS, _req.NUMPY)
+_POS = {"x": _req.NL_JX_POS, "p": _req.NL_JP_POS, "u": _req.NL_JU_POS}
 
-class ResponseNLModel(Model):
+
+class ResponseNLModel(FroudeScaled, Model):
     """Seed-002 response model with speed-dependent non-linear sway/yaw damping (29 coefficients).
 
     The coefficients are dimensional (SI, as ``kcs-response``) and belong to a
@@ -105,6 +108,8 @@ class ResponseNLModel(Model):
         (or the default) is Froude-scaled from its own length (its
         ``operating_point``) to ``lpp``; coefficients given as a mapping or
         array are taken as they are (they already belong to that ship).
+    design_speed, rudder_rate : float, optional
+        Approach speed [m/s] and steering rate [rad/s] of that ship (replace the set's).
 
     Attributes
     ----------
@@ -125,226 +130,48 @@ class ResponseNLModel(Model):
              "c3": "1/s^2", "b5": "1/m", "b6": "1/m", "b7": "m", "b8": "1", "b9": "m", "c4": "1/m^2",
              "c5": "1/m", "c6": "1/m^2", "c7": "1", "c8": "1/m", "c9": "1", "b0": "m", "c0": "1"}
     default_parameter_set = "mmg-kcs-fit"
+    prime_exponents = PRIME_EXPONENTS
     u_floor = 0.05
 
-    def __init__(self, params=None, *, lpp: float | None = None):
+    def __init__(self, params=None, *, lpp: float | None = None, design_speed: float | None = None,
+                 rudder_rate: float | None = None):
         super().__init__(params)
-        self.lpp = self.design_speed = self.rudder_rate = None
-        if params is None or isinstance(params, str):
-            op = self.parameter_set(params or self.default_parameter_set).extra.get("operating_point", {})
-            if "lpp_m" in op:
-                self.lpp = float(op["lpp_m"])
-                self.design_speed = float(op["u0_m_s"]) if "u0_m_s" in op else None
-                self.rudder_rate = float(np.radians(op["rudder_rate_deg_s"])) if "rudder_rate_deg_s" in op else None
-                if lpp is not None:
-                    scaled = self.scaled(lpp)
-                    self.params, self.lpp = scaled.params, scaled.lpp
-                    self.design_speed, self.rudder_rate = scaled.design_speed, scaled.rudder_rate
-                return
-        if lpp is not None:
-            if not float(lpp) > 0:
-                raise ValueError(f"response-nl: lpp must be a positive length in metres, got {lpp}")
-            self.lpp = float(lpp)
-
-    def options(self) -> dict:
-        """The ship length travels with fit results (``get_model("response-nl", coef, lpp=...)``)."""
-        return {} if self.lpp is None else {"lpp": self.lpp}
-
-    # ------------------------------------------------------- prime system
-    def _length(self, lpp):
-        L = self.lpp if lpp is None else float(lpp)
-        if L is None or not L > 0:
-            raise ValueError("response-nl: the ship length is unknown; pass lpp= (metres) to the model or here")
-        return L
-
-    def to_prime(self, lpp: float | None = None) -> dict:
-        """Froude-non-dimensional coefficients ``c / (L^a (L/g)^(b/2))`` (:data:`PRIME_EXPONENTS`)."""
-        L = self._length(lpp)
-        return {k: float(v / (L ** PRIME_EXPONENTS[k][0] * (L / G) ** (PRIME_EXPONENTS[k][1] / 2)))
-                for k, v in zip(self.param_names, self.params)}
-
-    @classmethod
-    def from_prime(cls, prime, lpp: float) -> "ResponseNLModel":
-        """The model of a ship of length ``lpp`` [m] from prime coefficients (missing ones are 0)."""
-        unknown = sorted(set(prime) - set(cls.param_names))
-        if unknown:
-            raise ValueError(f"response-nl: unknown prime coefficient(s) {unknown}")
-        L = float(lpp)
-        if not L > 0:
-            raise ValueError(f"response-nl: lpp must be a positive length in metres, got {lpp}")
-        vals = np.array([float(prime.get(k, 0.0)) * L ** PRIME_EXPONENTS[k][0]
-                         * (L / G) ** (PRIME_EXPONENTS[k][1] / 2) for k in cls.param_names])
-        return cls(vals, lpp=L)
-
-    def scaled(self, lpp_new: float) -> "ResponseNLModel":
-        """The Froude-similar model of the geometrically similar ship of length ``lpp_new`` [m]."""
-        new = self.from_prime(self.to_prime(), lpp_new)
-        lam = new.lpp / self._length(None)
-        new.design_speed = None if self.design_speed is None else self.design_speed * np.sqrt(lam)
-        new.rudder_rate = None if self.rudder_rate is None else self.rudder_rate / np.sqrt(lam)
-        return new
+        self._init_ship(params, lpp, design_speed, rudder_rate)
 
     # ----------------------------------------------------------- regressors
-    def _parts(self, x, u):
-        psi, uu, v, r = x[..., 2], x[..., 3], x[..., 4], x[..., 5]
-        d, n = u[..., 0], u[..., 1]
-        q = 1.0 / np.maximum(uu, self.u_floor)
-        return psi, uu, v, r, d, n, q
-
     def regressors(self, x, u):
         """Regressor arrays of the u, v and r equations, shapes (..., 9), (..., 10), (..., 10)
         (order of ``_U/_V/_R_IDX``)."""
         x, u = np.asarray(x, dtype=float), np.asarray(u, dtype=float)
-        _, uu, v, r, d, n, q = self._parts(x, u)
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1])
-        b = lambda a: np.broadcast_to(a, shape)  # noqa: E731
-        ru = np.stack([b(a) for a in (uu, v * v, r * r, d * d, v * r, v * d, r * d, uu * n, n * n)], axis=-1)
-        common = (v * np.abs(v), r * np.abs(r), v * v * r * q, v * r * r * q, n * n)
-        rv = np.stack([b(a) for a in (v, r, d, uu * r, uu * v) + common], axis=-1)
-        rr = np.stack([b(a) for a in (v, r, d, uu * v, uu * r) + common], axis=-1)
-        return ru, rv, rr
+        g = np.stack(np.broadcast_arrays(*_EQ["nl_regressors"](x[..., 3], x[..., 4], x[..., 5], u[..., 0], u[..., 1],
+                                                                self.u_floor)), axis=-1)
+        return g[..., :9], g[..., 9:19], g[..., 19:]
 
     def _rhs(self, t, x, u, p):
-        psi, uu, v = x[..., 2], x[..., 3], x[..., 4]
-        r = x[..., 5]
-        ru, rv, rr = self.regressors(x, u)
-        du = np.einsum("...k,...k->...", ru, p[..., _U_IDX])
-        dv = np.einsum("...k,...k->...", rv, p[..., _V_IDX])
-        dr = np.einsum("...k,...k->...", rr, p[..., _R_IDX])
-        out = [*planar_rates(psi, uu, v, r), du, dv, dr]
-        shape = np.broadcast_shapes(*[np.shape(o) for o in out])
-        return np.stack([np.broadcast_to(o, shape) for o in out], axis=-1)
+        out = _EQ["nl_rates"](x[..., 2], x[..., 3], x[..., 4], x[..., 5], u[..., 0], u[..., 1], _rows(p),
+                              self.u_floor)
+        return np.stack(np.broadcast_arrays(*out), axis=-1)
 
     # ------------------------------------------------------------- Jacobians
+    def _jacobian(self, x, u, p, which: str, ncol: int):
+        """Jacobian ``which`` ("x", "p", "u") from the entries of ``_response_equations.nl_jac_*``."""
+        vals = _EQ["nl_jac_" + which](x[..., 2], x[..., 3], x[..., 4], x[..., 5], u[..., 0], u[..., 1], _rows(p),
+                                      self.u_floor)
+        return _req.fill_numpy(batch_shape(x, u, p) + (6, ncol), _POS[which], vals)
+
     def _jac_x(self, t, x, u, p):
-        psi, uu, v, r, d, n, q = self._parts(x, u)
-        dq = np.where(uu > self.u_floor, -q * q, 0.0)
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
-        J = np.zeros(shape + (6, 6))
-        P = lambda name: p[..., self._pi[name]]  # noqa: E731
-        planar_jacobian(J, psi, uu, v)
-        J[..., 3, 3] = P("a1") + P("a8") * n
-        J[..., 3, 4] = 2 * P("a2") * v + P("a5") * r + P("a6") * d
-        J[..., 3, 5] = 2 * P("a3") * r + P("a5") * v + P("a7") * d
-        # row: (coef of v, r, u*r, u*v, v|v|, r|r|, v^2 r/u, v r^2/u)
-        for row, (kv, kr, kur, kuv, kvv, krr, kvvr, kvrr) in (
-                (4, ("b1", "b2", "b4", "b5", "b6", "b7", "b8", "b9")),
-                (5, ("c1", "c2", "c5", "c4", "c6", "c7", "c8", "c9"))):
-            J[..., row, 3] = P(kur) * r + P(kuv) * v + (P(kvvr) * v * v * r + P(kvrr) * v * r * r) * dq
-            J[..., row, 4] = P(kv) + P(kuv) * uu + 2 * P(kvv) * np.abs(v) + (2 * P(kvvr) * v * r + P(kvrr) * r * r) * q
-            J[..., row, 5] = P(kr) + P(kur) * uu + 2 * P(krr) * np.abs(r) + (P(kvvr) * v * v + 2 * P(kvrr) * v * r) * q
-        return J
+        return self._jacobian(x, u, p, "x", 6)
 
     def _jac_p(self, t, x, u, p):
-        ru, rv, rr = self.regressors(x, u)
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
-        J = np.zeros(shape + (6, self.np))
-        J[..., 3, _U_IDX] = ru
-        J[..., 4, _V_IDX] = rv
-        J[..., 5, _R_IDX] = rr
-        return J
+        return self._jacobian(x, u, p, "p", self.np)
 
     def _jac_u(self, t, x, u, p):
-        psi, uu, v, r, d, n, q = self._parts(x, u)
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
-        J = np.zeros(shape + (6, 2))
-        P = lambda name: p[..., self._pi[name]]  # noqa: E731
-        J[..., 3, 0] = 2 * P("a4") * d + P("a6") * v + P("a7") * r
-        J[..., 3, 1] = P("a8") * uu + 2 * P("a9") * n
-        J[..., 4, 0] = P("b3")
-        J[..., 5, 0] = P("c3")
-        J[..., 4, 1] = 2 * P("b0") * n
-        J[..., 5, 1] = 2 * P("c0") * n
-        return J
+        return self._jacobian(x, u, p, "u", 2)
+
+    # the compiled EKF kernel (shipid.identify._kernel) uses the same equations
+    _equations = _req.KERNEL_NL
+
+    def _kernel_constants(self) -> np.ndarray:
+        return np.array([self.u_floor])
 
     _pi = {k: i for i, k in enumerate(SEED_NAMES + EXTRA_NAMES + ASYM_NAMES)}
-
-
-def fit_to_model(truth: Model, *, speeds=(1.4, 1.7, 2.0), turning_rudders=(10.0, 20.0, 35.0),
-                 zigzags=(10.0, 20.0), free=None, output_error: bool = True, max_nfev: int = 40,
-                 heading_change_deg: float = 400.0, decimate: int = 2, p0=None):
-    """Fit ``response-nl`` to manoeuvres simulated with another model (e.g. ``mmg``).
-
-    Recipe: (1) simulate with ``truth`` as one batch each: turning circles at ``turning_rudders`` to both
-    sides and zigzags ``z/z`` for ``z`` in ``zigzags``, both sides first, at every approach speed in
-    ``speeds`` (steady rps of the truth at each speed); (2) equation-error fit
-    (:func:`shipid.identify.initial.equation_error_fit` given the truth's exact accelerations
-    ``du/dt, dv/dt, dr/dt`` along those trajectories, no regularisation: a least-squares fit on this
-    model's regressors); (3) if ``output_error``, refine all free coefficients with the identifier's
-    :class:`~shipid.identify.batch.OutputErrorRefiner` on the simulation error of ``u, v, r, psi``
-    (every manoeuvre replayed from its exact initial state with the truth's recorded inputs; runs on
-    one time grid as one batch; exact RK4 tangent sensitivities; residuals scaled by U0, U0, U0/L and
-    1 rad, ``U0 = max(speeds)``).
-
-    Parameters
-    ----------
-    truth : Model  with states x, y, psi, u, v, r and inputs delta, n (and ``lpp``, ``rudder_rate``)
-    free : sequence of str, optional  coefficients to fit (others are fixed at 0); default all 29.
-        ``free=SEED_NAMES`` fits the seed's 16-term ``kcs-response`` structure.
-    decimate : int  use every ``decimate``-th sample of the truth runs
-    p0 : mapping or array, optional  start the output-error fit here instead of at the equation-error fit
-        (to continue an earlier fit)
-
-    Returns
-    -------
-    model : ResponseNLModel  with the fitted coefficients
-    info : dict  ``equation_error_params``, ``cost`` (initial, final), ``nfev``, ``success``, ``message``,
-        ``settings`` (the recipe), ``n_samples``
-    """
-    from ..identify.batch import OutputErrorRefiner
-    from ..identify.data import prepare_logs
-    from ..identify.initial import equation_error_fit
-    from ..logs import TrialLog
-    from ..manoeuvres import ship_info, turning_circle, zigzag
-
-    model = ResponseNLModel(np.zeros(len(SEED_NAMES + EXTRA_NAMES + ASYM_NAMES)))
-    names = list(model.param_names)
-    free = list(names if free is None else free)
-    unknown = sorted(set(free) - set(names))
-    if unknown:
-        raise ValueError(f"fit_to_model: unknown coefficient(s) {unknown}; response-nl has {names}")
-    free = [k for k in names if k in free]
-    fidx = np.array([names.index(k) for k in free])
-    runs = [turning_circle(truth, list(turning_rudders), speed=list(speeds), side="both",
-                           heading_change_deg=heading_change_deg)]
-    for z in zigzags:
-        runs.append(zigzag(truth, float(z), speed=list(speeds), first="both"))
-    # the truth runs as logs (all six states measured exactly), their exact derivatives and initial states;
-    # the inputs are sampled every `decimate` steps and held over each interval (the identifier's input
-    # model), and the truth is re-run with exactly those inputs, so a perfect fit reproduces the logs
-    from ..simulate import simulate
-
-    logs, derivs, x0s = [], [], []
-    for j, run in enumerate(runs):
-        sim = run.simulation
-        t, Ub = sim.t[::decimate], sim.u[:, ::decimate]
-        Xb = simulate(truth, sim.x[:, 0], t, Ub).x
-        for b in range(sim.x.shape[0]):
-            X, U = Xb[b], Ub[b]
-            logs.append(TrialLog.from_arrays(t, name=f"run{j}_{b}", **dict(zip(model.state_names, X.T)),
-                                             **dict(zip(model.input_names, U.T))))
-            derivs.append(truth.rhs(t, X, U))
-            x0s.append(X[0])
-    arrays, meas = prepare_logs(model, logs)
-    n_samples = int(sum(a.t.size for a in arrays))
-    p = np.zeros(model.np)
-    theta, _, _, _ = equation_error_fit(model, arrays, meas, fidx, p, np.ones(fidx.size), derivatives=derivs,
-                                        regularisation=0.0, max_points=max(n_samples, 1), max_nfev=100)
-    p[fidx] = theta
-    if p0 is not None:
-        p = ResponseNLModel(p0).params.copy()
-    info = {"equation_error_params": dict(zip(names, p.tolist())), "n_samples": n_samples,
-            "settings": {"speeds": list(speeds), "turning_rudders": list(turning_rudders), "zigzags": list(zigzags),
-                         "heading_change_deg": heading_change_deg, "decimate": decimate, "free": free,
-                         "truth": f"{truth.name}" + (f" lpp={getattr(truth, 'lpp', None)}" if hasattr(truth, "lpp") else "")},
-            "success": True, "message": "equation-error fit only", "nfev": 0}
-    if output_error:
-        L = ship_info(truth)["lpp"]
-        U0 = float(np.max(speeds))
-        ref = OutputErrorRefiner(model.with_params(p), estimate=free, channels=["u", "v", "r", "psi"],
-                                 meas_std={"u": U0, "v": U0, "r": U0 / L, "psi": 1.0}, max_nfev=max_nfev,
-                                 jacobian="tangent")
-        ref.fit(logs, x0=x0s)
-        p = ref.coef_.to_numpy()
-        info.update(cost=(ref.cost_start_, ref.cost_), nfev=ref.nfev_, success=ref.success_, message=ref.message_)
-    return ResponseNLModel(p), info

@@ -1,0 +1,117 @@
+"""Standard-manoeuvre metrics of any run (TrialLog, DataFrame or SimulationResult): the manoeuvre kind is
+detected from the rudder, and the turning or zigzag metrics are computed with the same code as simulations use."""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from ..simulate import SimulationResult
+from .runner import ship_info
+from .turning import turning_metrics
+from .zigzag import zigzag_metrics
+
+
+def detect_manoeuvre(delta, threshold_deg: float = 2.0) -> str:
+    """``"zigzag"`` when the rudder goes both ways from its initial value by more than ``threshold_deg``
+    after the execute, else ``"turning"``."""
+    d = np.degrees(np.asarray(delta, dtype=float) - float(np.asarray(delta)[0]))
+    up, down = d.max() > threshold_deg, d.min() < -threshold_deg
+    if not (up or down):
+        raise ValueError("no manoeuvre: the rudder never moves more than "
+                         f"{threshold_deg} deg from its initial value")
+    return "zigzag" if (up and down) else "turning"
+
+
+def _frame(data) -> tuple[pd.DataFrame, Any]:
+    """Normalise a TrialLog / DataFrame / SimulationResult to a frame with column ``time``."""
+    ship = getattr(data, "ship", None)
+    if hasattr(data, "data") and isinstance(getattr(data, "data"), pd.DataFrame):
+        df = data.data
+    elif isinstance(data, pd.DataFrame):
+        df = data
+        if "time" not in df.columns:
+            if "t" in df.columns:
+                df = df.rename(columns={"t": "time"})
+            elif df.index.name in ("time", "t"):
+                df = df.reset_index().rename(columns={df.index.name: "time"})
+    else:
+        raise ValueError(f"metrics(): expected a TrialLog, a pandas DataFrame or a SimulationResult, got {type(data).__name__}")
+    return df, ship
+
+
+def metrics(data, *, lpp: float | None = None, kind: str = "auto", reference_offset: float | None = None,
+            execute_time: float | None = None, switch_deg: float | None = None, name: str | None = None,
+            rudder_deg: float | None = None, check_deg: float | None = None):
+    """Standard-manoeuvre metrics of a log or a simulated run.
+
+    Parameters
+    ----------
+    data : TrialLog, DataFrame or SimulationResult (single member)
+        Needs ``time`` (column or index), ``psi`` [rad], ``delta`` [rad]; turning circles also
+        ``x, y`` [m] and ``u`` [m/s] (``v`` optional).
+    lpp : float, optional
+        Ship length [m]; defaults to the log's ship particulars (``data.ship.lpp``) or the model's ``lpp``.
+    kind : {"auto", "turning", "zigzag"}
+    reference_offset : float, optional
+        Distance [m] of the logged point forward of midship; positions are moved to midship
+        (``reference="midship"``).  Without it the logged point is used as it is.
+    execute_time : optional override (see :func:`turning_metrics`, :func:`zigzag_metrics`).
+    rudder_deg, check_deg : float, optional
+        Zigzag: nominal rudder and check (switch) angles [deg] (``switch_deg`` is the older name of
+        ``check_deg``); by default both are read from the log (the check angle from the heading
+        deviation at the rudder reversals, :func:`~shipid.manoeuvres.zigzag.infer_check_angle`).
+
+    Returns
+    -------
+    TurningMetrics or ZigzagMetrics
+    """
+    reference = "logged point"
+    if isinstance(data, SimulationResult):
+        if data.batched:
+            raise ValueError("metrics(): batched simulation; pass result.to_pandas(member=i) or use the manoeuvre result's metrics")
+        lpp = lpp if lpp is not None else getattr(data.model, "lpp", None) or ship_info(data.model).get("lpp")
+        data = data.to_pandas()
+        reference = "model origin (midship for mmg)"
+    df, ship = _frame(data)
+    label = name or getattr(data, "name", None) or "data"
+    if lpp is None:
+        lpp = getattr(ship, "lpp", None)
+    if lpp is None or not lpp > 0:
+        raise ValueError(f"{label}: ship length unknown; pass lpp= (or --lpp on the command line)")
+    for col in ("time", "psi", "delta"):
+        if col not in df.columns:
+            raise ValueError(f"{label}: column '{col}' missing; metrics need time, psi [rad] and delta [rad]"
+                             f" (have {list(df.columns)})")
+    sub = df.dropna(subset=["time", "psi", "delta"])
+    if len(sub) < 3:
+        raise ValueError(f"{label}: fewer than 3 rows with time, psi and delta all present")
+    psi = sub["psi"].to_numpy(float)
+    if np.nanmax(np.abs(np.diff(psi))) > 1.0 and np.nanmax(np.abs(psi)) > 2 * math.pi + 1:
+        raise ValueError(f"{label}: column 'psi' jumps by more than 1 rad between samples and exceeds 2 pi; "
+                         "it looks like degrees -- convert to radians")
+    kind = detect_manoeuvre(sub["delta"].to_numpy(float)) if kind == "auto" else kind
+    if kind == "turning":  # positions and speed must be present on the samples used
+        sub = sub.dropna(subset=[c for c in ("x", "y", "u") if c in sub.columns])
+    t = sub["time"].to_numpy(float)
+    psi = sub["psi"].to_numpy(float)
+    delta = sub["delta"].to_numpy(float)
+    x = sub["x"].to_numpy(float) if "x" in sub else None
+    y = sub["y"].to_numpy(float) if "y" in sub else None
+    if x is not None and reference_offset is not None:
+        x = x - reference_offset * np.cos(psi)
+        y = y - reference_offset * np.sin(psi)
+        reference = "midship"
+    u = sub["u"].to_numpy(float) if "u" in sub else None
+    v = sub["v"].to_numpy(float) if "v" in sub else None
+    if kind == "turning":
+        missing = [c for c, a in (("x", x), ("y", y), ("u", u)) if a is None]
+        if missing:
+            raise ValueError(f"{label}: turning-circle metrics need column(s) {missing}")
+        return turning_metrics(t, x, y, psi, u, delta, lpp=lpp, v=v, execute_time=execute_time, reference=reference)
+    if kind == "zigzag":
+        return zigzag_metrics(t, psi, delta, lpp=lpp, u=u, v=v, x=x, y=y, execute_time=execute_time,
+                              switch_deg=switch_deg, check_deg=check_deg, rudder_deg=rudder_deg, reference=reference)
+    raise ValueError(f"kind={kind!r}: use 'auto', 'turning' or 'zigzag'")

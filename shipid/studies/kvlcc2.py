@@ -1,0 +1,115 @@
+"""Hold-out validation on the measured MARIN KVLCC2 runs (SIMMAN 2008): data loading plus the general recipe.
+
+Fit a model on the turning circles (tc +-35) and the 10/10 zigzags with the fit recipe every user gets
+(:func:`shipid.identify.recipe.fit_logs`, what ``shipid fit`` runs), predict the 20/20 zigzags it has not
+seen, and compare the closed-loop standard manoeuvres of the fitted model with the measured ones
+(:func:`shipid.validation.validate`, what ``shipid validate`` runs).  Nothing here is specific to this ship
+but the file names and the rudder sign: the length comes from the logs, the check angles from the logs.
+Used by ``notebooks/02_validate_kvlcc2.ipynb`` and ``tests/test_kvlcc2_study.py``.
+
+The MARIN files use the opposite rudder sign to the shipped models (+35 deg turns to port): a run whose
+positive rudder turns the ship to port as read is flipped (:func:`rudder_sign`), so the study stays right
+once the MARIN log adapter applies the convention itself.
+"""
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import pandas as pd
+
+from ..identify import recipe
+from ..logs import TrialLog, read_log
+from ..validation import validate
+
+__all__ = ["RUNS", "TRAIN", "TEST", "RUDDER_SIGN", "MEASURED_README", "START", "GOAL_TOL", "load_runs", "fit_model",
+           "evaluate", "neutral_rudder_angle", "common_grid", "metric_residuals", "rudder_sign"]
+
+RUNS = ("tc_35", "tc_-35", "zz_10", "zz_-10", "zz_20", "zz_-20")
+TRAIN = ("tc_35", "tc_-35", "zz_10", "zz_-10")
+TEST = ("zz_20", "zz_-20")
+RUDDER_SIGN = -1.0
+#: Measured values stated in the data folder's README (logged reference point).
+MEASURED_README = {
+    "tc_35": {"advance_L": 3.02, "transfer_L": 1.20, "tactical_diameter_L": 3.07},
+    "tc_-35": {"advance_L": 3.09, "transfer_L": 1.35, "tactical_diameter_L": 3.33},
+    "zz_10": {"overshoot1_deg": 9.4}, "zz_-10": {"overshoot1_deg": 8.1},
+    "zz_20": {"overshoot1_deg": 15.6}, "zz_-20": {"overshoot1_deg": 12.7},
+}
+#: Start parameter set of each model (``shipid fit --params``): the published KVLCC2 MMG set for ``mmg``,
+#: the shipped sets (Froude-scaled to the logs' length by the recipe) for the others.
+START = {"mmg": "kvlcc2", "response-nl": None, "kcs-response": None}
+#: Goal tolerances of the issues: tactical diameter [%], first and second overshoot [deg].
+GOAL_TOL = dict(recipe.METRIC_TOL)
+
+
+def rudder_sign(log) -> float:
+    """+1 when the log's rudder has the models' sign (a positive rudder change at the first execute turns
+    the ship to starboard, heading increasing), -1 when it is opposite (the MARIN files as written)."""
+    import numpy as np
+
+    d = log["delta"] - log["delta"][0]
+    moved = np.flatnonzero(np.abs(d) > np.radians(2.0))
+    if not moved.size:
+        raise ValueError(f"{log.name}: the rudder never moves by 2 deg; its sign convention cannot be checked")
+    k = moved[0]
+    psi = np.unwrap(log["psi"])
+    ahead = min(k + max(int(60.0 / max(float(np.median(np.diff(log.time))), 1e-9)), 2), psi.size - 1)
+    return 1.0 if np.sign(d[k]) == np.sign(psi[ahead] - psi[k]) else RUDDER_SIGN
+
+
+def load_runs(folder, decimate: int = 1) -> dict[str, TrialLog]:
+    """The six runs as TrialLogs in the models' rudder sign convention (flipped where the file has the
+    opposite one, :func:`rudder_sign`), every ``decimate``-th sample (full scale; 0.135 s native sampling)."""
+    folder = Path(folder)
+    out = {}
+    for k in RUNS:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            lg = read_log(folder / f"MARIN_FREE_KVLCC2_{k}_m.dat")
+        ch = {c: lg[c][::decimate] for c in lg.channels if c != "time"}
+        ch["delta"] = rudder_sign(lg) * ch["delta"]
+        new = TrialLog.from_arrays(lg.time[::decimate], name=k, ship=lg.ship, **ch)
+        new.path, new.sha256 = lg.path, lg.sha256
+        out[k] = new
+    return out
+
+
+def fit_model(name: str, runs: dict[str, TrialLog], train=TRAIN, **options) -> recipe.RecipeFit:
+    """The recipe's fit of model ``name`` (start set :data:`START`) to the training runs ``train``:
+    ``recipe.fit_logs([runs[k] for k in train], name, START[name], **options)``."""
+    return recipe.fit_logs([runs[k] for k in train], name, START.get(name), **options)
+
+
+def neutral_rudder_angle(runs: dict[str, TrialLog], names=TRAIN) -> float:
+    """Rudder angle [rad] that holds the ship straight, from the straight approaches of the runs ``names``
+    (:func:`shipid.identify.recipe.neutral_rudder_angle`)."""
+    return recipe.neutral_rudder_angle([runs[k] for k in names])[0]
+
+
+def common_grid(runs: dict[str, TrialLog], names=TRAIN, dt: float = 1.08) -> list[TrialLog]:
+    """The runs ``names`` on one time grid (:func:`shipid.identify.recipe.common_grid`)."""
+    return recipe.common_grid([runs[k] for k in names], dt)
+
+
+def metric_residuals(model, runs: dict[str, TrialLog], names=TRAIN, tolerances=None):
+    """The closed-loop metric residual function of ``model`` on the runs ``names``
+    (:func:`shipid.identify.recipe.metric_residuals`; never pass held-out runs to a fit)."""
+    return recipe.metric_residuals(model, [runs[k] for k in names], tolerances=tolerances, names=list(names))[0]
+
+
+def evaluate(result_or_model, runs: dict[str, TrialLog], names=RUNS) -> pd.DataFrame:
+    """Measured vs closed-loop predicted metrics of each run: one row per (run, metric); the ship length
+    and the zigzags' rudder and check angles come from the logs."""
+    rows = []
+    vals = validate(result_or_model, [runs[k] for k in names])
+    for k, v in zip(names, vals):
+        keys = (["advance_L", "transfer_L", "tactical_diameter_L"] if k.startswith("tc")
+                else ["overshoot1_deg", "overshoot2_deg"])
+        std = v.get("standard") or {}
+        for c in keys:
+            m, p = v["measured"].get(c), std.get(c)
+            rows.append({"run": k, "set": "test" if k in TEST else "train", "metric": c, "measured": m,
+                         "predicted": p, "error": None if (m is None or p is None) else p - m,
+                         "rel_error_%": None if (m is None or p is None or c.endswith("deg")) else 100 * (p - m) / m})
+    return pd.DataFrame(rows)

@@ -1,0 +1,62 @@
+"""The fit recipe and what travels with a fit (shipid.identify.recipe, FitResult particulars):
+every ship model in the prime system, particulars carried from the logs, the check angle, the recipe's steps."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from shipid.identify.result import FitResult, load_result
+from shipid.manoeuvres import zigzag
+from shipid.models import get_model
+
+#: Every ship-manoeuvring model, at its shipped length (kcs-response and response-nl: the 4.36 m KCS
+#: model; mmg: the KCS set).
+SHIP_MODELS = {"kcs-response": (None, {}), "response-nl": (None, {}), "mmg": ("kcs", {})}
+
+
+def _as_fit_result(model) -> FitResult:
+    """The model as a fit would hand it over (coefficients + model_options), through its JSON."""
+    import pandas as pd
+
+    res = FitResult(model=model.name, coef=model.params_series().to_dict(),
+                    coef_std={k: 0.0 for k in model.param_names}, cov=pd.DataFrame(),
+                    model_options=model.options())
+    return FitResult.from_dict(json.loads(json.dumps(res.to_dict())))
+
+
+@pytest.mark.parametrize("name", sorted(SHIP_MODELS))
+def test_every_ship_model_predicts_froude_scaled_manoeuvres(name):
+    """A fitted model (its result JSON) scaled from its length L1 to L2 = 320 m predicts the Froude-scaled
+    manoeuvre: a 20/20 zigzag at U sqrt(lam) gives the same overshoots, times x sqrt(lam), positions x lam,
+    to 1e-9; the prime coefficients are unchanged (mmg: prime by construction)."""
+    pset, opts = SHIP_MODELS[name]
+    small = _as_fit_result(get_model(name, pset, **opts)).to_model()
+    L1 = small.lpp
+    assert L1 is not None and L1 < 10, f"{name}: the shipped set must know its length"
+    big = small.scaled(320.0)
+    lam = 320.0 / L1
+    assert big.lpp == pytest.approx(320.0)
+    assert big.rudder_rate == pytest.approx(small.rudder_rate / np.sqrt(lam), rel=1e-12)
+    if hasattr(small, "to_prime"):
+        p1, p2 = small.to_prime(), big.to_prime()
+        for k in small.param_names:
+            assert p2[k] == pytest.approx(p1[k], rel=1e-12, abs=1e-300), k
+    U1 = 1.7 if name != "mmg" else small.design_speed
+    a = zigzag(small, 20.0, speed=U1, first="starboard")
+    b = zigzag(big, 20.0, speed=U1 * np.sqrt(lam), first="starboard")
+    ma, mb = a.metrics[0], b.metrics[0]
+    assert ma.success and mb.success
+    assert abs(ma.overshoot1_deg) > 1.0  # a real manoeuvre
+    for k in ("overshoot1_deg", "overshoot2_deg"):
+        assert getattr(mb, k) == pytest.approx(getattr(ma, k), abs=1e-9), k
+    for k in ("overshoot1_time", "time_second_execute", "time_third_execute"):
+        assert getattr(mb, k) == pytest.approx(getattr(ma, k) * np.sqrt(lam), rel=1e-9), k
+    assert mb.initial_turning == pytest.approx(ma.initial_turning * lam, rel=1e-9)
+    n = min(a.simulation.t.size, b.simulation.t.size)
+    np.testing.assert_allclose(b.simulation.t[:n], a.simulation.t[:n] * np.sqrt(lam), rtol=1e-12)
+    xa, xb = a.simulation.x[0, :n], b.simulation.x[0, :n]
+    np.testing.assert_allclose(xb[:, :2] / lam, xa[:, :2], rtol=1e-9, atol=1e-9 * L1)
+    np.testing.assert_allclose(xb[:, 2], xa[:, 2], rtol=0, atol=1e-9)
+
