@@ -431,10 +431,14 @@ def predict_manoeuvres(result, manoeuvres: Sequence = ("turning:35", "zigzag:10/
 
 # ----------------------------------------------------------------------------- replays (validate)
 def replay_draws(model, log, params: np.ndarray, *, lpp: float, kind: str, switch_deg=None,
-                 rudder_sign: float = 1.0, substeps: int = 2, level: float = 0.95) -> dict:
+                 rudder_sign: float = 1.0, substeps: int = 2, level: float = 0.95,
+                 with_nominal: bool = False) -> dict:
     """Open-loop replays of one log with N parameter sets as one batch, and the interval of each
     predicted metric (the ``predicted`` block of :func:`shipid.validation.validate` gains
     ``"<metric>_ci"`` and ``"imo_probability"``).
+
+    ``with_nominal``: also replay ``model.params`` as member 0 of the batch (for plots); the
+    statistics are always over the N draws only.
 
     Returns ``{"<metric>_ci": [low, high], ..., "imo_probability": {...}, "draws": {...},
     "simulation": SimulationResult}``.
@@ -446,11 +450,13 @@ def replay_draws(model, log, params: np.ndarray, *, lpp: float, kind: str, switc
     if rudder_sign == -1 and "delta" in data.columns:
         data = data.assign(delta=-data["delta"])
     P = np.asarray(params, dtype=float)
+    if with_nominal:
+        P = np.vstack([model.params[None], P])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         sim = replay(model, data, substeps=substeps, params=P)
     dicts, objs = [], []
-    for b in range(P.shape[0]):
+    for b in range(1 if with_nominal else 0, P.shape[0]):
         frame = pd.DataFrame({n: sim.x[b, :, i] for i, n in enumerate(model.state_names)})
         for i, n in enumerate(model.input_names):
             frame[n] = sim.u[b, :, i]
@@ -471,6 +477,6 @@ def replay_draws(model, log, params: np.ndarray, *, lpp: float, kind: str, switc
     rows = _summary_rows("replay", kind, dicts, {}, level)
     out = ci_block(pd.DataFrame(rows)) if rows else {}
     out["imo_probability"] = imo_probability([d.get("imo", {}) for d in dicts])
-    out["draws"] = {"n": int(P.shape[0]), **_failures(objs)}
+    out["draws"] = {"n": len(dicts), **_failures(objs)}  # a replay is as long as its log: no 540 deg rule
     out["simulation"] = sim
     return out

@@ -89,6 +89,11 @@ def test_sample_cli_writes_samples_and_exit_code(small_problem, tmp_path, capsys
     doc = json.loads(out.read_text())
     assert doc["names"] == ["c2", "c3"] and doc["converged"] is False and len(doc["samples"]) == 160
     assert "split-R-hat_max" in capsys.readouterr().out
+    mo = tmp_path / "m.json"  # the samples feed the propagation
+    assert main(["simulate", str(rp), "--turning", "35", "--side", "starboard", "--draws", "10", "--samples", str(out),
+                 "--metrics-output", str(mo)]) == 0
+    doc = json.loads(mo.read_text())
+    assert doc["source"] == "mcmc" and doc["manoeuvres"]["turning_35_starboard"]["draws"]["n"] == 10
     assert main(["sample", str(rp), str(lp), "-o", str(out), "--steps", "30"]) == 2  # exists, no --force
 
 
@@ -97,7 +102,7 @@ def test_mcmc_matches_the_exact_grid_posterior(small_problem):
     """Two coefficients: the posterior on a fine grid (one batched evaluation) is exact; the converged chain
     must reproduce its means (within 0.1 posterior std) and std (within 10 %)."""
     res, log = small_problem
-    s = sample_posterior(res, log, walkers=32, steps=600, burn=100, seed=2)
+    s = sample_posterior(res, log, walkers=32, steps=1500, burn=300, seed=2)
     assert s.converged, s.message
     like = OutputErrorLikelihood(res.to_model(), log, ["c2", "c3"],
                                  meas_std=res.settings["meas_std"],

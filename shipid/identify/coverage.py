@@ -186,7 +186,7 @@ def coverage_study(truth=None, recipes=None, *, n_replicates: int = 100, seed: i
         raise ValueError(f"every replicate failed; first error: {errors[0] if errors else '?'}")
     # truth values of the tabled metrics
     truth_metrics = {}
-    for spec in map(parse_manoeuvre, manoeuvres):
+    for spec in map(parse_manoeuvre, manoeuvres if draws > 0 else ()):
         if spec.kind == "turning":
             m = turning_circle(truth, spec.rudder_deg, side=spec.side).metrics[0]
             truth_metrics[f"{spec.label}:tactical_diameter_L"] = m.tactical_diameter_L

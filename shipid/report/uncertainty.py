@@ -98,8 +98,8 @@ def uncertainty_section(res, validations, *, draws: int, seed: int = 0, samples=
             continue
         kind = v.measured.manoeuvre
         m = _for_length(res.to_model(), v.lpp, [])
-        blk = replay_draws(m, v.log, np.vstack([m.params[None], P]), lpp=v.lpp, kind=kind,
-                           switch_deg=getattr(v.measured, "switch_deg", None), rudder_sign=v.rudder_sign)
+        blk = replay_draws(m, v.log, P, lpp=v.lpp, kind=kind, switch_deg=getattr(v.measured, "switch_deg", None),
+                           rudder_sign=v.rudder_sign, with_nominal=True)
         meas = v.measured.to_dict()
         pred = v.predicted.to_dict() if v.predicted is not None else {}
         name = getattr(v.log, "name", "log")
@@ -112,7 +112,7 @@ def uncertainty_section(res, validations, *, draws: int, seed: int = 0, samples=
             cell = ("&ndash;", "na") if inside is None else (("yes", "pass") if inside else ("no", "fail"))
             rows.append([_e(name), _e(key), _f(mv), _f(pred.get(key)), f"{_f(lo)} &ndash; {_f(hi)}", cell])
         for crit, p in blk["imo_probability"].items():
-            imo_rows.append([_e(name), _e(crit), _f(p["probability"], "{:.3f}"), _e(f"{p['n_met']}/{draws + 1}"),
+            imo_rows.append([_e(name), _e(crit), _f(p["probability"], "{:.3f}"), _e(f"{p['n_met']}/{draws}"),
                              _e(p["n_not_evaluated"])])
         if blk["draws"]["n_failed"]:
             parts.append(f"<p class=\"warn\">{_e(name)}: {blk['draws']['n_failed']} draws did not finish: "
