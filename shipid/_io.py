@@ -1,49 +1,375 @@
-"""Small I/O helpers: atomic writes that never clobber a user's file, hashes."""
+"""Small I/O helpers: atomic writes that never clobber a user's file, strict JSON,
+guarded JSON/YAML reading, hashes and one-line error text.
+
+Writing
+    :func:`atomic_write_bytes` writes a temporary file in the destination folder
+    and then *links* it to the destination (``os.link`` fails if the name exists,
+    so two writers racing for one name cannot both win: the loser gets
+    :class:`OutputExistsError`); with ``force=True`` it renames over the old file.
+    :func:`atomic_write_set` writes several files (e.g. a plan's JSON and CSV)
+    as a set: all temporaries first, then the links in quick succession, rolled
+    back if any fails.  Temporaries of a run killed by SIGTERM/SIGHUP/SIGINT are
+    removed by :func:`install_signal_cleanup` (the CLI installs it); SIGKILL
+    cannot be caught, so a ``.NAME.*.tmp`` may survive that.
+    :func:`dumps_json` is the one JSON writer: strict JSON (``NaN``/``inf`` become
+    ``null``, numpy scalars and arrays become numbers and lists).
+
+Reading
+    :func:`read_json` / :func:`loads_yaml` refuse files that are too large or
+    nested too deeply with one line naming the file.  Schema checks are
+    hand-written (:func:`check_keys`, :func:`as_number`, ...) rather than a
+    validator such as ``jsonschema``: no extra dependency, and every message is
+    short, names the key path, and never echoes a huge value back.
+"""
 from __future__ import annotations
 
 import hashlib
+import json
+import math
 import os
+import signal
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_write_bytes", "atomic_write_text", "sha256_file", "OutputExistsError"]
+import numpy as np
+
+__all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_write_set", "sha256_file", "OutputExistsError",
+           "dumps_json", "to_jsonable", "read_json", "loads_yaml", "short", "check_keys", "as_number", "as_int",
+           "as_mapping", "as_string", "as_bool", "check_output_path", "install_signal_cleanup", "MAX_DEPTH",
+           "MAX_FILE_BYTES"]
+
+#: Deepest nesting accepted in a JSON/YAML file the program reads.
+MAX_DEPTH = 64
+#: Largest JSON/YAML file accepted (bytes).
+MAX_FILE_BYTES = 64 * 1024 * 1024
+
+_LIVE_TMP: set[str] = set()
 
 
 class OutputExistsError(ValueError):
     """Raised when an output file exists and overwriting was not allowed."""
 
 
+def short(value, limit: int = 60) -> str:
+    """``repr(value)`` cut to ``limit`` characters (error messages never echo a 100 kB value)."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 5] + "...'" + f" ({len(text)} chars)"
+
+
+def _exists_message(path: Path) -> str:
+    return f"{path}: output exists; choose another name or pass --force (force=True) to overwrite it"
+
+
+def check_output_path(path, *, force: bool = False, inputs=(), what: str = "output") -> Path:
+    """Check an output name *before* a long computation.
+
+    ValueError when the name is empty or a folder, when it is one of ``inputs``,
+    when it exists without ``force``, when its folder is missing, or when the
+    folder is not writable.  Returns the path.
+    """
+    if path is None or str(path).strip() == "":
+        raise ValueError(f"{what}: empty file name; give a file name, e.g. -o result.json")
+    p = Path(path)
+    if p.is_dir():
+        raise ValueError(f"{p}: is a folder; give a file name for the {what}")
+    rp = p.resolve()
+    for q in inputs:
+        if q is not None and Path(q).exists() and Path(q).resolve() == rp:
+            raise ValueError(f"{p}: the {what} would replace the input file {q}; choose another name")
+    if p.exists() and not force:
+        raise OutputExistsError(_exists_message(p))
+    folder = p.parent
+    if not folder.exists():
+        raise ValueError(f"{p}: folder {folder} does not exist; create it first")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise ValueError(f"{p}: folder {folder} is not writable; choose another folder or fix its permissions")
+    return p
+
+
+def _tmp_for(path: Path) -> str:
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except PermissionError:
+        raise PermissionError(f"{path}: cannot write in folder {path.parent} (permission denied); "
+                              "choose another folder") from None
+    os.close(fd)
+    _LIVE_TMP.add(tmp)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; give the file ordinary permissions
+    return tmp
+
+
+def _fill(tmp: str, data: bytes) -> None:
+    with open(tmp, "wb") as fh:
+        fh.write(data)
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
+def _drop(tmp: str) -> None:
+    _LIVE_TMP.discard(tmp)
+    try:
+        os.unlink(tmp)
+    except FileNotFoundError:
+        pass
+
+
+def _publish(tmp: str, path: Path, force: bool) -> None:
+    """Move ``tmp`` to ``path``: rename with ``force``, else create ``path`` exclusively (hard link)."""
+    if force:
+        os.replace(tmp, path)
+        _LIVE_TMP.discard(tmp)
+        return
+    try:
+        os.link(tmp, path)
+    except FileExistsError:
+        raise OutputExistsError(_exists_message(path)) from None
+    except OSError:  # a file system without hard links: reserve the name exclusively, then rename over it
+        try:
+            os.close(os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666))
+        except FileExistsError:
+            raise OutputExistsError(_exists_message(path)) from None
+        os.replace(tmp, path)
+    _drop(tmp)
+
+
+def atomic_write_set(items, *, force: bool = False) -> list[Path]:
+    """Write several files as a set: ``items`` is a list of ``(path, bytes | str)``.
+
+    Every file is first written to a temporary beside its destination; then the
+    temporaries are published one after the other (exclusively unless
+    ``force``).  If any step fails, the files already published by this call
+    are removed again, so a rerun is not blocked by half a set.
+    """
+    items = [(Path(p), d.encode("utf-8") if isinstance(d, str) else bytes(d)) for p, d in items]
+    for p, _ in items:
+        if str(p).strip() in ("", "."):
+            raise ValueError("output: empty file name; give a file name, e.g. -o result.json")
+        if p.exists() and not force:
+            raise OutputExistsError(_exists_message(p))
+        if not p.parent.exists():
+            raise ValueError(f"{p}: folder {p.parent} does not exist; create it first")
+    tmps: list[str] = []
+    done: list[Path] = []
+    try:
+        for p, d in items:
+            tmps.append(_tmp_for(p))
+            _fill(tmps[-1], d)
+        for (p, _), tmp in zip(items, tmps):
+            _publish(tmp, p, force)
+            done.append(p)
+    except BaseException:
+        for tmp in tmps:
+            _drop(tmp)
+        if not force:  # remove what this call created (with force the old files are already replaced)
+            for p in done:
+                try:
+                    os.unlink(p)
+                except FileNotFoundError:
+                    pass
+        raise
+    return [p for p, _ in items]
+
+
 def atomic_write_bytes(path: str | os.PathLike, data: bytes, *, force: bool = False) -> Path:
-    """Write ``data`` to ``path`` atomically (temp file in the same folder + rename).
+    """Write ``data`` to ``path`` atomically (temporary file in the same folder, then link or rename).
 
     An existing file is replaced only with ``force=True``; otherwise
-    :class:`OutputExistsError` names it and says to pass ``--force``.
+    :class:`OutputExistsError` names it and says to pass ``--force`` -- also
+    when another writer creates the file while this one is writing.
     """
-    path = Path(path)
-    if path.exists() and not force:
-        raise OutputExistsError(f"{path}: output exists; choose another name or pass --force (force=True) to overwrite it")
-    if path.parent and not path.parent.exists():
-        raise ValueError(f"{path}: folder {path.parent} does not exist; create it first")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; give the file ordinary permissions
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+    return atomic_write_set([(path, data)], force=force)[0]
 
 
 def atomic_write_text(path: str | os.PathLike, text: str, *, force: bool = False) -> Path:
     """Text version of :func:`atomic_write_bytes` (UTF-8)."""
     return atomic_write_bytes(path, text.encode("utf-8"), force=force)
+
+
+def _cleanup_tmp() -> None:
+    for tmp in list(_LIVE_TMP):
+        _drop(tmp)
+
+
+def install_signal_cleanup() -> None:
+    """On SIGTERM/SIGHUP remove this process's temporaries and exit with 128 + signal number.
+
+    (SIGINT already raises KeyboardInterrupt, which the writers clean up after.)
+    """
+    import atexit
+
+    def handler(signum, frame):
+        _cleanup_tmp()
+        raise SystemExit(128 + signum)
+
+    for sig in (signal.SIGTERM, getattr(signal, "SIGHUP", None)):
+        if sig is not None:
+            try:
+                signal.signal(sig, handler)
+            except (ValueError, OSError):  # not the main thread
+                return
+    atexit.register(_cleanup_tmp)
+
+
+def to_jsonable(obj):
+    """Plain-Python copy of ``obj`` for strict JSON: non-finite floats -> None, numpy -> Python."""
+    if isinstance(obj, dict):
+        return {str(k): to_jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [to_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return to_jsonable(obj.tolist())
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        v = float(obj)
+        return v if math.isfinite(v) else None
+    if isinstance(obj, os.PathLike):
+        return os.fspath(obj)
+    return obj
+
+
+def dumps_json(obj, *, indent: int | None = 2) -> str:
+    """The one JSON writer: strict JSON text (no NaN/Infinity tokens) ending in a newline."""
+    return json.dumps(to_jsonable(obj), indent=indent, allow_nan=False) + "\n"
+
+
+def _depth_ok(doc, max_depth: int) -> bool:
+    stack = [(doc, 1)]
+    while stack:
+        node, d = stack.pop()
+        if isinstance(node, (dict, list)):
+            if d > max_depth:
+                return False
+            stack.extend((v, d + 1) for v in (node.values() if isinstance(node, dict) else node))
+    return True
+
+
+def _read_text(path: Path, what: str) -> str:
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such {what} file; check the path")
+    if path.is_dir():
+        raise ValueError(f"{path}: is a folder, not a {what} file")
+    if not path.is_file():
+        raise ValueError(f"{path}: not a regular file (a pipe or device?); give a {what} file")
+    size = path.stat().st_size
+    if size > MAX_FILE_BYTES:
+        raise ValueError(f"{path}: {size / 2**20:.0f} MiB is too large for a {what} file "
+                         f"(limit {MAX_FILE_BYTES // 2**20} MiB)")
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path}: not UTF-8 text (byte {exc.start}); give a {what} file") from None
+
+
+def loads_json(text: str, where: str, what: str = "JSON"):
+    """``json.loads`` with one-line errors naming ``where`` and a nesting limit of :data:`MAX_DEPTH`."""
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{where}: not valid JSON ({exc.msg} at line {exc.lineno} column {exc.colno}); "
+                         f"give a {what} file") from None
+    except RecursionError:
+        doc = None
+        ok = False
+    else:
+        ok = _depth_ok(doc, MAX_DEPTH)
+    if not ok:
+        raise ValueError(f"{where}: nested more than {MAX_DEPTH} levels deep; not a {what} file")
+    return doc
+
+
+def read_json(path, what: str = "JSON"):
+    """Read a JSON file the user gave (size, encoding, syntax and depth checked; one-line errors)."""
+    path = Path(path)
+    return loads_json(_read_text(path, what), str(path), what)
+
+
+def loads_yaml(text: str, where: str, what: str = "YAML"):
+    """``yaml.safe_load`` after a token scan that refuses nesting deeper than :data:`MAX_DEPTH`."""
+    import yaml  # type: ignore
+
+    depth = 0
+    try:
+        for tok in yaml.scan(text, Loader=yaml.SafeLoader):
+            name = type(tok).__name__
+            if name in ("BlockSequenceStartToken", "BlockMappingStartToken", "FlowSequenceStartToken",
+                        "FlowMappingStartToken"):
+                depth += 1
+                if depth > MAX_DEPTH:
+                    raise ValueError(f"{where}: nested more than {MAX_DEPTH} levels deep; not a {what} file")
+            elif name in ("BlockEndToken", "FlowSequenceEndToken", "FlowMappingEndToken"):
+                depth -= 1
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        at = f" at line {mark.line + 1} column {mark.column + 1}" if mark is not None else ""
+        raise ValueError(f"{where}: not valid YAML ({getattr(exc, 'problem', None) or 'syntax error'}{at})") from None
+    except RecursionError:
+        raise ValueError(f"{where}: nested too deeply; not a {what} file") from None
+    if not _depth_ok(doc, MAX_DEPTH):  # aliases can nest without tokens
+        raise ValueError(f"{where}: nested more than {MAX_DEPTH} levels deep; not a {what} file")
+    return doc
+
+
+# ----------------------------------------------------------------- schema checks
+def check_keys(doc: dict, allowed, where: str) -> None:
+    """ValueError naming the first unknown keys of ``doc`` and the allowed ones."""
+    unknown = sorted(str(k) for k in set(doc) - set(allowed))
+    if unknown:
+        shown = ", ".join(short(k, 30) for k in unknown[:3]) + (" ..." if len(unknown) > 3 else "")
+        raise ValueError(f"{where}: unknown key(s) {shown}; allowed: {', '.join(sorted(allowed))}")
+
+
+def as_mapping(value, where: str, example: str = '{"name": value}') -> dict:
+    if not isinstance(value, dict):
+        raise ValueError(f"{where}: expected an object like {example}, got {type(value).__name__} {short(value, 40)}")
+    return value
+
+
+def as_string(value, where: str) -> str:
+    if not isinstance(value, str):
+        raise ValueError(f"{where}: expected a string, got {type(value).__name__} {short(value, 40)}")
+    return value
+
+
+def as_bool(value, where: str) -> bool:
+    if not isinstance(value, bool):
+        raise ValueError(f"{where}: expected true or false, got {short(value, 40)}")
+    return value
+
+
+def as_number(value, where: str, *, low: float | None = None, high: float | None = None,
+              low_open: bool = False, allow_none: bool = False, finite: bool = True):
+    """A JSON number as float (``true``/``false`` and strings refused); optional range check."""
+    if value is None and allow_none:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{where}: expected a number, got {type(value).__name__} {short(value, 40)}")
+    v = float(value)
+    if finite and not math.isfinite(v):
+        raise ValueError(f"{where}: expected a finite number, got {v}")
+    if low is not None and (v < low or (low_open and v == low)):
+        raise ValueError(f"{where}: must be {'>' if low_open else '>='} {low:g}, got {v:g}")
+    if high is not None and v > high:
+        raise ValueError(f"{where}: must be <= {high:g}, got {v:g}")
+    return v
+
+
+def as_int(value, where: str, *, low: int | None = None, high: int | None = None) -> int:
+    """A JSON integer (``3.0`` accepted, ``3.5``/``true``/``"3"`` refused) with an optional range."""
+    v = as_number(value, where)
+    if v != int(v):
+        raise ValueError(f"{where}: expected a whole number, got {v:g}")
+    v = int(v)
+    if low is not None and v < low:
+        raise ValueError(f"{where}: must be >= {low}, got {v}")
+    if high is not None and v > high:
+        raise ValueError(f"{where}: must be <= {high}, got {v}")
+    return v
 
 
 def sha256_file(path: str | os.PathLike) -> str:

@@ -3,15 +3,21 @@
 The CLI is a thin layer over the library.  Each command lives in a module that
 exposes ``register(subparsers)``; the module list is :data:`COMMAND_MODULES`.
 A handler returns an exit code.  Any ``ValueError`` (bad input, bad option)
-is printed as one line on stderr and exits with code 2 -- never a traceback.
+is printed as one line (at most :data:`MAX_MESSAGE` characters) on stderr and
+exits with code 2 -- never a traceback.  Warnings (e.g. a diverged filter) are
+printed as one plain sentence, without the source line Python adds.
 """
 from __future__ import annotations
 
 import argparse
 import importlib
 import sys
+import warnings
 
-__all__ = ["main", "COMMAND_MODULES"]
+__all__ = ["main", "COMMAND_MODULES", "MAX_MESSAGE", "one_line"]
+
+#: Longest error line printed (longer messages keep their start and their end).
+MAX_MESSAGE = 300
 
 #: Modules that add sub-commands (each has ``register(subparsers)``).
 COMMAND_MODULES: list[str] = [
@@ -47,26 +53,57 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def one_line(text: str, limit: int = MAX_MESSAGE) -> str:
+    """``text`` on one line, at most ``limit`` characters (the middle elided: the start names the file,
+    the end says what to do)."""
+    msg = " ".join(str(text).split())
+    if len(msg) <= limit:
+        return msg
+    head = limit * 2 // 3
+    return msg[:head] + " ... " + msg[len(msg) - (limit - head - 5):]
+
+
+def _show_warning(prog: str):
+    def show(message, category, filename, lineno, file=None, line=None):
+        print(one_line(f"{prog}: warning: {message}"), file=sys.stderr if file is None else file)
+    return show
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI; returns the exit code (0 ok, 1 numerical failure, 2 bad input)."""
+    from ._io import install_signal_cleanup
+
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
     except _UsageError as exc:
-        print(str(exc), file=sys.stderr)
+        print(one_line(str(exc)), file=sys.stderr)
         return 2
     if not getattr(args, "command", None):
         parser.print_help()
         return 2
+    install_signal_cleanup()
+    prog = f"shipid {args.command}"
+    old_show = warnings.showwarning
+    warnings.showwarning = _show_warning(prog)
     try:
         return int(args.handler(args) or 0)
-    except (ValueError, FileNotFoundError, IsADirectoryError, PermissionError) as exc:
-        msg = " ".join(str(exc).split())
-        print(f"shipid {args.command}: error: {msg}", file=sys.stderr)
+    except (ValueError, OSError) as exc:
+        print(one_line(f"{prog}: error: {exc}"), file=sys.stderr)
+        return 2
+    except RecursionError:
+        print(one_line(f"{prog}: error: an input is nested too deeply to read; check the files given"),
+              file=sys.stderr)
+        return 2
+    except MemoryError:
+        print(f"{prog}: error: out of memory; reduce the problem size (intervals, particles, samples)",
+              file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("shipid: interrupted", file=sys.stderr)
         return 130
+    finally:
+        warnings.showwarning = old_show
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -31,34 +31,52 @@ def _eye(n: int) -> np.ndarray:
     return eye
 
 
-def rk4_step(model: Model, t, x, u, p, h):
-    """One classical RK4 step with the input held constant over the step.
+def _stage_inputs(u, u1):
+    """Inputs at the start, middle and end of a step: ``u`` held (``u1`` None) or linear from ``u`` to ``u1``.
+
+    The middle value ``0.5 * (u + u1)`` is the first-order-hold input at half the step; with
+    ``u1 = u`` it equals ``u`` exactly (floating point), so zero-order hold is the special case
+    of equal end inputs.
+    """
+    if u1 is None:
+        return u, u, u
+    return u, 0.5 * (u + u1), u1
+
+
+def rk4_step(model: Model, t, x, u, p, h, u1=None):
+    """One classical RK4 step.
 
     Shapes: ``x (..., nx)``, ``u (..., nu)``, ``p (..., np)``; ``h`` scalar or
-    ``(...)``.  Returns ``x(t + h)``.
+    ``(...)``.  Returns ``x(t + h)``.  The input is held at ``u`` over the step
+    (zero-order hold) or, with ``u1`` (the input at ``t + h``), linear from ``u``
+    to ``u1`` (first-order hold): each RK4 stage sees the input at its stage time
+    (``u`` at ``t``, ``(u + u1) / 2`` at ``t + h/2``, ``u1`` at ``t + h``).
     """
     rhs = model._rhs
-    return rk4_map(lambda tt, xx, uu: rhs(tt, xx, uu, p), t, x, u, h)
+    return rk4_map(lambda tt, xx, uu: rhs(tt, xx, uu, p), t, x, u, h, u1)
 
 
-def rk4_map(f: Callable, t, x, u, h):
+def rk4_map(f: Callable, t, x, u, h, u1=None):
     """The RK4 step of :func:`rk4_step` for a right-hand side ``f(t, x, u)`` with the parameters bound
-    (e.g. ``model._rhs_bound(p)``, which integrators fetch once per run)."""
+    (e.g. ``model._rhs_bound(p)``, which integrators fetch once per run); ``u1`` as there."""
     if isinstance(h, float):
         hh = h
     else:
         h = np.asarray(h, dtype=float)
         hh = h[..., None] if h.ndim else h
-    k1 = f(t, x, u)
-    k2 = f(t + h / 2, x + hh / 2 * k1, u)
-    k3 = f(t + h / 2, x + hh / 2 * k2, u)
-    k4 = f(t + h, x + hh * k3, u)
+    ua, um, ub = _stage_inputs(u, u1)
+    k1 = f(t, x, ua)
+    k2 = f(t + h / 2, x + hh / 2 * k1, um)
+    k3 = f(t + h / 2, x + hh / 2 * k2, um)
+    k4 = f(t + h, x + hh * k3, ub)
     return x + hh / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
 
 
-def rk4_step_tangent(model: Model, t, x, u, p, h):
+def rk4_step_tangent(model: Model, t, x, u, p, h, u1=None):
     """RK4 step and its exact Jacobians ``(x_next, dxn/dx, dxn/dp)``.
 
+    Inputs per stage as in :func:`rk4_step` (``u1`` None: held; else linear to ``u1``); the
+    Jacobians of each stage are taken at that stage's input.
     Returns arrays of shapes ``(..., nx)``, ``(..., nx, nx)``, ``(..., nx, np)``.
     """
     h = np.asarray(h, dtype=float)
@@ -67,28 +85,29 @@ def rk4_step_tangent(model: Model, t, x, u, p, h):
     f, fx, fp = model._rhs, model._jac_x, model._jac_p
     nx = x.shape[-1]
     eye = _eye(nx)
+    ua, um, ub = _stage_inputs(u, u1)
 
-    k1 = f(t, x, u, p)
-    A1, B1 = fx(t, x, u, p), fp(t, x, u, p)
+    k1 = f(t, x, ua, p)
+    A1, B1 = fx(t, x, ua, p), fp(t, x, ua, p)
     K1x, K1p = A1, B1
 
     x2 = x + hh / 2 * k1
-    A2, B2 = fx(t + h / 2, x2, u, p), fp(t + h / 2, x2, u, p)
+    A2, B2 = fx(t + h / 2, x2, um, p), fp(t + h / 2, x2, um, p)
     K2x = A2 @ (eye + hm / 2 * K1x)
     K2p = A2 @ (hm / 2 * K1p) + B2
-    k2 = f(t + h / 2, x2, u, p)
+    k2 = f(t + h / 2, x2, um, p)
 
     x3 = x + hh / 2 * k2
-    A3, B3 = fx(t + h / 2, x3, u, p), fp(t + h / 2, x3, u, p)
+    A3, B3 = fx(t + h / 2, x3, um, p), fp(t + h / 2, x3, um, p)
     K3x = A3 @ (eye + hm / 2 * K2x)
     K3p = A3 @ (hm / 2 * K2p) + B3
-    k3 = f(t + h / 2, x3, u, p)
+    k3 = f(t + h / 2, x3, um, p)
 
     x4 = x + hh * k3
-    A4, B4 = fx(t + h, x4, u, p), fp(t + h, x4, u, p)
+    A4, B4 = fx(t + h, x4, ub, p), fp(t + h, x4, ub, p)
     K4x = A4 @ (eye + hm * K3x)
     K4p = A4 @ (hm * K3p) + B4
-    k4 = f(t + h, x4, u, p)
+    k4 = f(t + h, x4, ub, p)
 
     xn = x + hh / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
     Fx = eye + hm / 6 * (K1x + 2 * K2x + 2 * K3x + K4x)
@@ -96,8 +115,9 @@ def rk4_step_tangent(model: Model, t, x, u, p, h):
     return xn, Fx, Fp
 
 
-def euler_step_tangent(model: Model, t, x, u, p, h):
-    """Explicit Euler step and its Jacobians (cheaper, first order)."""
+def euler_step_tangent(model: Model, t, x, u, p, h, u1=None):
+    """Explicit Euler step and its Jacobians (cheaper, first order); uses the input at the step
+    start only, so ``u1`` (accepted for a common signature) has no effect."""
     h = np.asarray(h, dtype=float)
     hh = h[..., None] if h.ndim else h
     hm = h[..., None, None] if h.ndim else h
@@ -107,19 +127,21 @@ def euler_step_tangent(model: Model, t, x, u, p, h):
     return xn, Fx, Fp
 
 
-def rk4_step_taylor_tangent(model: Model, t, x, u, p, h):
+def rk4_step_taylor_tangent(model: Model, t, x, u, p, h, u1=None):
     """RK4 step with a second-order Taylor tangent (cheaper than the exact one).
 
-    The state is advanced by RK4; the Jacobians are those of the exact flow to
-    second order in ``h`` about the start point:
+    The state is advanced by RK4 (stage inputs as in :func:`rk4_step`); the
+    Jacobians are those of the exact flow to second order in ``h`` about the
+    start point ``(t, x, u)``:
     ``Fx = I + h A + h^2 A^2 / 2`` and ``Fp = h (I + h A / 2) B`` with
     ``A = df/dx``, ``B = df/dp``.  They differ from the exact RK4 tangent by
-    O(h^3 |A|^3), negligible when the step is short against the model's time
-    constants (checked in the tests); one Jacobian evaluation instead of four.
+    O(h^3 |A|^3) (and, under first-order hold, by O(h^2 |df/du| |u1 - u|)),
+    negligible when the step is short against the model's time constants
+    (checked in the tests); one Jacobian evaluation instead of four.
     """
     h = np.asarray(h, dtype=float)
     hm = h[..., None, None] if h.ndim else h
-    xn = rk4_step(model, t, x, u, p, h)
+    xn = rk4_step(model, t, x, u, p, h, u1)
     A = model._jac_x(t, x, u, p)
     Bp = model._jac_p(t, x, u, p)
     hA = hm * A

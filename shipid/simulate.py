@@ -81,7 +81,9 @@ class SimulationResult:
     u : ndarray, shape (n_t, nu) or (B, n_t, nu)
     model : Model
     success : bool
-        False when the state became non-finite; ``x`` is NaN from there on.
+        False when the state became non-finite; ``x`` is NaN from there on.  In a batch (fixed-step
+        ``rk4``) the other members are integrated to the end; ``meta["failed"]`` lists the failed
+        members and ``meta["failed_at"]`` their failure times [s].
     message : str
     """
 
@@ -215,6 +217,7 @@ def simulate(
     X[..., 0, :] = x
     ok, msg = True, "integration finished"
     f = model._rhs_bound(p)
+    failed_at = np.full(batch, np.nan)  # time at which each batch member became non-finite
     for k in range(n_t - 1):
         h = (t[k + 1] - t[k]) / substeps
         tk = t[k]
@@ -230,17 +233,40 @@ def simulate(
             for _ in range(substeps):
                 x = rk4_map(f, tk, x, uk, h)
                 tk += h
-        X[..., k + 1, :] = x
-        if not np.all(np.isfinite(x)):
+        bad = ~np.all(np.isfinite(x), axis=-1)
+        if np.any(bad):
             ok = False
-            msg = f"state became non-finite at t = {t[k + 1]:.6g} s; the model or its parameters are unstable here"
-            warnings.warn(msg, RuntimeWarning, stacklevel=2)
-            break
-    if ok:
+            if not batch or np.all(bad | np.isfinite(failed_at)):
+                X[..., k + 1, :] = np.where(np.isfinite(failed_at)[..., None], np.nan, x)
+                failed_at = np.where(np.isfinite(failed_at), failed_at, t[k + 1])
+                break
+            # a batch finishes its other members: the failed ones restart from their last finite state
+            # (so that nothing non-finite is integrated) and are recorded as NaN from here on
+            failed_at = np.where(bad & ~np.isfinite(failed_at), t[k + 1], failed_at)
+            x = np.where(bad[..., None], X[..., k, :], x)
+            x = np.where(np.isfinite(x), x, 0.0)
+        X[..., k + 1, :] = np.where(np.isfinite(failed_at)[..., None], np.nan, x)
+    if not ok:
+        msg = _failure_message(t, failed_at)
+        warnings.warn(msg, RuntimeWarning, stacklevel=2)
+    else:
         last = (law.inputs(t[-1], x) if law is not None else controller(t[-1], x)) if controller is not None else U[..., -1, :]
         Uout[..., -1, :] = np.broadcast_to(np.asarray(last, dtype=float), batch + (model.nu,))
-    return SimulationResult(t=t, x=X, u=Uout, model=model, params=np.array(p), success=ok, message=msg,
-                            meta={"method": "rk4"})
+    meta = {"method": "rk4"}
+    if batch:
+        meta["failed"] = [int(i) for i in np.flatnonzero(np.isfinite(failed_at.ravel()))]
+        meta["failed_at"] = [float(v) for v in failed_at.ravel()[meta["failed"]]]
+    return SimulationResult(t=t, x=X, u=Uout, model=model, params=np.array(p), success=ok, message=msg, meta=meta)
+
+
+def _failure_message(t, failed_at) -> str:
+    fa = np.atleast_1d(failed_at).ravel()
+    idx = np.flatnonzero(np.isfinite(fa))
+    if np.ndim(failed_at) == 0:
+        return f"state became non-finite at t = {float(failed_at):.6g} s; the model or its parameters are unstable here"
+    shown = ", ".join(f"{i} (t = {fa[i]:.6g} s)" for i in idx[:10]) + (" ..." if idx.size > 10 else "")
+    return (f"state became non-finite in {idx.size} of {fa.size} batch member(s): {shown}; the others finished "
+            "(meta['failed'] lists the failed members, NaN from their failure on)")
 
 
 def _rk4_law_step(f, law, t, x, h):
@@ -334,7 +360,7 @@ def _log_frame(log) -> pd.DataFrame:
     return data
 
 
-def replay(model: Model, log, *, x0=None, substeps: int = 2) -> SimulationResult:
+def replay(model: Model, log, *, x0=None, substeps: int = 2, params=None) -> SimulationResult:
     """Simulate ``model`` with the recorded inputs of ``log`` from its initial state.
 
     Parameters
@@ -348,6 +374,8 @@ def replay(model: Model, log, *, x0=None, substeps: int = 2) -> SimulationResult
         each logged state (0 for states not logged).
     substeps : int
         RK4 steps per sample interval.
+    params : array (np,) or (B, np), optional
+        Parameters (default the model's); B sets replay the log as one batch of B members.
     """
     df = _log_frame(log)
     t = df["time"].to_numpy(dtype=float)
@@ -366,7 +394,9 @@ def replay(model: Model, log, *, x0=None, substeps: int = 2) -> SimulationResult
                 fin = col[np.isfinite(col)][:5]
                 if fin.size:
                     x0[i] = fin.mean()
-    return simulate(model, x0, t, U, substeps=substeps)
+    if params is not None and np.ndim(params) == 2:
+        x0 = np.broadcast_to(np.asarray(x0, dtype=float), (np.shape(params)[0], model.nx))
+    return simulate(model, x0, t, U, substeps=substeps, params=params)
 
 
 def replay_errors(sim: SimulationResult, log) -> pd.DataFrame:

@@ -250,9 +250,13 @@ def test_divergence_is_detected_and_reported_not_nan(kcs_truth, kcs_logs):
     ident = EKFIdentifier(bad, n_passes=1, init="model", estimate=["a1"], prior_std={"a1": 1e-6})
     with pytest.warns(RuntimeWarning, match="diverged"):
         ident.fit(noisy)
-    assert not ident.success_ and "diverged at sample" in ident.message_
+    assert not ident.success_ and "diverged at sample" in ident.message_ and "smoother skipped" in ident.message_
     assert np.all(np.isfinite(ident.coef_)) and np.all(np.isfinite(ident.cov_.to_numpy()))
-    assert np.all(np.isfinite(ident.states_[0][["u", "v", "r"]].to_numpy()))
+    # the filter stopped at the divergence sample: states up to it, nothing (NaN) after
+    kd = int(ident.output_.diverged_at[0])
+    st = ident.states_[0][["u", "v", "r"]].to_numpy()
+    assert 0 < kd < len(st) and np.all(np.isfinite(st[:kd])) and np.all(np.isnan(st[kd:]))
+    assert np.all(np.isnan(ident.output_.innov[0, kd + 1:])) and ident.output_.loglik[0] == -np.inf
 
 
 def test_covariance_stays_symmetric_positive_definite(kcs_fit):
@@ -362,3 +366,76 @@ def test_model_options_travel_with_the_result(tmp_path):
         model_from(tmp_path / "r.json", model="glider")
     with pytest.raises(ValueError, match="neither a result file nor a registered model"):
         model_from("nope:set")
+
+
+# ------------------------------------------------------ kernel contract: holds, gaps, gates
+def test_interval_steps_cross_a_gap_in_many_steps_and_keep_ordinary_intervals():
+    from shipid.identify.ekf import interval_steps
+
+    t = np.array([0.0, 0.1, 0.2, 20.2, 20.3, 20.45])
+    assert interval_steps(t, 2, None).tolist() == [2, 2, 2, 2, 2]
+    assert interval_steps(t, 2, 0.075).tolist() == [2, 2, 267, 2, 2]
+    assert interval_steps(t, 1, 0.15).tolist() == [1, 1, 134, 1, 1]  # 0.15 s exactly: one step (to rounding)
+    with pytest.raises(ValueError, match="h_max"):
+        interval_steps(t, 1, 0.0)
+
+
+@pytest.mark.parametrize("hold", ["foh", "zoh"])
+def test_prediction_is_the_documented_rk4_map_over_gaps_and_sub_steps(kcs_truth, kcs_logs, hold):
+    """No measurements: the priors are the RK4 map, n_k = max(substeps, ceil(dt/h_max)) steps per interval,
+    inputs linear between samples (foh) or held (zoh), stage by stage."""
+    from shipid.integrate import rk4_step
+
+    noisy = kcs_logs["kcs_zz_p20_rpm"][0].iloc[::1].iloc[:120].copy()
+    noisy = noisy.drop(index=range(60, 100))  # a 4 s gap
+    ident = EKFIdentifier(kcs_truth, n_passes=1, init="model", estimate=["c3"], input_hold=hold, substeps=2).fit(noisy)
+    prob = replace(ident.problem_, Y=np.full_like(ident.problem_.Y, np.nan))
+    assert prob.h_max == pytest.approx(0.075)
+    out = run_ekf(prob, store=True)
+    t, U = prob.t[0], prob.U[0]
+    x = prob.z0[0, :kcs_truth.nx].copy()
+    p = kcs_truth.params
+    worst = 0.0
+    for k in range(t.size - 1):
+        n = max(2, int(np.ceil((t[k + 1] - t[k]) / 0.075 - 1e-9)))
+        h = (t[k + 1] - t[k]) / n
+        for i in range(n):
+            w0, w1 = i / n, (i + 1) / n
+            ua = (1 - w0) * U[k] + w0 * U[k + 1] if hold == "foh" else U[k]
+            ub = (1 - w1) * U[k] + w1 * U[k + 1] if hold == "foh" else None
+            x = rk4_step(kcs_truth, t[k] + i * h, x, ua, p, h, ub)
+        worst = max(worst, np.max(np.abs(x - out.z_prior[0, k + 1, :kcs_truth.nx])))
+    assert worst < 1e-10, worst
+
+
+def test_a_glitch_is_gated_and_counted_and_does_not_move_the_estimate(kcs_truth, kcs_logs):
+    noisy = kcs_logs["kcs_tc_p35"][0].iloc[:400]
+    ident = EKFIdentifier(kcs_truth, n_passes=1, init="model", estimate=["c2", "c3"], gate=5.0).fit(noisy)
+    prob = ident.problem_
+    ir = list(prob.meas_idx).index(kcs_truth.state_index("r"))
+    Y = prob.Y.copy()
+    Y[0, 200, ir] += 50 * KCS_NOISE_STD["r"]  # one 50-sigma yaw-rate glitch
+    clean = run_ekf(prob, store=False)
+    hit = run_ekf(replace(prob, Y=Y), store=False)
+    ungated = run_ekf(replace(prob, Y=Y, gate=None), store=False)
+    assert clean.n_gated.sum() == 0
+    assert hit.n_gated[0].tolist() == [int(j == ir) for j in range(len(prob.meas_idx))]
+    assert hit.gated[0, 200, ir] and hit.innov[0, 200, ir] > 40 * KCS_NOISE_STD["r"]
+    assert np.isfinite(hit.S_diag[0, 200, ir]) and np.isfinite(hit.innov[0, 200]).all()
+    np.testing.assert_allclose(hit.z_final, clean.z_final, rtol=1e-3, atol=1e-6)
+    assert np.max(np.abs(ungated.z_final - clean.z_final)) > 10 * np.max(np.abs(hit.z_final - clean.z_final))
+    # the likelihood leaves the rejected measurement out
+    assert hit.loglik[0] == pytest.approx(clean.loglik[0], rel=1e-3)
+
+
+def test_a_persistent_jump_is_accepted_after_gate_run_rejections(kcs_truth, kcs_logs):
+    noisy = kcs_logs["kcs_tc_p35"][0].iloc[:300]
+    ident = EKFIdentifier(kcs_truth, n_passes=1, init="model", estimate=["c3"], gate=5.0, gate_run=4).fit(noisy)
+    prob = ident.problem_
+    ix = list(prob.meas_idx).index(kcs_truth.state_index("x"))
+    Y = prob.Y.copy()
+    Y[0, 150:, ix] += 3.0  # the position jumps by 3 m and stays (150 sigma)
+    out = run_ekf(replace(prob, Y=Y), store=False)
+    g = out.gated[0, :, ix]
+    assert g[150:154].all() and not g[154]  # four rejections, then accepted
+    assert not g[:150].any() and not out.diverged[0]

@@ -137,3 +137,52 @@ def test_dopri5_batch_equals_members_within_tolerance(turn):
     for i in range(2):
         one = simulate(m, X0[i], t, UU[i], method="dopri5", rtol=1e-8)
         assert np.max(np.abs(both.x[i, :, :2] - one.x[:, :2])) / m.lpp < 1e-6
+
+
+# ------------------------------------------------------------------ RK4 steps with first-order-hold inputs
+def test_first_order_hold_step_integrates_a_linear_input_exactly_and_zoh_is_the_equal_end_case():
+    """x' = u with u linear over the step: RK4 with stage inputs is exact (x0 + h (u0 + u1) / 2)."""
+    from shipid.integrate import rk4_step_tangent, rk4_step_taylor_tangent
+
+    m = get_model("kcs-response", "synthetic-truth")
+
+    class Ramp:  # the protocol's private hooks on a one-state ODE x' = u
+        def _rhs(self, t, x, u, p):
+            return u[..., :1] * np.ones_like(x)
+
+        def _jac_x(self, t, x, u, p):
+            return np.zeros(x.shape + (1,))
+
+        def _jac_p(self, t, x, u, p):
+            return np.zeros(x.shape + (1,))
+
+    r = Ramp()
+    x0, u0, u1, h = np.array([1.0]), np.array([2.0]), np.array([5.0]), 0.3
+    for step in (rk4_step_tangent, rk4_step_taylor_tangent):
+        assert step(r, 0.0, x0, u0, None, h, u1)[0][0] == pytest.approx(1.0 + h * 3.5, abs=1e-15)
+        assert step(r, 0.0, x0, u0, None, h)[0][0] == pytest.approx(1.0 + h * 2.0, abs=1e-15)
+    # on a real model: u1 = u0 gives the held step bit for bit
+    x = np.array([0.0, 0.0, 0.1, 1.6, 0.01, 0.02])
+    u = np.array([0.3, 10.0])
+    a = rk4_step_tangent(m, 0.0, x, u, m.params, 0.1)
+    b = rk4_step_tangent(m, 0.0, x, u, m.params, 0.1, u.copy())
+    for ai, bi in zip(a, b):
+        assert np.array_equal(ai, bi)
+
+
+def test_exact_tangent_with_first_order_hold_matches_finite_differences():
+    from shipid.integrate import rk4_step, rk4_step_tangent
+
+    m = get_model("kcs-response", "synthetic-truth")
+    x = np.array([0.0, 0.0, 0.1, 1.6, 0.01, 0.02])
+    u0, u1, p, h = np.array([0.1, 10.0]), np.array([0.4, 11.0]), m.params, 0.2
+    xn, Fx, Fp = rk4_step_tangent(m, 0.0, x, u0, p, h, u1)
+    assert np.allclose(xn, rk4_step(m, 0.0, x, u0, p, h, u1), rtol=0, atol=1e-15)
+    eps = 1e-6
+    Fx_fd = np.stack([(rk4_step(m, 0.0, x + eps * e, u0, p, h, u1) - rk4_step(m, 0.0, x - eps * e, u0, p, h, u1))
+                      / (2 * eps) for e in np.eye(m.nx)], axis=-1)
+    dp = eps * np.maximum(np.abs(p), 1e-3)
+    Fp_fd = np.stack([(rk4_step(m, 0.0, x, u0, p + d * e, h, u1) - rk4_step(m, 0.0, x, u0, p - d * e, h, u1))
+                      / (2 * d) for d, e in zip(dp, np.eye(m.np))], axis=-1)
+    np.testing.assert_allclose(Fx, Fx_fd, rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(Fp, Fp_fd, rtol=1e-5, atol=1e-9)

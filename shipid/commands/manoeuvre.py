@@ -11,7 +11,7 @@ import math
 import sys
 from pathlib import Path
 
-from ._common import parse_zigzag
+from ._common import add_log_options, parse_zigzag, read_logs
 
 #: Keys printed in the short metric summaries.
 SUMMARY_KEYS = ("advance_L", "transfer_L", "tactical_diameter_L", "steady_diameter_L", "speed_loss",
@@ -21,7 +21,7 @@ SUMMARY_KEYS = ("advance_L", "transfer_L", "tactical_diameter_L", "steady_diamet
 def register(sub) -> None:
     p = sub.add_parser("metrics", help="standard-manoeuvre metrics (ITTC/IMO) of measured logs -> JSON list")
     p.add_argument("logs", nargs="+", metavar="LOG", help="trial logs (CSV or MARIN .dat)")
-    p.add_argument("--lpp", type=float, default=None, help="ship length [m] (default: from the log's particulars)")
+    add_log_options(p)   # --lpp (default: from the log's particulars), --schema, --units, ...
     p.add_argument("--kind", choices=("auto", "turning", "zigzag"), default="auto")
     p.add_argument("--zigzag", metavar="D/C", default=None,
                    help="nominal rudder/check angles [deg] of zigzag logs, e.g. 10/5 (default: read from each log, "
@@ -113,13 +113,11 @@ def _write_or_print(text: str, output, force: bool):
 
 
 def _metrics(args) -> int:
-    from ..logs import read_log
     from ..manoeuvres import metrics
 
     out = []
-    for f in args.logs:
-        log = read_log(f, lpp=args.lpp) if args.lpp else read_log(f)
-        rud, chk = parse_zigzag(args.zigzag) if args.zigzag else (None, None)
+    rud, chk = parse_zigzag(args.zigzag) if args.zigzag else (None, None)
+    for f, log in zip(args.logs, read_logs(args.logs, args)):
         m = metrics(log, lpp=args.lpp, kind=args.kind, reference_offset=args.reference_offset, name=Path(f).name,
                     rudder_deg=rud, check_deg=chk)
         out.append({"file": str(f), **m.to_dict()})

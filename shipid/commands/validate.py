@@ -11,14 +11,15 @@ import math
 import sys
 from pathlib import Path
 
+from ._common import add_log_options, read_logs
+
 
 def _common(p) -> None:
     p.add_argument("result", metavar="RESULT.json", help="fit result written by `shipid fit -o`")
     p.add_argument("logs", nargs="+", metavar="LOG", help="trial logs to replay (.csv, MARIN .dat)")
-    p.add_argument("--lpp", type=float, default=None, help="ship length [m] (default: from the log, then the model)")
-    p.add_argument("--rudder-sign", type=float, choices=(1.0, -1.0), default=1.0, metavar="{1,-1}",
-                   help="multiply the logged rudder angle by this before the replay (-1 for the MARIN KVLCC2 files, "
-                        "whose positive rudder turns to port)")
+    # --lpp (default: from the log, then the model), --rudder-sign (-1: the file's rudder is positive to port;
+    # the MARIN reader flips by itself), --schema, --units, ...: read exactly as `shipid fit` reads
+    add_log_options(p)
     p.add_argument("--zigzag", metavar="D/C", default=None,
                    help="nominal rudder/check angles [deg] of the zigzag logs, e.g. 10/5 (default: read from each log)")
     p.add_argument("--no-closed-loop", action="store_true",
@@ -81,8 +82,8 @@ def _validate(args) -> int:
     from ..validation import validate
 
     out = _check(args)
-    res = validate(args.result, args.logs, args.lpp, rudder_sign=args.rudder_sign,
-                   closed_loop=not args.no_closed_loop, zigzag_angles=_zigzag(args))
+    res = validate(args.result, read_logs(args.logs, args), args.lpp, closed_loop=not args.no_closed_loop,
+                   zigzag_angles=_zigzag(args))
     atomic_write_text(out, json.dumps(res, indent=2, allow_nan=False) + "\n", force=args.force)
     for d in res:
         print(_line(d))
@@ -99,12 +100,12 @@ def _validate(args) -> int:
 def _report(args) -> int:
     from .._io import atomic_write_text
     from ..report import render_report
-    from ..validation import load_logs, resolve_model, validate_one
+    from ..validation import resolve_model, validate_one
 
     out = _check(args)
     model, res = resolve_model(args.result)
-    vals = [validate_one(model, lg, lpp=args.lpp, rudder_sign=args.rudder_sign, closed_loop=not args.no_closed_loop,
-                         zigzag_angles=_zigzag(args)) for lg in load_logs(args.logs, lpp=args.lpp)]
+    vals = [validate_one(model, lg, lpp=args.lpp, closed_loop=not args.no_closed_loop, zigzag_angles=_zigzag(args))
+            for lg in read_logs(args.logs, args)]
     text = render_report(res, args.logs, title=args.title, validations=vals)
     atomic_write_text(out, text, force=args.force)
     for v in vals:

@@ -29,7 +29,7 @@ from scipy.linalg.lapack import dpotrs as _potrs
 from ..integrate import STEP_TANGENTS
 from ..models.base import Model
 
-__all__ = ["EKFProblem", "EKFOutput", "run_ekf", "rts_smooth"]
+__all__ = ["EKFProblem", "EKFOutput", "run_ekf", "rts_smooth", "interval_steps", "INPUT_HOLDS"]
 
 _LOG2PI = np.log(2.0 * np.pi)
 
@@ -50,7 +50,7 @@ class EKFProblem:
     scale : (ne,) -- ``theta = scale * theta_s``.
     t : (B, N) -- sample times [s]; at a reset sample the step from the previous
         sample is not integrated.
-    U : (B, N, nu) -- inputs, held constant from sample k to k+1.
+    U : (B, N, nu) -- inputs at the sample times (between samples: see ``input_hold``).
     Y : (B, N, nm) -- measurements, NaN where missing.
     meas_idx : (nm,) int -- state index measured by each channel.
     R : (B, nm) -- measurement noise variances.
@@ -59,8 +59,16 @@ class EKFProblem:
     reset : (B, N) bool -- sample k starts a new log (never sample 0).
     x_reset : (B, N, nx) -- initial ship state used at reset samples.
     P_reset : (B, nx, nx) -- its covariance.
-    substeps : int -- RK4 steps per sample interval.
+    substeps : int -- least number of RK4 steps per sample interval.
     method : a key of :data:`shipid.integrate.STEP_TANGENTS` ("rk4", "rk4-exact", "euler").
+    input_hold : {"foh", "zoh"} -- inputs between samples: linear from ``U[k]`` to ``U[k+1]``
+        (first-order hold, default) or held at ``U[k]`` (zero-order hold).
+    h_max : float or None -- largest RK4 step [s]; an interval longer than ``substeps * h_max``
+        (a logger dropout) is crossed in more steps.  None: always ``substeps`` steps.
+    gate : float or None -- innovation gate in standard deviations (None: no gating).
+    gate_run : int -- a channel rejected by the gate at ``gate_run`` consecutive measured samples
+        has its next measurement accepted whatever its innovation (a filter that drifted away
+        must not reject everything from then on).
     """
 
     model: Model
@@ -80,11 +88,19 @@ class EKFProblem:
     P_reset: np.ndarray
     substeps: int = 1
     method: str = "rk4"
+    input_hold: str = "foh"
+    h_max: float | None = None
+    gate: float | None = None
+    gate_run: int = 10
 
     @property
     def shape(self):
         B, N = self.t.shape
         return B, N, self.model.nx, len(self.est_idx), len(self.meas_idx)
+
+
+#: Input holds understood by the kernel and the simulator.
+INPUT_HOLDS = ("foh", "zoh")
 
 
 @dataclass
@@ -93,11 +109,20 @@ class EKFOutput:
 
     ``z_post/P_post`` are the filtered (posterior) estimates at each sample,
     ``z_prior/P_prior`` the predictions at each sample (sample 0: the initial
-    condition), ``F[k]`` the transition from k to k+1 (last entry unused).
-    ``innov`` (B, N, nm) are innovations (NaN where no measurement),
-    ``S_diag`` their predicted variances, ``loglik`` (B,) the innovation
-    log-likelihood, ``diverged`` (B,) bool and ``diverged_at`` (B,) sample
-    index (-1 if not), ``message`` per member.
+    condition), ``F[k]`` the transition from k to k+1 (last entry the identity).
+    ``innov`` (B, N, nm) are innovations ``y - H z_prior`` (NaN where no
+    measurement; a gated channel keeps its innovation, marked in ``gated``),
+    ``S_diag`` their predicted variances ``(H P_prior H^T + R)_jj``, ``nis`` (B, N)
+    the normalised innovation squared of the accepted channels, ``loglik`` (B,)
+    the innovation log-likelihood (``-inf`` for a diverged member),
+    ``diverged`` (B,) bool and ``diverged_at`` (B,) sample index (-1 if not),
+    ``message`` per member, ``gated`` (B, N, nm) bool the measurements rejected by
+    the innovation gate and ``n_gated`` (B, nm) their count per channel.
+
+    A member that diverged at sample ``kd`` was not computed further: its
+    ``z_post/P_post/F`` from ``kd`` on and ``z_prior/P_prior/innov/S_diag/nis`` after
+    ``kd`` are NaN; ``z_final/P_final`` are its last good posterior (sample ``kd - 1``,
+    or the initial condition when ``kd = 0``).
     """
 
     z_post: np.ndarray | None
@@ -114,6 +139,8 @@ class EKFOutput:
     diverged: np.ndarray
     diverged_at: np.ndarray
     message: list
+    gated: np.ndarray
+    n_gated: np.ndarray
 
 
 def _index_or_slice(idx, n: int):
@@ -156,6 +183,51 @@ def _spd_solve(S: np.ndarray, rhs: np.ndarray):
     return X, logdet
 
 
+def interval_steps(t: np.ndarray, substeps: int, h_max: float | None) -> np.ndarray:
+    """RK4 steps per sample interval: ``n_k = max(substeps, ceil(dt_k / h_max - 1e-9))``.
+
+    ``t (..., N)`` sample times [s] -> ``(..., N-1)`` int; ``h_max`` None gives ``substeps``
+    everywhere.  The ``1e-9`` keeps an interval of exactly ``m * h_max`` (to rounding) at ``m`` steps.
+    """
+    dt = np.diff(np.asarray(t, dtype=float), axis=-1)
+    n = np.full(dt.shape, int(substeps), dtype=np.int64)
+    if h_max is not None:
+        if not h_max > 0:
+            raise ValueError(f"h_max must be positive or None, got {h_max}")
+        n = np.maximum(n, np.ceil(dt / float(h_max) - 1e-9).astype(np.int64))
+    return n
+
+
+def _cross_interval(step, model, t0, x, u0, u1, p, h, n, scale, est, all_est):
+    """Cross one sample interval in ``n`` RK4 steps of length ``h`` from ``(t0, x)``.
+
+    Step ``i`` starts at ``t0 + i h``; under first-order hold (``u1`` given) its end
+    inputs are ``(1 - w) u0 + w u1`` at the fractions ``w = i/n`` and ``(i+1)/n`` (so the
+    interval ends on ``u1`` exactly), under zero-order hold (``u1`` None) ``u0`` throughout.
+    Returns ``x(t0 + n h)``, ``dx/dx0 (B, nx, nx)`` and ``dx/dtheta_s (B, nx, ne)``.
+    """
+    ua = u0
+    Fx = Fp = None
+    for i in range(n):
+        if u1 is None:
+            ub = None
+        elif i == n - 1:
+            ub = u1
+        else:
+            w = (i + 1) / n
+            ub = (1.0 - w) * u0 + w * u1
+        x, Ax, Ap = step(model, t0 + i * h if i else t0, x, ua, p, h, ub)
+        Ap = Ap * scale if all_est else Ap[:, :, est] * scale
+        if Fx is None:
+            Fx, Fp = Ax, Ap
+        else:
+            Fp = Ax @ Fp + Ap
+            Fx = Ax @ Fx
+        if ub is not None:
+            ua = ub
+    return x, Fx, Fp
+
+
 def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKFOutput:
     """Run the augmented-state EKF over a batch.
 
@@ -167,8 +239,8 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKF
         smoother; memory ``B * N * nz^2 * 24`` bytes).
     nis_limit : float
         A normalised innovation squared above this (or a non-finite or
-        non-positive covariance) marks the member as diverged; it is then
-        frozen (no further updates) and reported, never silently NaN.
+        non-positive covariance) marks the member as diverged at that sample;
+        it is then stopped (see below) and reported, never silently NaN.
 
     Returns
     -------
@@ -176,6 +248,39 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKF
 
     Notes
     -----
+    The semantics, per member and sample ``k`` (a contract: the compiled kernel
+    reproduces them):
+
+    1. **Update** with the measurements of sample ``k``.  The innovation of channel
+       ``j`` is ``e_j = y_j - z_prior[meas_idx_j]`` with prior variance
+       ``S_jj = P_prior[meas_idx_j, meas_idx_j] + R_j``.  With ``gate`` set, a
+       measured channel with ``|e_j| > gate * sqrt(S_jj)`` is *rejected* (treated as
+       missing at this sample, flagged in ``gated``) unless it was rejected at its
+       last ``gate_run`` measured samples in a row (then it is accepted and its
+       count restarts); the run counters restart at reset samples.  The accepted
+       channels update the state jointly (Joseph form); ``nis`` and the
+       log-likelihood use the accepted channels only.
+    2. **Divergence**: ``nis > nis_limit``, or a posterior covariance with a
+       non-finite or non-positive trace, or a non-finite state, marks the member
+       diverged at ``k``.  It stops there: its posterior at ``k`` and everything
+       after is not computed (NaN in the stored arrays) and ``z_final/P_final``
+       keep its last good posterior; the other members continue.  The loop ends
+       when every member has diverged.
+    3. **Predict** to ``k + 1`` unless ``k + 1`` is a reset sample (then the ship
+       state restarts at ``x_reset`` with covariance ``P_reset``, nothing is
+       integrated, and the parameter states carry over).  The interval
+       ``dt_k = t[k+1] - t[k]`` is crossed in ``n_k = max(substeps,
+       ceil(dt_k / h_max - 1e-9))`` equal RK4 steps ``h = dt_k / n_k``
+       (:func:`interval_steps`), step ``i`` starting at ``t[k] + i h``.  Under
+       ``input_hold="foh"`` the input is linear from ``U[k]`` to ``U[k+1]``: step
+       ``i`` runs from ``u_a = (1-w_i) U[k] + w_i U[k+1]`` to ``u_b`` at
+       ``w_{i+1}`` (``w_i = i / n_k``; the last ``u_b`` is ``U[k+1]`` itself), its
+       RK4 stages see ``u_a``, ``(u_a + u_b) / 2``, ``(u_a + u_b) / 2``, ``u_b``, and
+       the tangent is taken with the same stage inputs (the "rk4" Taylor tangent
+       at ``(t, x, u_a)``); ``"zoh"`` holds ``U[k]``.  The transition is the
+       product of the steps' tangents; ``P_prior = F P F^T`` (symmetrised) plus
+       ``Q_k = diag(q) dt_k``.
+
     The loop is written for few numpy calls per sample (their fixed cost,
     not the arithmetic, dominates at ~20 states): ``H`` selects states, so
     ``P H^T`` and ``H P H^T`` are column/row picks of ``P`` (views when the
@@ -193,13 +298,20 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKF
     all_est = isinstance(est, slice) and est == slice(0, n_par)
     scale = np.asarray(prob.scale, dtype=float)
     step = STEP_TANGENTS[prob.method]
-    substeps = int(prob.substeps)
+    if prob.input_hold not in INPUT_HOLDS:
+        raise ValueError(f"input_hold must be one of {INPUT_HOLDS}, got {prob.input_hold!r}")
+    foh = prob.input_hold == "foh"
+    gate = None if prob.gate is None else float(prob.gate)
+    if gate is not None and not gate > 0:
+        raise ValueError(f"gate must be positive or None, got {prob.gate}")
+    gate_run = int(prob.gate_run)
     eye = np.eye(nz)
 
     # per-sample quantities computed once, outside the loop
     t_all = prob.t
     dt = np.diff(t_all, axis=1)  # (B, N-1)
-    h_all = dt / substeps
+    n_all = interval_steps(t_all, int(prob.substeps), prob.h_max)
+    h_all = dt / n_all
     Qd = prob.q[:, None, :] * dt[:, :, None]  # (B, N-1, nz) process-noise variances per interval
     # with one sampling interval throughout, Q is one matrix (added in one call); "one interval" to
     # rounding, since time stamps like k*0.1 give differences that vary in the last bits
@@ -209,19 +321,26 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKF
     shared_t = (t_all == t_all[:1]).all(axis=0).tolist()
     t_first = t_all[0].tolist()
     h_first = h_all[0].tolist()
+    n_first = n_all[0].tolist()
     Y = prob.Y
     fin = np.isfinite(Y)
     all_k = fin.all(axis=(0, 2)).tolist()
     any_k = fin.any(axis=(0, 2)).tolist()
     reset_k = prob.reset.any(axis=0).tolist()
+    reset_all = prob.reset.all(axis=0).tolist()
     R = prob.R
     Rrow = R[:, None, :]
     Rfull = R[:, :, None] * np.eye(nm)
     logR = np.log(R)
     logdet_k = np.full((B, N), np.nan)  # log det S per sample (masked channels removed)
+    if gate is not None:
+        mi_arr = np.asarray(prob.meas_idx, dtype=np.intp)
+        run = np.zeros((B, nm), dtype=np.int64)  # consecutive rejections per channel
+        gate2 = gate * gate
 
     z = prob.z0.copy()
     P = prob.P0.copy()
+    z_good, P_good = z, P  # last good posterior (before any update: the initial condition)
     p = prob.p_base.copy()
     if store:
         z_post = np.empty((B, N, nz))
@@ -237,20 +356,37 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKF
     innov = np.full((B, N, nm), np.nan)
     S_diag = np.full((B, N, nm), np.nan)
     nis = np.full((B, N), np.nan)
+    gated = np.zeros((B, N, nm), dtype=bool)
     diverged = np.zeros(B, dtype=bool)
     any_div = False
     diverged_at = np.full(B, -1)
     message = ["ok"] * B
+    k_end = N  # samples computed (the loop stops when every member has diverged)
     for k in range(N):
         # ---- update with the measurements of sample k
-        if any_k[k] and not (any_div and diverged.all()):
-            full = all_k[k] and not any_div
+        if gate is not None and reset_k[k]:
+            run[prob.reset[:, k]] = 0
+        if any_k[k]:
             e = Y[:, k] - z[:, mi]
             PHt = P[:, :, mi]  # (B, nz, nm)
+            m = None
+            if gate is not None:
+                Sjj = P[:, mi_arr, mi_arr] + R
+                mk = fin[:, k] & ~diverged[:, None] if any_div else fin[:, k]
+                rej = mk & (e * e > gate2 * Sjj) & (run < gate_run)
+                if rej.any():
+                    run = np.where(rej, run + 1, np.where(mk, 0, run))
+                    gated[:, k] = rej
+                    m = mk & ~rej
+                    e_raw, S_raw = e, Sjj
+                else:
+                    run[mk] = 0
+            full = m is None and all_k[k] and not any_div
             if full:
                 S = PHt[:, mi, :] + Rfull
             else:
-                m = fin[:, k] & ~diverged[:, None]
+                if m is None:
+                    m = fin[:, k] & ~diverged[:, None]
                 e = np.where(m, e, 0.0)
                 PHt = PHt * m[:, None, :]
                 S = PHt[:, mi, :] * m[:, :, None] + Rfull
@@ -277,6 +413,10 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKF
                 nis[:, k] = np.where(has, d2, np.nan)
                 innov[:, k] = np.where(m, e, np.nan)
                 S_diag[:, k] = np.where(m, np.diagonal(S, axis1=1, axis2=2), np.nan)
+                if gated[:, k].any():  # a rejected channel keeps its innovation and prior variance
+                    g = gated[:, k]
+                    innov[:, k] = np.where(g, e_raw, innov[:, k])
+                    S_diag[:, k] = np.where(g, S_raw, S_diag[:, k])
             # ---- divergence checks (NaN fails every comparison)
             # trace of P, poisoned (NaN) by a non-finite z; S not positive definite gave a NaN gain
             tr = np.add.reduce(P.reshape(B, nz * nz)[:, :: nz + 1] + 0.0 * z, axis=1)
@@ -295,70 +435,94 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKF
                             if np.isfinite(d2[b])
                             else f"filter diverged at sample {k} (t = {tk:.4g} s): non-finite state or covariance"
                         )
-                    # freeze the member at its last good values
-                    if store and k > 0:
-                        z[bad] = z_post[bad, k - 1]
-                        P[bad] = P_post[bad, k - 1]
-                    else:
-                        z[bad] = prob.z0[bad]
-                        P[bad] = prob.P0[bad]
+                    # the member stops: keep its last good posterior
+                    z[bad] = z_good[bad]
+                    P[bad] = P_good[bad]
         if store:
             z_post[:, k], P_post[:, k] = z, P
+            if any_div:
+                z_post[diverged, k] = np.nan
+                P_post[diverged, k] = np.nan
+        z_good, P_good = z, P
         if k == N - 1:
             break
+        if any_div and diverged.all():
+            k_end = k + 1
+            break
         # ---- predict to sample k+1 (RK4 map of the model, its tangent as the transition)
-        x = z[:, :nx]
-        if all_est:
-            p = z[:, nx:] * scale
-        else:
-            p[:, est] = z[:, nx:] * scale
-        if shared_t[k] and shared_t[k + 1]:
-            h, tk = h_first[k], t_first[k]
-        else:
-            h, tk = h_all[:, k], t_all[:, k]
-        uk = prob.U[:, k]
-        x, Fx, Fp = step(model, tk, x, uk, p, h)
-        Fp = Fp * scale if all_est else Fp[:, :, est] * scale
-        for _ in range(substeps - 1):
-            tk = tk + h
-            x, Ax, Ap = step(model, tk, x, uk, p, h)
-            Fp = Ax @ Fp + (Ap * scale if all_est else Ap[:, :, est] * scale)
-            Fx = Ax @ Fx
         F = Fs[:, k] if store else Fbuf
-        F[:, :nx, :nx] = Fx
-        F[:, :nx, nx:] = Fp
-        zn = np.concatenate((x, z[:, nx:]), axis=1)
+        zn = z.copy()
         Qk = Qd[:, k]
-        if reset_k[k + 1]:
-            rs = prob.reset[:, k + 1]
+        rs = prob.reset[:, k + 1] if reset_k[k + 1] else None
+        if not reset_all[k + 1]:  # nothing is integrated into a reset sample
+            x = z[:, :nx]
+            if all_est:
+                p = z[:, nx:] * scale
+            else:
+                p[:, est] = z[:, nx:] * scale
+            u0 = prob.U[:, k]
+            u1 = prob.U[:, k + 1] if foh else None
+            if shared_t[k] and shared_t[k + 1]:
+                x, Fx, Fp = _cross_interval(step, model, t_first[k], x, u0, u1, p, h_first[k], n_first[k],
+                                            scale, est, all_est)
+            else:
+                nk = n_all[:, k]
+                if (nk == nk[0]).all():
+                    x, Fx, Fp = _cross_interval(step, model, t_all[:, k], x, u0, u1, p, h_all[:, k], int(nk[0]),
+                                                scale, est, all_est)
+                else:  # members whose intervals need different step counts: one group per count
+                    xg, Fx, Fp = np.empty_like(x), np.empty((B, nx, nx)), np.empty((B, nx, ne))
+                    for nv in np.unique(nk):
+                        g = np.flatnonzero(nk == nv)
+                        xg[g], Fx[g], Fp[g] = _cross_interval(
+                            step, model, t_all[g, k], x[g], u0[g], None if u1 is None else u1[g], p[g],
+                            h_all[g, k], int(nv), scale, est, all_est)
+                    x = xg
+            F[:, :nx, :nx] = Fx
+            F[:, :nx, nx:] = Fp
+            zn[:, :nx] = x
+        if rs is not None:
             F[rs, :nx, :] = 0.0
             zn[rs, :nx] = prob.x_reset[rs, k + 1]
             Qk = Qk.copy()
             Qk[rs, :nx] = 0.0
         Pn = F @ P @ F.transpose(0, 2, 1)
         Pn = 0.5 * (Pn + Pn.transpose(0, 2, 1))  # exactly symmetric
-        if Q_const is not None and not reset_k[k + 1]:
+        if Q_const is not None and rs is None:
             Pn += Q_const
         else:
             Pn.reshape(B, nz * nz)[:, :: nz + 1] += Qk
-            if reset_k[k + 1]:
+            if rs is not None:
                 Pn[rs, :nx, :nx] += prob.P_reset[rs]
         if any_div:
             zn[diverged], Pn[diverged] = z[diverged], P[diverged]
-            F[diverged] = eye
+            if store:
+                F[diverged] = np.nan
         z, P = zn, Pn
         if store:
             z_prior[:, k + 1], P_prior[:, k + 1] = z, P
+            if any_div:
+                z_prior[diverged, k + 1] = np.nan
+                P_prior[diverged, k + 1] = np.nan
     if store:
         Fs[:, N - 1] = eye
-    # innovation log-likelihood, summed over the samples that had measurements
-    cnt = np.isfinite(innov).sum(axis=2)
+        if k_end < N:  # every member diverged: nothing after was computed
+            for a in (z_post, P_post, z_prior, P_prior, Fs):
+                a[:, k_end:] = np.nan
+            Fs[:, k_end - 1] = np.nan
+        if any_div:
+            for b in np.flatnonzero(diverged):
+                Fs[b, diverged_at[b]:] = np.nan
+    # innovation log-likelihood, summed over the samples that had accepted measurements
+    cnt = (np.isfinite(innov) & ~gated).sum(axis=2)
     loglik = -0.5 * np.where(cnt > 0, nis + logdet_k + cnt * _LOG2PI, 0.0).sum(axis=1)
+    loglik = np.where(diverged, -np.inf, loglik)
     return EKFOutput(
         z_post=z_post if store else None, P_post=P_post if store else None,
         z_prior=z_prior if store else None, P_prior=P_prior if store else None,
-        F=Fs if store else None, z_final=z, P_final=P, innov=innov, S_diag=S_diag,
+        F=Fs if store else None, z_final=z_good, P_final=P_good, innov=innov, S_diag=S_diag,
         loglik=loglik, nis=nis, diverged=diverged, diverged_at=diverged_at, message=message,
+        gated=gated, n_gated=gated.sum(axis=1),
     )
 
 

@@ -85,6 +85,16 @@ class EKFIdentifier:
     method : {"rk4", "rk4-exact", "euler"}
         Discretisation: RK4 state propagation with a second-order Taylor
         transition matrix (default), with the exact RK4 tangent, or Euler.
+    input_hold : {"foh", "zoh"}
+        Inputs between samples: linear between the logged values (first-order
+        hold) or held at the value of the interval's start (zero-order hold).
+    gate : float or None
+        Innovation gate [standard deviations]: a measurement whose innovation
+        exceeds ``gate * sqrt(S_jj)`` is rejected as an outlier (see
+        :func:`~shipid.identify.ekf.run_ekf`); None disables gating.
+    gate_run : int
+        After this many consecutive rejections of a channel its next measurement
+        is accepted (a drifting filter must not reject everything).
     progress : bool
         Show a tqdm progress bar over passes.
     """
@@ -108,6 +118,9 @@ class EKFIdentifier:
         tune_noise: bool = False,
         substeps: int = 1,
         method: str = "rk4",
+        input_hold: str = "zoh",
+        gate: float | None = None,
+        gate_run: int = 10,
         progress: bool = False,
     ):
         self.model = model
@@ -126,6 +139,9 @@ class EKFIdentifier:
         self.tune_noise = tune_noise
         self.substeps = substeps
         self.method = method
+        self.input_hold = input_hold
+        self.gate = gate
+        self.gate_run = gate_run
         self.progress = progress
 
     # ----------------------------------------------------------------- setup
@@ -140,6 +156,14 @@ class EKFIdentifier:
             raise ValueError(f"n_passes must be >= 1, got {self.n_passes}")
         if int(self.substeps) < 1:
             raise ValueError(f"substeps must be >= 1, got {self.substeps}")
+        from .ekf import INPUT_HOLDS
+
+        if self.input_hold not in INPUT_HOLDS:
+            raise ValueError(f"input_hold must be one of {INPUT_HOLDS}, got {self.input_hold!r}")
+        if self.gate is not None and not self.gate > 0:
+            raise ValueError(f"gate must be positive or None, got {self.gate}")
+        if int(self.gate_run) < 1:
+            raise ValueError(f"gate_run must be >= 1, got {self.gate_run}")
         if not self.param_walk >= 0:
             raise ValueError(f"param_walk must be >= 0, got {self.param_walk}")
 
@@ -272,15 +296,16 @@ class EKFIdentifier:
         for k in passes:
             prob = self._problem(theta_s, q_mult, r_mult)
             out = run_ekf(prob, store=True)
-            zs, Ps = rts_smooth(out)
-            if out.diverged[0]:
-                self.pass_messages_.append(f"pass {k + 1}: {out.message[0]}")
+            if out.diverged[0]:  # the kernel stopped at the divergence sample; smoothing it cannot help
+                self.pass_messages_.append(f"pass {k + 1}: {out.message[0]} (filter stopped there, smoother skipped)")
                 break
+            zs, Ps = rts_smooth(out)
             good = (prob, out, zs, Ps)
             theta_s = zs[0, 0, nx:].copy()
             history.append(theta_s * scale)
         if good is None:
-            # even the first pass diverged: keep the start values and the prior, say so
+            # even the first pass diverged: keep the start values and the prior, say so; the states are
+            # the filtered ones up to the divergence sample (NaN after it: not computed)
             nz = nx + len(est_idx)
             zs = np.broadcast_to(prob.z0[:, None, :], (1, prob.t.shape[1], nz)).copy()
             zs[0, :, :nx] = out.z_post[0, :, :nx]
@@ -339,6 +364,8 @@ class EKFIdentifier:
             t=rep(t), U=rep(np.concatenate(U_all)), Y=rep(np.concatenate(Y_all)), meas_idx=s["meas_idx"],
             R=R, q=qb, z0=rep(z0), P0=rep(P0), reset=rep(np.concatenate(reset)),
             x_reset=rep(np.concatenate(xr)), P_reset=rep(P_reset), substeps=int(self.substeps), method=self.method,
+            input_hold=self.input_hold, h_max=1.5 * s["dt"] / int(self.substeps),
+            gate=None if self.gate is None else float(self.gate), gate_run=int(self.gate_run),
         )
 
     def _initial_state(self, a: LogArrays) -> np.ndarray:
@@ -346,9 +373,15 @@ class EKFIdentifier:
         x0 = np.zeros(self.model.nx)
         for j, i in enumerate(s["meas_idx"]):
             col = a.Y[:, j]
-            fin = np.flatnonzero(np.isfinite(col[: max(5, col.size // 20)]))
-            if fin.size:
-                x0[i] = np.median(col[fin[:5]])
+            fin = np.flatnonzero(np.isfinite(col[: max(5, col.size // 20)]))[:5]
+            if fin.size > 2:
+                # straight line through the first five measurements, at the first sample time: a position
+                # moves ~5 noise widths over five samples, so their median would start the filter off
+                tt = a.t[fin] - a.t[0]
+                slope, icpt = np.polyfit(tt, col[fin], 1)
+                x0[i] = icpt
+            elif fin.size:
+                x0[i] = col[fin[0]]
         return x0
 
     def _initial_state_var(self, arrays) -> np.ndarray:
@@ -400,7 +433,7 @@ class EKFIdentifier:
         self.history_ = pd.DataFrame(history, columns=est)
         self.equations_used_for_start_ = used_eq
         self.success_ = not bool(out.diverged[0])
-        self.message_ = "converged" if self.success_ else out.message[0]
+        self.message_ = "converged" if self.success_ else self.pass_messages_[-1].split(": ", 1)[1]
         if self.success_ and self.pass_messages_:
             self.message_ += f" (result of pass {len(history)}; {self.pass_messages_[-1]})"
         if not self.success_:

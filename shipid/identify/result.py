@@ -3,7 +3,6 @@ uncertainties, diagnostics, inputs (path + sha256) and software versions, and
 loads back into a model."""
 from __future__ import annotations
 
-import json
 import platform
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -12,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .._io import atomic_write_text
+from .._io import (as_mapping, as_number, as_string, atomic_write_text, dumps_json, read_json, short)
 
 __all__ = ["FitResult", "load_result", "model_from", "software_versions", "diagnostics_to_json", "fitted_ship"]
 
@@ -147,24 +146,23 @@ class FitResult:
 
     def to_json(self, path, *, force: bool = False) -> Path:
         """Write atomically; an existing file is replaced only with ``force=True``."""
-        return atomic_write_text(path, json.dumps(self.to_dict(), indent=2, allow_nan=True) + "\n", force=force)
+        return atomic_write_text(path, dumps_json(self.to_dict()), force=force)
 
     @classmethod
     def from_dict(cls, doc: dict, source: str = "result") -> "FitResult":
-        for key in ("model", "coef"):
-            if key not in doc:
-                raise ValueError(f"{source}: not a shipid fit result (no '{key}' entry)")
-        cov = doc.get("cov") or {"names": [], "matrix": []}
-        names = cov.get("names", [])
-        mat = np.array(cov.get("matrix", []), dtype=float).reshape(len(names), len(names))
+        """Build from the JSON structure of :meth:`to_dict`, checking every entry's type
+        (ValueError naming ``source`` and the key; see :func:`check_result_dict`)."""
+        d = check_result_dict(doc, source)
+        names = d["cov"]["names"]
+        mat = np.array(d["cov"]["matrix"], dtype=float).reshape(len(names), len(names))
         return cls(
-            model=doc["model"], coef=dict(doc["coef"]), coef_std=dict(doc.get("coef_std", {})),
-            cov=pd.DataFrame(mat, index=names, columns=names), diagnostics=doc.get("diagnostics", {}),
-            inputs=doc.get("inputs", []), method=doc.get("method", "ekf"), settings=doc.get("settings", {}),
-            loglik=doc.get("loglik"), success=doc.get("success", True), message=doc.get("message", ""),
-            versions=doc.get("versions", {}), created=doc.get("created", ""), extra=doc.get("extra", {}),
-            model_options=dict(doc.get("model_options") or (doc.get("extra") or {}).get("model_options") or {}),
-            ship=dict(doc.get("ship") or {}),
+            model=d["model"], coef=d["coef"], coef_std=d["coef_std"],
+            cov=pd.DataFrame(mat, index=names, columns=names), diagnostics=d["diagnostics"],
+            inputs=d["inputs"], method=d["method"], settings=d["settings"],
+            loglik=d["loglik"], success=d["success"], message=d["message"],
+            versions=d["versions"], created=d["created"], extra=d["extra"],
+            model_options=dict(d["model_options"] or d["extra"].get("model_options") or {}),
+            ship=d["ship"],
         )
 
     def to_model(self):
@@ -175,8 +173,9 @@ class FitResult:
             raise ValueError("fit result: 'coef' must be a mapping name -> value")
         try:
             return get_model(self.model, self.coef, **self.model_options)
-        except TypeError as exc:
-            raise ValueError(f"fit result: cannot build model '{self.model}' with options {self.model_options}: {exc}") from None
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"fit result: cannot build model '{self.model}' with options "
+                             f"{short(self.model_options, 80)}: {exc}") from None
 
     def summary(self) -> pd.DataFrame:
         est = list(self.cov.index)
@@ -223,7 +222,12 @@ def model_from(spec, *, model: str | None = None):
     else:
         raise ValueError(f"expected a fit result, a result JSON, a model or 'name[:set]', got {type(spec).__name__}")
     if res is not None:
-        m = res.to_model()
+        try:
+            m = res.to_model()
+        except ValueError as exc:
+            if isinstance(spec, (str, os.PathLike)):
+                raise ValueError(f"{spec}: {str(exc).removeprefix('fit result: ')}") from None
+            raise
     if model is not None and m.name != model:
         raise ValueError(f"{spec if isinstance(spec, (str, os.PathLike)) else 'result'}: model is '{m.name}', expected '{model}'")
     return m, res
@@ -234,10 +238,80 @@ def load_result(path) -> FitResult:
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(f"{p}: no such result file; run `shipid fit` first or check the path")
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ValueError(f"{p}: not a JSON fit result ({exc}); pass the file written by `shipid fit -o`") from None
-    if not isinstance(doc, dict):
-        raise ValueError(f"{p}: not a shipid fit result (top level is not an object)")
+    doc = read_json(p, "shipid fit result")
     return FitResult.from_dict(doc, source=str(p))
+
+
+def _number_map(value, where: str, *, allow_null: bool = False) -> dict:
+    out = {}
+    for k, v in as_mapping(value, where, '{"a1": 0.1}').items():
+        out[k] = np.nan if (v is None and allow_null) else as_number(v, f"{where}.{short(k, 30)}", finite=False)
+    return out
+
+
+def _list_of(value, where: str, kind, label: str) -> list:
+    if not isinstance(value, list) or not all(isinstance(v, kind) for v in value):
+        raise ValueError(f"{where}: expected a list of {label}, got {short(value, 40)}")
+    return value
+
+
+def check_result_dict(doc, source: str = "result") -> dict:
+    """Check the types of a fit-result document (the JSON of :meth:`FitResult.to_dict`).
+
+    Hand-written checks (no schema library): each message names ``source``,
+    the key and the offending type or value, in one short line.  Unknown
+    top-level keys are kept in the file but ignored.  Returns a normalised copy
+    (defaults filled in, ``null`` numbers -> NaN).
+    """
+    if not isinstance(doc, dict):
+        raise ValueError(f"{source}: not a shipid fit result (top level is not an object)")
+    for key in ("model", "coef"):
+        if key not in doc:
+            raise ValueError(f"{source}: not a shipid fit result (no '{key}' entry)")
+    w = f"{source}: "
+    out = {"model": as_string(doc["model"], w + "model"), "coef": _number_map(doc["coef"], w + "coef")}
+    out["coef_std"] = _number_map(doc.get("coef_std") or {}, w + "coef_std", allow_null=True)
+    cov = as_mapping(doc.get("cov") or {"names": [], "matrix": []}, w + "cov", '{"names": [...], "matrix": [[...]]}')
+    names = _list_of(cov.get("names", []), w + "cov.names", str, "coefficient names")
+    mat = cov.get("matrix", [])
+    if not isinstance(mat, list) or len(mat) != len(names) or not all(
+            isinstance(row, list) and len(row) == len(names) for row in mat):
+        raise ValueError(f"{w}cov.matrix: expected a {len(names)}x{len(names)} list of lists (one row per name)")
+    out["cov"] = {"names": names, "matrix": [[np.nan if v is None else as_number(v, f"{w}cov.matrix[{i}][{j}]", finite=False)
+                                              for j, v in enumerate(row)] for i, row in enumerate(mat)]}
+    missing = [n for n in names if n not in out["coef"]]
+    if missing:
+        raise ValueError(f"{w}cov.names {short(missing, 60)} have no value in 'coef'")
+    diag = as_mapping(doc.get("diagnostics") or {}, w + "diagnostics", '{"warnings": [...]}')
+    if "warnings" in diag:
+        _list_of(diag["warnings"], w + "diagnostics.warnings", str, "strings")
+    for key in ("poorly_determined", "correlated_pairs", "unidentified_combinations"):
+        if key in diag and not isinstance(diag[key], list):
+            raise ValueError(f"{w}diagnostics.{key}: expected a list, got {short(diag[key], 40)}")
+    for key in ("condition_number", "nis_mean", "nis_expected"):
+        if diag.get(key) is not None:
+            as_number(diag[key], f"{w}diagnostics.{key}", finite=False)
+    if "correlation" in diag:
+        c = as_mapping(diag["correlation"], w + "diagnostics.correlation", '{"names": [...], "matrix": [[...]]}')
+        cn = _list_of(c.get("names", []), w + "diagnostics.correlation.names", str, "names")
+        cm = c.get("matrix", [])
+        if not isinstance(cm, list) or len(cm) != len(cn) or not all(
+                isinstance(r, list) and len(r) == len(cn) and all(v is None or (isinstance(v, (int, float))
+                                                                  and not isinstance(v, bool)) for v in r)
+                for r in cm):
+            raise ValueError(f"{w}diagnostics.correlation.matrix: expected a {len(cn)}x{len(cn)} list of numbers")
+    out["diagnostics"] = diag
+    inputs = doc.get("inputs") or []
+    if not isinstance(inputs, list) or not all(isinstance(i, dict) for i in inputs):
+        raise ValueError(f"{w}inputs: expected a list of objects (name, path, sha256), got {short(inputs, 40)}")
+    out["inputs"] = inputs
+    for key, default in (("method", "ekf"), ("message", ""), ("created", "")):
+        out[key] = as_string(doc.get(key, default) if doc.get(key) is not None else default, w + key)
+    for key in ("settings", "versions", "extra", "model_options", "ship"):
+        out[key] = as_mapping(doc.get(key) or {}, w + key)
+    success = doc.get("success", True)
+    if not isinstance(success, bool):
+        raise ValueError(f"{w}success: expected true or false, got {short(success, 40)}")
+    out["success"] = success
+    out["loglik"] = as_number(doc["loglik"], w + "loglik", finite=False) if doc.get("loglik") is not None else None
+    return out

@@ -18,6 +18,8 @@ _REGISTRY: dict[str, str] = {
     "glider": "shipid.models.glider:GliderModel",
     "planing-boat": "shipid.models.planing:PlaningBoatModel",
     "response-nl": "shipid.models.response_nl:ResponseNLModel",
+    "lowspeed": "shipid.models.lowspeed:LowSpeedModel",
+    "with-environment": "shipid.environment.model:EnvironmentModel",
 }
 
 

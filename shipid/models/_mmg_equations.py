@@ -52,6 +52,12 @@ def sqrt_pos(z):
     return math.sqrt(z) if z > 0 else 0.0
 
 
+def inv_pos(z):
+    """1/z for z > 0, else 0 (the prime-system velocities v' = v/U, r' = r L/U are set to 0 at U = 0,
+    where the hull polynomial has no defined value; the model is not valid there)."""
+    return 1.0 / z if z > 0 else 0.0
+
+
 def derived(p, P):
     """Constants ``c`` of the equations for one parameter set: everything that depends only on the
     parameters and the particulars, folded once so that :func:`forces` and :func:`rates` do the least
@@ -104,7 +110,7 @@ def forces(uu, v, r, delta, n, c):
     # hull, eqs. (7)-(10): v' = v/U, r' = r L/U, beta = asin(-v')
     U2 = uu * uu + v * v
     U = sqrt(U2)
-    iU = 1.0 / U
+    iU = inv_pos(U)  # 0 at rest (u = v = 0): no NaN; the MMG hull model itself is not valid there
     vp = v * iU
     rp = (r * L) * iU
     beta = -arcsin(vp)
@@ -118,13 +124,15 @@ def forces(uu, v, r, delta, n, c):
     one_m_wP = w1 + (wcA + wcD * sP) * (1.0 - exp(mC1 * (betaP * sP)))
     uP = uu * one_m_wP
     uP2 = uP * uP
-    KTn2D2 = (kT0 * n + kT1 * uP) * n + k2 * uP2     # K_T n^2 D_P^2, free of the 1/n in J_P
+    # K_T n|n| D_P^2 with J_P = u_P/(|n| D_P): the thrust reverses with n (astern), free of the 1/n in J_P
+    sn = sign_nn(n)
+    KTn2D2 = (kT0 * (n * sn) + kT1 * uP) * n + k2 * uP2 * sn
     # rudder, eqs. (17)-(28)
     a = uP + kappa * (sqrt_pos(uP2 + c8pi * KTn2D2) - uP)
     uR = eps * sqrt(eta * (a * a) + one_m_eta * uP2)
     betaR = beta - lR * rp
     vR = (U * (gRA + gRD * sign_nn(betaR))) * betaR
-    alphaR = delta - delta0 - arctan(vR / uR)  # delta0: rudder neutral angle (not in the standard)
+    alphaR = delta - delta0 - arctan(vR * inv_pos(uR))  # delta0: rudder neutral angle (not in the standard)
     FN = cF * (uR * uR + vR * vR) * sin(alphaR)
     FNcd = FN * cos(delta)
     return (XH, YH, NH, cXP * KTn2D2, cXR * FN * sin(delta), cYR * FNcd, cNR * FNcd, FN, cT * KTn2D2,
@@ -214,13 +222,17 @@ def sqrt_pos_cs(z):
     return cmath.sqrt(z) if z.real > 0 else 0j
 
 
+def inv_pos_cs(z):
+    return 1.0 / z if z.real > 0 else 0j
+
+
 #: The functions of this module in dependency order (what :func:`shipid._jit.rebind` rebinds).
-FUNCTIONS = {"sign": sign, "sign_nn": sign_nn, "sqrt_pos": sqrt_pos, "planar_rates_cs": planar_rates_cs,
+FUNCTIONS = {"sign": sign, "sign_nn": sign_nn, "sqrt_pos": sqrt_pos, "inv_pos": inv_pos, "planar_rates_cs": planar_rates_cs,
              "derived": derived, "forces": forces, "rates": rates, "rhs_one": rhs_one, "rhs_rows": rhs_rows}
 
 #: The complex-step set compiled for the Jacobians: the same equations with complex-safe elementary
 #: functions (``sign`` and friends branch on the real part), and the driver :func:`jacobians`.
-FUNCTIONS_CS = {"sign": sign_cs, "sign_nn": sign_nn_cs, "sqrt_pos": sqrt_pos_cs,
+FUNCTIONS_CS = {"sign": sign_cs, "sign_nn": sign_nn_cs, "sqrt_pos": sqrt_pos_cs, "inv_pos": inv_pos_cs,
                 "planar_rates_cs": planar_rates_cs, "derived": derived, "forces": forces, "rates": rates,
                 "jacobians": jacobians}
 #: Globals of the compiled complex-step set (``cmath``).
@@ -232,9 +244,11 @@ _NUMPY_BASE = {"sqrt": np.sqrt, "exp": np.exp, "arcsin": np.arcsin, "arctan": np
 
 #: Globals of the batched numpy backend (real arrays).
 NUMPY = {**_NUMPY_BASE, "sign": np.sign, "sign_nn": lambda z: np.copysign(1.0, z),
-         "sqrt_pos": lambda z: np.sqrt(np.maximum(z, 0.0))}
+         "sqrt_pos": lambda z: np.sqrt(np.maximum(z, 0.0)),
+         "inv_pos": lambda z: np.divide(1.0, z, out=np.zeros(np.shape(z)), where=np.asarray(z) > 0)}
 
 #: Globals of the complex-step backend: signs and branches from the real part.
 COMPLEX_STEP = {**_NUMPY_BASE, "sign": lambda z: np.sign(np.real(z)),
                 "sign_nn": lambda z: np.copysign(1.0, np.real(z)),
-                "sqrt_pos": lambda z: np.sqrt(z * (np.real(z) > 0))}
+                "sqrt_pos": lambda z: np.sqrt(z * (np.real(z) > 0)),
+                "inv_pos": lambda z: np.where(np.real(z) > 0, 1.0 / np.where(np.real(z) > 0, z, 1.0), 0.0)}

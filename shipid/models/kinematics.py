@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["planar_rates", "planar_rates_cs", "planar_jacobian"]
+__all__ = ["planar_rates", "planar_rates_cs", "planar_jac_cs", "planar_jacobian", "PLANAR_JAC_POS"]
 
 
 def planar_rates_cs(u, v, r, c, s):
@@ -23,13 +23,18 @@ def planar_rates(psi, u, v, r, xp=np):
     return planar_rates_cs(u, v, r, xp.cos(psi), xp.sin(psi))
 
 
+#: (row, column) of the entries of :func:`planar_jac_cs` in the state Jacobian (states x y psi u v r).
+PLANAR_JAC_POS = ((0, 2), (0, 3), (0, 4), (1, 2), (1, 3), (1, 4), (2, 5))
+
+
+def planar_jac_cs(u, v, c, s):
+    """The non-zero entries of d(x', y', psi')/d(psi, u, v, r) at :data:`PLANAR_JAC_POS`, from
+    ``c = cos psi``, ``s = sin psi`` (plain arithmetic: numpy, floats, or compiled)."""
+    return -u * s - v * c, c, -s, u * c - v * s, s, c, 1.0
+
+
 def planar_jacobian(J, psi, u, v, ipsi: int = 2, iu: int = 3, iv: int = 4, ir: int = 5) -> None:
     """Fill rows 0-2 (x, y, psi) of the state Jacobian ``J`` (..., nx, nx) in place."""
-    c, s = np.cos(psi), np.sin(psi)
-    J[..., 0, ipsi] = -u * s - v * c
-    J[..., 0, iu] = c
-    J[..., 0, iv] = -s
-    J[..., 1, ipsi] = u * c - v * s
-    J[..., 1, iu] = s
-    J[..., 1, iv] = c
-    J[..., 2, ir] = 1.0
+    cols = {2: ipsi, 3: iu, 4: iv, 5: ir}
+    for (i, j), val in zip(PLANAR_JAC_POS, planar_jac_cs(u, v, np.cos(psi), np.sin(psi))):
+        J[..., i, cols[j]] = val

@@ -37,7 +37,10 @@ Propeller, eqs. (11)-(16): ``X_P = (1 - t_P) T``,
 and ``C2m`` (beta_P < 0).  The thrust is evaluated as the polynomial
 ``rho D_P^2 (k_0 n^2 D_P^2 + k_1 n D_P u_P + k_2 u_P^2)`` with
 ``u_P = u (1 - w_P)`` -- identical to the paper for n > 0 and free of the
-1/n singularity.
+1/n singularity; for n < 0 the thrust is ``rho n|n| D_P^4 K_T(u_P/(|n| D_P))``,
+so it reverses with the propeller (a sign fix, not a four-quadrant model:
+use ``lowspeed`` for astern manoeuvres).  At rest (u = v = 0) the prime
+velocities are set to 0 (no NaN).
 
 Rudder, eqs. (17)-(28): ``X_R = -(1 - t_R) F_N sin(delta)``,
 ``Y_R = -(1 + a_H) F_N cos(delta)``,
@@ -86,7 +89,7 @@ from .._jit import compiled, rebind
 from . import _mmg_equations as _eq
 from .base import Model, batch_shape
 
-__all__ = ["MMGModel", "MMGParticulars", "MMG_PARAM_NAMES"]
+__all__ = ["MMGModel", "MMGParticulars", "MMG_PARAM_NAMES", "eq4_mass_matrix"]
 
 #: Non-dimensional (prime-system) parameters, in order.
 MMG_PARAM_NAMES = _eq.PARAM_NAMES
@@ -197,6 +200,21 @@ class MMGParticulars:
         )
 
 
+def eq4_mass_matrix(P: MMGParticulars, mx, my, Jz) -> np.ndarray:
+    """Mass matrix of eq. (4) at midship, ``(..., 3, 3)`` [kg, kg m, kg m^2] (rows surge, sway, yaw), from
+    the particulars and the non-dimensional added masses (arrays broadcast; complex-step safe).  The
+    accelerations are linear in the external forces, so a force ``F`` adds ``M^-1 F`` (wind, thrusters)."""
+    m = P.rho * P.displacement
+    q2 = 0.5 * P.rho * P.lpp ** 2 * P.draught
+    mx, my, Jz = np.asarray(mx), np.asarray(my), np.asarray(Jz)
+    M = np.zeros(np.broadcast_shapes(mx.shape, my.shape, Jz.shape) + (3, 3), dtype=np.result_type(mx, my, Jz, float))
+    M[..., 0, 0] = m + mx * q2
+    M[..., 1, 1] = m + my * q2
+    M[..., 1, 2] = M[..., 2, 1] = P.x_G * m
+    M[..., 2, 2] = m * (P.kzz * P.lpp) ** 2 + P.x_G ** 2 * m + Jz * q2 * P.lpp ** 2
+    return M
+
+
 def _no_default(f) -> bool:
     import dataclasses
 
@@ -305,6 +323,12 @@ class MMGModel(Model):
         return {"m": m, "I_zG": m * (P.kzz * P.lpp) ** 2, "m_x": p[self._idx["mx"]] * q2,
                 "m_y": p[self._idx["my"]] * q2, "J_z": p[self._idx["Jz"]] * q4,
                 "m_prime": m / q2, "x_G": P.x_G}
+
+    def mass_matrix(self, params=None) -> np.ndarray:
+        """Mass matrix of eq. (4), ``(..., 3, 3)`` (:func:`eq4_mass_matrix`) for ``params`` (default own;
+        complex parameters are kept, for complex-step Jacobians of models that add external forces)."""
+        p = self.params if params is None else np.asarray(params)
+        return eq4_mass_matrix(self.particulars, p[..., self._idx["mx"]], p[..., self._idx["my"]], p[..., self._idx["Jz"]])
 
     def to_dimensional(self, speed: float | None = None) -> dict:
         """Dimensional hull derivatives at speed ``speed`` [m/s] (default design speed).

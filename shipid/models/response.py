@@ -6,7 +6,7 @@ turns the ship to starboard, i.e. produces positive r with the synthetic set)
 and ``n`` [rps]; 16 parameters::
 
     du/dt = a1 u + a2 v^2 + a3 r^2 + a4 delta^2 + a5 v r + a6 v delta
-            + a7 r delta + a8 u n + a9 n^2
+            + a7 r delta + a8 u n + a9 n|n|
     dv/dt = b1 v + b2 r + b3 delta + b4 u r
     dr/dt = c1 v + c2 r + c3 delta
 
@@ -18,16 +18,27 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._jit import rebind
+from . import _response_equations as _req
 from .base import Model, batch_shape
-from .kinematics import planar_jacobian, planar_rates
 from .prime import FroudeScaled
 
 __all__ = ["KCSResponseModel", "RESPONSE_REGRESSORS", "PRIME_EXPONENTS"]
 
+#: The equations (one copy, :mod:`._response_equations`) on numpy arrays.
+_EQ = rebind(_req.FUNCTIONS, _req.NUMPY)
+_POS = {"x": _req.KCS_JX_POS, "p": _req.KCS_JP_POS, "u": _req.KCS_JU_POS}
+
+
+def _rows(p):
+    """The parameters as a sequence of components (``p.T`` for a batch)."""
+    return p.T if p.ndim <= 2 else np.moveaxis(p, -1, 0)
+
+
 #: Regressor of each coefficient, for tables and identifiability messages.
 RESPONSE_REGRESSORS = {
     "a1": "u", "a2": "v^2", "a3": "r^2", "a4": "delta^2", "a5": "v*r", "a6": "v*delta",
-    "a7": "r*delta", "a8": "u*n", "a9": "n^2",
+    "a7": "r*delta", "a8": "u*n", "a9": "n|n|",
     "b1": "v", "b2": "r", "b3": "delta", "b4": "u*r",
     "c1": "v", "c2": "r", "c3": "delta",
 }
@@ -94,15 +105,8 @@ class KCSResponseModel(FroudeScaled, Model):
         self._init_ship(params, lpp, design_speed, rudder_rate)
 
     def _rhs(self, t, x, u, p):
-        psi, uu, v, r = x[..., 2], x[..., 3], x[..., 4], x[..., 5]
-        d, n = u[..., 0], u[..., 1]
-        a1, a2, a3, a4, a5, a6, a7, a8, a9, b1, b2, b3, b4, c1, c2, c3 = p.T if p.ndim <= 2 else np.moveaxis(p, -1, 0)
-        out = np.empty(batch_shape(x, u, p) + (6,))
-        out[..., 0], out[..., 1], out[..., 2] = planar_rates(psi, uu, v, r)
-        out[..., 3] = (a1 + a8 * n) * uu + a2 * v * v + a3 * r * r + a4 * d * d + (a5 * r + a6 * d) * v + a7 * r * d + a9 * n * n
-        out[..., 4] = b1 * v + (b2 + b4 * uu) * r + b3 * d
-        out[..., 5] = c1 * v + c2 * r + c3 * d
-        return out
+        out = _EQ["kcs_rates"](x[..., 2], x[..., 3], x[..., 4], x[..., 5], u[..., 0], u[..., 1], _rows(p))
+        return np.stack(np.broadcast_arrays(*out), axis=-1)
 
     def identifiability_notes(self, arrays, estimated) -> list[str]:
         """Warn when n is constant over all logs: u, u*n and n^2 are then collinear."""
@@ -118,57 +122,20 @@ class KCSResponseModel(FroudeScaled, Model):
             ]
         return []
 
-    def _regressors(self, x, u):
-        uu, v, r = x[..., 3], x[..., 4], x[..., 5]
-        d, n = u[..., 0], u[..., 1]
-        return uu, v, r, d, n
+    def _jacobian(self, x, u, p, which: str, ncol: int):
+        """Jacobian ``which`` ("x", "p", "u") from the entries of ``_response_equations.kcs_jac_*``."""
+        vals = _EQ["kcs_jac_" + which](x[..., 2], x[..., 3], x[..., 4], x[..., 5], u[..., 0], u[..., 1], _rows(p))
+        return _req.fill_numpy(batch_shape(x, u, p) + (6, ncol), _POS[which], vals)
 
     def _jac_x(self, t, x, u, p):
-        psi, uu, v, r = x[..., 2], x[..., 3], x[..., 4], x[..., 5]
-        d, n = u[..., 0], u[..., 1]
-        shape = batch_shape(x, u, p)
-        J = np.zeros(shape + (6, 6))
-        P = lambda i: p[..., i]  # noqa: E731
-        planar_jacobian(J, psi, uu, v)
-        J[..., 3, 3] = P(0) + P(7) * n
-        J[..., 3, 4] = 2 * P(1) * v + P(4) * r + P(5) * d
-        J[..., 3, 5] = 2 * P(2) * r + P(4) * v + P(6) * d
-        J[..., 4, 3] = P(12) * r
-        J[..., 4, 4] = P(9)
-        J[..., 4, 5] = P(10) + P(12) * uu
-        J[..., 5, 4] = P(13)
-        J[..., 5, 5] = P(14)
-        return J
+        return self._jacobian(x, u, p, "x", 6)
 
     def _jac_p(self, t, x, u, p):
-        uu, v, r, d, n = self._regressors(x, u)
-        shape = batch_shape(x, u, p)
-        J = np.zeros(shape + (6, 16))
-        J[..., 3, 0] = uu
-        J[..., 3, 1] = v * v
-        J[..., 3, 2] = r * r
-        J[..., 3, 3] = d * d
-        J[..., 3, 4] = v * r
-        J[..., 3, 5] = v * d
-        J[..., 3, 6] = r * d
-        J[..., 3, 7] = uu * n
-        J[..., 3, 8] = n * n
-        J[..., 4, 9] = v
-        J[..., 4, 10] = r
-        J[..., 4, 11] = d
-        J[..., 4, 12] = uu * r
-        J[..., 5, 13] = v
-        J[..., 5, 14] = r
-        J[..., 5, 15] = d
-        return J
+        return self._jacobian(x, u, p, "p", 16)
 
     def _jac_u(self, t, x, u, p):
-        uu, v, r, d, n = self._regressors(x, u)
-        shape = batch_shape(x, u, p)
-        J = np.zeros(shape + (6, 2))
-        J[..., 3, 0] = 2 * p[..., 3] * d + p[..., 5] * v + p[..., 6] * r
-        J[..., 3, 1] = p[..., 7] * uu + 2 * p[..., 8] * n
-        J[..., 4, 0] = p[..., 11]
-        J[..., 5, 0] = p[..., 15]
-        return J
+        return self._jacobian(x, u, p, "u", 2)
+
+    # the compiled EKF kernel (shipid.identify._kernel) uses the same equations
+    _equations = _req.KERNEL_KCS
 

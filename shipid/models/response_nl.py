@@ -29,7 +29,7 @@ names, same meaning as ``kcs-response``) and adds, in sway and yaw,
 
 Equations (states ``x, y, psi, u, v, r``; inputs ``delta`` [rad], ``n`` [rps])::
 
-    du/dt = a1 u + a2 v^2 + a3 r^2 + a4 delta^2 + a5 v r + a6 v delta + a7 r delta + a8 u n + a9 n^2
+    du/dt = a1 u + a2 v^2 + a3 r^2 + a4 delta^2 + a5 v r + a6 v delta + a7 r delta + a8 u n + a9 n|n|
     dv/dt = b1 v + b2 r + b3 delta + b4 u r
             + b5 u v + b6 v|v| + b7 r|r| + b8 v^2 r/u + b9 v r^2/u + b0 n^2
     dr/dt = c1 v + c2 r + c3 delta
@@ -47,10 +47,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import Model
+from .._jit import rebind
+from . import _response_equations as _req
+from .base import Model, batch_shape
 from .prime import FroudeScaled
 from .response import PRIME_EXPONENTS as _SEED_EXPONENTS
-from .kinematics import planar_jacobian, planar_rates
+from .response import _rows
 
 __all__ = ["ResponseNLModel", "RESPONSE_NL_REGRESSORS", "PRIME_EXPONENTS", "ASYM_NAMES"]
 
@@ -62,7 +64,7 @@ ASYM_NAMES = ("b0", "c0")
 #: Regressor of each coefficient (for tables and identifiability messages).
 RESPONSE_NL_REGRESSORS = {
     "a1": "u", "a2": "v^2", "a3": "r^2", "a4": "delta^2", "a5": "v*r", "a6": "v*delta", "a7": "r*delta",
-    "a8": "u*n", "a9": "n^2",
+    "a8": "u*n", "a9": "n|n|",
     "b1": "v", "b2": "r", "b3": "delta", "b4": "u*r", "b5": "u*v", "b6": "v|v|", "b7": "r|r|",
     "b8": "v^2 r/u", "b9": "v r^2/u",
     "c1": "v", "c2": "r", "c3": "delta", "c4": "u*v", "c5": "u*r", "c6": "v|v|", "c7": "r|r|",
@@ -80,6 +82,10 @@ PRIME_EXPONENTS = {
 _U_IDX = [0, 1, 2, 3, 4, 5, 6, 7, 8]
 _V_IDX = [9, 10, 11, 12, 16, 17, 18, 19, 20, 27]      # b1 b2 b3 b4 b5 b6 b7 b8 b9 b0
 _R_IDX = [13, 14, 15, 21, 22, 23, 24, 25, 26, 28]     # c1 c2 c3 c4 c5 c6 c7 c8 c9 c0
+
+#: The equations (one copy, :mod:`._response_equations`) on numpy arrays.
+_EQ = rebind(_req.FUNCTIONS, _req.NUMPY)
+_POS = {"x": _req.NL_JX_POS, "p": _req.NL_JP_POS, "u": _req.NL_JU_POS}
 
 
 class ResponseNLModel(FroudeScaled, Model):
@@ -133,76 +139,39 @@ class ResponseNLModel(FroudeScaled, Model):
         self._init_ship(params, lpp, design_speed, rudder_rate)
 
     # ----------------------------------------------------------- regressors
-    def _parts(self, x, u):
-        psi, uu, v, r = x[..., 2], x[..., 3], x[..., 4], x[..., 5]
-        d, n = u[..., 0], u[..., 1]
-        q = 1.0 / np.maximum(uu, self.u_floor)
-        return psi, uu, v, r, d, n, q
-
     def regressors(self, x, u):
         """Regressor arrays of the u, v and r equations, shapes (..., 9), (..., 10), (..., 10)
         (order of ``_U/_V/_R_IDX``)."""
         x, u = np.asarray(x, dtype=float), np.asarray(u, dtype=float)
-        _, uu, v, r, d, n, q = self._parts(x, u)
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1])
-        b = lambda a: np.broadcast_to(a, shape)  # noqa: E731
-        ru = np.stack([b(a) for a in (uu, v * v, r * r, d * d, v * r, v * d, r * d, uu * n, n * n)], axis=-1)
-        common = (v * np.abs(v), r * np.abs(r), v * v * r * q, v * r * r * q, n * n)
-        rv = np.stack([b(a) for a in (v, r, d, uu * r, uu * v) + common], axis=-1)
-        rr = np.stack([b(a) for a in (v, r, d, uu * v, uu * r) + common], axis=-1)
-        return ru, rv, rr
+        g = np.stack(np.broadcast_arrays(*_EQ["nl_regressors"](x[..., 3], x[..., 4], x[..., 5], u[..., 0], u[..., 1],
+                                                                self.u_floor)), axis=-1)
+        return g[..., :9], g[..., 9:19], g[..., 19:]
 
     def _rhs(self, t, x, u, p):
-        psi, uu, v = x[..., 2], x[..., 3], x[..., 4]
-        r = x[..., 5]
-        ru, rv, rr = self.regressors(x, u)
-        du = np.einsum("...k,...k->...", ru, p[..., _U_IDX])
-        dv = np.einsum("...k,...k->...", rv, p[..., _V_IDX])
-        dr = np.einsum("...k,...k->...", rr, p[..., _R_IDX])
-        out = [*planar_rates(psi, uu, v, r), du, dv, dr]
-        shape = np.broadcast_shapes(*[np.shape(o) for o in out])
-        return np.stack([np.broadcast_to(o, shape) for o in out], axis=-1)
+        out = _EQ["nl_rates"](x[..., 2], x[..., 3], x[..., 4], x[..., 5], u[..., 0], u[..., 1], _rows(p),
+                              self.u_floor)
+        return np.stack(np.broadcast_arrays(*out), axis=-1)
 
     # ------------------------------------------------------------- Jacobians
+    def _jacobian(self, x, u, p, which: str, ncol: int):
+        """Jacobian ``which`` ("x", "p", "u") from the entries of ``_response_equations.nl_jac_*``."""
+        vals = _EQ["nl_jac_" + which](x[..., 2], x[..., 3], x[..., 4], x[..., 5], u[..., 0], u[..., 1], _rows(p),
+                                      self.u_floor)
+        return _req.fill_numpy(batch_shape(x, u, p) + (6, ncol), _POS[which], vals)
+
     def _jac_x(self, t, x, u, p):
-        psi, uu, v, r, d, n, q = self._parts(x, u)
-        dq = np.where(uu > self.u_floor, -q * q, 0.0)
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
-        J = np.zeros(shape + (6, 6))
-        P = lambda name: p[..., self._pi[name]]  # noqa: E731
-        planar_jacobian(J, psi, uu, v)
-        J[..., 3, 3] = P("a1") + P("a8") * n
-        J[..., 3, 4] = 2 * P("a2") * v + P("a5") * r + P("a6") * d
-        J[..., 3, 5] = 2 * P("a3") * r + P("a5") * v + P("a7") * d
-        # row: (coef of v, r, u*r, u*v, v|v|, r|r|, v^2 r/u, v r^2/u)
-        for row, (kv, kr, kur, kuv, kvv, krr, kvvr, kvrr) in (
-                (4, ("b1", "b2", "b4", "b5", "b6", "b7", "b8", "b9")),
-                (5, ("c1", "c2", "c5", "c4", "c6", "c7", "c8", "c9"))):
-            J[..., row, 3] = P(kur) * r + P(kuv) * v + (P(kvvr) * v * v * r + P(kvrr) * v * r * r) * dq
-            J[..., row, 4] = P(kv) + P(kuv) * uu + 2 * P(kvv) * np.abs(v) + (2 * P(kvvr) * v * r + P(kvrr) * r * r) * q
-            J[..., row, 5] = P(kr) + P(kur) * uu + 2 * P(krr) * np.abs(r) + (P(kvvr) * v * v + 2 * P(kvrr) * v * r) * q
-        return J
+        return self._jacobian(x, u, p, "x", 6)
 
     def _jac_p(self, t, x, u, p):
-        ru, rv, rr = self.regressors(x, u)
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
-        J = np.zeros(shape + (6, self.np))
-        J[..., 3, _U_IDX] = ru
-        J[..., 4, _V_IDX] = rv
-        J[..., 5, _R_IDX] = rr
-        return J
+        return self._jacobian(x, u, p, "p", self.np)
 
     def _jac_u(self, t, x, u, p):
-        psi, uu, v, r, d, n, q = self._parts(x, u)
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
-        J = np.zeros(shape + (6, 2))
-        P = lambda name: p[..., self._pi[name]]  # noqa: E731
-        J[..., 3, 0] = 2 * P("a4") * d + P("a6") * v + P("a7") * r
-        J[..., 3, 1] = P("a8") * uu + 2 * P("a9") * n
-        J[..., 4, 0] = P("b3")
-        J[..., 5, 0] = P("c3")
-        J[..., 4, 1] = 2 * P("b0") * n
-        J[..., 5, 1] = 2 * P("c0") * n
-        return J
+        return self._jacobian(x, u, p, "u", 2)
+
+    # the compiled EKF kernel (shipid.identify._kernel) uses the same equations
+    _equations = _req.KERNEL_NL
+
+    def _kernel_constants(self) -> np.ndarray:
+        return np.array([self.u_floor])
 
     _pi = {k: i for i, k in enumerate(SEED_NAMES + EXTRA_NAMES + ASYM_NAMES)}

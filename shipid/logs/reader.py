@@ -1,0 +1,197 @@
+"""``read_log``: open a log file, pick its format reader, validate into a :class:`TrialLog`."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Mapping, Sequence
+
+from ._text import _check_path, _decode
+from .marin import _looks_marin, _read_marin
+from .schema import PRESETS, Schema, apply_conventions, check_frame, check_rudder_sign, load_schema, merged
+from .ship import ShipParticulars, _as_ship, _bundled_ship, read_ship
+from .shipid_csv import _read_csv
+from .trial_log import LogError, TrialLog, _finish
+
+
+def read_log(
+    path: str | os.PathLike,
+    *,
+    columns: Mapping[str, str] | None = None,
+    units: Mapping[str, str] | None = None,
+    fmt: str = "auto",
+    lpp: float | None = None,
+    ship: ShipParticulars | Mapping | str | os.PathLike | None = None,
+    interpolate_inputs: bool = False,
+    inputs: Sequence[str] = ("delta", "n"),
+    required: Sequence[str] = ("time", "u", "v", "r", "delta", "n"),
+    min_samples: int = 20,
+    delimiter: str | None = None,
+    name: str | None = None,
+    unit_checks: bool = True,
+    marin_time: str = "uniform",
+    schema: "str | os.PathLike | Schema | Mapping | None" = None,
+    velocity_frame: str | None = None,
+    rudder_sign: float | None = None,
+    skip_rows: int | None = None,
+    header: bool | None = None,
+    consistency_checks: bool = True,
+) -> TrialLog:
+    """Read and validate a trial log.
+
+    Parameters
+    ----------
+    path : str or path-like
+        CSV file (default schema below) or MARIN SIMMAN ``.dat`` file.
+    columns : dict, optional
+        Our channel name -> the file's column name (with or without its
+        bracketed unit), e.g. ``{"psi": "heading", "n": "prop_rpm"}``, or the
+        column's 1-based number (``{"u": 5}``) when names are ambiguous.
+    units : dict, optional
+        Our channel name -> unit of the values in the file; one of s, m, rad,
+        deg, m/s, knots (kn), rad/s, deg/s, rps, rpm, Hz.  Overrides a unit in
+        the header.  Default: the header's bracketed unit, else SI/radians.
+    fmt : {"auto", "csv", "marin"}
+        File format; "auto" picks "marin" for a ``.dat`` file with the MARIN
+        title line, else "csv".
+    lpp : float, optional
+        Length between perpendiculars [m]; sets/overrides ``ship.lpp``.
+    ship : ShipParticulars, mapping or path to a JSON/YAML ship file, optional
+        Particulars that travel with the log.  A MARIN file defaults to the
+        bundled KVLCC2 particulars.
+    interpolate_inputs : bool
+        Fill blank cells of input channels by linear interpolation in time
+        (reported in ``notes``); otherwise an input gap is an error.
+    inputs : sequence of str
+        Input channels (gaps are errors); other channels are measurements
+        (gaps are NaN and reported in ``missing``).
+    required : sequence of str
+        Channels that must be present.
+    min_samples : int
+        Fewest samples accepted.
+    delimiter : str, optional
+        CSV delimiter.  Default ``","``: a file that is evidently separated by
+        ``;``, tabs or spaces is refused with a message saying to pass
+        ``delimiter=";"`` (or ``"\\t"``, ``"whitespace"``).
+    name : str, optional
+        Log name (default: the file stem, or the name stored by :meth:`TrialLog.to_csv`).
+    unit_checks : bool
+        Run the "looks like degrees" heuristics (docs/logs.md).
+    marin_time : {"uniform", "drop"}
+        MARIN files print time with 3 significant digits, so stamps repeat
+        (1 s resolution after 100 s).  "uniform" (default) rebuilds the time
+        base as ``t0 + k dt`` after verifying that it rounds to every printed
+        stamp; "drop" keeps only the first sample of each repeated stamp.
+    schema : str, path, Schema or mapping, optional
+        A preset (``"shipid"``, ``"marin"``, ``"esso-frt"``; see
+        :data:`shipid.logs.schema.PRESETS`) or a schema file (JSON/YAML) that
+        says which column holds which channel, units, velocity frame, rudder
+        sign, rows to skip, header and delimiter.  The other arguments
+        override it (``columns``/``units`` per channel).  Default: the
+        ``shipid`` schema, or ``marin`` for an auto-detected MARIN file.
+    velocity_frame : {"body", "earth"}, optional
+        Axes of the file's u, v; ``"earth"`` (earth-fixed dx/dt, dy/dt) is
+        rotated into body axes by the heading.  Default: the schema's.
+    rudder_sign : {+1, -1}, optional
+        Multiplies the file's rudder angle to give shipid's convention
+        (positive delta turns to starboard).  Default: the schema's.
+    skip_rows : int, optional
+        Lines to skip before the header (or before the data without one).
+    header : bool, optional
+        False when the file has no header line; then ``columns`` gives
+        1-based column numbers and unmapped columns are named ``col<k>``.
+    consistency_checks : bool
+        Run :func:`shipid.logs.check_consistency` on the log (yaw rate against
+        dpsi/dt, velocities against the track, rudder sign against the first
+        turn, propeller rate against speed, GNSS freezes, glitches): an error
+        raises LogError, a warning is issued as ``UserWarning``; the result is
+        ``log.consistency``.  CLI: ``--no-consistency-checks`` turns them off.
+
+    Returns
+    -------
+    TrialLog
+
+    Raises
+    ------
+    LogError
+        For any unusable input; the message names file, column, row (file
+        line, 1-based), the value, and what to do.
+    """
+    p = Path(path)
+    _check_path(p)
+    try:
+        raw = p.read_bytes()
+    except PermissionError:
+        raise LogError(f"`{p}`: cannot read the file (permission denied); check its permissions", path=p) from None
+    import hashlib
+
+    sha = hashlib.sha256(raw).hexdigest()
+    if not raw.strip():
+        raise LogError(f"`{p.name}`: file is empty; give a log with a header line and data rows", path=p)
+    text = _decode(raw, p)
+    if fmt not in ("auto", "csv", "marin"):
+        raise ValueError(f"fmt={fmt!r}: use 'auto', 'csv' or 'marin'")
+    if velocity_frame is not None:
+        check_frame(velocity_frame)
+    if rudder_sign is not None:
+        check_rudder_sign(rudder_sign)
+    if schema is not None:
+        sch = load_schema(schema)
+    elif fmt == "marin" or (fmt == "auto" and _looks_marin(text)):
+        sch = PRESETS["marin"]
+    else:
+        sch = PRESETS["shipid"]
+    sch = merged(sch, fmt=None if fmt == "auto" else fmt, columns=columns, units=units, delimiter=delimiter,
+                 velocity_frame=velocity_frame, rudder_sign=rudder_sign, skip_rows=skip_rows, header=header)
+    ship_obj = _as_ship(ship, None)
+    if sch.fmt == "marin":
+        if columns:
+            raise ValueError("columns= does not apply to MARIN .dat files (their columns are fixed)")
+        t, ch, where, units_in, notes = _read_marin(text, p, units or {}, marin_time)
+        meta = {}
+    else:
+        t, ch, where, units_in, notes, meta = _read_csv(text, p, sch.columns, sch.units, required, sch.delimiter,
+                                                        skip_rows=sch.skip_rows, header=sch.header)
+        if ship_obj is None and isinstance(meta.get("ship"), Mapping):
+            ship_obj = ShipParticulars.from_dict(meta["ship"], source=f"`{p.name}` shipid-ship line")
+    apply_conventions(ch, units_in, notes, sch, where)
+    if ship_obj is None and sch.ship is not None:
+        ship_obj = _schema_ship(sch.ship)
+        notes.append(f"ship particulars: bundled {ship_obj} (schema '{sch.name}'); pass ship= or lpp= to override")
+    ship_obj = _as_ship(ship_obj, lpp)
+    if name is None:
+        name = (meta.get("log") or {}).get("name") if isinstance(meta.get("log"), Mapping) else None
+        name = name or p.stem
+    where.name = name
+    log = _finish(t, ch, where=where, name=name, ship=ship_obj, path=p, sha256=sha, inputs=inputs,
+                   interpolate_inputs=interpolate_inputs, required=required, min_samples=min_samples,
+                   unit_checks=unit_checks, units_in=units_in, notes=notes, fmt=sch.fmt)
+    if consistency_checks:
+        _run_consistency(log)
+    return log
+
+
+def _schema_ship(spec: str) -> ShipParticulars:
+    """A schema's ship: a bundled ship name (``shipid/data_ships/NAME.json``) or a ship file path."""
+    from importlib import resources
+
+    if resources.files("shipid").joinpath("data_ships", f"{spec}.json").is_file():
+        return _bundled_ship(spec)
+    return read_ship(spec)
+
+
+def _run_consistency(log: TrialLog) -> None:
+    """Check the channels; errors raise LogError (all named, first in full), warnings warn."""
+    import warnings
+
+    from .consistency import check_consistency
+
+    res = check_consistency(log)
+    log.consistency = res
+    for f in res.warnings:
+        warnings.warn(f.message, stacklevel=3)
+    if res.errors:
+        more = len(res.errors) - 1
+        tail = f" (and {more} more consistency error(s))" if more else ""
+        e = res.errors[0]
+        raise LogError(e.message + tail + "; or pass consistency_checks=False (CLI: --no-consistency-checks)",
+                       path=log.path, column=e.channels[0] if e.channels else None)

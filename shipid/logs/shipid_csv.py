@@ -1,0 +1,260 @@
+"""The default shipid CSV format: a header of channel names with bracketed units.
+
+Conventions: one header line (``# ...`` comment lines before it are skipped;
+``# shipid-log:`` / ``# shipid-ship:`` lines carry the name and particulars
+written by :meth:`TrialLog.to_csv`), velocities in body axes, rudder and
+heading in the shipid convention, units from the header or ``units=``
+(default SI/radians).
+"""
+from __future__ import annotations
+
+import csv
+import warnings
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from ._text import (_DELIMS, _ISO_RE, _fast_table, _is_number, _iso_seconds, _mostly_numeric, _parse_meta,
+                    _split_header, _to_float)
+from .marin import _looks_marin
+from .trial_log import LogError, _convert_units, _fmt_value, _short_list, _Where
+from .units import SCHEMA, SHIP_CHANNELS
+
+def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str, str],
+              required: Sequence[str], delimiter: str | None, *, skip_rows: int = 0, header: bool = True):
+    """Read a delimited or whitespace text table.
+
+    ``skip_rows`` lines are skipped first (a preamble); then ``#`` comment and
+    blank lines; the next line is the header (``header=True``) or the first
+    data row (``header=False``: columns are named ``col1, col2, ...`` and are
+    mapped by number or by those names).
+    """
+    lines = text.splitlines()
+    meta: dict = {}
+    h = None
+    if skip_rows >= len(lines):
+        raise LogError(f"`{p.name}`: skip_rows = {skip_rows} but the file has only {len(lines)} line(s); "
+                       "give a smaller --skip-rows", path=p, value=skip_rows)
+    for k, line in enumerate(lines):
+        if k < skip_rows:
+            continue
+        s = line.strip()
+        if not s:
+            continue
+        if s.startswith("#"):
+            _parse_meta(s, meta, p, k + 1)
+            continue
+        h = k
+        break
+    if h is None:
+        raise LogError(f"`{p.name}`: file has no header line (only blank or # comment lines); "
+                       "give a header like 'time [s], x [m], ...' and data rows", path=p)
+    header_line = lines[h]
+    data_idx = [k for k in range(h + (0 if not header else 1), len(lines)) if lines[k].strip()]
+    # --- delimiter --------------------------------------------------------------
+    if delimiter is None:
+        delim = ","
+        if "," not in header_line:
+            # the header decides: a comma-free header holding ';' or a tab is a delimiter mistake
+            shown = _fmt_value(header_line.strip())
+            for cand, label, cli in ((";", "semicolon", ";"), ("\t", "tab", "tab")):
+                if cand in header_line:
+                    raise LogError(f"`{p.name}` row {h + 1}: the header has no commas but is {label}-separated "
+                                   f"({shown}); pass delimiter={cand!r} (CLI: --delimiter {cli}) or save the file "
+                                   "as comma-separated CSV", path=p, row=h + 1, value=header_line.strip())
+            first = lines[data_idx[0]].split() if data_idx else []
+            ntok = len(header_line.split())
+            if ntok > 1 and len(first) == ntok and "," not in lines[data_idx[0]]:
+                raise LogError(f"`{p.name}` row {h + 1}: the header has no commas but is whitespace-separated "
+                               f"({shown}); pass delimiter='whitespace' (CLI: --delimiter whitespace) or save the "
+                               "file as comma-separated CSV", path=p, row=h + 1, value=header_line.strip())
+    else:
+        delim = {"tab": "\t", "\\t": "\t", "space": "whitespace", "spaces": "whitespace"}.get(delimiter, delimiter)
+        if delim not in _DELIMS:
+            raise ValueError(f"delimiter={delimiter!r}: use ',', ';', '\\t' (tab) or 'whitespace'")
+
+    def split(s: str) -> list[str]:
+        if delim == "whitespace":
+            return s.split()
+        try:
+            return next(csv.reader([s], delimiter=delim))
+        except csv.Error as exc:
+            raise _cell_error(p, h, s, exc) from None
+
+    hdr = [c.strip() for c in split(header_line)]
+    if not header:  # no header line: the first data row gives the number of columns
+        hdr = [f"col{j + 1}" for j in range(len(hdr))]
+    if not hdr or all(not c for c in hdr):
+        raise LogError(f"`{p.name}` row {h + 1}: empty header", path=p, row=h + 1)
+    parsed = [_split_header(c) for c in hdr]
+    names = [n for n, _ in parsed]
+    # numeric header: the file has no header line
+    if header and all(_is_number(n) for n in names if n):
+        raise LogError(f"`{p.name}` row {h + 1}: the first line is numbers, not a header "
+                       f"({_fmt_value(header_line.strip())}); add a header line like "
+                       "'time [s], x [m], y [m], psi [rad], u [m/s], v [m/s], r [rad/s], delta [rad], n [rps]', "
+                       "or pass header=False (CLI: --no-header) and map the columns by number",
+                       path=p, row=h + 1, value=header_line.strip())
+    # --- map file columns to our names ---------------------------------------------
+    colmap: dict[str, int] = {}   # our name -> column index
+    taken: set[int] = set()
+    for ours, theirs in columns.items():
+        if isinstance(theirs, (int, np.integer)) and not isinstance(theirs, bool):
+            if not 1 <= theirs <= len(hdr):
+                raise LogError(f"`{p.name}` row {h + 1}: columns maps '{ours}' to column number {theirs} but the "
+                               f"header has {len(hdr)} columns (numbers count from 1)", path=p, column=ours,
+                               row=h + 1, value=theirs)
+            j = int(theirs) - 1
+        else:
+            j = _find_col(str(theirs), hdr, names)
+            if j is None and str(theirs).strip().isdigit() and 1 <= int(theirs) <= len(hdr):
+                j = int(theirs) - 1  # a column number given as text (CLI --column u=5)
+        if j is None:
+            raise LogError(f"`{p.name}` row {h + 1}: columns maps '{ours}' to '{theirs}' but the header has no such "
+                           f"column; header: {', '.join(hdr)}", path=p, column=ours, row=h + 1, value=theirs)
+        colmap[ours] = j
+        taken.add(j)
+    known = set(SHIP_CHANNELS) | set(required)
+    for j, nm in enumerate(names):  # exact names of known channels
+        if j in taken or nm not in known or nm in colmap:
+            continue
+        colmap[nm] = j
+        taken.add(j)
+    # case-insensitive fallback ("Time", "PSI") for known names, never stealing a known name ("U" stays U)
+    for want in list(dict.fromkeys([*required, *SCHEMA])):
+        if want in colmap:
+            continue
+        cands = [j for j, nm in enumerate(names)
+                 if j not in taken and nm.lower() == want.lower() and nm not in SHIP_CHANNELS]
+        if len(cands) == 1:
+            colmap[want] = cands[0]
+            taken.add(cands[0])
+    missing_cols = [c for c in required if c not in colmap]
+    if missing_cols:
+        c = missing_cols[0]
+        single = " (the header is a single column: is the file comma-separated?)" if len(hdr) == 1 else ""
+        if _looks_marin(header_line):
+            single = " (this looks like a MARIN .dat file: pass fmt='marin')"
+        raise LogError(f"`{p.name}` row {h + 1}: required column '{c}' not found; header has "
+                       f"{', '.join(repr(x) for x in hdr)}{single}; rename the column or map it with "
+                       f"columns={{'{c}': 'your name'}} (CLI: --column {c}=NAME)", path=p, column=c, row=h + 1)
+    header_units = {ours: parsed[j][1] for ours, j in colmap.items() if parsed[j][1] is not None}
+    file_col = {ours: names[j] or hdr[j] for ours, j in colmap.items()}
+    # --- data rows -----------------------------------------------------------------
+    if not data_idx:
+        raise LogError(f"`{p.name}`: header only, no data rows; the log needs samples below the header",
+                       path=p, row=h + 1)
+    ncol = len(hdr)
+    rows_txt: list = []
+    keep_rows: list[int] = []
+    blank_rows: list[int] = []   # rows of empty cells (bare delimiters), dropped with a note
+    data_idx = [k for k in data_idx if not lines[k].lstrip().startswith("#")]
+    fast = _fast_table(lines, data_idx, delim, ncol)
+    if fast is not None:  # all cells numeric or blank, every row complete: pandas' C parser did the work
+        table, keep = fast
+        rows_txt = [None] * int(keep.sum())
+        keep_rows = [k + 1 for k, ok in zip(data_idx, keep) if ok]
+        blank_rows = [k + 1 for k, ok in zip(data_idx, keep) if not ok]
+        data_idx = []
+    if delim == "whitespace":
+        split_rows = (lines[k].split() for k in data_idx)
+    else:
+        split_rows = csv.reader((lines[k] for k in data_idx), delimiter=delim)
+    try:
+        for k, cells in zip(data_idx, split_rows):
+            s = lines[k]
+            if (not cells or not cells[0].strip()) and all(not c.strip() for c in cells):  # bare delimiters
+                blank_rows.append(k + 1)
+                continue
+            if len(cells) != ncol:
+                other = [d for d in (";", "\t") if d != delim and d in s]
+                extra = f"; the row contains {_DELIMS[other[0]]}s: wrong delimiter?" if other and len(cells) == 1 else ""
+                raise LogError(f"`{p.name}` row {k + 1}: {len(cells)} field(s) but the header has {ncol}{extra}; "
+                               "fix the row (every row needs one cell per header column, blank = missing)",
+                               path=p, row=k + 1, value=s.strip()[:60])
+            rows_txt.append(cells)
+            keep_rows.append(k + 1)
+    except csv.Error as exc:
+        k = data_idx[max(split_rows.line_num - 1, 0)]
+        raise _cell_error(p, k, lines[k], exc) from None
+    if not rows_txt:
+        raise LogError(f"`{p.name}`: header only, no data rows; the log needs samples below the header",
+                       path=p, row=h + 1)
+    rows = np.asarray(keep_rows, dtype=np.int64)
+    where = _Where(p, p.stem, rows)
+    cols = list(table.T) if fast is not None else list(zip(*rows_txt))
+    arrays: dict[str, np.ndarray] = {}
+    first_stamp = None
+    for ours, j in colmap.items():
+        if ours == "time" and fast is None and _ISO_RE.match(cols[j][0].strip()):
+            arrays[ours] = _iso_seconds(cols[j], names[j] or hdr[j], where)
+            first_stamp = cols[j][0].strip()
+            continue
+        arrays[ours] = _to_float(cols[j], ours, names[j] or hdr[j], where, decimal_comma=delim != ",")
+    if "time" not in arrays:
+        raise LogError(f"`{p.name}` row {h + 1}: no 'time' column; header has {', '.join(repr(x) for x in hdr)}; "
+                       "map it with columns={'time': 'your name'}", path=p, column="time", row=h + 1)
+    # unknown extra columns: keep when numeric, else ignore with a warning
+    notes: list[str] = []
+    if first_stamp is not None:
+        notes.append(f"time given as date-time stamps; t = 0 s at {first_stamp}")
+    if blank_rows:
+        trailing = blank_rows[0] > rows[-1]
+        notes.append(f"{len(blank_rows)} {'trailing ' if trailing else ''}row(s) of empty cells dropped "
+                     f"(rows {_short_list(blank_rows, 3)})")
+    order = ["time"] + [c for c in SCHEMA[1:] if c in arrays] + [c for c in arrays if c not in SCHEMA]
+    arrays = {c: arrays[c] for c in order}
+    extra_at: dict[str, int] = {}   # extra channel -> its column index
+    for j, nm in enumerate(names):
+        if j in taken:
+            continue
+        label = nm or f"column {j + 1}"
+        empty = (np.isnan(cols[j]).all() if isinstance(cols[j], np.ndarray)
+                 else all(not c.strip() for c in cols[j]))
+        if not nm and empty:  # trailing delimiter: an empty unnamed column
+            continue
+        if not _mostly_numeric(cols[j]):
+            notes.append(f"column '{hdr[j]}' is not numeric; ignored")
+            warnings.warn(f"`{p.name}`: column '{hdr[j]}' is not numeric; ignored", stacklevel=3)
+            continue
+        # a mostly numeric column: a bad cell is an error
+        if label in arrays and label in columns:
+            notes.append(f"column '{hdr[j]}' ignored: columns= maps '{label}' to '{columns[label]}'")
+            continue
+        if label in arrays:
+            first = colmap.get(label, extra_at.get(label, j))
+            raise LogError(f"`{p.name}` row {h + 1}: column '{label}' appears twice (columns {first + 1} and "
+                           f"{j + 1} of the header); rename one, or pick one by number with "
+                           f"columns={{'{label}': {first + 1}}}",
+                           path=p, column=label, row=h + 1, value=hdr[j])
+        a = _to_float(cols[j], label, label, where, decimal_comma=delim != ",")
+        arrays[label] = a
+        extra_at[label] = j
+        if parsed[j][1] is not None:
+            header_units[label] = parsed[j][1]
+            file_col[label] = label
+    where.sources = {c: f"column {j + 1} '{hdr[j]}'" for c, j in {**colmap, **extra_at}.items()}
+    t, ch, units_in = _convert_units(arrays, units, header_units, where, file_col)
+    return t, ch, where, units_in, notes, meta
+
+
+def _cell_error(p: Path, k: int, line: str, exc: Exception) -> LogError:
+    """csv module errors (a field over its size limit, a NUL, a stray quote) as one line naming the row."""
+    msg = str(exc)
+    if "field larger than field limit" in msg:
+        what = (f"a cell of more than {csv.field_size_limit()} characters (the row has {len(line)}); a log cell "
+                "holds a number or a short text: fix or delete the row")
+    else:
+        what = f"cannot be split into cells ({msg}); fix the row's quoting"
+    return LogError(f"`{p.name}` row {k + 1}: {what}", path=p, row=k + 1, value=line[:60])
+
+
+def _find_col(theirs: str, hdr: list[str], names: list[str]) -> int | None:
+    t = theirs.strip()
+    for cands in (hdr, names):
+        hits = [j for j, c in enumerate(cands) if c == t]
+        if len(hits) == 1:
+            return hits[0]
+    hits = [j for j, c in enumerate(names) if c.lower() == t.lower()]
+    return hits[0] if len(hits) == 1 else None
