@@ -253,10 +253,16 @@ class OutputErrorRefiner:
         self.cost_start_ = float(0.5 * np.sum(fun(th0) ** 2))
         self.rms_normalised_residual_ = float(np.sqrt(s2))
         finite = bool(np.all(np.isfinite(sol.x)) and np.isfinite(sol.cost))
-        self.success_ = bool(sol.success) and finite
+        capped = finite and bool(np.any(np.abs(sol.fun) >= 1e6))  # a replay still diverges at the end
+        self.success_ = bool(sol.success) and finite and not capped
         self.nfev_ = int(sol.nfev)
-        self.message_ = str(sol.message) if finite else \
-            f"refinement failed: non-finite coefficients or cost ({sol.message}); the start model's replay diverges?"
+        if not finite:
+            self.message_ = f"refinement failed: non-finite coefficients or cost ({sol.message}); the start model's replay diverges?"
+        elif capped:
+            self.message_ = (f"refinement failed: the refined model's replay of some logs still diverges ({sol.message}); "
+                             "the model cannot follow these logs")
+        else:
+            self.message_ = str(sol.message)
         if start is not None and hasattr(start, "prior_std_"):
             prior_cov_s = np.diag((start.prior_std_.reindex(names).to_numpy() / scale) ** 2)
         else:
