@@ -298,13 +298,30 @@ def _summary_rows(label: str, kind: str, metric_dicts: list[dict], nominal: dict
     return rows
 
 
-def _failures(metric_objs) -> dict:
+def _unfinished(m, kind: str | None, target: dict) -> str | None:
+    """Why a member did not finish its manoeuvre (None when it did)."""
+    if not m.success:
+        return m.message or "failed"
+    if kind == "turning" and not (getattr(m, "max_heading_change_deg", np.nan) >= target["heading_change_deg"] - 1e-6):
+        return f"heading change did not reach {target['heading_change_deg']:g} deg within t_max"
+    if kind == "zigzag":
+        need = ("overshoot1_deg", "overshoot2_deg") if target["zigzag_executes"] >= 4 else ("overshoot1_deg",)
+        miss = [k for k in need if not np.isfinite(getattr(m, k, np.nan))]
+        if miss:
+            return f"zigzag did not reach {' and '.join(miss)}"
+    return None
+
+
+def _failures(metric_objs, kind: str | None = None, target: dict | None = None) -> dict:
+    """Count of members that did not finish, by reason (see :func:`_unfinished`)."""
+    target = target or {"heading_change_deg": 540.0, "zigzag_executes": 4}
     msgs: dict[str, int] = {}
     n = 0
     for m in metric_objs:
-        if not m.success:
+        why = _unfinished(m, kind, target)
+        if why is not None:
             n += 1
-            msgs[m.message or "failed"] = msgs.get(m.message or "failed", 0) + 1
+            msgs[why] = msgs.get(why, 0) + 1
     return {"n_failed": n, "messages": msgs}
 
 
@@ -389,11 +406,12 @@ def predict_manoeuvres(result, manoeuvres: Sequence = ("turning:35", "zigzag:10/
         runs[spec.label] = run
         dicts = [m.to_dict() for m in run.metrics]
         nominal[spec.label] = dicts[0]
-        if not run.metrics[0].success:
-            status = 2
         summary += _summary_rows(spec.label, spec.kind, dicts[1:], dicts[0], level)
         imo[spec.label] = imo_probability([d["imo"] for d in dicts[1:]])
-        fails[spec.label] = _failures(run.metrics[1:])
+        target = {"heading_change_deg": 540.0, "zigzag_executes": int(zigzag_executes)}
+        fails[spec.label] = _failures(run.metrics[1:], spec.kind, target)
+        if _unfinished(run.metrics[0], spec.kind, target) is not None:
+            status = 2
         if fails[spec.label]["n_failed"] and status == 0:
             status = 1
     n_fail = {k: v["n_failed"] for k, v in fails.items() if v["n_failed"]}

@@ -76,7 +76,7 @@ def add_log_options(p) -> None:
 
 def read_logs(paths, args) -> list:
     """Read ``paths`` with the options of :func:`add_log_options`; gap warnings are left to the caller
-    (they are in each log's ``summary()``)."""
+    (they are in each log's ``summary()``), consistency warnings are re-issued (one per finding)."""
     from ..logs import read_log
 
     if args.skip_rows is not None and args.skip_rows < 0:
@@ -93,6 +93,9 @@ def read_logs(paths, args) -> list:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)
             logs.append(read_log(path, **kw))
+        # consistency warnings (GNSS freezes, a loose yaw rate, rpm?) matter to every command: one line each
+        for f in (logs[-1].consistency.warnings if logs[-1].consistency is not None else []):
+            warnings.warn(f.message, UserWarning, stacklevel=2)
     return logs
 
 
@@ -128,6 +131,15 @@ def add_progress_option(p) -> None:
     p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress output")
 
 
+def progress_iter(items, args, desc: str):
+    """``items`` wrapped in a tqdm bar when :func:`progress_on` (else unchanged)."""
+    if not progress_on(args):
+        return items
+    from tqdm.auto import tqdm
+
+    return tqdm(items, desc=desc, leave=False)
+
+
 def progress_on(args) -> bool:
     """Whether to show progress for ``args`` (see :func:`add_progress_option`)."""
     import sys
@@ -138,23 +150,23 @@ def progress_on(args) -> bool:
     return bool(value)
 
 
-def number(text: str, option: str, *, low: float | None = None, low_open: bool = False,
-           integer: bool = False, high: float | None = None):
-    """Parse an option value as a finite number (ValueError naming the option, the value and the range)."""
-    import math
+#: Units of the channels that appear in CSV outputs (SI, radians), for the headers.
+CHANNEL_UNITS = {"time": "s", "t": "s", "x": "m", "y": "m", "psi": "rad", "u": "m/s", "v": "m/s", "r": "rad/s",
+                 "p": "rad/s", "phi": "rad", "delta": "rad", "n": "rps", "T": "N", "phi_p": "rad"}
 
-    from .._io import short
 
-    kind = "whole number" if integer else "number"
-    try:
-        v = int(text) if integer else float(text)
-    except (TypeError, ValueError, OverflowError):
-        raise ValueError(f"{option} {short(text, 40)}: not a {kind}; give e.g. {option} "
-                         f"{'10' if integer else '1.5'}") from None
-    if not math.isfinite(v):
-        raise ValueError(f"{option} {text}: give a finite {kind}")
-    if low is not None and (v < low or (low_open and v == low)):
-        raise ValueError(f"{option} {short(text, 40)}: must be {'>' if low_open else '>='} {low:g}")
-    if high is not None and v > high:
-        raise ValueError(f"{option} {short(text, 40)}: must be <= {high:g}")
-    return v
+def units_header(frame, model=None):
+    """``frame`` with ``name [unit]`` column (and index) names where the unit is known
+    (the model's ``units`` first, then :data:`CHANNEL_UNITS`); other names unchanged."""
+    units = dict(CHANNEL_UNITS)
+    if model is not None:
+        units.update(getattr(model, "units", {}) or {})
+
+    def label(name):
+        unit = units.get(str(name))
+        return f"{name} [{unit}]" if unit and "[" not in str(name) else name
+
+    out = frame.rename(columns=label)
+    if out.index.name is not None:
+        out.index = out.index.rename(label(out.index.name))
+    return out

@@ -6,12 +6,11 @@ Both replay the model with each log's recorded rudder and propeller inputs
 """
 from __future__ import annotations
 
-import json
 import math
 import sys
 from pathlib import Path
 
-from ._common import add_log_options, read_logs
+from ._common import add_log_options, add_progress_option, progress_iter, read_logs
 
 
 def _common(p) -> None:
@@ -34,6 +33,14 @@ def register(sub) -> None:
                                    "ITTC/IMO manoeuvre metrics of the log and of the replay.")
     _common(p)
     p.add_argument("-o", "--output", required=True, help="JSON file to write (a list, one object per log)")
+    p.add_argument("--horizon", default="10,30,60", metavar="SECONDS",
+                   help="multi-start open-loop prediction horizons [s], comma-separated (default 10,30,60; "
+                        "'none' to skip): per log a 'horizon' entry with median/p90 position and median heading "
+                        "errors from starts every --start-every s")
+    p.add_argument("--start-every", type=float, default=5.0, help="spacing of the horizon starts [s] (default 5)")
+    from .uncertainty import add_draws_option
+
+    add_draws_option(p)
     p.set_defaults(handler=_validate)
 
     r = sub.add_parser("report", help="write a self-contained HTML validation report of a fitted model",
@@ -43,15 +50,17 @@ def register(sub) -> None:
     _common(r)
     r.add_argument("-o", "--output", required=True, help="HTML file to write")
     r.add_argument("--title", default=None, help="report title")
+    from .uncertainty import add_draws_option
+
+    add_draws_option(r)
+    add_progress_option(r)
     r.set_defaults(handler=_report)
 
 
 def _check(args) -> Path:
-    out = Path(args.output)
-    if out.exists() and not args.force:
-        raise ValueError(f"{out}: output exists; choose another name or pass --force to overwrite it")
-    if out.resolve() in {Path(p).resolve() for p in [args.result, *args.logs]}:
-        raise ValueError(f"{out}: the output would replace an input file; choose another name")
+    from ._common import check_output_path
+
+    out = check_output_path(args.output, force=args.force, inputs=[args.result, *args.logs])
     if args.lpp is not None and not (math.isfinite(args.lpp) and args.lpp > 0):
         raise ValueError(f"--lpp {args.lpp}: give the ship length in metres (a positive number)")
     return out
@@ -78,13 +87,30 @@ def _line(d: dict) -> str:
 
 
 def _validate(args) -> int:
-    from .._io import atomic_write_text
-    from ..validation import validate
+    from .._io import atomic_write_text, dumps_json
+    from ..validation import validate_logs
+    from .uncertainty import validate_draws
 
     out = _check(args)
-    res = validate(args.result, read_logs(args.logs, args), args.lpp, closed_loop=not args.no_closed_loop,
-                   zigzag_angles=_zigzag(args))
-    atomic_write_text(out, json.dumps(res, indent=2, allow_nan=False) + "\n", force=args.force)
+    horizons = _horizons(args.horizon)
+    logs = read_logs(args.logs, args)
+    vals = validate_logs(args.result, logs, args.lpp, closed_loop=not args.no_closed_loop,
+                         zigzag_angles=_zigzag(args))
+    res = [v.to_dict() for v in vals]
+    validate_draws(args, args.result, vals, res)  # --draws N: intervals inside each "predicted" block
+    if horizons:
+        from ..validation import resolve_model
+        from ..validation_horizon import horizon_prediction
+
+        model, _ = resolve_model(args.result)
+        for d, lg in zip(res, logs):
+            h = horizon_prediction(model, lg, horizons=horizons, start_every=args.start_every)
+            d["horizon"] = h.summary()
+            print(f"{d['name']}: horizon " + ", ".join(
+                f"{e['seconds']:g} s median {e['position_error_median_m']:.3g} m ({e['n_starts']} starts"
+                f"{', %d blow-ups' % e['n_blowups'] if e['n_blowups'] else ''})"
+                for e in d["horizon"] if e["position_error_median_m"] is not None))
+    atomic_write_text(out, dumps_json(res), force=args.force)
     for d in res:
         print(_line(d))
         for n in d["notes"]:
@@ -97,6 +123,18 @@ def _validate(args) -> int:
     return 0
 
 
+def _horizons(text: str) -> list[float]:
+    if text is None or text.strip().lower() in ("", "none", "off", "0"):
+        return []
+    try:
+        out = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise ValueError(f"--horizon {text}: give comma-separated seconds, e.g. 10,30,60") from None
+    if not out or not all(math.isfinite(v) and v > 0 for v in out):
+        raise ValueError(f"--horizon {text}: horizons must be positive numbers of seconds, e.g. 10,30,60")
+    return out
+
+
 def _report(args) -> int:
     from .._io import atomic_write_text
     from ..report import render_report
@@ -104,9 +142,13 @@ def _report(args) -> int:
 
     out = _check(args)
     model, res = resolve_model(args.result)
-    vals = [validate_one(model, lg, lpp=args.lpp, closed_loop=not args.no_closed_loop, zigzag_angles=_zigzag(args))
-            for lg in read_logs(args.logs, args)]
-    text = render_report(res, args.logs, title=args.title, validations=vals)
+    vals = [validate_one(model, lg, lpp=args.lpp, closed_loop=not args.no_closed_loop,
+                         zigzag_angles=_zigzag(args))
+            for lg in progress_iter(read_logs(args.logs, args), args, "replaying logs")]
+    from .uncertainty import check_draws
+
+    unc = {"draws": check_draws(args), "seed": args.draws_seed, "samples": args.samples} if check_draws(args) else None
+    text = render_report(res, args.logs, title=args.title, validations=vals, uncertainty=unc)
     atomic_write_text(out, text, force=args.force)
     for v in vals:
         print(_line(v.to_dict()))

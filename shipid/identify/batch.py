@@ -49,6 +49,9 @@ class OutputErrorRefiner:
         Iteration limit of the least-squares solver.
     substeps : int
         RK4 steps per sample.
+    input_hold : {"foh", "zoh"}
+        Inputs between samples in the simulations: linear between the logged values (default, as
+        the EKF's) or held (see :func:`shipid.simulate.simulate`).
     jacobian : {"fd", "tangent"}
         Sensitivities by forward differences in one batched simulation (default) or
         by the exact tangent of the RK4 map.
@@ -69,7 +72,7 @@ class OutputErrorRefiner:
 
     def __init__(self, model: Model, *, estimate=None, channels=None, meas_std=None, max_nfev: int = 30,
                  substeps: int = 1, jacobian: str = "fd", log_weights=None,
-                 extra_residuals=None):
+                 extra_residuals=None, input_hold: str = "foh"):
         self.model = model
         self.estimate = estimate
         self.channels = channels
@@ -79,6 +82,7 @@ class OutputErrorRefiner:
         self.jacobian = jacobian
         self.log_weights = log_weights
         self.extra_residuals = extra_residuals
+        self.input_hold = input_hold
 
     def fit(self, logs, start=None, x0=None) -> "OutputErrorRefiner":
         """Refine on ``logs``; ``start`` may be a fitted :class:`EKFIdentifier` whose
@@ -87,6 +91,8 @@ class OutputErrorRefiner:
         simulated logs); by default they are the mean of each log's first five samples."""
         if self.jacobian not in ("fd", "tangent"):
             raise ValueError(f"jacobian must be 'fd' or 'tangent', got {self.jacobian!r}")
+        if self.input_hold not in ("foh", "zoh"):
+            raise ValueError(f"input_hold must be 'foh' or 'zoh', got {self.input_hold!r}")
         model = self.model
         arrays, meas = prepare_logs(model, logs)
         if self.log_weights is None:
@@ -164,7 +170,7 @@ class OutputErrorRefiner:
                 Ug = np.broadcast_to(Ug, (B,) + Ug.shape).reshape((B * G,) + Ug.shape[1:])
                 Pg = np.repeat(P, G, axis=0)
                 with np.errstate(all="ignore"):
-                    res = simulate(model, X0, t, Ug, params=Pg, substeps=self.substeps)
+                    res = simulate(model, X0, t, Ug, params=Pg, substeps=self.substeps, input_hold=self.input_hold)
                 xs = res.x.reshape((B, G) + res.x.shape[1:])
                 for j, i in enumerate(g):
                     out[i] = xs[:, j][:, :, st_idx]
@@ -172,7 +178,7 @@ class OutputErrorRefiner:
 
         def tangent_jac(th):
             """Exact sensitivities of the RK4 map along the nominal trajectory, (n_res, ne)."""
-            from ..integrate import rk4_step_tangent
+            from ..integrate import hold_steps, rk4_step_tangent
 
             p = p0.copy()
             p[est_idx] = th * scale
@@ -186,8 +192,9 @@ class OutputErrorRefiner:
                 with np.errstate(all="ignore"):
                     for k in range(t.size - 1):
                         h = (t[k + 1] - t[k]) / self.substeps
-                        for m in range(self.substeps):
-                            x, Fx, Fp = rk4_step_tangent(model, t[k] + m * h, x, Ug[:, k], p, h)
+                        u1 = Ug[:, k + 1] if self.input_hold == "foh" else None
+                        for m, (ua, ub) in enumerate(hold_steps(Ug[:, k], u1, self.substeps)):
+                            x, Fx, Fp = rk4_step_tangent(model, t[k] + m * h, x, ua, p, h, ub)
                             S = Fx @ S + Fp
                         J[:, k + 1] = S[:, st_idx][:, :, est_idx]
                 J = J * scale / sig[ch_idx][:, None]
@@ -263,6 +270,11 @@ class OutputErrorRefiner:
                              "the model cannot follow these logs")
         else:
             self.message_ = str(sol.message)
+        if start is not None and getattr(start, "success_", True) is False:
+            # a start from a diverged filter is not a result, whatever the optimiser says
+            self.success_ = False
+            self.message_ = (f"started from a diverged EKF fit ({getattr(start, 'message_', 'diverged')}); "
+                             f"refinement reported as failed (optimiser: {sol.message})")
         if start is not None and hasattr(start, "prior_std_"):
             prior_cov_s = np.diag((start.prior_std_.reindex(names).to_numpy() / scale) ** 2)
         else:
@@ -289,6 +301,7 @@ class OutputErrorRefiner:
             coef_std={k: float(v) for k, v in self.coef_std_.items()}, cov=self.cov_.copy(), diagnostics=diag,
             inputs=_inputs(self.logs_), method="output-error",
             settings={"estimated": self.estimated_, "channels": self.channels_, "max_nfev": self.max_nfev,
+                      "input_hold": self.input_hold,
                       "log_weights": None if self.log_weights is None else [float(w) for w in self.log_weights],
                       "extra_residuals": self.extra_residuals is not None},
             loglik=None, success=self.success_, message=self.message_, versions=software_versions(),

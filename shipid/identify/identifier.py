@@ -10,7 +10,7 @@ import pandas as pd
 
 from ..models.base import Model
 from .data import LogArrays, noise_std_from_data, prepare_logs
-from .diagnostics import identifiability
+from .diagnostics import coefficient_plausibility, consistency, identifiability
 from .ekf import EKFOutput, EKFProblem, rts_smooth, run_ekf
 from .initial import equation_error_fit
 
@@ -95,6 +95,13 @@ class EKFIdentifier:
     gate_run : int
         After this many consecutive rejections of a channel its next measurement
         is accepted (a drifting filter must not reject everything).
+    max_gap : float, "auto" or None
+        A sampling interval longer than this [s] (rows missing from the log: the
+        inputs over it are unknown) restarts the ship state after it, from the
+        measurements that follow, keeping the parameters -- as a new log does.
+        "auto": 10 median sampling intervals.  None: every gap is integrated
+        across (with as many RK4 steps as it needs, inputs as ``input_hold``),
+        right when the inputs are known to be steady over the gaps.
     progress : bool
         Show a tqdm progress bar over passes.
     """
@@ -118,9 +125,10 @@ class EKFIdentifier:
         tune_noise: bool = False,
         substeps: int = 1,
         method: str = "rk4",
-        input_hold: str = "zoh",
-        gate: float | None = None,
+        input_hold: str = "foh",
+        gate: float | None = 5.0,
         gate_run: int = 10,
+        max_gap: float | str | None = "auto",
         progress: bool = False,
     ):
         self.model = model
@@ -142,6 +150,7 @@ class EKFIdentifier:
         self.input_hold = input_hold
         self.gate = gate
         self.gate_run = gate_run
+        self.max_gap = max_gap
         self.progress = progress
 
     # ----------------------------------------------------------------- setup
@@ -164,6 +173,9 @@ class EKFIdentifier:
             raise ValueError(f"gate must be positive or None, got {self.gate}")
         if int(self.gate_run) < 1:
             raise ValueError(f"gate_run must be >= 1, got {self.gate_run}")
+        if not (self.max_gap is None or self.max_gap == "auto" or (isinstance(self.max_gap, (int, float))
+                                                                   and self.max_gap > 0)):
+            raise ValueError(f"max_gap must be a positive number of seconds, 'auto' or None, got {self.max_gap!r}")
         if not self.param_walk >= 0:
             raise ValueError(f"param_walk must be >= 0, got {self.param_walk}")
 
@@ -276,8 +288,20 @@ class EKFIdentifier:
                 scale[est_names.index(k)] = v
         scale = np.where(scale > 1e-12, scale, prior_std_abs)
         prior_cov_s = np.diag((prior_std_abs / scale) ** 2)
+        max_gap = None if self.max_gap is None else (10.0 * dt if self.max_gap == "auto" else float(self.max_gap))
+        pieces, start, self.gap_notes_ = [], 0, []
+        for a in arrays:  # (global slice, log) of every stretch without a long gap
+            cuts = [0] + (list(np.flatnonzero(np.diff(a.t) > max_gap) + 1) if max_gap is not None else []) + [a.t.size]
+            for c0, c1 in zip(cuts[:-1], cuts[1:]):
+                pieces.append(slice(start + c0, start + c1))
+            for c in cuts[1:-1]:
+                self.gap_notes_.append(f"log '{a.name}': {a.t[c] - a.t[c - 1]:.3g} s without samples after t = "
+                                       f"{a.t[c - 1]:.6g} s (longer than max_gap = {max_gap:.3g} s): the ship state "
+                                       "restarts from the measurements after it")
+            start += a.t.size
         self._setup = dict(arrays=arrays, meas=meas, meas_idx=meas_idx, p_base=p_base, est_idx=est_idx,
-                           est_names=est_names, sig=sig, qx=qx, scale=scale, prior_cov_s=prior_cov_s, dt=dt)
+                           est_names=est_names, sig=sig, qx=qx, scale=scale, prior_cov_s=prior_cov_s, dt=dt,
+                           pieces=pieces)
 
         # optional noise tuning (one batched filter pass over a grid of multipliers)
         q_mult, r_mult = 1.0, 1.0
@@ -333,7 +357,7 @@ class EKFIdentifier:
         q_mult = np.atleast_1d(np.asarray(q_mult, dtype=float))
         r_mult = np.atleast_1d(np.asarray(r_mult, dtype=float))
         B = max(q_mult.size, r_mult.size)
-        t_all, U_all, Y_all, reset, xr = [], [], [], [], []
+        t_all, U_all, Y_all = [], [], []
         offset = 0.0
         for i, a in enumerate(arrays):
             t = a.t - a.t[0] + offset
@@ -341,13 +365,15 @@ class EKFIdentifier:
             t_all.append(t)
             U_all.append(a.U)
             Y_all.append(a.Y)
-            rs = np.zeros(a.t.size, dtype=bool)
-            rs[0] = i > 0
-            reset.append(rs)
-            x0 = self._initial_state(a)
-            xr.append(np.broadcast_to(x0, (a.t.size, nx)))
         t = np.concatenate(t_all)
-        x_init = self._initial_state(arrays[0])
+        Y = np.concatenate(Y_all)
+        # every log, and every stretch after a long gap, starts its ship state afresh
+        reset = np.zeros(t.size, dtype=bool)
+        xr = np.empty((t.size, nx))
+        for sl in s["pieces"]:
+            reset[sl.start] = sl.start > 0
+            xr[sl] = self._initial_state(LogArrays(name="", t=t[sl], U=np.zeros((sl.stop - sl.start, 0)), Y=Y[sl]))
+        x_init = xr[0]
         P_reset = np.diag(self._initial_state_var(arrays))
         z0 = np.concatenate([x_init, theta_s])
         P0 = np.zeros((ne + nx, ne + nx))
@@ -361,9 +387,9 @@ class EKFIdentifier:
         rep = lambda a: np.broadcast_to(a, (B,) + np.shape(a)).copy()  # noqa: E731
         return EKFProblem(
             model=model, est_idx=s["est_idx"], p_base=rep(s["p_base"]), scale=s["scale"],
-            t=rep(t), U=rep(np.concatenate(U_all)), Y=rep(np.concatenate(Y_all)), meas_idx=s["meas_idx"],
-            R=R, q=qb, z0=rep(z0), P0=rep(P0), reset=rep(np.concatenate(reset)),
-            x_reset=rep(np.concatenate(xr)), P_reset=rep(P_reset), substeps=int(self.substeps), method=self.method,
+            t=rep(t), U=rep(np.concatenate(U_all)), Y=rep(Y), meas_idx=s["meas_idx"],
+            R=R, q=qb, z0=rep(z0), P0=rep(P0), reset=rep(reset),
+            x_reset=rep(xr), P_reset=rep(P_reset), substeps=int(self.substeps), method=self.method,
             input_hold=self.input_hold, h_max=1.5 * s["dt"] / int(self.substeps),
             gate=None if self.gate is None else float(self.gate), gate_run=int(self.gate_run),
         )
@@ -465,8 +491,56 @@ class EKFIdentifier:
             notes = list(hook(s["arrays"], est))
         self.diagnostics_ = identifiability(est, cov_s, s["prior_cov_s"], notes=notes)
         self.diagnostics_["nis_mean"] = float(np.nanmean(out.nis[0]))
-        self.diagnostics_["nis_expected"] = float(np.mean(np.isfinite(out.innov[0]).sum(axis=1)))
+        self.diagnostics_["nis_expected"] = float(np.mean((np.isfinite(out.innov[0]) & ~out.gated[0]).sum(axis=1)))
+        self.diagnostics_["n_gated"] = {m: int(c) for m, c in zip(s["meas"], out.n_gated[0])}
+        self.diagnostics_["consistency"] = self._consistency(out, r_mult)
         self.logs_ = [a.meta for a in s["arrays"]]
+
+    def _consistency(self, out: EKFOutput, r_mult) -> dict:
+        """``diagnostics["consistency"]``: innovation statistics of the reported pass, the replay of the
+        fitted model against the noise model, gated counts, the coefficients against the model's
+        values, and the verdict (:func:`~shipid.identify.diagnostics.consistency`)."""
+        s = self._setup
+        model = self.model
+        meas, arrays, pieces = s["meas"], s["arrays"], s["pieces"]
+        sig = s["sig"] * np.sqrt(r_mult)
+        Jp = np.abs(model.jac_p(0.0, np.ones(model.nx), np.ones(model.nu), self.coef_.to_numpy()))
+        dynamic = [m for m in meas if Jp[model.state_index(m), s["est_idx"]].max() > 0]
+        ratio = None
+        if self.success_:
+            from ..simulate import simulate
+
+            fitted = self.to_model()
+            t = np.concatenate([a.t for a in arrays])
+            U = np.concatenate([a.U for a in arrays])
+            Y = np.concatenate([a.Y for a in arrays])
+            X = np.concatenate([st[list(model.state_names)].to_numpy() for st in self.states_])
+            sq, cnt = np.zeros(len(meas)), np.zeros(len(meas))
+            sub = max(2, int(self.substeps))
+            with np.errstate(all="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                for sl in pieces:  # open-loop replay of every stretch from its smoothed initial state
+                    if sl.stop - sl.start < 2:
+                        continue
+                    sim = simulate(fitted, X[sl.start], t[sl], U[sl], substeps=sub, input_hold=self.input_hold,
+                                   h_max=1.5 * s["dt"] / sub)
+                    e = sim.x[:, s["meas_idx"]] - Y[sl]
+                    ok = np.isfinite(Y[sl])
+                    sq += np.where(ok, np.where(np.isfinite(e), e, np.inf) ** 2, 0.0).sum(axis=0)
+                    cnt += ok.sum(axis=0)
+            ratio = {m: float(np.sqrt(sq[j] / cnt[j]) / sig[j]) if cnt[j] else float("nan") for j, m in enumerate(meas)}
+        est = s["est_idx"]
+        coef_reasons = coefficient_plausibility(s["est_names"], self.coef_.to_numpy()[est],
+                                                self.coef_std_.to_numpy()[est], s["p_base"][est],
+                                                self.prior_std_.to_numpy())
+        res = consistency(meas, out.innov[0], out.S_diag[0], out.gated[0], pieces, replay_ratio=ratio,
+                          dynamic=dynamic, extra_reasons=coef_reasons)
+        res["dynamic_channels"] = dynamic
+        res["gaps"] = list(self.gap_notes_)
+        if not self.success_:
+            res["consistent"] = False
+            res["reasons"].insert(0, f"the filter diverged: {self.message_}")
+        return res
 
     # ----------------------------------------------------------- after fitting
     def _check_fitted(self):

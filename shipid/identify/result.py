@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .._io import (as_mapping, as_number, as_string, atomic_write_text, dumps_json, read_json, short)
+from .._io import (as_bool, as_mapping, as_number, as_string, atomic_write_text, dumps_json, read_json, short)
 
 __all__ = ["FitResult", "load_result", "model_from", "software_versions", "diagnostics_to_json", "fitted_ship"]
 
@@ -162,7 +162,7 @@ class FitResult:
             loglik=d["loglik"], success=d["success"], message=d["message"],
             versions=d["versions"], created=d["created"], extra=d["extra"],
             model_options=dict(d["model_options"] or d["extra"].get("model_options") or {}),
-            ship=d["ship"],
+            ship=dict(as_mapping(doc.get("ship") or {}, f"{source}: ship", '{"lpp": 320}')),
         )
 
     def to_model(self):
@@ -238,7 +238,7 @@ def load_result(path) -> FitResult:
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(f"{p}: no such result file; run `shipid fit` first or check the path")
-    doc = read_json(p, "shipid fit result")
+    doc = read_json(p, "JSON fit result", advice="pass the file written by `shipid fit -o`")
     return FitResult.from_dict(doc, source=str(p))
 
 
@@ -309,9 +309,6 @@ def check_result_dict(doc, source: str = "result") -> dict:
         out[key] = as_string(doc.get(key, default) if doc.get(key) is not None else default, w + key)
     for key in ("settings", "versions", "extra", "model_options", "ship"):
         out[key] = as_mapping(doc.get(key) or {}, w + key)
-    success = doc.get("success", True)
-    if not isinstance(success, bool):
-        raise ValueError(f"{w}success: expected true or false, got {short(success, 40)}")
-    out["success"] = success
+    out["success"] = as_bool(doc.get("success", True), w + "success")
     out["loglik"] = as_number(doc["loglik"], w + "loglik", finite=False) if doc.get("loglik") is not None else None
     return out

@@ -25,6 +25,7 @@ result is kept as ``log.consistency``.  docs/logs.md explains every message.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -133,33 +134,65 @@ class _Ctx:
         self.label = f"`{log.path.name}`" if log.path is not None else f"log '{log.name}'"
         self.t = log.time
         self.findings: list[Finding] = []
+        self._sig: dict = {}
+        self._arrays: dict = {}
+        # kinematic checks on at most ~2048 samples (>= 1024) (increments over lags; integrals at the full rate)
+        self.stride = max(1, self.t.size // 1024)
 
     def col(self, c: str) -> str:
+        """``'r' (column 7)``, or ``'r' (column 7 'r_angvelo')`` when the file names it differently."""
         src = self.log.sources.get(c)
-        return f"'{c}' ({src})" if src else f"'{c}'"
+        if not src:
+            return f"'{c}'"
+        m = re.match(r"column (\d+) '(.*?)\s*(?:[\[(].*)?'$", src)
+        if not m:
+            return f"'{c}' ({src})"
+        return f"'{c}' (column {m.group(1)})" if m.group(2) in ("", c) else f"'{c}' (column {m.group(1)} '{m.group(2)}')"
 
     def add(self, level, check, channels, text, **values):
         self.findings.append(Finding(level, check, tuple(channels), f"{self.label}: {text}", values))
 
     def get(self, c: str):
-        return self.log[c] if c in self.log.channels and self.log.has(c) else None
+        """Channel ``c`` as an array, or None when absent or all NaN (arrays extracted once)."""
+        if c not in self._arrays:
+            a = self.log.data[c].to_numpy() if c in self.log.data.columns else None
+            self._arrays[c] = a if a is not None and np.isfinite(a).any() else None
+        return self._arrays[c]
 
-    def resolution(self, c: str) -> np.ndarray:
-        """Per-sample print resolution of channel ``c`` [SI], from the digits of the file's values in the
-        file's own unit (MARIN prints 3 significant digits: 0.1 deg at 35 deg, 10 m at 1000 m)."""
-        from .units import UNITS
+    def _digits(self, c: str) -> tuple[int, float]:
+        """(significant digits the file's values of ``c`` are printed with, factor file unit -> SI); judged on
+        up to 256 values spread over the log.  16 = full precision."""
+        if c not in self._sig:
+            from .units import UNITS
 
-        a = self.log[c]
-        unit = str(self.log.units_in.get(c, "")).split(" (")[0].strip().lower()
-        factor = UNITS.get(unit, ("", 1.0))[1]
-        return _sig_resolution(a / factor) * factor
+            unit = str(self.log.units_in.get(c, "")).split(" (")[0].strip().lower()
+            factor = UNITS.get(unit, ("", 1.0))[1]
+            a = self.get(c)
+            f = a[np.isfinite(a) & (a != 0)]
+            f = f[::max(1, f.size // 256)] / factor
+            self._sig[c] = (_sig_digits(f), factor)
+        return self._sig[c]
+
+    def resolution(self, c: str, idx=slice(None)) -> np.ndarray:
+        """Print resolution of channel ``c`` [SI] at samples ``idx``, from the digits of the file's values in
+        the file's own unit (MARIN prints 3 significant digits: 0.1 deg at 35 deg, 10 m at 1000 m)."""
+        s, factor = self._digits(c)
+        a = np.abs(self.get(c)[idx]) / factor
+        if s >= 16:
+            return np.zeros_like(a)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ex = np.floor(np.log10(np.where(a > 0, a, 1.0)))
+        return 10.0 ** (ex - (s - 1)) * factor
 
     def typical_resolution(self, c: str) -> float:
-        """A channel's coarse resolution: the larger of its 90th-percentile print resolution and its
-        median non-zero step."""
-        res = self.resolution(c)
-        res = res[np.isfinite(res)]
-        return max(float(np.percentile(res, 90)) if res.size else 0.0, 0.0)
+        """A channel's coarse print resolution: at its 90th-percentile magnitude."""
+        s, factor = self._digits(c)
+        a = np.abs(self.get(c))
+        a = a[np.isfinite(a)][::max(1, a.size // 1024)]
+        if s >= 16 or a.size == 0:
+            return 0.0
+        top = float(np.percentile(a, 90)) / factor
+        return 10.0 ** (math.floor(math.log10(top)) - (s - 1)) * factor if top > 0 else 0.0
 
 
 def _cumint(t: np.ndarray, a: np.ndarray) -> np.ndarray:
@@ -171,6 +204,7 @@ def _quantum(a: np.ndarray) -> float:
     """Typical resolution of a channel: the median non-zero step between samples (0 if none)."""
     d = np.abs(np.diff(a[np.isfinite(a)]))
     d = d[d > 0]
+    d = d[::max(1, d.size // 1024)]
     return float(np.median(d)) if d.size else 0.0
 
 
@@ -202,17 +236,18 @@ def _corr(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def _lags(lag0: int, n: int) -> list[int]:
-    """lag0, 2 lag0, 4 lag0, ... while at least 8 increments fit."""
+    """lag0, 2 lag0, 4 lag0, ... while at least 16 increments fit."""
     out = [lag0]
-    while out[-1] * 16 < n:
+    while out[-1] * 32 < n:
         out.append(out[-1] * 2)
     return out
 
 
-def _yaw_fit(t, psi, r, lag):
-    """Heading increments over ``lag`` samples against the integral of r: (unexplained fraction with r as
-    logged, unexplained fraction with scale k and bias b fitted, k, b [rad/s], correlation)."""
-    dpsi, dt_l, ir = _incr(psi, lag), _incr(t, lag), _incr(_cumint(t, r), lag)
+def _yaw_fit(t, psi, int_r, lag):
+    """Heading increments over ``lag`` samples against those of the integral of r (``int_r``, same samples):
+    (unexplained fraction with r as logged, unexplained fraction with scale k and bias b fitted, k,
+    b [rad/s], correlation)."""
+    dpsi, dt_l, ir = _incr(psi, lag), _incr(t, lag), _incr(int_r, lag)
     scale = float(np.sqrt(np.mean(dpsi ** 2)))
     if scale == 0:
         return float("inf"), float("inf"), float("nan"), float("nan"), float("nan")
@@ -245,14 +280,17 @@ def _check_yaw_rate(c: _Ctx) -> None:
     ok = np.isfinite(psi) & np.isfinite(r)
     if ok.sum() < 20:
         return
-    t, psi, r = t[ok], psi[ok], r[ok]
+    st = c.stride   # on ~1024-2048 samples; the integrals at the full rate (r may be noisy)
+    t_full = t[ok]
+    ir_s = _cumint(t_full, r[ok])[::st]
+    t, psi, r = t_full[::st], psi[ok][::st], r[ok]
     if np.ptp(psi) < math.radians(5.0):
         c.add("info", "yaw_rate", ("r", "psi"), f"heading {c.col('psi')} changes by less than 5 deg: yaw rate "
               "not compared with dpsi/dt")
         return
     lag0 = _lag(psi.size, np.diff(psi), max(c.typical_resolution("psi"), _quantum(psi)))
     # the time scale at which r explains the heading best (short lags: noise; long: few increments)
-    fits = {lag: _yaw_fit(t, psi, r, lag) for lag in _lags(lag0, psi.size)}
+    fits = {lag: _yaw_fit(t, psi, ir_s, lag) for lag in _lags(lag0, psi.size)}
     lag = min(fits, key=lambda g: fits[g][1])
     e_direct, e_fit, k, bias, rho = fits[lag]
     vals = dict(rho=rho, scale=k, bias_rad_s=bias, error_direct=e_direct, error_fitted=e_fit, lag_samples=lag)
@@ -261,7 +299,7 @@ def _check_yaw_rate(c: _Ctx) -> None:
     if e_fit <= _FIT_GOOD and k < -0.5:
         c.add("error", "yaw_rate", ("r", "psi"),
               f"{who} has the opposite sign to dpsi/dt of {c.col('psi')} (rho = {shown}, dpsi/dt = {k:.3g} r): "
-              "one sign convention is flipped; negate r (schema \"signs\": {\"r\": -1}) or the heading", **vals)
+              "negate r (schema \"signs\": {\"r\": -1}) or the heading", **vals)
         return
     if e_fit > _FIT_GOOD:
         # r does not explain the heading: which other column does?
@@ -272,7 +310,8 @@ def _check_yaw_rate(c: _Ctx) -> None:
             a = c.get(other)
             if a is None or not np.isfinite(a[ok]).all():
                 continue
-            eo, rho_o = min((_yaw_fit(t, psi, a[ok], g)[0], _yaw_fit(t, psi, a[ok], g)[4]) for g in fits)
+            io = _cumint(t_full, a[ok])[::st]
+            eo, rho_o = min((_yaw_fit(t, psi, io, g)[0], _yaw_fit(t, psi, io, g)[4]) for g in fits)
             if eo < best_e:
                 best, best_e, best_rho = other, eo, rho_o
         if best is not None and best_e <= _FIT_GOOD:
@@ -284,17 +323,16 @@ def _check_yaw_rate(c: _Ctx) -> None:
         elif e_fit > _FIT_BAD:
             c.add("error", "yaw_rate", ("r", "psi"),
                   f"{who} does not agree with dpsi/dt of {c.col('psi')} (rho = {shown}; no other column does): "
-                  "check that the column is the yaw rate, its unit, and that psi is the heading", **vals)
+                  "check the column, its unit and the heading", **vals)
         else:
             c.add("warning", "yaw_rate", ("r", "psi"),
                   f"{who} agrees only loosely with dpsi/dt of {c.col('psi')} (rho = {shown}, {100 * e_fit:.0f} % "
-                  "unexplained): check the column and its filtering/time alignment", **vals)
+                  "unexplained): check the column, its filtering and time alignment", **vals)
         return
     if 40.0 < k < 80.0 or 1 / 80.0 < k < 1 / 40.0:
-        unit = "psi is in degrees" if k > 1 else "r is in deg/s"
-        c.add("error", "yaw_rate", ("r", "psi"),
-              f"dpsi/dt = {k:.4g} x {who} (57.3 = deg/rad): {unit} but declared in radians; declare the unit "
-              "(units={'psi': 'deg'} / {'r': 'deg/s'}, CLI --units)", **vals)
+        fix = "psi is in degrees: declare units={'psi': 'deg'} (CLI: --units psi=deg)" if k > 1 else \
+            "r is in deg/s: declare units={'r': 'deg/s'} (CLI: --units r=deg/s)"
+        c.add("error", "yaw_rate", ("r", "psi"), f"dpsi/dt = {k:.4g} x {who} (57.3 = deg/rad): {fix}", **vals)
         return
     if abs(k - 1.0) > 0.1:
         c.add("warning", "yaw_rate", ("r", "psi"),
@@ -319,42 +357,58 @@ def _check_velocity_frame(c: _Ctx) -> None:
     ok = np.isfinite(x) & np.isfinite(y) & np.isfinite(u) & np.isfinite(v) & np.isfinite(psi)
     if ok.sum() < 20:
         return
-    t, x, y, u, v, psi = c.t[ok], x[ok], y[ok], u[ok], v[ok], psi[ok]
+    st = c.stride   # on ~1024-2048 samples; the integrals at the full rate
+    t, x, y, u, v, psi = (a[ok] for a in (c.t, x, y, u, v, psi))
+    cs, sn = np.cos(psi), np.sin(psi)
+    h = np.diff(t)[:, None] * 0.5
+    integ: dict = {}
+
+    def integrate(**cols):   # full-rate trapezoidal integrals, then the ~1-2k sample grid
+        V = np.stack(list(cols.values()), axis=1)
+        I = np.concatenate([np.zeros((1, V.shape[1])), np.cumsum((V[1:] + V[:-1]) * h, axis=0)])[::st]
+        integ.update(zip(cols, I.T))
+
+    integrate(ub=u * cs - v * sn, vb=u * sn + v * cs)
+    t, x, y = t[::st], x[::st], y[::st]
     step = np.hypot(np.diff(x), np.diff(y))
     lag0 = _lag(x.size, step, max(c.typical_resolution("x"), c.typical_resolution("y"), _quantum(x), _quantum(y)))
-    cs, sn = np.cos(psi), np.sin(psi)
 
-    def err(ue, ve, lag):
+    def err(ke, kn, lag):
         dx, dy = _incr(x, lag), _incr(y, lag)
         scale = float(np.median(np.hypot(dx, dy)))
         if scale <= 0:
             return float("inf")
-        px, py = _incr(_cumint(t, ue), lag), _incr(_cumint(t, ve), lag)
+        px, py = _incr(integ[ke], lag), _incr(integ[kn], lag)
         return float(np.median(np.hypot(dx - px, dy - py)) / scale)
 
-    ub, vb = u * cs - v * sn, u * sn + v * cs
-    errs = {lag: (err(ub, vb, lag), err(u, v, lag)) for lag in _lags(lag0, x.size)}
+    lags = _lags(lag0, x.size)
+    body = {lag: err("ub", "vb", lag) for lag in lags}
+    lag = min(body, key=body.get)
+    uv = f"{c.col('u')}, {c.col('v')}"
+    if body[lag] <= _FRAME_GOOD:
+        c.add("info", "velocity_frame", ("u", "v"),
+              f"body-axis {uv} integrate to the track of x, y (median error {100 * body[lag]:.0f} %)",
+              error_body=body[lag], lag_samples=lag)
+        return
+    # body axes do not fit: earth-fixed? swapped?
+    uf, vf = (a[ok] for a in (c.get("u"), c.get("v")))
+    integrate(u=uf, v=vf, ubs=vf * cs - uf * sn, vbs=vf * sn + uf * cs)
+    errs = {g: (body[g], err("u", "v", g)) for g in lags}
     lag = min(errs, key=lambda g: min(errs[g]))
     e_body, e_earth = errs[lag]
     if not math.isfinite(min(e_body, e_earth)):
         return
     vals = dict(error_body=e_body, error_earth=e_earth, lag_samples=lag)
-    uv = f"{c.col('u')}, {c.col('v')}"
-    if e_body <= _FRAME_GOOD:
-        c.add("info", "velocity_frame", ("u", "v"),
-              f"body-axis {uv} integrate to the track of x, y (median error {100 * e_body:.0f} %)", **vals)
-        return
     if e_earth <= _FRAME_GOOD and e_earth < 0.5 * e_body:
         c.add("error", "velocity_frame", ("u", "v"),
-              f"{uv} agree with the earth-fixed dx/dt, dy/dt (median error {100 * e_earth:.0f} %), not with body "
-              f"axes ({100 * e_body:.0f} %): the file's u, v are earth-fixed; pass velocity_frame='earth' "
-              "(CLI: --velocity-frame earth)", **vals)
+              f"{uv} agree with the earth-fixed dx/dt, dy/dt (error {100 * e_earth:.0f} %), not with body axes "
+              f"({100 * e_body:.0f} %): pass velocity_frame='earth' (CLI: --velocity-frame earth)", **vals)
         return
-    e_swap = err(v * cs - u * sn, v * sn + u * cs, lag)
+    e_swap = err("ubs", "vbs", lag)
     if e_swap <= _FRAME_GOOD:
         c.add("error", "velocity_frame", ("u", "v"),
-              f"{uv} look swapped: (v, u) integrate to the track (median error {100 * e_swap:.0f} %), (u, v) do not "
-              f"({100 * e_body:.0f} %); map u and v to each other's column", error_swapped=e_swap, **vals)
+              f"{uv} look swapped: (v, u) fit the track (error {100 * e_swap:.0f} %), (u, v) do not "
+              f"({100 * e_body:.0f} %): map u and v to each other's column", error_swapped=e_swap, **vals)
         return
     c.add("warning", "velocity_frame", ("u", "v", "x", "y"),
           f"{uv} agree with neither the body-axis ({100 * e_body:.0f} %) nor the earth-fixed ({100 * e_earth:.0f} %) "
@@ -389,13 +443,11 @@ def _check_rudder_sign(c: _Ctx) -> None:
         return
     held = float(d[seg][int(np.nanargmax(np.abs(off[seg])))])
     vals = dict(execute_time=float(t[i]), delta_held=held, heading_change=turn)
-    what = (f"the first rudder execute ({c.col('delta')} = {math.degrees(held):+.1f} deg from t = {t[i]:g} s) turned "
-            f"the ship {'to port' if turn < 0 else 'to starboard'} (heading {math.degrees(turn):+.1f} deg while "
-            "the rudder was held)")
+    what = (f"the first rudder execute ({c.col('delta')} {math.degrees(held):+.1f} deg, t = {t[i]:.4g} s) turned the "
+            f"ship to {'port' if turn < 0 else 'starboard'} (heading {math.degrees(turn):+.0f} deg)")
     if side * turn <= -_TURN_ERR:
         c.add("error", "rudder_sign", ("delta",),
-              f"{what}; in shipid a positive rudder turns to starboard: the file's rudder sign is opposite, pass "
-              "rudder_sign=-1 (CLI: --rudder-sign -1)", **vals)
+              f"{what}: rudder sign opposite to shipid's; pass rudder_sign=-1 (CLI: --rudder-sign -1)", **vals)
     elif side * turn <= -_TURN_WARN:
         c.add("warning", "rudder_sign", ("delta",),
               f"{what}, against shipid's convention (positive rudder to starboard); check the rudder sign "
@@ -416,7 +468,7 @@ def _check_propeller(c: _Ctx) -> None:
     if neg > 0.8:
         c.add("warning", "propeller", ("n",),
               f"{c.col('n')} is negative (astern) in {100 * neg:.0f} % of the samples while the ship moves ahead "
-              f"(u up to {umax:.3g} m/s): the propeller sign is probably flipped (shipid: n > 0 ahead); negate n",
+              f"(u up to {umax:.3g} m/s): propeller sign flipped? (shipid: n > 0 ahead); negate n",
               fraction_negative=neg)
         return
     # n u [rps m/s] ~ g Fn^2 / (J D/L): 1..150 for displacement ships and their models at any scale
@@ -428,27 +480,24 @@ def _check_propeller(c: _Ctx) -> None:
             return   # the ship's length says rps (checked when reading)
     if score > _NU_ERR:
         c.add("error", "propeller", ("n",),
-              f"{c.col('n')} looks like rpm: n x u = {score:.0f} rps m/s while moving ahead (ships and their models "
-              "stay within ~1-150); declare units={'n': 'rpm'} (CLI: --units n=rpm)", **vals)
+              f"{c.col('n')} looks like rpm: n x u = {score:.0f} rps m/s while moving ahead (ships and models: "
+              "~1-150); declare units={'n': 'rpm'} (CLI: --units n=rpm)", **vals)
     elif score > _NU_WARN:
         c.add("warning", "propeller", ("n",),
-              f"{c.col('n')} may be in rpm: n x u = {score:.0f} rps m/s while moving ahead (ships and their models "
-              "stay within ~1-150; fast craft may exceed it); declare units={'n': 'rpm'} if so, or give lpp", **vals)
+              f"{c.col('n')} may be in rpm: n x u = {score:.0f} rps m/s while moving ahead (ships and models: "
+              "~1-150; fast craft more); if so declare units={'n': 'rpm'}, or give lpp", **vals)
 
 
-def _sig_resolution(a: np.ndarray) -> np.ndarray:
-    """Per-sample print resolution of values written with a fixed number of significant digits."""
-    f = a[np.isfinite(a) & (a != 0)]
+def _sig_digits(f: np.ndarray) -> int:
+    """Fewest significant digits that reproduce every (non-zero, finite) value of ``f``; 16 if none do."""
     if f.size == 0:
-        return np.zeros_like(a)
+        return 16
     ex = np.floor(np.log10(np.abs(f)))
     for s in range(1, 16):
         q = 10.0 ** (ex - (s - 1))
         if np.all(np.abs(np.round(f / q) * q - f) <= 1e-9 * np.abs(f)):
-            with np.errstate(divide="ignore", invalid="ignore"):
-                e_all = np.floor(np.log10(np.where(np.abs(a) > 0, np.abs(a), 1.0)))
-            return 10.0 ** (e_all - (s - 1))
-    return np.zeros_like(a)
+            return s
+    return 16
 
 
 def _check_position_freeze(c: _Ctx) -> None:
@@ -456,10 +505,13 @@ def _check_position_freeze(c: _Ctx) -> None:
     if x is None or y is None or u is None or v is None:
         return
     t = c.t
-    res = np.maximum(c.resolution("x"), c.resolution("y"))[1:]
-    expected = np.hypot(u, v)[1:] * np.diff(t)
     dx, dy = np.diff(x), np.diff(y)
-    frozen = (dx == 0) & (dy == 0) & (expected > 2.0 * res) & np.isfinite(expected)
+    frozen = (dx == 0) & (dy == 0)
+    cand = np.flatnonzero(frozen)
+    if cand.size:
+        expected = np.hypot(u[cand + 1], v[cand + 1]) * (t[cand + 1] - t[cand])
+        res = np.maximum(c.resolution("x", cand + 1), c.resolution("y", cand + 1))
+        frozen[cand] = (expected > 2.0 * res) & np.isfinite(expected)
     nf = int(frozen.sum())
     if nf == 0:
         return
@@ -472,49 +524,63 @@ def _check_position_freeze(c: _Ctx) -> None:
                 max_jump_m=max(jumps) if jumps else 0.0)
     level = "warning" if frac > _FREEZE_WARN else "info"
     c.add(level, "position_freeze", ("x", "y"),
-          f"positions {c.col('x')}, {c.col('y')} freeze while the ship moves on {nf} samples ({100 * frac:.1f} %, "
-          f"{starts.size} stretches, longest {longest:.3g} s) and then jump (up to {vals['max_jump_m']:.3g} m): "
-          "GNSS freezes; give x, y little weight in the fit or drop them", **vals)
+          f"positions {c.col('x')}, {c.col('y')} freeze on {nf} samples while the ship moves ({100 * frac:.1f} %, "
+          f"{starts.size} stretches, longest {longest:.3g} s), then jump (up to {vals['max_jump_m']:.3g} m): "
+          "GNSS freezes; give x, y little weight", **vals)
 
 
 def _check_glitches(c: _Ctx) -> None:
+    from .units import SHIP_CHANNELS
+
     counts, first = {}, {}
     units = c.log.units()
-    for ch in c.log.channels:
-        a = c.get(ch)
-        if a is None or a.size < 10:
+    names = [ch for ch in c.log.channels if c.get(ch) is not None]
+    if len(c.t) < 10 or not names:
+        return
+    # first differences of all channels at once, (n-1, channels); wrapped angles (wind directions) wrapped
+    A = c.log.data[names].to_numpy(dtype=float)
+    D = A[1:] - A[:-1]
+    for j, ch in enumerate(names):
+        if units.get(ch) == "rad" and ch not in SHIP_CHANNELS:
+            D[:, j] = (D[:, j] + math.pi) % (2 * math.pi) - math.pi
+    step = max(1, D.shape[0] // 1024)
+    sub, sub2 = D[::step], (D[1:] - D[:-1])[::step]   # first and second differences, a subset
+    thr = np.zeros(len(names))
+    for j in range(len(names)):
+        d1, d2 = sub[:, j][np.isfinite(sub[:, j])], sub2[:, j][np.isfinite(sub2[:, j])]
+        if d2.size < 10:
             continue
-        if units.get(ch) == "rad" and ch != "psi":   # wrapped angles (wind directions): no spikes at the wrap
-            a = a.copy()
-            ok = np.isfinite(a)
-            a[ok] = np.unwrap(a[ok])
-        res = c.resolution(ch)[1:-1]
-        prev, mid, nxt = a[:-2], a[1:-1], a[2:]
-        up, down = mid - prev, mid - nxt
-        d2 = nxt - 2 * mid + prev
-        fin = np.isfinite(d2)
-        if fin.sum() < 10:
-            continue
-        sig = 1.4826 * float(np.median(np.abs(d2[fin] - np.median(d2[fin]))))
-        # per sample: beyond 12 robust sigmas, 3 print resolutions (MARIN: 0.1 deg at 35 deg) and 10 typical
-        # steps (quantised sensors dither by one step: the Esso rudder by 0.56 deg)
-        thr = np.maximum(np.maximum(_GLITCH_SIGMA * sig, 3.0 * res), 10.0 * _quantum(a))
-        if not np.any(thr > 0):
-            continue
-        with np.errstate(invalid="ignore"):
-            g = ((np.abs(up) > thr) & (np.abs(down) > thr) & (np.sign(up) == np.sign(down))
-                 & (np.abs(nxt - prev) < 0.25 * np.minimum(np.abs(up), np.abs(down))))
-        if g.any():
-            counts[ch] = int(g.sum())
-            first[ch] = int(c.log.rows[1 + int(np.argmax(g))])
+        sig = 1.4826 * float(np.median(np.abs(d2 - np.median(d2))))
+        nz = np.abs(d1[d1 != 0])
+        # beyond 12 robust sigmas and 10 typical steps (quantised sensors dither by one step: the Esso rudder
+        # by 0.56 deg), and (below) 3 print resolutions at the sample (MARIN: 0.1 deg at 35 deg)
+        thr[j] = max(_GLITCH_SIGMA * sig, 10.0 * (float(np.median(nz)) if nz.size else 0.0))
+    with np.errstate(invalid="ignore"):
+        big = np.abs(D) > np.where(thr > 0, thr, np.inf)
+    # a spike at sample i: a big step up to it and a big step back, the neighbours agreeing
+    both = big[:-1] & big[1:]
+    hit = np.flatnonzero(both.any(axis=1))
+    sub_rows, cols = np.nonzero(both[hit])
+    rows = hit[sub_rows]
+    if rows.size:
+        up, back = D[rows, cols], D[rows + 1, cols]
+        ok = (np.sign(up) == -np.sign(back)) & (np.abs(up + back) < 0.25 * np.minimum(np.abs(up), np.abs(back)))
+        rows, cols, up, back = rows[ok], cols[ok], up[ok], back[ok]
+    for j in np.unique(cols):
+        ch = names[j]
+        i = rows[cols == j] + 1
+        res = 3.0 * c.resolution(ch, i)
+        keep = i[(np.abs(up[cols == j]) > res) & (np.abs(back[cols == j]) > res)]
+        if keep.size:
+            counts[ch] = int(keep.size)
+            first[ch] = int(c.log.rows[int(keep[0])])
     if not counts:
         return
     total = sum(counts.values())
     parts = ", ".join(f"{c.col(ch)} {k} (first at row {first[ch]})" for ch, k in counts.items())
     level = "warning" if total > max(2, 0.001 * len(c.log)) else "info"
     c.add(level, "glitches", tuple(counts),
-          f"single-sample spikes (a sample far from both neighbours, which agree): {parts}; check the sensor or "
-          "blank those cells", counts=counts, first_rows=first)
+          f"single-sample spikes: {parts}; check the sensor or blank those cells", counts=counts, first_rows=first)
 
 
 _RUN = {"yaw_rate": _check_yaw_rate, "velocity_frame": _check_velocity_frame, "rudder_sign": _check_rudder_sign,

@@ -193,5 +193,5 @@ def _run_consistency(log: TrialLog) -> None:
         more = len(res.errors) - 1
         tail = f" (and {more} more consistency error(s))" if more else ""
         e = res.errors[0]
-        raise LogError(e.message + tail + "; or pass consistency_checks=False (CLI: --no-consistency-checks)",
+        raise LogError(e.message + tail + "; or --no-consistency-checks",
                        path=log.path, column=e.channels[0] if e.channels else None)

@@ -170,6 +170,36 @@ def rhs_rows(x, u, c):
     return out
 
 
+def cs_columns(xc, uc, pc, Pc, c, h, which, cols, out):
+    """Complex-step derivatives of the rates of one sample, columns ``cols`` into ``out (6, k)``.
+
+    ``xc (6,)``, ``uc (2,)``, ``pc (39,)``, ``Pc`` complex copies of the state, inputs, parameters and
+    particulars (perturbed in place and restored); ``c`` the constants of ``pc``; ``which``: 0 -> d/dx,
+    1 -> d/du, 2 -> d/dp (the constants are re-derived for each perturbed parameter).
+    """
+    ih = 1j * h
+    for jj in range(cols.shape[0]):
+        j = cols[jj]
+        if which == 0:
+            xc[j] += ih
+            f = rates(xc[2], xc[3], xc[4], xc[5], uc[0], uc[1], c)
+            xc[j] -= ih
+        elif which == 1:
+            uc[j] += ih
+            f = rates(xc[2], xc[3], xc[4], xc[5], uc[0], uc[1], c)
+            uc[j] -= ih
+        else:
+            pc[j] += ih
+            f = rates(xc[2], xc[3], xc[4], xc[5], uc[0], uc[1], derived(pc, Pc))
+            pc[j] -= ih
+        for m in range(6):
+            out[m, j] = f[m].imag / h
+
+
+#: The state columns the rates depend on (x and y do not enter them).
+X_COLS = np.arange(2, 6)
+
+
 def jacobians(x, u, p, P, h, which):
     """Complex-step Jacobians of the rates of N samples (used compiled, with complex-safe globals).
 
@@ -180,31 +210,14 @@ def jacobians(x, u, p, P, h, which):
     N = x.shape[0]
     xc, uc, pc = x.astype(np.complex128), u.astype(np.complex128), p.astype(np.complex128)
     Pc = P.astype(np.complex128)
-    k = 6 if which == 0 else (2 if which == 1 else p.shape[1])
-    out = np.zeros((N, 6, k))
-    ih = 1j * h
+    cols = X_COLS if which == 0 else np.arange(2 if which == 1 else p.shape[1])
+    out = np.zeros((N, 6, 6 if which == 0 else cols.shape[0]))
     c = derived(pc[0], Pc)
     for i in range(N):
         ip = i if p.shape[0] > 1 else 0
         if p.shape[0] > 1 and which != 2:
             c = derived(pc[ip], Pc)
-        for j in range(k):
-            if which == 0:
-                if j < 2:  # x, y do not enter the rates
-                    continue
-                xc[i, j] += ih
-                f = rates(xc[i, 2], xc[i, 3], xc[i, 4], xc[i, 5], uc[i, 0], uc[i, 1], c)
-                xc[i, j] -= ih
-            elif which == 1:
-                uc[i, j] += ih
-                f = rates(xc[i, 2], xc[i, 3], xc[i, 4], xc[i, 5], uc[i, 0], uc[i, 1], c)
-                uc[i, j] -= ih
-            else:
-                pc[ip, j] += ih
-                f = rates(xc[i, 2], xc[i, 3], xc[i, 4], xc[i, 5], uc[i, 0], uc[i, 1], derived(pc[ip], Pc))
-                pc[ip, j] -= ih
-            for m in range(6):
-                out[i, m, j] = f[m].imag / h
+        cs_columns(xc[i], uc[i], pc[ip], Pc, c, h, which, cols, out[i])
     return out
 
 
@@ -234,7 +247,7 @@ FUNCTIONS = {"sign": sign, "sign_nn": sign_nn, "sqrt_pos": sqrt_pos, "inv_pos": 
 #: functions (``sign`` and friends branch on the real part), and the driver :func:`jacobians`.
 FUNCTIONS_CS = {"sign": sign_cs, "sign_nn": sign_nn_cs, "sqrt_pos": sqrt_pos_cs, "inv_pos": inv_pos_cs,
                 "planar_rates_cs": planar_rates_cs, "derived": derived, "forces": forces, "rates": rates,
-                "jacobians": jacobians}
+                "cs_columns": cs_columns, "jacobians": jacobians}
 #: Globals of the compiled complex-step set (``cmath``).
 CMATH = {"sqrt": cmath.sqrt, "exp": cmath.exp, "arcsin": cmath.asin, "arctan": cmath.atan, "sin": cmath.sin,
          "cos": cmath.cos}
@@ -252,3 +265,30 @@ COMPLEX_STEP = {**_NUMPY_BASE, "sign": lambda z: np.sign(np.real(z)),
                 "sign_nn": lambda z: np.copysign(1.0, np.real(z)),
                 "sqrt_pos": lambda z: np.sqrt(z * (np.real(z) > 0)),
                 "inv_pos": lambda z: np.where(np.real(z) > 0, 1.0 / np.where(np.real(z) > 0, z, 1.0), 0.0)}
+
+
+# ------------------------------------------------------------------ the EKF kernel's protocol
+# (see shipid.models._response_equations and shipid.identify._kernel): constants once per step,
+# the rates of one sample, and the complex-step Jacobians of one sample (``cs_columns`` and
+# ``derived_cs`` are the complex-step set's compiled functions, given as globals by the model).
+#: Complex step of the compiled Jacobians (as ``MMGModel._H_CS``).
+H_CS = 1e-30
+
+
+def k_consts(p, P):
+    return np.array(derived(p, P))
+
+
+def k_rhs(t, x, u, c, out):
+    out[0], out[1], out[2], out[3], out[4], out[5] = rates(x[2], x[3], x[4], x[5], u[0], u[1], c)
+
+
+def k_jac(t, x, u, p, P, c, cols, Jx, Jp):
+    xc, uc, pc, Pc = x.astype(np.complex128), u.astype(np.complex128), p.astype(np.complex128), P.astype(np.complex128)
+    cc = derived_cs(pc, Pc)
+    cs_columns(xc, uc, pc, Pc, cc, H_CS, 0, X_COLS, Jx)
+    cs_columns(xc, uc, pc, Pc, cc, H_CS, 2, cols, Jp)
+
+
+#: The kernel-protocol set (dependency order); needs the globals ``cs_columns`` and ``derived_cs``.
+KERNEL = {**FUNCTIONS, "k_consts": k_consts, "k_rhs": k_rhs, "k_jac": k_jac}

@@ -260,6 +260,20 @@ class Model:
         rhs = self._rhs
         return lambda t, x, u: rhs(t, x, u, p)
 
+    #: The model's equations for the compiled EKF kernel (:mod:`shipid.identify._kernel`): functions
+    #: (name -> function, dependency order, rebound by :func:`shipid._jit.rebind`) including the
+    #: kernel protocol ``k_consts``, ``k_rhs``, ``k_jac`` (see :mod:`shipid.models._response_equations`).
+    #: ``None``: no compiled path (the EKF uses numpy and says so once).
+    _equations: ClassVar[dict | None] = None
+
+    def _equations_namespace(self) -> dict:
+        """Extra globals of :attr:`_equations` (e.g. already compiled helpers)."""
+        return {}
+
+    def _kernel_constants(self) -> np.ndarray:
+        """Fixed constants ``P`` the kernel protocol receives (e.g. MMG particulars)."""
+        return np.zeros(0)
+
     def _rhs(self, t, x, u, p) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError(f"{type(self).__name__} must implement _rhs")
 

@@ -503,6 +503,16 @@ class MMGModel(Model):
     def _jac_p(self, t, x, u, p):
         return self._jacobian(t, x, u, p, 2)
 
+    # the compiled EKF kernel (shipid.identify._kernel) uses the same equations
+    _equations = _eq.KERNEL
+
+    def _equations_namespace(self) -> dict:
+        cs = compiled(_eq.FUNCTIONS_CS, _eq.CMATH, tag="__cs")
+        return {} if cs is None else {"cs_columns": cs["cs_columns"], "derived_cs": cs["derived"]}
+
+    def _kernel_constants(self) -> np.ndarray:
+        return np.array(self._particulars_tuple())
+
     @classmethod
     def sample_point(cls, rng, batch=()):
         """A valid random (x, u) for protocol tests: forward speed, moderate drift and yaw rate."""

@@ -48,6 +48,7 @@ td.pass{background:#dff5df}td.fail{background:#f9dcdc;font-weight:bold}td.na{col
 .note{color:#444;font-size:0.9em}
 .mono{font-family:Menlo,Consolas,monospace;font-size:0.85em;word-break:break-all}
 img{max-width:100%;height:auto;display:block;margin:6px 0}
+p.intro{background:#f3f6fa;border-left:4px solid #4a78a8;padding:6px 10px}
 .figs{display:flex;flex-wrap:wrap;gap:12px;align-items:flex-start}
 nav a{margin-right:12px}
 """
@@ -302,6 +303,9 @@ def _section_log(v: LogValidation, i: int, identifier) -> str:
                 f"residuals {log.name}")
     inn = _innovations_for(identifier, log.name)
     if inn is not None:
+        out += ("<p class=\"note\">Innovations: each measurement minus the filter's one-step prediction "
+                "(final pass). For a consistent filter about 95 % of them lie inside the shaded band of "
+                "&plusmn;2 predicted standard deviations.</p>")
         out += _fig(figures.innovation_figure(inn, f"{log.name}: EKF innovations (final pass)"),
                     f"innovations {log.name}")
     elif identifier is not None:
@@ -337,11 +341,17 @@ def _section_versions(result) -> str:
 # ----------------------------------------------------------------------------- public
 def render_report(result, logs, *, identifier=None, title: str | None = None, lpp: float | None = None,
                   rudder_sign: float = 1.0, closed_loop: bool = True,
-                  validations: list[LogValidation] | None = None) -> str:
+                  validations: list[LogValidation] | None = None, uncertainty: dict | None = None,
+                  intro: str | None = None) -> str:
     """The report as an HTML string (see :func:`write_report`).
 
+    ``intro`` is plain text shown under the title (what the report demonstrates); blank
+    lines separate paragraphs.
+
     ``validations`` (from :func:`shipid.validation.validate_logs`) reuses replays already computed;
-    ``logs``, ``lpp``, ``rudder_sign`` and ``closed_loop`` are then ignored.
+    ``logs``, ``lpp``, ``rudder_sign`` and ``closed_loop`` are then ignored.  ``uncertainty``
+    (``{"draws": N, "seed": s, "samples": None}``) adds the prediction-uncertainty section
+    (:func:`shipid.report.uncertainty.uncertainty_section`).
     """
     if result is None:
         if identifier is None:
@@ -353,6 +363,11 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
     if validations is None:
         validations = [validate_one(model, lg, lpp=lpp, rudder_sign=rudder_sign, closed_loop=closed_loop)
                        for lg in load_logs(logs, lpp=lpp)]
+    extra = []
+    if uncertainty:
+        from .uncertainty import uncertainty_section
+
+        extra.append(uncertainty_section(res, validations, **uncertainty))
     title = title or f"Validation report: {res.model} model"
     stamp = datetime.now(timezone.utc).isoformat(timespec="seconds")
     n_ok = sum(v.success for v in validations)
@@ -366,8 +381,11 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
             f"validated on {len(validations)} log(s) "
             f"({n_ok} replayed with both metric sets). Report written {_e(stamp)} by shipid "
             f"{_e(_versions_now().get('shipid'))}.</p>",
+            *[f"<p class=\"intro\">{_e(par.strip())}</p>" for par in (intro or "").split("\n\n") if par.strip()],
             f"<nav>{nav}</nav>",
-            _section_summary(validations), _section_imo(validations), _section_coefficients(res),
+            _section_summary(validations), _section_imo(validations),
+            *extra,
+            _section_coefficients(res),
             _section_identifiability(res), _section_model(res, model),
             "<h2 id=\"logs\">Measured vs simulated, per log</h2>",
             *[_section_log(v, i, identifier) for i, v in enumerate(validations)],
@@ -379,7 +397,7 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
 
 def write_report(result, logs, path: str | os.PathLike, *, force: bool = False, identifier=None,
                  title: str | None = None, lpp: float | None = None, rudder_sign: float = 1.0,
-                 closed_loop: bool = True) -> Path:
+                 closed_loop: bool = True, intro: str | None = None) -> Path:
     """Write a self-contained HTML validation report.
 
     Parameters
@@ -392,6 +410,8 @@ def write_report(result, logs, path: str | os.PathLike, *, force: bool = False, 
     identifier : EKFIdentifier, optional
         The fitted identifier; adds innovation plots for the logs it was fitted to.
     title : str, optional
+    intro : str, optional
+        Plain text under the title saying what the report shows (paragraphs separated by blank lines).
     lpp : float, optional
         Ship length [m] for the metrics (default: from each log, then the model).
     rudder_sign : {1, -1}
@@ -407,5 +427,5 @@ def write_report(result, logs, path: str | os.PathLike, *, force: bool = False, 
     if p.exists() and not force:  # fail before the (slow) replays and figures
         raise OutputExistsError(f"{p}: output exists; choose another name or pass --force (force=True) to overwrite it")
     text = render_report(result, logs, identifier=identifier, title=title, lpp=lpp, rudder_sign=rudder_sign,
-                         closed_loop=closed_loop)
+                         closed_loop=closed_loop, intro=intro)
     return atomic_write_text(p, text, force=force)

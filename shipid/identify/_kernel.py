@@ -1,0 +1,601 @@
+"""The compiled EKF: filter step, RK4 map with its tangent, and the RTS smoother (numba, ``shipid[fast]``).
+
+The same algorithm as :func:`shipid.identify.ekf.run_ekf` and
+:func:`~shipid.identify.ekf.rts_smooth` (which dispatch here), written per
+batch member as loops over samples so that numba compiles it together with
+the model's equations.  The model's equations are not copied: a model
+declares them (``Model._equations``, the kernel protocol ``k_consts``,
+``k_rhs``, ``k_jac`` of e.g. :mod:`shipid.models._response_equations`), and
+:func:`shipid._jit.rebind` builds this module's functions with those as
+globals, compiled once per model (numba's disk cache keeps them; the cache
+tag carries a hash of the equations' source files, so an edited equation is
+recompiled).  Parameter-derived constants (``k_consts``) are computed once
+per step and member.
+
+Semantics (kept equal to the numpy path, to rounding; ``tests/test_kernel.py``):
+measurement update with the finite, not-diverged channels (Joseph form,
+``A - (A H^T - K R) K^T`` with ``A = P - K H P``), divergence check (NIS
+above ``nis_limit``, non-finite or non-positive trace) freezing the member at
+its last good values, RK4 map with the tangent of ``method`` over ``substeps``
+steps per interval (input held from sample k), resets, process noise
+``q dt`` per interval.  Without numba, or with ``SHIPID_JIT=0``, nothing here
+is used.
+"""
+from __future__ import annotations
+
+import hashlib
+import inspect
+import math
+import re
+import warnings
+
+import numpy as np
+
+from .. import _jit
+
+__all__ = ["filter_functions", "run_compiled", "smooth_compiled", "METHODS"]
+
+#: Transition methods of the kernel (codes of ``EKFProblem.method``).
+METHODS = {"rk4": 0, "rk4-exact": 1, "euler": 2}
+
+_LOG2PI = math.log(2.0 * math.pi)
+
+
+# ------------------------------------------------------------------ small dense helpers (compiled)
+def mat_mul(A, B, out):
+    """``out = A @ B`` (small matrices; loops)."""
+    n, m = A.shape
+    k = B.shape[1]
+    for i in range(n):
+        for j in range(k):
+            s = 0.0
+            for a in range(m):
+                s += A[i, a] * B[a, j]
+            out[i, j] = s
+
+
+def tangent(method, t, x, ua, um, ub, p, P, c, cols, h, scale, xn, Fx, Fp, w):
+    """One step of the discrete map and its tangent: ``xn``, ``Fx (nx, nx)``, ``Fp (nx, ne)`` (the
+    parameter columns ``cols``, multiplied by ``scale``).  ``method``: 0 RK4 with the second-order
+    Taylor tangent at the step start (:func:`shipid.integrate.rk4_step_taylor_tangent`), 1 RK4 with
+    its exact tangent (:func:`~shipid.integrate.rk4_step_tangent`), 2 Euler.  Stage inputs ``ua`` (start),
+    ``um`` (middle), ``ub`` (end) as :func:`shipid.integrate._stage_inputs`; ``c = k_consts(p, P)``;
+    ``w``: work arrays (see :func:`_work`)."""
+    k1, k2, k3, k4, xs, A, Bp, Ax, Kx, Kp, Kxs, Kps, M, Be = w
+    nx = x.shape[0]
+    ne = cols.shape[0]
+    k_rhs(t, x, ua, c, k1)
+    k_jac(t, x, ua, p, P, c, cols, A, Bp)
+    for j in range(ne):
+        for i in range(nx):
+            Be[i, j] = Bp[i, cols[j]]
+    if method == 2:  # Euler
+        for i in range(nx):
+            xn[i] = x[i] + h * k1[i]
+            for j in range(nx):
+                Fx[i, j] = (1.0 if i == j else 0.0) + h * A[i, j]
+            for j in range(ne):
+                Fp[i, j] = h * Be[i, j] * scale[j]
+        return
+    if method == 0:
+        for i in range(nx):
+            xs[i] = x[i] + h / 2 * k1[i]
+        k_rhs(t + h / 2, xs, um, c, k2)
+        for i in range(nx):
+            xs[i] = x[i] + h / 2 * k2[i]
+        k_rhs(t + h / 2, xs, um, c, k3)
+        for i in range(nx):
+            xs[i] = x[i] + h * k3[i]
+        k_rhs(t + h, xs, ub, c, k4)
+        for i in range(nx):
+            xn[i] = x[i] + h / 6 * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i])
+        # half = I + h A / 2; Fx = I + h A half; Fp = h half B
+        for i in range(nx):
+            for j in range(nx):
+                M[i, j] = (1.0 if i == j else 0.0) + 0.5 * (h * A[i, j])
+        for i in range(nx):
+            for j in range(nx):
+                s = 0.0
+                for a in range(nx):
+                    s += (h * A[i, a]) * M[a, j]
+                Fx[i, j] = (1.0 if i == j else 0.0) + s
+            for j in range(ne):
+                s = 0.0
+                for a in range(nx):
+                    s += M[i, a] * Be[a, j]
+                Fp[i, j] = h * s * scale[j]
+        return
+    # exact RK4 tangent: K_s = A_s (I + a_s h K_{s-1}) for the state, A_s a_s h K_{s-1} + B_s for p
+    for i in range(nx):
+        for j in range(nx):
+            Kx[i, j] = A[i, j]
+            Fx[i, j] = A[i, j]
+        for j in range(ne):
+            Kp[i, j] = Be[i, j]
+            Fp[i, j] = Be[i, j]
+    kprev = k1
+    for s_ in range(1, 4):
+        a = 0.5 if s_ < 3 else 1.0
+        wgt = 2.0 if s_ < 3 else 1.0
+        for i in range(nx):
+            xs[i] = x[i] + h * a * kprev[i]
+        ks = k2 if s_ == 1 else (k3 if s_ == 2 else k4)
+        ts = t + h * a
+        us = um if s_ < 3 else ub
+        k_jac(ts, xs, us, p, P, c, cols, A, Bp)
+        for j in range(ne):
+            for i in range(nx):
+                Be[i, j] = Bp[i, cols[j]]
+        for i in range(nx):
+            for j in range(nx):
+                M[i, j] = (1.0 if i == j else 0.0) + (h * a) * Kx[i, j]
+        mat_mul(A, M, Kxs)
+        for i in range(nx):
+            for j in range(ne):
+                Kps[i, j] = (h * a) * Kp[i, j]
+        mat_mul(A, Kps, Kp)
+        for i in range(nx):
+            for j in range(ne):
+                Kp[i, j] += Be[i, j]
+            for j in range(nx):
+                Kx[i, j] = Kxs[i, j]
+        for i in range(nx):
+            for j in range(nx):
+                Fx[i, j] += wgt * Kx[i, j]
+            for j in range(ne):
+                Fp[i, j] += wgt * Kp[i, j]
+        k_rhs(ts, xs, us, c, ks)
+        kprev = ks
+    for i in range(nx):
+        xn[i] = x[i] + h / 6 * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i])
+        for j in range(nx):
+            Fx[i, j] = (1.0 if i == j else 0.0) + h / 6 * Fx[i, j]
+        for j in range(ne):
+            Fp[i, j] = h / 6 * Fp[i, j] * scale[j]
+
+
+def _work(nx, n_par, ne):
+    return (np.zeros(nx), np.zeros(nx), np.zeros(nx), np.zeros(nx), np.zeros(nx),
+            np.zeros((nx, nx)), np.zeros((nx, n_par)), np.zeros((nx, nx)), np.zeros((nx, nx)), np.zeros((nx, ne)),
+            np.zeros((nx, nx)), np.zeros((nx, ne)), np.zeros((nx, nx)), np.zeros((nx, ne)))
+
+
+def cross_interval(method, t0, x, u0, u1, foh, n, p, P, c, cols, h, scale, xn, Fx, Fp, Ax, Ap, tmpx, tmpp,
+                   ua, ub, um, w):
+    """Cross one sample interval in ``n`` steps of length ``h`` (as ``ekf._cross_interval``): step ``i``
+    starts at ``t0 + i h``; under first-order hold (``foh``) its end inputs are ``(1 - w) u0 + w u1`` at
+    ``w = i/n, (i+1)/n`` (the last one ``u1`` itself), else ``u0`` throughout.  ``xn``, ``Fx``, ``Fp``
+    receive the end state and the interval's transition (parameter columns scaled)."""
+    nx = x.shape[0]
+    ne = cols.shape[0]
+    nu = u0.shape[0]
+    ua[:] = u0
+    for i in range(n):
+        for j in range(nu):
+            if not foh:
+                ub[j] = u0[j]
+            elif i == n - 1:
+                ub[j] = u1[j]
+            else:
+                wt = (i + 1) / n
+                ub[j] = (1.0 - wt) * u0[j] + wt * u1[j]
+            um[j] = 0.5 * (ua[j] + ub[j]) if foh else ua[j]
+        ti = t0 + i * h if i else t0
+        if i == 0:
+            tangent(method, ti, x, ua, um, ub, p, P, c, cols, h, scale, xn, Fx, Fp, w)
+        else:
+            x[:] = xn
+            tangent(method, ti, x, ua, um, ub, p, P, c, cols, h, scale, xn, Ax, Ap, w)
+            mat_mul(Ax, Fp, tmpp)
+            for r in range(nx):
+                for j in range(ne):
+                    Fp[r, j] = tmpp[r, j] + Ap[r, j]
+            mat_mul(Ax, Fx, tmpx)
+            Fx[:, :] = tmpx
+        ua[:] = ub
+
+
+def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, R, z0, P0, p_base, est_idx, scale,
+               meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store,
+               z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated,
+               div, div_at, d2_at):
+    """The filter over the samples of batch member ``b`` (arrays as in :func:`run_compiled`; the stored
+    arrays arrive NaN-filled, so what a diverged member does not compute stays NaN)."""
+    N = t.shape[1]
+    nz = z0.shape[1]
+    ne = nz - nx
+    nm = meas_idx.shape[0]
+    nu = U.shape[2]
+    n_par = p_base.shape[1]
+    z = z0[b].copy()
+    P = P0[b].copy()
+    p = p_base[b].copy()
+    zn = np.empty(nz)
+    Pn = np.empty((nz, nz))
+    Ftop = np.zeros((nx, nz))
+    Fx = np.zeros((nx, nx))
+    Fp = np.zeros((nx, ne))
+    Ax = np.zeros((nx, nx))
+    Ap = np.zeros((nx, ne))
+    tmpx = np.zeros((nx, nx))
+    tmpp = np.zeros((nx, ne))
+    x = np.empty(nx)
+    xn = np.empty(nx)
+    ua = np.empty(nu)
+    ub = np.empty(nu)
+    um = np.empty(nu)
+    M = np.empty((nx, nz))
+    Pb = np.empty((ne, nx))
+    w = _work(nx, n_par, ne)
+    sel = np.empty(nm, dtype=np.int64)
+    run = np.zeros(nm, dtype=np.int64)
+    S = np.empty((nm, nm))
+    L = np.empty((nm, nm))
+    PHt = np.empty((nz, nm))
+    Kt = np.empty((nm, nz))
+    e = np.empty(nm)
+    a = np.empty(nm)
+    A = np.empty((nz, nz))
+    colb = np.empty(nm)
+    z_fin[b] = z
+    P_fin[b] = P
+    if store:
+        z_prior[b, 0] = z
+        P_prior[b, 0] = P
+    for k in range(N):
+        # ---- update with the measurements of sample k (gated channels count as missing)
+        if gate > 0 and reset[b, k]:
+            run[:] = 0
+        if any_k[k]:
+            cnt = 0
+            for j in range(nm):
+                if fin[b, k, j]:
+                    ej = Y[b, k, j] - z[meas_idx[j]]
+                    if gate > 0:
+                        Sjj = P[meas_idx[j], meas_idx[j]] + R[b, j]
+                        if ej * ej > gate * gate * Sjj and run[j] < gate_run:
+                            run[j] += 1
+                            gated[b, k, j] = True
+                            innov[b, k, j] = ej
+                            S_diag[b, k, j] = Sjj
+                            continue
+                        run[j] = 0
+                    sel[cnt] = j
+                    cnt += 1
+            d2 = 0.0
+            ld = 0.0
+            ok = True
+            if cnt > 0:
+                for a_ in range(cnt):
+                    ja = sel[a_]
+                    e[a_] = Y[b, k, ja] - z[meas_idx[ja]]
+                    for i in range(nz):
+                        PHt[i, a_] = P[i, meas_idx[ja]]
+                for a_ in range(cnt):
+                    for c_ in range(cnt):
+                        S[a_, c_] = PHt[meas_idx[sel[a_]], c_]
+                    S[a_, a_] += R[b, sel[a_]]
+                # Cholesky S = L L^T (fails: not positive definite or not finite)
+                for i in range(cnt):
+                    for j in range(i + 1):
+                        s = S[i, j]
+                        for m in range(j):
+                            s -= L[i, m] * L[j, m]
+                        if i == j:
+                            if not s > 0.0:
+                                ok = False
+                                break
+                            L[i, i] = math.sqrt(s)
+                        else:
+                            L[i, j] = s / L[j, j]
+                    if not ok:
+                        break
+                if ok:
+                    # X = S^-1 [H P, e]: forward then backward substitution, column by column
+                    for col in range(nz + 1):
+                        for i in range(cnt):
+                            s = PHt[col, i] if col < nz else e[i]
+                            for m in range(i):
+                                s -= L[i, m] * colb[m]
+                            colb[i] = s / L[i, i]
+                        for i in range(cnt - 1, -1, -1):
+                            s = colb[i]
+                            for m in range(i + 1, cnt):
+                                s -= L[m, i] * colb[m]
+                            colb[i] = s / L[i, i]
+                        for i in range(cnt):
+                            if col < nz:
+                                Kt[i, col] = colb[i]
+                            else:
+                                a[i] = colb[i]
+                    for i in range(cnt):
+                        ld += 2.0 * math.log(L[i, i])
+                        d2 += e[i] * a[i]
+                    for i in range(nz):
+                        s = 0.0
+                        for c_ in range(cnt):
+                            s += Kt[c_, i] * e[c_]
+                        z[i] += s
+                    # A = P - K H P  (H P = PHt^T)
+                    for i in range(nz):
+                        for j in range(nz):
+                            s = P[i, j]
+                            for c_ in range(cnt):
+                                s -= Kt[c_, i] * PHt[j, c_]
+                            A[i, j] = s
+                    # P = A - (A H^T - K R) K^T
+                    for i in range(nz):
+                        for c_ in range(cnt):
+                            colb[c_] = A[i, meas_idx[sel[c_]]] - Kt[c_, i] * R[b, sel[c_]]
+                        for j in range(nz):
+                            s = A[i, j]
+                            for c_ in range(cnt):
+                                s -= colb[c_] * Kt[c_, j]
+                            P[i, j] = s
+                else:
+                    d2 = np.nan
+                    ld = np.nan
+                for a_ in range(cnt):
+                    ja = sel[a_]
+                    innov[b, k, ja] = e[a_]
+                    S_diag[b, k, ja] = S[a_, a_]
+                nis[b, k] = d2
+                logdet[b, k] = ld
+            # ---- divergence check (NaN fails every comparison); the member stops here
+            tr = 0.0
+            for i in range(nz):
+                tr += P[i, i] + 0.0 * z[i]
+            if cnt == 0 and not math.isfinite(tr):
+                d2 = np.nan
+            margin = min(min(nis_limit - d2, tr), np.inf - tr)
+            if not margin > 0:
+                div[b] = True
+                div_at[b] = k
+                d2_at[b] = d2
+                return
+        if store:
+            z_post[b, k] = z
+            P_post[b, k] = P
+        z_fin[b] = z
+        P_fin[b] = P
+        if k == N - 1:
+            break
+        # ---- predict to sample k+1 (nothing is integrated into a reset sample)
+        rs = reset[b, k + 1]
+        if not rs:
+            for j in range(ne):
+                p[est_idx[j]] = z[nx + j] * scale[j]
+            c = k_consts(p, Pk)
+            n = nsteps[b, k]
+            h = (t[b, k + 1] - t[b, k]) / n
+            x[:] = z[:nx]
+            cross_interval(method, t[b, k], x, U[b, k], U[b, k + 1], foh, n, p, Pk, c, est_idx, h, scale,
+                           xn, Fx, Fp, Ax, Ap, tmpx, tmpp, ua, ub, um, w)
+        for i in range(nx):
+            zn[i] = x_reset[b, k + 1, i] if rs else xn[i]
+            for j in range(nz):
+                Ftop[i, j] = 0.0 if rs else (Fx[i, j] if j < nx else Fp[i, j - nx])
+        for i in range(nx, nz):
+            zn[i] = z[i]
+        # P_next = F P F^T with F = [[Ftop], [0 I]], symmetrised, + Q
+        for i in range(nx):  # M = top rows of F P (nx, nz)
+            for j in range(nz):
+                s = 0.0
+                for m in range(nz):
+                    s += Ftop[i, m] * P[m, j]
+                M[i, j] = s
+        for i in range(ne):  # Pb = bottom-left block of F P F^T (ne, nx)
+            for j in range(nx):
+                s = 0.0
+                for m in range(nz):
+                    s += P[nx + i, m] * Ftop[j, m]
+                Pb[i, j] = s
+        for i in range(nx):  # top-left block M F_top^T, symmetrised
+            for j in range(i + 1):
+                s1 = 0.0
+                s2 = 0.0
+                for m in range(nz):
+                    s1 += M[i, m] * Ftop[j, m]
+                    s2 += M[j, m] * Ftop[i, m]
+                Pn[i, j] = 0.5 * (s1 + s2)
+                Pn[j, i] = Pn[i, j]
+            for j in range(ne):
+                v = 0.5 * (M[i, nx + j] + Pb[j, i])
+                Pn[i, nx + j] = v
+                Pn[nx + j, i] = v
+        for i in range(ne):
+            for j in range(ne):
+                Pn[nx + i, nx + j] = 0.5 * (P[nx + i, nx + j] + P[nx + j, nx + i])
+        for i in range(nz):
+            Pn[i, i] += 0.0 if (rs and i < nx) else q[b, i] * dtq[b, k]
+        if rs:
+            for i in range(nx):
+                for j in range(nx):
+                    Pn[i, j] += P_reset[b, i, j]
+        if store:
+            for i in range(nz):
+                for j in range(nz):
+                    Fs[b, k, i, j] = Ftop[i, j] if i < nx else (1.0 if i == j else 0.0)
+            z_prior[b, k + 1] = zn
+            P_prior[b, k + 1] = Pn
+        z[:] = zn
+        P[:, :] = Pn
+    if store:
+        for i in range(nz):
+            for j in range(nz):
+                Fs[b, N - 1, i, j] = 1.0 if i == j else 0.0
+
+
+def ekf_batch(t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, R, z0, P0, p_base, est_idx, scale,
+              meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store,
+              z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated, div, div_at, d2_at):
+    for b in range(t.shape[0]):
+        ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, R, z0, P0, p_base, est_idx, scale,
+                   meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store,
+                   z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated,
+                   div, div_at, d2_at)
+
+
+FILTER = {"mat_mul": mat_mul, "tangent": tangent, "_work": _work, "cross_interval": cross_interval,
+          "ekf_member": ekf_member, "ekf_batch": ekf_batch}
+
+
+# ------------------------------------------------------------------ RTS smoother (model-free)
+def rts_member(zf, Pf, zp, Pp, F, zs, Ps):
+    """Backward recursion of one member: ``G = Pf F^T Pp^-1`` (solved as ``Pp G^T = F Pf``),
+    ``zs_k = zf_k + G (zs_{k+1} - zp_{k+1})``, ``Ps_k = Pf_k + G (Ps_{k+1} - Pp_{k+1}) G^T`` (symmetrised)."""
+    N, nz = zf.shape
+    zs[N - 1] = zf[N - 1]
+    Ps[N - 1] = Pf[N - 1]
+    d = np.empty(nz)
+    for k in range(N - 2, -1, -1):
+        rhs = np.dot(F[k], Pf[k])
+        try:
+            Gt = np.linalg.solve(Pp[k + 1], rhs)
+        except Exception:  # singular prediction covariance: pseudo-inverse
+            Gt = np.dot(np.linalg.pinv(Pp[k + 1]), rhs)
+        Gt = np.ascontiguousarray(Gt)
+        G = np.ascontiguousarray(Gt.T)
+        for i in range(nz):
+            d[i] = zs[k + 1, i] - zp[k + 1, i]
+        zs[k] = zf[k] + np.dot(G, d)
+        D = np.dot(np.dot(G, Ps[k + 1] - Pp[k + 1]), Gt)
+        for i in range(nz):
+            for j in range(nz):
+                Ps[k, i, j] = Pf[k, i, j] + 0.5 * (D[i, j] + D[j, i])
+
+
+def rts_batch(zf, Pf, zp, Pp, F, zs, Ps):
+    for b in range(zf.shape[0]):
+        if np.isfinite(zf[b, -1]).all():
+            rts_member(zf[b], Pf[b], zp[b], Pp[b], F[b], zs[b], Ps[b])
+        else:  # a member that stopped at its divergence: nothing to smooth
+            zs[b] = np.nan
+            Ps[b] = np.nan
+
+
+SMOOTHER = {"rts_member": rts_member, "rts_batch": rts_batch}
+
+
+# ------------------------------------------------------------------ Python side
+_noticed: set = set()
+
+
+def _source_hash(functions: dict) -> str:
+    """Hash of the source files of ``functions`` (and of this module): the compiled kernel inlines them."""
+    files = {inspect.getsourcefile(getattr(f, "py_func", f)) for f in functions.values()} | {__file__}
+    h = hashlib.sha1()
+    for name in sorted(files):
+        with open(name, "rb") as fh:
+            h.update(fh.read())
+    return h.hexdigest()[:10]
+
+
+def filter_functions(model):
+    """The compiled filter for ``model`` (a dict of numba functions), or ``None`` when compilation is
+    off (:func:`shipid._jit.enabled`) or the model declares no equations (then a one-line notice,
+    once per model class)."""
+    if not _jit.enabled():
+        return None
+    eq = getattr(model, "_equations", None)
+    if eq is None:
+        key = type(model).__name__
+        if key not in _noticed:
+            _noticed.add(key)
+            warnings.warn(f"shipid: model '{model.name}' declares no compiled equations (Model._equations); "
+                          "the EKF runs on the numpy path", RuntimeWarning, stacklevel=3)
+        return None
+    ns = model._equations_namespace()
+    tag = "__" + re.sub(r"\W", "_", model.name) + "_" + _source_hash({**eq, **ns})
+    key = ("filter", id(eq), tag)
+    out = _cache.get(key)
+    if out is None:
+        funcs = _jit.rebind(eq, ns, jit=True, tag=tag)
+        out = _cache[key] = _jit.rebind(FILTER, {**ns, **funcs}, jit=True, tag=tag)
+    return out
+
+
+_cache: dict = {}
+
+
+def run_compiled(prob, store: bool, nis_limit: float):
+    """:func:`shipid.identify.ekf.run_ekf` on the compiled kernel, or ``None`` when it is not available
+    (numba off, the model has no compiled equations, or a method the kernel does not implement)."""
+    from .ekf import INPUT_HOLDS, EKFOutput, interval_steps
+
+    if prob.method not in METHODS:
+        return None
+    if prob.input_hold not in INPUT_HOLDS:
+        raise ValueError(f"input_hold must be one of {INPUT_HOLDS}, got {prob.input_hold!r}")
+    if prob.gate is not None and not float(prob.gate) > 0:
+        raise ValueError(f"gate must be positive or None, got {prob.gate}")
+    fns = filter_functions(prob.model)
+    if fns is None:
+        return None
+    B, N, nx, ne, nm = prob.shape
+    nz = nx + ne
+    f64 = lambda a: np.ascontiguousarray(a, dtype=float)  # noqa: E731
+    t = f64(prob.t)
+    Y = f64(prob.Y)
+    fin = np.isfinite(Y)
+    reset = np.ascontiguousarray(prob.reset, dtype=np.bool_)
+    dt = np.diff(t, axis=1)
+    # the numpy path adds one Q (that of the first interval) when the sampling is uniform and no member
+    # resets at k+1; the interval's own Q otherwise
+    uniform = N > 1 and bool(np.all(np.abs(dt - dt[:, :1]) <= 1e-9 * np.abs(dt[:, :1])))
+    dtq = dt.copy()
+    if uniform:
+        keep = ~reset[:, 1:].any(axis=0)
+        dtq[:, keep] = dt[:, :1]
+    nsteps = interval_steps(t, int(prob.substeps), prob.h_max)
+    if N == 1:
+        dtq, nsteps = np.zeros((B, 1)), np.ones((B, 1), dtype=np.int64)
+    nan = lambda *shape: np.full(shape, np.nan)  # noqa: E731
+    if store:
+        z_post, z_prior = nan(B, N, nz), nan(B, N, nz)
+        P_post, P_prior, Fs = nan(B, N, nz, nz), nan(B, N, nz, nz), nan(B, N, nz, nz)
+    else:
+        z_post = z_prior = np.empty((1, 1, nz))
+        P_post = P_prior = Fs = np.empty((1, 1, nz, nz))
+    z_fin, P_fin = np.empty((B, nz)), np.empty((B, nz, nz))
+    innov, S_diag, nis, logdet = nan(B, N, nm), nan(B, N, nm), nan(B, N), nan(B, N)
+    gated = np.zeros((B, N, nm), dtype=np.bool_)
+    div = np.zeros(B, dtype=np.bool_)
+    div_at = np.full(B, -1, dtype=np.int64)
+    d2_at = np.full(B, np.nan)
+    fns["ekf_batch"](
+        t, f64(prob.U), Y, fin, fin.any(axis=(0, 2)), reset, f64(prob.x_reset), f64(prob.P_reset), f64(prob.q), dtq,
+        nsteps, f64(prob.R), f64(prob.z0), f64(prob.P0), f64(prob.p_base),
+        np.ascontiguousarray(prob.est_idx, dtype=np.int64), f64(prob.scale),
+        np.ascontiguousarray(prob.meas_idx, dtype=np.int64), f64(prob.model._kernel_constants()), nx,
+        METHODS[prob.method], prob.input_hold == "foh", -1.0 if prob.gate is None else float(prob.gate),
+        int(prob.gate_run), float(nis_limit), bool(store),
+        z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated, div, div_at, d2_at)
+    message = ["ok"] * B
+    for b in np.flatnonzero(div):
+        k = int(div_at[b])
+        tk = t[b, k]
+        message[b] = (f"filter diverged at sample {k} (t = {tk:.4g} s): normalised innovation {d2_at[b]:.3g}"
+                      if np.isfinite(d2_at[b])
+                      else f"filter diverged at sample {k} (t = {tk:.4g} s): non-finite state or covariance")
+    cnt = (np.isfinite(innov) & ~gated).sum(axis=2)
+    loglik = -0.5 * np.where(cnt > 0, nis + logdet + cnt * _LOG2PI, 0.0).sum(axis=1)
+    loglik = np.where(div, -np.inf, loglik)
+    return EKFOutput(
+        z_post=z_post if store else None, P_post=P_post if store else None,
+        z_prior=z_prior if store else None, P_prior=P_prior if store else None,
+        F=Fs if store else None, z_final=z_fin, P_final=P_fin, innov=innov, S_diag=S_diag,
+        loglik=loglik, nis=nis, diverged=div, diverged_at=div_at, message=message,
+        gated=gated, n_gated=gated.sum(axis=1),
+    )
+
+
+def smooth_compiled(out):
+    """:func:`shipid.identify.ekf.rts_smooth` compiled, or ``None`` when compilation is off."""
+    fns = _jit.compiled(SMOOTHER)
+    if fns is None:
+        return None
+    c = lambda a: np.ascontiguousarray(a, dtype=float)  # noqa: E731
+    zs, Ps = np.empty_like(out.z_post), np.empty_like(out.P_post)
+    fns["rts_batch"](c(out.z_post), c(out.P_post), c(out.z_prior), c(out.P_prior), c(out.F), zs, Ps)
+    return zs, Ps

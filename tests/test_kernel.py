@@ -1,0 +1,137 @@
+"""The compiled EKF kernel (shipid.identify._kernel) against the numpy path of run_ekf / rts_smooth.
+
+Every model with compiled equations, with resets (two logs), partial and whole-sample gaps, an
+irregular sampling gap, a batch of members with different noise, sub-steps, every transition method,
+and a diverging member: filtered and predicted means and covariances, transitions, innovations,
+their variances, NIS, log-likelihood, divergence flags and messages, smoothed means and covariances
+agree to 1e-10.  Skipped when compilation is off (no numba, or SHIPID_JIT=0).
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+import shipid
+from shipid import _jit
+from shipid.datasets import bundled_kcs_logs
+from shipid.identify import EKFIdentifier, rts_smooth, run_ekf
+from shipid.identify import _kernel
+from shipid.models import get_model
+
+pytestmark = pytest.mark.skipif(not _jit.enabled(), reason="numba not installed (extra 'fast') or SHIPID_JIT=0: "
+                                "compiled EKF kernel not tested")
+
+FIELDS = ("z_post", "P_post", "z_prior", "P_prior", "F", "innov", "S_diag", "nis", "loglik", "z_final", "P_final",
+          "diverged", "diverged_at")
+
+
+def _close(a, b, name):
+    """Equal to 1e-10 relative to the size of the quantity (NaN where the other is NaN)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    assert np.array_equal(np.isnan(a), np.isnan(b)), f"{name}: NaN pattern differs"
+    assert np.array_equal(np.isinf(a), np.isinf(b)) and np.array_equal(a[np.isinf(a)], b[np.isinf(b)]), name
+    ref = np.max(np.abs(b[np.isfinite(b)])) if np.isfinite(b).any() else 1.0
+    np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-10 * max(ref, 1e-300), equal_nan=True, err_msg=name)
+
+
+def _compare(prob, nis_limit=1e6):
+    assert _kernel.run_compiled(prob, True, nis_limit) is not None, "the compiled path did not run"
+    fast = run_ekf(prob, store=True, nis_limit=nis_limit)
+    fast_nostore = run_ekf(prob, store=False, nis_limit=nis_limit)
+    with _jit.disabled():
+        slow = run_ekf(prob, store=True, nis_limit=nis_limit)
+        slow_nostore = run_ekf(prob, store=False, nis_limit=nis_limit)
+        zs0, Ps0 = rts_smooth(slow)
+    for f in FIELDS:
+        _close(getattr(fast, f), getattr(slow, f), f)
+    for f in ("z_final", "P_final", "innov", "loglik", "diverged_at"):
+        _close(getattr(fast_nostore, f), getattr(slow_nostore, f), f + " (store=False)")
+    assert fast.message == slow.message and fast_nostore.message == slow_nostore.message
+    zs, Ps = rts_smooth(fast)
+    _close(zs, zs0, "smoothed means")
+    _close(Ps, Ps0, "smoothed covariances")
+    return fast
+
+
+def _batch(prob, B, rng):
+    """``prob`` repeated B times, members with other measurement noise and noise settings."""
+    rep = lambda a: np.repeat(a, B, axis=0)  # noqa: E731
+    sig = np.sqrt(prob.R[0])
+    Y = rep(prob.Y) + rng.normal(0, 1, (B,) + prob.Y.shape[1:]) * sig
+    R = rep(prob.R) * np.linspace(0.5, 2.0, B)[:, None]
+    q = rep(prob.q) * np.linspace(0.1, 10.0, B)[:, None]
+    return replace(prob, p_base=rep(prob.p_base), t=rep(prob.t), U=rep(prob.U), Y=Y, R=R, q=q, z0=rep(prob.z0),
+                   P0=rep(prob.P0), reset=rep(prob.reset), x_reset=rep(prob.x_reset), P_reset=rep(prob.P_reset))
+
+
+def _problem(model, logs, estimate, n=160):
+    """The identifier's EKF problem for the first ``n`` samples of each log, with gaps."""
+    frames = []
+    for j, lg in enumerate(logs):
+        df = lg.iloc[:n].copy().reset_index(drop=True)
+        df.loc[30 + j:40, ["u", "v"]] = np.nan           # partial gaps: the masked update
+        df.loc[70:72, [c for c in ("x", "y", "psi", "u", "v", "r") if c in df]] = np.nan  # whole samples
+        df = df.drop(index=range(100, 104)).reset_index(drop=True)  # an irregular sampling gap
+        frames.append(df)
+    with _jit.disabled():
+        ident = EKFIdentifier(model, n_passes=1, init="model", estimate=estimate)
+        ident.fit(frames)
+    return ident.problem_
+
+
+@pytest.fixture(scope="module")
+def kcs_problem(kcs_truth, kcs_logs):
+    return _problem(kcs_truth, [kcs_logs["kcs_zz_p20_rpm"][0], kcs_logs["kcs_tc_m25_rpm"][0]], None)
+
+
+@pytest.mark.parametrize("method, hold", [("rk4", "foh"), ("rk4", "zoh"), ("rk4-exact", "foh"), ("euler", "foh")])
+def test_kcs_response_kernel_equals_numpy(kcs_problem, method, hold):
+    """Sub-steps, more steps over the sampling gap (h_max), both input holds, gating."""
+    prob = _batch(kcs_problem, 3, np.random.default_rng(5))
+    Y = prob.Y.copy()
+    Y[0, 20:23, 5] += 0.05  # outliers the gate rejects (member 0)
+    dt = float(np.median(np.diff(prob.t[0])))
+    prob = replace(prob, Y=Y, method=method, substeps=2, h_max=0.75 * dt, input_hold=hold, gate=4.0, gate_run=2)
+    assert prob.reset.any() and not np.isfinite(prob.Y).all()
+    out = _compare(prob)
+    assert not out.diverged.any() and out.gated[0].any()
+
+
+def test_diverging_member_is_frozen_alike(kcs_problem):
+    prob = _batch(kcs_problem, 3, np.random.default_rng(6))
+    Y = prob.Y.copy()
+    Y[1, 120:, 5] += 50.0  # member 1: an absurd yaw-rate jump
+    out = _compare(replace(prob, Y=Y, input_hold="foh"))
+    assert list(out.diverged) == [False, True, False] and out.diverged_at[1] == 120
+
+
+def test_response_nl_kernel_equals_numpy(kcs_logs):
+    model = get_model("response-nl")
+    logs = [f for f, _ in kcs_logs.values()][:2]
+    prob = _problem(model, logs, ["b1", "b2", "b3", "b6", "c1", "c2", "c3", "c7", "a1", "a9"])
+    _compare(_batch(prob, 2, np.random.default_rng(7)))
+
+
+def test_mmg_kernel_equals_numpy():
+    truth = shipid.get_model("mmg", "kcs")
+    logs = [shipid.read_log(p).data for p in bundled_kcs_logs("mmg")][:2]
+    prob = _problem(truth, logs, ["Yv", "Yr", "Nv", "Nr", "Nvvr", "R0", "tP", "f_alpha"], n=120)
+    _compare(_batch(prob, 2, np.random.default_rng(8)))
+
+
+def test_models_without_compiled_equations_fall_back_with_one_notice(kcs_truth):
+    class Plain(type(kcs_truth)):
+        name = "plain-kcs"
+        _equations = None
+
+    model = Plain(kcs_truth.params)
+    _kernel._noticed.discard("Plain")
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        assert _kernel.filter_functions(model) is None
+        assert _kernel.filter_functions(model) is None
+    msgs = [str(w.message) for w in rec]
+    assert len(msgs) == 1 and "plain-kcs" in msgs[0] and "numpy path" in msgs[0]
