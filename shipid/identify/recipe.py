@@ -340,7 +340,7 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
              start: str = "staged", neutral: bool = True, free_neutral: bool = True, dt="auto",
              refine: str | None = "auto",
              n_passes: int = 2, max_nfev: int = 60, tune_noise: bool = False, progress: bool = False,
-             meas_std=None, log=None) -> RecipeFit:
+             meas_std=None, ekf_options=None, log=None) -> RecipeFit:
     """Fit ``model`` to ``logs`` with the project's recipe (module docstring: steps 1-6).
 
     Parameters
@@ -357,6 +357,7 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
     dt : "auto", int or None  step 2: ``"auto"``; an int k: every k-th sample; None: every sample
     refine : {"auto", "metrics", "output-error", None}  step 6
     n_passes, tune_noise, progress, meas_std : passed to the EKF
+    ekf_options : dict, optional  further keyword arguments of the EKF identifier (e.g. ``input_hold``, ``gate``)
     max_nfev : int  evaluation limit of the refinement
     log : callable, optional  called with one line per step as it happens (e.g. ``print``)
 
@@ -435,7 +436,7 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
         seed_model = get_model("kcs-response", lpp=L)
         seed_fix = {k2: v for k2, v in fix.items() if k2 in seed_model.param_names}
         seed = EKFIdentifier(seed_model, fixed=seed_fix or None, n_passes=n_passes, progress=progress,
-                             meas_std=meas_std).fit(used)
+                             meas_std=meas_std, **(ekf_options or {})).fit(used)
         vals = {k2: float(seed.coef_.get(k2, 0.0)) for k2 in m0.param_names}
         vals.update({k2: v for k2, v in fix.items()})
         m0 = m0.with_params(vals)
@@ -443,9 +444,17 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
              f"({seed.message_}); the non-linear terms start at 0")
     else:
         step("start values", "as built", why)
+    ekf_opts = dict(ekf_options or {})
     ekf = EKFIdentifier(m0, estimate=est, fixed=fix or None, n_passes=n_passes, tune_noise=tune_noise,
-                        progress=progress, meas_std=meas_std).fit(used)
+                        progress=progress, meas_std=meas_std, **ekf_opts).fit(used)
     step("EKF", ekf.message_, f"{len(ekf.estimated_)} parameters estimated, {n_passes} passes")
+    if not ekf.success_ and "gate" not in ekf_opts and getattr(ekf, "gate", None) is not None:
+        # the start transient of a model far from the data gives large innovations; rejecting them (gating)
+        # leaves the filter open-loop (the MARIN KVLCC2 mmg fit diverges at t = 38 s with the default gate)
+        first = ekf.message_
+        ekf = EKFIdentifier(m0, estimate=est, fixed=fix or None, n_passes=n_passes, tune_noise=tune_noise,
+                            progress=progress, meas_std=meas_std, **{**ekf_opts, "gate": None}).fit(used)
+        step("EKF", ekf.message_, f"refitted without innovation gating: with the default gate the filter failed ({first})")
     fit = RecipeFit(ekf=ekf, steps=steps, logs=used)
     mode = refine
     if mode == "auto":
