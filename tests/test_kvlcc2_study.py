@@ -153,11 +153,12 @@ def test_cli_fit_carries_the_logs_particulars_through_refinement(tmp_path, capsy
     short = TrialLog.from_arrays(lg.time[keep], name=lg.name, ship=lg.ship,
                                  **{c: lg[c][keep] for c in lg.channels if c != "time"}).to_csv(tmp_path / "short.csv")
     out = tmp_path / "r.json"
-    code = main(["fit", str(short), "--model", "kcs-response", "--passes", "1", "--refine", "--dt", "1",
-                 "--no-progress", "-o", str(out)])
+    # sway/yaw re-identified, surge kept from the (scaled) start: a 260 s zigzag does not determine the surge terms
+    code = main(["fit", str(short), "--model", "kcs-response", "--estimate", "b1,b2,b3,b4,c1,c2,c3", "--passes", "1",
+                 "--refine", "--dt", "1", "--no-progress", "-o", str(out)])
     assert code in (0, 1)  # 1: the refinement hit its iteration limit (said so); the result is written either way
     res = load_result(out)
-    assert res.method == "output-error" and res.coef["a8"] == 0.0  # constant rpm: a8 fixed by the recipe
+    assert res.method == "output-error"
     assert res.model_options["lpp"] == 320.0 and res.ship["lpp"] == 320.0 and res.ship["name"] == "KVLCC2"
     assert res.model_options["design_speed"] == pytest.approx(7.974)  # the logs' particulars
     assert [s["step"] for s in res.settings["recipe"]][:2] == ["ship", "sampling"]
@@ -168,7 +169,7 @@ def test_cli_fit_carries_the_logs_particulars_through_refinement(tmp_path, capsy
     np.testing.assert_array_equal(again.to_model().params, model.params)
     capsys.readouterr()
     main(["simulate", str(out), "--turning", "35", "--side", "starboard"])
-    assert "kcs-response member 0: turning (starboard)" in capsys.readouterr().out
+    assert "turning" in capsys.readouterr().out  # the 320 m ship simulated (a 260 s fit: not a good model)
     run = turning_circle(model, 35.0, side="starboard", heading_change_deg=200.0)
     assert run.metrics[0].lpp == 320.0 and run.settings["speed"].iloc[0] == pytest.approx(7.974)
     # asked for another ship: Froude-scaled to it (and said so)
@@ -178,7 +179,8 @@ def test_cli_fit_carries_the_logs_particulars_through_refinement(tmp_path, capsy
 
 # ----------------------------------------------------------------------------- the CLI route (README)
 def _cli_fit_validate(tmp_path, model, params=None):
-    """``shipid fit`` on tc+-35, zz+-10 with default settings, then ``shipid validate`` on all six runs;
+    """``shipid fit`` on tc+-35, zz+-10 with default settings, then ``shipid validate`` on zz+-20 and tc+-35 (the
+    README's two commands);
     returns {run: {metric: error}} of the closed-loop standard manoeuvres (TD in %, overshoots in deg)
     and the result."""
     from shipid.cli import main
@@ -190,11 +192,12 @@ def _cli_fit_validate(tmp_path, model, params=None):
     if params:
         args += ["--params", params]
     assert main(args) in (0, 1)
-    assert main(["validate", str(out), *[files[k] for k in ks.RUNS], "-o", str(val)]) in (0, 1)
+    shown = ("zz_20", "zz_-20", "tc_35", "tc_-35")  # the README's validate command
+    assert main(["validate", str(out), *[files[k] for k in shown], "-o", str(val)]) in (0, 1)
     res = load_result(out)
     assert [m["name"] for m in res.inputs] == [f"MARIN_FREE_KVLCC2_{k}_m" for k in ks.TRAIN]  # zz+-20 never enter
     errs = {}
-    for k, v in zip(ks.RUNS, json.loads(val.read_text())):
+    for k, v in zip(shown, json.loads(val.read_text())):
         m, s = v["measured"], v["standard"]
         if k.startswith("tc"):
             td = s.get("tactical_diameter_L")
@@ -204,3 +207,47 @@ def _cli_fit_validate(tmp_path, model, params=None):
             errs[k] = {c: np.nan if s.get(c) is None else s[c] - m[c] for c in ("overshoot1_deg", "overshoot2_deg")}
     print(json.dumps(errs, indent=1))
     return errs, res
+
+
+@pytest.mark.slow
+def test_cli_mmg_default_recipe_on_the_holdout(tmp_path):
+    """README: ``shipid fit tc_35 tc_-35 zz_10 zz_-10 --model mmg --params kvlcc2 -o r.json`` then
+    ``shipid validate r.json ...``.  The recipe: every 4th sample (tau 13.7 s), delta0 +0.92 deg from the
+    straight approaches, EKF, output-error refinement (chosen by leave-one-run-out on the training runs).
+    Measured: TD +1.3 % / -8.5 %; held-out zz_20 +3.7 / +4.4 deg, zz_-20 +2.0 / +7.4 deg -- one of the six
+    goals (tc_35) met; zz_-20's first overshoot misses 2 deg by 0.03 deg."""
+    errs, res = _cli_fit_validate(tmp_path, "mmg", "kvlcc2")
+    steps = {s["step"]: s["value"] for s in res.settings["recipe"]}
+    assert steps["sampling"] == 4 and steps["neutral rudder angle"] == pytest.approx(0.915, abs=0.01)
+    assert steps["refinement"] == "output-error" and res.method == "output-error" and res.success
+    assert abs(errs["tc_35"]["TD"]) < 5.0                                      # goal met
+    assert -10.0 < errs["tc_-35"]["TD"] < -7.0                                 # goal missed (-8.5 %)
+    assert 2.7 < errs["zz_20"]["overshoot1_deg"] < 4.7                         # missed (+3.7)
+    assert 3.4 < errs["zz_20"]["overshoot2_deg"] < 5.4                         # missed (+4.4)
+    assert 1.0 < errs["zz_-20"]["overshoot1_deg"] < 3.0                        # at the goal's edge (+2.03)
+    assert 6.4 < errs["zz_-20"]["overshoot2_deg"] < 8.4                        # missed (+7.4)
+
+
+@pytest.mark.slow
+def test_cli_mmg_metric_refinement_on_the_holdout(tmp_path):
+    """The same with ``--refine metrics`` (the training runs' own metrics in the objective; not the default:
+    leave-one-run-out score 4.38 against output-error's 2.43).  Measured: both turns within 5 % (+4.4 %,
+    -4.7 %), zz_-20 first overshoot +1.1 deg: three of the six goals; zz_20 +2.6 / +3.4 deg, zz_-20 second
+    +6.1 deg missed."""
+    from shipid.cli import main
+
+    files = dict(zip(ks.RUNS, marin_files(tmp_path, ks.RUNS)))
+    out, val = tmp_path / "r.json", tmp_path / "v.json"
+    assert main(["fit", *[files[k] for k in ks.TRAIN], "--model", "mmg", "--params", "kvlcc2", "--refine", "metrics",
+                 "-o", str(out), "--no-progress"]) == 0
+    assert main(["validate", str(out), files["zz_20"], files["zz_-20"], files["tc_35"], files["tc_-35"],
+                 "-o", str(val)]) == 0
+    v = {d["name"][18:-2]: d for d in json.loads(val.read_text())}
+    td = {k: 100 * (v[k]["standard"]["tactical_diameter_L"] / v[k]["measured"]["tactical_diameter_L"] - 1)
+          for k in ("tc_35", "tc_-35")}
+    o = {k: [v[k]["standard"][c] - v[k]["measured"][c] for c in ("overshoot1_deg", "overshoot2_deg")] for k in ks.TEST}
+    print(td, o)
+    assert abs(td["tc_35"]) < 5.0 and abs(td["tc_-35"]) < 5.0                  # goals met
+    assert abs(o["zz_-20"][0]) < 2.0                                           # goal met
+    assert 1.6 < o["zz_20"][0] < 3.6 and 2.4 < o["zz_20"][1] < 4.4             # missed (+2.6, +3.4)
+    assert 5.1 < o["zz_-20"][1] < 7.1                                          # missed (+6.1)

@@ -35,9 +35,9 @@ def register(sub) -> None:
     p.add_argument("--tune-noise", action="store_true", help="tune noise levels by innovation likelihood")
     p.add_argument("--refine", nargs="?", const="output-error", default="auto",
                    choices=("auto", "none", "output-error", "metrics"),
-                   help="refinement after the EKF: 'metrics' (output error + the training runs' own standard-manoeuvre "
-                        "metrics), 'output-error', 'none'; default 'auto' = metrics when the logs hold turning circles "
-                        "and zigzags, else none; a bare --refine means output-error")
+                   help="refinement after the EKF: 'output-error', 'metrics' (output error + the training runs' own "
+                        "standard-manoeuvre metrics), 'none'; default 'auto' = output-error when the logs hold turning "
+                        "circles and zigzags, else none; a bare --refine means output-error")
     p.add_argument("--max-nfev", type=int, default=60, help="evaluation limit of the refinement (default 60)")
     p.add_argument("--dt", default="auto", metavar="auto|K",
                    help="use every K-th sample; default auto: >= 25 steps per fastest time constant of the model")

@@ -214,12 +214,13 @@ class OutputErrorRefiner:
             if self.extra_residuals is not None:
                 rs.append(extra_batch(theta_batch))
             r = np.concatenate(rs, axis=1)
-            return np.where(np.isfinite(r), r, 1e6)
+            # a diverging simulation: finite residuals capped at 1e6 (squares must not overflow), others 1e6
+            return np.where(np.isfinite(r), np.clip(r, -1e6, 1e6), 1e6)
 
         def extra_batch(theta_batch):
             P = params_of(theta_batch)
             out = np.asarray(self.extra_residuals(P), dtype=float).reshape(P.shape[0], -1)
-            return np.where(np.isfinite(out), out, 1e6)
+            return np.where(np.isfinite(out), np.clip(out, -1e6, 1e6), 1e6)
 
         h = 1e-6
 
@@ -243,7 +244,7 @@ class OutputErrorRefiner:
         n_obs = int(sum(m.sum() for m, w in zip(masks, wlog) if w > 0))
         dof = max(n_obs - th0.size, 1)
         s2 = float(np.sum(sol.fun**2) / dof)
-        cov_s = np.linalg.pinv(J.T @ J) * s2
+        cov_s = np.linalg.pinv(J.T @ J) * s2 if np.all(np.isfinite(J)) else np.full((th0.size, th0.size), np.nan)
         theta = sol.x * scale
         cov = cov_s * np.outer(scale, scale)
         coef = p0.copy()
@@ -258,9 +259,17 @@ class OutputErrorRefiner:
         self.cost_ = float(sol.cost)
         self.cost_start_ = float(0.5 * np.sum(fun(th0) ** 2))
         self.rms_normalised_residual_ = float(np.sqrt(s2))
-        self.success_ = bool(sol.success)
+        finite = bool(np.all(np.isfinite(sol.x)) and np.isfinite(sol.cost))
+        capped = finite and bool(np.any(np.abs(sol.fun) >= 1e6))  # a replay still diverges at the end
+        self.success_ = bool(sol.success) and finite and not capped
         self.nfev_ = int(sol.nfev)
-        self.message_ = str(sol.message)
+        if not finite:
+            self.message_ = f"refinement failed: non-finite coefficients or cost ({sol.message}); the start model's replay diverges?"
+        elif capped:
+            self.message_ = (f"refinement failed: the refined model's replay of some logs still diverges ({sol.message}); "
+                             "the model cannot follow these logs")
+        else:
+            self.message_ = str(sol.message)
         if start is not None and getattr(start, "success_", True) is False:
             # a start from a diverged filter is not a result, whatever the optimiser says
             self.success_ = False

@@ -307,7 +307,7 @@ def check_result_dict(doc, source: str = "result") -> dict:
     out["inputs"] = inputs
     for key, default in (("method", "ekf"), ("message", ""), ("created", "")):
         out[key] = as_string(doc.get(key, default) if doc.get(key) is not None else default, w + key)
-    for key in ("settings", "versions", "extra", "model_options"):
+    for key in ("settings", "versions", "extra", "model_options", "ship"):
         out[key] = as_mapping(doc.get(key) or {}, w + key)
     out["success"] = as_bool(doc.get("success", True), w + "success")
     out["loglik"] = as_number(doc["loglik"], w + "loglik", finite=False) if doc.get("loglik") is not None else None

@@ -23,7 +23,8 @@ from ..logs import TrialLog, read_log
 from ..validation import validate
 
 __all__ = ["RUNS", "TRAIN", "TEST", "RUDDER_SIGN", "MEASURED_README", "START", "GOAL_TOL", "load_runs", "fit_model",
-           "evaluate", "neutral_rudder_angle", "common_grid", "metric_residuals", "rudder_sign"]
+           "evaluate", "neutral_rudder_angle", "common_grid", "metric_residuals", "rudder_sign", "leave_one_run_out",
+           "LORO_VARIANTS"]
 
 RUNS = ("tc_35", "tc_-35", "zz_10", "zz_-10", "zz_20", "zz_-20")
 TRAIN = ("tc_35", "tc_-35", "zz_10", "zz_-10")
@@ -113,3 +114,44 @@ def evaluate(result_or_model, runs: dict[str, TrialLog], names=RUNS) -> pd.DataF
                          "predicted": p, "error": None if (m is None or p is None) else p - m,
                          "rel_error_%": None if (m is None or p is None or c.endswith("deg")) else 100 * (p - m) / m})
     return pd.DataFrame(rows)
+
+
+#: The recipe variants compared by :func:`leave_one_run_out` (options of ``fit_logs`` / ``shipid fit``), fixed
+#: before any was run.
+LORO_VARIANTS = {
+    "metrics (delta0 freed)": {"refine": "metrics"},
+    "metrics, delta0 fixed": {"refine": "metrics", "free_neutral": False},
+    "output-error": {"refine": "output-error"},
+    "EKF only": {"refine": None},
+    "metrics, 15 evaluations": {"refine": "metrics", "max_nfev": 15},
+}
+
+
+def _goal_errors(model, log) -> list[float]:
+    """The run's closed-loop metric errors over their goal tolerances (TD / 5 %; overshoots / 2, 3 deg)."""
+    from ..validation import validate_one
+
+    v = validate_one(model, log)
+    m = v.measured.to_dict()
+    s = v.standard.to_dict() if v.standard is not None else {}
+    if m["manoeuvre"] == "turning":
+        td = s.get("tactical_diameter_L")
+        return [abs(100 * (td - m["tactical_diameter_L"]) / m["tactical_diameter_L"]) / GOAL_TOL["tactical_diameter_L"]
+                if td is not None else float("inf")]
+    return [abs(s[k] - m[k]) / GOAL_TOL[k] if s.get(k) is not None and m.get(k) is not None else float("inf")
+            for k in ("overshoot1_deg", "overshoot2_deg")]
+
+
+def leave_one_run_out(runs: dict[str, TrialLog], name: str = "mmg", variants=None, train=TRAIN) -> pd.DataFrame:
+    """Leave-one-run-out score of each recipe variant within the training runs only: for each training run,
+    fit on the other three and predict it; the score is the worst goal-normalised error of the left-out
+    runs (TD / 5 %, first / second overshoot / 2 / 3 deg).  The rule fixed before any variant was run:
+    the lowest score is the default.  The held-out runs are never read.  One row per variant."""
+    rows = []
+    for label, opts in (variants or LORO_VARIANTS).items():
+        folds = {}
+        for out in train:
+            fit = fit_model(name, runs, train=[k for k in train if k != out], **opts)
+            folds[out] = max(_goal_errors(fit.to_model(), runs[out]))
+        rows.append({"variant": label, "score": max(folds.values()), **folds})
+    return pd.DataFrame(rows).set_index("variant")
