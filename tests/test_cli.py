@@ -193,8 +193,10 @@ def test_demo_runs_and_recovers_the_truth(tmp_path, monkeypatch, capsys):
 
 def test_fit_meas_std_option_reaches_the_filter(tmp_path):
     out = tmp_path / "m.json"
+    # exit 3 is allowed: noise levels set by hand that differ from the data's may make the consistency
+    # verdict say so; this test is about the option reaching the filter
     assert main(["fit", str(SRC["kcs_zz_m10"]), "--estimate", "c2", "--passes", "1", "--meas-std", "v=0.001,r=0.0005",
-                 "-o", str(out), "--no-progress"]) == 0
+                 "-o", str(out), "--no-progress"]) in (0, 3)
     ms = json.loads(out.read_text())["settings"]["meas_std"]
     assert ms["v"] == 0.001 and ms["r"] == 0.0005
 

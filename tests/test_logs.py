@@ -545,7 +545,7 @@ def test_read_ship_json_yaml_and_errors(tmp_path, monkeypatch):
     p = write(tmp_path, "kcs.json", '{"name": "KCS", "lpp": 4.36, "beam": 0.61, "scale": 52.67}')
     s = read_ship(p)
     assert s.lpp == 4.36 and s.name == "KCS"
-    with pytest.raises(ValueError, match=r"`bad.json`: not valid JSON \(.* at line 1 column 14\); give a ship file"):
+    with pytest.raises(ValueError, match=r"`bad.json`: not a ship \(not valid JSON: .* at line 1 column 14\); give a ship file"):
         read_ship(write(tmp_path, "bad.json", '{"lpp": 4.36,'))
     with pytest.raises(ValueError, match="ship file does not exist"):
         read_ship(tmp_path / "none.json")

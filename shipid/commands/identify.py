@@ -177,11 +177,12 @@ def _fit(args) -> int:
                               meas_std=meas_std, **extra)
         fit = _lib_errors(lambda: ident.fit(logs))
     else:
-        fit = _lib_errors(lambda: fit_logs(
+        recipe = _lib_errors(lambda: fit_logs(
             logs, model, lpp=args.lpp, estimate=_names(args.estimate) or None, fixed=_fixed(args, model),
             start=args.start, neutral=not args.no_neutral, dt=_dt(args),
             refine=None if args.refine == "none" else args.refine, n_passes=args.passes, max_nfev=args.max_nfev,
             tune_noise=args.tune_noise, progress=progress_on(args), meas_std=meas_std, log=print))
+        fit, ident = recipe, recipe.ekf
     result = fit.result()
     result.to_json(out, force=args.force)
     _print_result(result)

@@ -183,9 +183,10 @@ class Model:
             items = dict(params.items())
             unknown = sorted(set(items) - set(self.param_names))
             if unknown:
-                raise ValueError(
-                    f"model '{self.name}' has no parameter(s) {unknown}; its parameters are {list(self.param_names)}"
-                )
+                names = list(self.param_names)
+                shown = ", ".join(names) if len(names) <= 8 else ", ".join(names[:6]) + f", ... ({len(names)} in all)"
+                raise ValueError(f"model '{self.name}' has no parameter(s) {unknown[:5]}; its parameters are {shown} "
+                                 f"(`shipid models` lists them)")
             base = self._default_params()
             for k, v in items.items():
                 base[self.param_index(k)] = float(v)
