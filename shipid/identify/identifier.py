@@ -456,14 +456,17 @@ class EKFIdentifier:
         for j, i in enumerate(s["meas_idx"]):
             col = a.Y[:, j]
             fin = np.flatnonzero(np.isfinite(col[: max(5, col.size // 20)]))[:5]
+            if not fin.size:
+                continue
+            x0[i] = np.median(col[fin])
             if fin.size > 2:
-                # straight line through the first five measurements, at the first sample time: a position
-                # moves ~5 noise widths over five samples, so their median would start the filter off
+                # a channel that moves by more than two noise widths over these samples (a position at
+                # speed) starts from the straight line through them, at the first sample time: their
+                # median would start the filter off by half the motion
                 tt = a.t[fin] - a.t[0]
                 slope, icpt = np.polyfit(tt, col[fin], 1)
-                x0[i] = icpt
-            elif fin.size:
-                x0[i] = col[fin[0]]
+                if abs(slope) * np.ptp(tt) > 2.0 * s["sig"][j]:
+                    x0[i] = icpt
         return x0
 
     def _initial_state_var(self, arrays) -> np.ndarray:
