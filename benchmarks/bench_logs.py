@@ -2,8 +2,9 @@
 
 Prints, for a 12 000-row CSV in the default schema and for a MARIN SIMMAN .dat file
 (when ../shared/data/kvlcc2_marin is present), the time of ``read_log`` (parse +
-validation + unit conversion + unwrapping + MARIN time rebuild and rotation) and of
-``pandas.read_csv`` (parse only), and their ratio.  Run:
+validation + unit conversion + unwrapping + MARIN time rebuild and rotation +
+channel-consistency checks), of ``read_log(..., consistency_checks=False)`` and of
+``pandas.read_csv`` (parse only), the ratio to pandas and the share the checks add.  Run:
 
     python benchmarks/bench_logs.py
 """
@@ -44,20 +45,23 @@ def main() -> None:
         p = Path(d) / "log12k.csv"
         log.to_csv(p)
         t_ours = best_of(lambda: read_log(p))
+        t_bare = best_of(lambda: read_log(p, consistency_checks=False))
         t_pd = best_of(lambda: pd.read_csv(p, comment="#"))
-        rows.append(("CSV 12000 rows x 9", t_ours, t_pd))
+        rows.append(("CSV 12000 rows x 9", t_ours, t_bare, t_pd))
     f = MARIN / "MARIN_FREE_KVLCC2_tc_35_m.dat"
     if f.exists():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             t_ours = best_of(lambda: read_log(f))
+            t_bare = best_of(lambda: read_log(f, consistency_checks=False))
         t_pd = best_of(lambda: pd.read_csv(f, sep=r"\s+", skiprows=3, header=None))
-        rows.append((f"MARIN {f.name} ({len(read_log(f))} rows x 11)", t_ours, t_pd))
+        rows.append((f"MARIN {f.name} ({len(read_log(f))} rows x 11)", t_ours, t_bare, t_pd))
     else:
         print(f"(MARIN data not found at {MARIN}; skipped)")
-    print(f"{'file':55s} {'read_log [ms]':>14s} {'pandas [ms]':>12s} {'ratio':>7s}")
-    for name, a, b in rows:
-        print(f"{name:55s} {a * 1e3:14.1f} {b * 1e3:12.1f} {a / b:7.2f}")
+    print(f"{'file':55s} {'read_log [ms]':>14s} {'no checks [ms]':>15s} {'pandas [ms]':>12s} {'ratio':>7s} "
+          f"{'checks':>7s}")
+    for name, a, c, b in rows:
+        print(f"{name:55s} {a * 1e3:14.1f} {c * 1e3:15.1f} {b * 1e3:12.1f} {a / b:7.2f} {a / c - 1:+7.0%}")
 
 
 if __name__ == "__main__":

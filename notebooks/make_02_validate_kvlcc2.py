@@ -11,8 +11,9 @@ nb.cells = [
 Real free-running model tests, full scale (Lpp 320 m), read from `../shared/data/kvlcc2_marin`
 (not part of the repository). We (1) compute the standard-manoeuvre metrics from the
 measurements, (2) check the published MMG set, (3) fit `kcs-response`, `response-nl` and
-`mmg` on the turning circles and the 10/10 zigzags, and (4) predict the 20/20 zigzags they
-have not seen, with the models' own closed-loop manoeuvres.
+`mmg` on the turning circles and the 10/10 zigzags with the same public calls `shipid fit`
+makes, and (4) predict the 20/20 zigzags they have not seen, with the models' own
+closed-loop manoeuvres.
 
 `SHIPID_FAST=1` (the test suite) fits one model on two decimated runs only."""),
     code("""import os
@@ -42,26 +43,30 @@ print("MARIN data:", folder.resolve() if HAVE_DATA else "not found -- the rest o
     pub = shipid.get_model("mmg", "kvlcc2", lpp=320.0)
     names = ks.TEST if FAST else ks.RUNS
     display(ks.evaluate(pub, runs, names).round(3))"""),
-    md("""## 3. Fit on tc±35 and zz±10, predict zz±20
+    md("""## 3. Fit on tc±35 and zz±10, predict zz±20 -- the calls `shipid fit` / `shipid validate` make
 
-Decimated to every 4th sample (0.54 s at full scale, still far below the ship's time
-constants of ~40 s). The MMG fit re-identifies the linear and main non-linear hull
-derivatives and the resistance with the EKF, with the rudder neutral angle `delta0` fixed at the
-measured straight-course rudder (section 4); rudder and propeller interaction stay published.
-It then refines them (and `delta0`) by output error on the training replays, with the training
-runs' tactical diameters and overshoots in the objective (`ks.refine_fit`; `refine=None` gives the
-EKF stage alone). The held-out zz±20 enter no fit."""),
+`shipid.identify.recipe.fit_logs` is what `shipid fit` runs: the ship length from the logs, the sampling
+step from the model's fastest time constant (here every 4th sample), the rudder neutral angle from the
+straight approaches, staged start values, the EKF, then the output-error refinement with the training
+runs' own tactical diameters and overshoots in the objective (each step is printed with its reason).
+`shipid.validation.validate` is what `shipid validate` runs: the replay and each model's closed-loop
+standard manoeuvre with the log's own rudder and check angles. The held-out zz±20 enter no fit."""),
     code("""if HAVE_DATA:
-    dec = ks.load_runs(folder, decimate=8 if FAST else 4)
-    setups = ["kcs-response"] if FAST else list(ks.DEFAULT_SETUPS)
+    from shipid.identify.recipe import fit_logs
+    from shipid.validation import validate
     train = ("zz_10", "zz_-10") if FAST else ks.TRAIN
-    tables, fits = {}, {}
-    for name in setups:
-        fit = ks.fit_model(name, dec, train=train, n_passes=1 if FAST else 2)
+    setups = {"kcs-response": None} if FAST else {"kcs-response": None, "response-nl": None, "mmg": "kvlcc2"}
+    rows, fits = [], {}
+    for name, params in setups.items():
+        fit = fit_logs([runs[k] for k in train], name, params, n_passes=1 if FAST else 2,
+                       dt=8 if FAST else "auto", refine=None if FAST else "auto", log=print)
         fits[name] = fit
-        print(f"{name}: {fit.message_}; warnings: {len(fit.diagnostics_['warnings'])}")
-        tables[name] = ks.evaluate(fit.result(), runs, ks.TEST if FAST else ks.RUNS)
-    summary = pd.concat(tables, names=["model"]).reset_index(level=0)
+        for k, v in zip(ks.TEST, validate(fit.result(), [runs[k] for k in ks.TEST])):
+            for c in ("overshoot1_deg", "overshoot2_deg"):
+                m, p = v["measured"].get(c), v["standard"].get(c)
+                rows.append({"model": name, "run": k, "metric": c, "measured": m, "predicted": p,
+                             "error": None if (m is None or p is None) else p - m})
+    summary = pd.DataFrame(rows)
     display(summary.round(3))"""),
     md("""## 4. What each model achieves
 
@@ -70,10 +75,12 @@ zigzags, tactical diameter within 5 % on the training turns. The measured tactic
 diameters differ by 8.5 % between port and starboard (3.07 vs 3.33 L); a port/starboard
 symmetric model therefore misses one side by at least 4 %. The asymmetry comes from the
 propeller: the rudder that holds the ship straight before each execute is not zero
-(`ks.neutral_rudder_angle`, +0.92° pooled over the training runs). `mmg` takes it as its
-rudder neutral angle `delta0`, `response-nl` as the propeller terms `b0 n², c0 n²`."""),
+(+0.92° over the straight approaches of the training runs). `mmg` takes it as its
+rudder neutral angle `delta0`; `response-nl` holds its propeller terms `b0 n², c0 n²` at 0."""),
     code("""if HAVE_DATA:
-    print(f"neutral rudder angle of the training runs: {np.rad2deg(ks.neutral_rudder_angle(dec, train)):+.2f} deg")"""),
+    from shipid.identify.recipe import neutral_rudder_angle
+    d0, n_logs = neutral_rudder_angle([runs[k] for k in train])
+    print(f"neutral rudder angle of the training runs: {np.rad2deg(d0):+.2f} deg ({n_logs} straight approaches)")"""),
     code("""if HAVE_DATA:
     piv = summary.pivot_table(index=["run", "metric"], columns="model", values="error")
     display(piv.round(2))
@@ -86,7 +93,7 @@ rudder neutral angle `delta0`, `response-nl` as the propeller terms `b0 n², c0 
         te = lg.time[np.argmax(np.abs(d) > np.deg2rad(0.5))]
         ax.plot(lg.time - te, np.rad2deg(lg["psi"] - lg["psi"][0]), "k", lw=1.5, label="measured")
         for name, fit in fits.items():
-            z = zigzag(fit.to_model(), rudder_deg=20.0, speed=float(lg["u"][0]), first=first, lpp=320.0)
+            z = zigzag(fit.to_model(), rudder_deg=20.0, speed=float(lg["u"][0]), first=first)
             df = z.member(0)
             t0 = z.metrics[0].to_dict().get("execute_time_s", 0.0) or 0.0
             ax.plot(df.index - t0, np.rad2deg(df["psi"]), label=f"{name} (closed loop)")

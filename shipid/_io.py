@@ -36,6 +36,7 @@ import numpy as np
 __all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_write_set", "sha256_file", "OutputExistsError",
            "dumps_json", "to_jsonable", "read_json", "loads_yaml", "short", "check_keys", "as_number", "as_int",
            "as_mapping", "as_string", "as_bool", "check_output_path", "install_signal_cleanup", "MAX_DEPTH",
+           "check_memory", "memory_limit_bytes", "loads_json", "restore_signal_handlers",
            "MAX_FILE_BYTES"]
 
 #: Deepest nesting accepted in a JSON/YAML file the program reads.
@@ -192,10 +193,14 @@ def _cleanup_tmp() -> None:
         _drop(tmp)
 
 
-def install_signal_cleanup() -> None:
+_ATEXIT = []
+
+
+def install_signal_cleanup() -> dict:
     """On SIGTERM/SIGHUP remove this process's temporaries and exit with 128 + signal number.
 
     (SIGINT already raises KeyboardInterrupt, which the writers clean up after.)
+    Returns the previous handlers for :func:`restore_signal_handlers`.
     """
     import atexit
 
@@ -203,13 +208,26 @@ def install_signal_cleanup() -> None:
         _cleanup_tmp()
         raise SystemExit(128 + signum)
 
+    previous = {}
     for sig in (signal.SIGTERM, getattr(signal, "SIGHUP", None)):
         if sig is not None:
             try:
-                signal.signal(sig, handler)
+                previous[sig] = signal.signal(sig, handler)
             except (ValueError, OSError):  # not the main thread
-                return
-    atexit.register(_cleanup_tmp)
+                break
+    if not _ATEXIT:
+        atexit.register(_cleanup_tmp)
+        _ATEXIT.append(True)
+    return previous
+
+
+def restore_signal_handlers(previous: dict) -> None:
+    """Put back the handlers :func:`install_signal_cleanup` replaced."""
+    for sig, h in previous.items():
+        try:
+            signal.signal(sig, h if h is not None else signal.SIG_DFL)
+        except (ValueError, OSError):
+            pass
 
 
 def to_jsonable(obj):
@@ -265,13 +283,16 @@ def _read_text(path: Path, what: str) -> str:
         raise ValueError(f"{path}: not UTF-8 text (byte {exc.start}); give a {what} file") from None
 
 
-def loads_json(text: str, where: str, what: str = "JSON"):
-    """``json.loads`` with one-line errors naming ``where`` and a nesting limit of :data:`MAX_DEPTH`."""
+def loads_json(text: str, where: str, what: str = "JSON", *, advice: str | None = None):
+    """``json.loads`` with one-line errors naming ``where`` and a nesting limit of :data:`MAX_DEPTH`.
+
+    A syntax error reads ``"{where}: not a {what} (not valid JSON: {reason} at line L column C); {advice}"``.
+    """
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise ValueError(f"{where}: not valid JSON ({exc.msg} at line {exc.lineno} column {exc.colno}); "
-                         f"give a {what} file") from None
+        raise ValueError(f"{where}: not a {what} (not valid JSON: {exc.msg} at line {exc.lineno} column "
+                         f"{exc.colno}); {advice or f'give a {what} file'}") from None
     except RecursionError:
         doc = None
         ok = False
@@ -282,10 +303,10 @@ def loads_json(text: str, where: str, what: str = "JSON"):
     return doc
 
 
-def read_json(path, what: str = "JSON"):
+def read_json(path, what: str = "JSON file", *, advice: str | None = None):
     """Read a JSON file the user gave (size, encoding, syntax and depth checked; one-line errors)."""
     path = Path(path)
-    return loads_json(_read_text(path, what), str(path), what)
+    return loads_json(_read_text(path, what), str(path), what, advice=advice)
 
 
 def loads_yaml(text: str, where: str, what: str = "YAML"):
@@ -313,6 +334,29 @@ def loads_yaml(text: str, where: str, what: str = "YAML"):
     if not _depth_ok(doc, MAX_DEPTH):  # aliases can nest without tokens
         raise ValueError(f"{where}: nested more than {MAX_DEPTH} levels deep; not a {what} file")
     return doc
+
+
+def memory_limit_bytes() -> float:
+    """Memory a single computation may plan to use: half of the physical memory
+    (``SHIPID_MEMORY_LIMIT_GB`` overrides it)."""
+    env = os.environ.get("SHIPID_MEMORY_LIMIT_GB")
+    if env:
+        try:
+            return float(env) * 2**30
+        except ValueError:
+            raise ValueError(f"SHIPID_MEMORY_LIMIT_GB={short(env, 20)}: give a number of GiB, e.g. 4") from None
+    try:
+        return 0.5 * os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return 4.0 * 2**30
+
+
+def check_memory(nbytes: float, what: str, advice: str) -> None:
+    """ValueError ``"{what} needs about X GiB ... {advice}"`` when ``nbytes`` exceeds :func:`memory_limit_bytes`."""
+    limit = memory_limit_bytes()
+    if nbytes > limit:
+        raise ValueError(f"{what} needs about {nbytes / 2**30:.3g} GiB of memory (limit {limit / 2**30:.3g} GiB, "
+                         f"half of this machine's; SHIPID_MEMORY_LIMIT_GB sets it); {advice}")
 
 
 # ----------------------------------------------------------------- schema checks
@@ -349,7 +393,10 @@ def as_number(value, where: str, *, low: float | None = None, high: float | None
         return None
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise ValueError(f"{where}: expected a number, got {type(value).__name__} {short(value, 40)}")
-    v = float(value)
+    try:
+        v = float(value)
+    except OverflowError:
+        raise ValueError(f"{where}: a {len(str(value))}-digit number is too large") from None
     if finite and not math.isfinite(v):
         raise ValueError(f"{where}: expected a finite number, got {v}")
     if low is not None and (v < low or (low_open and v == low)):
@@ -365,10 +412,11 @@ def as_int(value, where: str, *, low: int | None = None, high: int | None = None
     if v != int(v):
         raise ValueError(f"{where}: expected a whole number, got {v:g}")
     v = int(v)
+    shown = f"{v}" if abs(v) < 10**12 else f"{v:.3g}"  # never echo a 300-digit number
     if low is not None and v < low:
-        raise ValueError(f"{where}: must be >= {low}, got {v}")
+        raise ValueError(f"{where}: must be >= {low}, got {shown}")
     if high is not None and v > high:
-        raise ValueError(f"{where}: must be <= {high}, got {v}")
+        raise ValueError(f"{where}: must be <= {high}, got {shown}")
     return v
 
 

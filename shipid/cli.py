@@ -29,6 +29,7 @@ COMMAND_MODULES: list[str] = [
     "shipid.commands.glider",
     "shipid.commands.validate",
     "shipid.commands.control",
+    "shipid.commands.uncertainty",
 ]
 
 
@@ -63,6 +64,20 @@ def one_line(text: str, limit: int = MAX_MESSAGE) -> str:
     return msg[:head] + " ... " + msg[len(msg) - (limit - head - 5):]
 
 
+def _input_files(args) -> str:
+    """The existing files named on the command line (for errors that cannot say which one)."""
+    import os
+
+    names = []
+    for key, val in sorted(vars(args).items()):
+        if key in ("output", "trajectory", "handler"):
+            continue
+        for v in val if isinstance(val, list) else [val]:
+            if isinstance(v, str) and v and os.path.isfile(v):
+                names.append(os.path.basename(v))
+    return ", ".join(names[:4]) + (" ..." if len(names) > 4 else "") if names else "no file named"
+
+
 def _show_warning(prog: str):
     def show(message, category, filename, lineno, file=None, line=None):
         print(one_line(f"{prog}: warning: {message}"), file=sys.stderr if file is None else file)
@@ -71,7 +86,7 @@ def _show_warning(prog: str):
 
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI; returns the exit code (0 ok, 1 numerical failure, 2 bad input)."""
-    from ._io import install_signal_cleanup
+    from ._io import install_signal_cleanup, restore_signal_handlers
 
     parser = build_parser()
     try:
@@ -82,18 +97,27 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "command", None):
         parser.print_help()
         return 2
-    install_signal_cleanup()
+    handlers = install_signal_cleanup()
     prog = f"shipid {args.command}"
     old_show = warnings.showwarning
     warnings.showwarning = _show_warning(prog)
     try:
         return int(args.handler(args) or 0)
+    except BrokenPipeError:  # `shipid models | head`: the reader left; not an error of ours
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except (ValueError, OSError) as exc:
         print(one_line(f"{prog}: error: {exc}"), file=sys.stderr)
         return 2
     except RecursionError:
-        print(one_line(f"{prog}: error: an input is nested too deeply to read; check the files given"),
-              file=sys.stderr)
+        print(one_line(f"{prog}: error: an input file is nested too deeply to read ({_input_files(args)}); "
+                       "check that it is the file you meant"), file=sys.stderr)
+        return 2
+    except OverflowError:
+        print(one_line(f"{prog}: error: a number given is too large to compute with ({_input_files(args)}); "
+                       "check the options and files"), file=sys.stderr)
         return 2
     except MemoryError:
         print(f"{prog}: error: out of memory; reduce the problem size (intervals, particles, samples)",
@@ -104,6 +128,7 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     finally:
         warnings.showwarning = old_show
+        restore_signal_handlers(handlers)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -19,7 +19,7 @@ import numpy as np
 
 from .models.base import Model
 
-__all__ = ["rk4_step", "rk4_map", "rk4_step_tangent", "rk4_step_taylor_tangent", "euler_step_tangent", "STEP_TANGENTS",
+__all__ = ["interval_steps", "hold_steps", "rk4_step", "rk4_map", "rk4_step_tangent", "rk4_step_taylor_tangent", "euler_step_tangent", "STEP_TANGENTS",
            "dopri5", "AdaptiveResult"]
 
 
@@ -41,6 +41,42 @@ def _stage_inputs(u, u1):
     if u1 is None:
         return u, u, u
     return u, 0.5 * (u + u1), u1
+
+
+def interval_steps(t: np.ndarray, substeps: int, h_max: float | None) -> np.ndarray:
+    """RK4 steps per sample interval: ``n_k = max(substeps, ceil(dt_k / h_max - 1e-9))``.
+
+    ``t (..., N)`` sample times [s] -> ``(..., N-1)`` int; ``h_max`` None gives ``substeps``
+    everywhere.  The ``1e-9`` keeps an interval of exactly ``m * h_max`` (to rounding) at ``m`` steps.
+    """
+    dt = np.diff(np.asarray(t, dtype=float), axis=-1)
+    n = np.full(dt.shape, int(substeps), dtype=np.int64)
+    if h_max is not None:
+        if not h_max > 0:
+            raise ValueError(f"h_max must be positive or None, got {h_max}")
+        n = np.maximum(n, np.ceil(dt / float(h_max) - 1e-9).astype(np.int64))
+    return n
+
+
+def hold_steps(u0, u1, n: int):
+    """End inputs ``(u_a, u_b)`` of the ``n`` equal steps that cross one sample interval.
+
+    First-order hold (``u1`` given): step ``i`` runs from ``(1 - w_i) u0 + w_i u1`` to the same at
+    ``w_{i+1}``, ``w_i = i / n``; the first starts on ``u0`` and the last ends on ``u1`` exactly.
+    Zero-order hold (``u1`` None): ``(u0, None)`` for every step (the step functions then hold ``u0``).
+    """
+    ua = u0
+    for i in range(n):
+        if u1 is None:
+            yield u0, None
+            continue
+        if i == n - 1:
+            ub = u1
+        else:
+            w = (i + 1) / n
+            ub = (1.0 - w) * u0 + w * u1
+        yield ua, ub
+        ua = ub
 
 
 def rk4_step(model: Model, t, x, u, p, h, u1=None):

@@ -2,7 +2,8 @@
 
 :func:`simulate` is the single forward simulator of the package, vectorised
 over a leading batch axis, with inputs given as samples on the time grid
-(zero-order hold between samples), as a callable ``controller(t, x) -> u``
+(held between samples, or linear between them with ``input_hold="foh"``, as
+:func:`replay` does by default), as a callable ``controller(t, x) -> u``
 for state feedback (held over each step), or as an :class:`InputLaw` (inputs
 as a function of time with located events: the standard manoeuvres' rudder
 laws).  Two integrators:
@@ -22,13 +23,15 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from .integrate import dopri5, rk4_map
+from .integrate import dopri5, hold_steps, interval_steps, rk4_map
 from .models.base import Model
 
-__all__ = ["simulate", "SimulationResult", "InputLaw", "replay", "replay_errors", "METHODS"]
+__all__ = ["simulate", "SimulationResult", "InputLaw", "replay", "replay_errors", "METHODS", "INPUT_HOLDS"]
 
 #: Integrators of :func:`simulate`.
 METHODS = ("rk4", "dopri5")
+#: Holds of sampled inputs between samples: first-order (linear) and zero-order (held).
+INPUT_HOLDS = ("foh", "zoh")
 
 
 class InputLaw:
@@ -149,6 +152,8 @@ def simulate(
     rtol: float = 1e-6,
     atol=None,
     first_step: float | None = None,
+    input_hold: str = "zoh",
+    h_max: float | None = None,
 ) -> SimulationResult:
     """Integrate ``model`` from ``x0`` over the time grid ``t``.
 
@@ -160,7 +165,7 @@ def simulate(
     t : array, shape (n_t,)
         Strictly increasing output times [s]; steps may be non-uniform.
     inputs : array, shape (n_t, nu) or (B, n_t, nu), optional
-        Inputs sampled on ``t`` and held constant over each interval.
+        Inputs sampled on ``t``; between samples see ``input_hold``.
     controller : callable ``(t, x) -> u`` or InputLaw, optional
         A callable is state feedback evaluated at the start of each output interval and held over it
         (batch-aware: ``x`` has shape (B, nx) in a batch).  An :class:`InputLaw` is evaluated as a
@@ -169,7 +174,10 @@ def simulate(
     params : array, shape (np,) or (B, np), optional
         Defaults to ``model.params``.
     substeps : int
-        ``rk4``: steps per output interval.
+        ``rk4``: (least) steps per output interval.
+    h_max : float, optional
+        ``rk4``: largest step [s]; a long interval (a logger dropout) is crossed in
+        ``max(substeps, ceil(dt / h_max))`` steps (:func:`shipid.integrate.interval_steps`, as the EKF).
     method : {"rk4", "dopri5"}
         Fixed-step RK4 (the EKF's map) or adaptive Dormand-Prince 5(4) (see module docstring).
     rtol, atol : float
@@ -178,6 +186,10 @@ def simulate(
     first_step : float, optional
         ``dopri5`` first step [s] (e.g. ``meta["h_last"]`` of a previous run being continued); default
         Hairer's starting-step heuristic.
+    input_hold : {"zoh", "foh"}
+        Sampled ``inputs`` between samples: held at the interval's first sample (zero-order hold,
+        default here) or linear between the samples (first-order hold: every RK4 stage, or every
+        ``dopri5`` stage, sees the input at its own time), as the EKF's ``input_hold``.
 
     Returns
     -------
@@ -193,6 +205,8 @@ def simulate(
         raise ValueError(f"substeps must be >= 1, got {substeps}")
     if method not in METHODS:
         raise ValueError(f"method={method!r}: use one of {METHODS}")
+    if input_hold not in INPUT_HOLDS:
+        raise ValueError(f"input_hold={input_hold!r}: use one of {INPUT_HOLDS}")
     if method == "dopri5" and not (0 < rtol < 1):
         raise ValueError(f"rtol must be in (0, 1), got {rtol}")
     x0 = np.asarray(x0, dtype=float)
@@ -210,7 +224,7 @@ def simulate(
     law = controller if isinstance(controller, InputLaw) else None
     if method == "dopri5":
         return _simulate_dopri5(model, x0, t, U, controller, law, p, rtol, 1e-3 * rtol if atol is None else atol,
-                                first_step)
+                                first_step, foh=input_hold == "foh" and U is not None)
     X = np.full(batch + (n_t, model.nx), np.nan)
     Uout = np.full(batch + (n_t, model.nu), np.nan)
     x = x0.copy()
@@ -218,21 +232,24 @@ def simulate(
     ok, msg = True, "integration finished"
     f = model._rhs_bound(p)
     failed_at = np.full(batch, np.nan)  # time at which each batch member became non-finite
+    foh = input_hold == "foh" and U is not None
+    n_int = interval_steps(t, substeps, h_max).tolist()
     for k in range(n_t - 1):
-        h = (t[k + 1] - t[k]) / substeps
+        nk = n_int[k]
+        h = (t[k + 1] - t[k]) / nk
         tk = t[k]
         if law is not None:
             Uout[..., k, :] = law.inputs(tk, x)
-            for _ in range(substeps):
+            for _ in range(nk):
                 x = _rk4_law_step(f, law, tk, x, h)
                 tk += h
         else:
             uk = controller(tk, x) if controller is not None else U[..., k, :]
             uk = np.broadcast_to(np.asarray(uk, dtype=float), batch + (model.nu,))
             Uout[..., k, :] = uk
-            for _ in range(substeps):
-                x = rk4_map(f, tk, x, uk, h)
-                tk += h
+            u1 = U[..., k + 1, :] if foh else None
+            for i, (ua, ub) in enumerate(hold_steps(uk, u1, nk)):
+                x = rk4_map(f, t[k] + i * h if i else tk, x, ua, h, ub)
         bad = ~np.all(np.isfinite(x), axis=-1)
         if np.any(bad):
             ok = False
@@ -303,7 +320,7 @@ def _rk4_law_step(f, law, t, x, h):
     return x
 
 
-def _simulate_dopri5(model, x0, t, U, controller, law, p, rtol, atol, first_step=None):
+def _simulate_dopri5(model, x0, t, U, controller, law, p, rtol, atol, first_step=None, foh=False):
     batch = x0.shape[:-1]
     n_t = t.size
     f = model._rhs_bound(p)
@@ -325,6 +342,24 @@ def _simulate_dopri5(model, x0, t, U, controller, law, p, rtol, atol, first_step
         X[...] = np.moveaxis(r.x, 0, -2)
         ok, msg = r.success, r.message
         Uout[...] = law.input_history(t, X)
+    elif foh:
+        # first-order-hold inputs: one run, inputs interpolated at every stage, stops where the slope changes
+        dU = np.diff(U, axis=-2)
+        slope = dU / np.diff(t)[:, None]
+        kink = np.any(np.abs(np.diff(slope, axis=-2)) > 1e-12 * (1.0 + np.abs(slope[..., 1:, :])), axis=-1)
+        stops = t[1:-1][np.any(kink.reshape(-1, n_t - 2), axis=0)] if n_t > 2 else ()
+
+        def u_at(tt):
+            k = min(max(int(np.searchsorted(t, tt, side="right")) - 1, 0), n_t - 2)
+            w = (tt - t[k]) / (t[k + 1] - t[k])
+            return (1.0 - w) * U[..., k, :] + w * U[..., k + 1, :]
+
+        r = dopri5(lambda tt, xx: f(tt, xx, u_at(tt)), float(t[0]), x0, float(t[-1]), t, rtol=rtol, atol=atol,
+                   h0=first_step, stops=stops)
+        add(r)
+        X[...] = np.moveaxis(r.x, 0, -2)
+        ok, msg = r.success, r.message
+        Uout[...] = U
     else:
         # zero-order-hold inputs: one adaptive run per interval of constant input
         X[..., 0, :] = x0
@@ -360,7 +395,8 @@ def _log_frame(log) -> pd.DataFrame:
     return data
 
 
-def replay(model: Model, log, *, x0=None, substeps: int = 2, params=None) -> SimulationResult:
+def replay(model: Model, log, *, x0=None, substeps: int = 2, params=None, input_hold: str = "foh",
+           h_max: float | None = None) -> SimulationResult:
     """Simulate ``model`` with the recorded inputs of ``log`` from its initial state.
 
     Parameters
@@ -376,6 +412,12 @@ def replay(model: Model, log, *, x0=None, substeps: int = 2, params=None) -> Sim
         RK4 steps per sample interval.
     params : array (np,) or (B, np), optional
         Parameters (default the model's); B sets replay the log as one batch of B members.
+    input_hold : {"foh", "zoh"}
+        Inputs between samples: linear between the logged values (default; a real rudder moves
+        between samples, and the EKF assumes the same by default) or held.
+    h_max : float, optional
+        Largest RK4 step [s] (default ``1.5 * median(dt) / substeps``): gaps in the log are crossed in
+        as many steps as they need, as the EKF does.
     """
     df = _log_frame(log)
     t = df["time"].to_numpy(dtype=float)
@@ -396,7 +438,9 @@ def replay(model: Model, log, *, x0=None, substeps: int = 2, params=None) -> Sim
                     x0[i] = fin.mean()
     if params is not None and np.ndim(params) == 2:
         x0 = np.broadcast_to(np.asarray(x0, dtype=float), (np.shape(params)[0], model.nx))
-    return simulate(model, x0, t, U, substeps=substeps, params=params)
+    if h_max is None:
+        h_max = 1.5 * float(np.median(np.diff(t))) / substeps
+    return simulate(model, x0, t, U, substeps=substeps, params=params, input_hold=input_hold, h_max=h_max)
 
 
 def replay_errors(sim: SimulationResult, log) -> pd.DataFrame:

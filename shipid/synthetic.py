@@ -98,7 +98,7 @@ def steady_surge_speed(model: Model, n: float, delta: float = 0.0) -> float:
 
 
 def make_trial(model: Model, recipe: TrialRecipe, rng: np.random.Generator | None = None,
-               noise_std: dict | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
+               noise_std: dict | None = None, rudder: str = "continuous") -> tuple[pd.DataFrame, pd.DataFrame]:
     """Simulate one trial; returns (noisy log, noise-free truth) as frames in the default schema.
 
     The inputs are the manoeuvre laws of :mod:`shipid.manoeuvres` (one implementation):
@@ -106,13 +106,22 @@ def make_trial(model: Model, recipe: TrialRecipe, rng: np.random.Generator | Non
     executed at ``execute_s`` and moved at the rudder rate; a zigzag reverses the rudder when the
     heading deviation from the initial course reaches ``psi_deg`` in the direction of the current
     rudder), with the propeller following ``rpm_steps`` at ``n_rate``
-    (:class:`~shipid.manoeuvres.RampSchedule`), applied as a sampled controller
-    (:class:`~shipid.manoeuvres.SampledHold`: decisions at the samples, inputs held over each sample
-    interval and logged as held -- the identifier's zero-order-hold assumption).  Fixed-step RK4,
-    4 steps per sample.
+    (:class:`~shipid.manoeuvres.RampSchedule`).
+
+    rudder : {"continuous", "sampled"}
+        ``"continuous"`` (default, the bundled data): the laws act in continuous time -- the rudder
+        moves between samples, the zigzag reverses at the exact crossing of the switch heading --
+        integrated by adaptive Dormand-Prince 5(4) (``rtol = 1e-10``, stops at every kink of the
+        rudder and rps ramps), so the generator integrates far finer than it logs; the log records the
+        instantaneous inputs at the sample times, as a real logger does.  ``"sampled"``: the old recipe,
+        a sampled controller (:class:`~shipid.manoeuvres.SampledHold`) that holds each input over
+        its sample interval (exactly the zero-order-hold assumption), fixed-step RK4 with 4 steps per
+        sample.
     """
     from .manoeuvres import RampSchedule, SampledHold, TurningRudder, ZigzagRudder
 
+    if rudder not in ("continuous", "sampled"):
+        raise ValueError(f"rudder must be 'continuous' or 'sampled', got {rudder!r}")
     if recipe.kind not in ("turning", "zigzag"):
         raise ValueError(f"recipe {recipe.name}: kind must be 'turning' or 'zigzag', got {recipe.kind!r}")
     t = np.arange(0.0, recipe.duration_s + 1e-9, recipe.dt_s)
@@ -130,7 +139,10 @@ def make_trial(model: Model, recipe: TrialRecipe, rng: np.random.Generator | Non
         law = TurningRudder(side * amp, rpm, rate, recipe.execute_s, **idx)
     else:
         law = ZigzagRudder(amp, np.deg2rad(recipe.psi_deg), side, x0[ipsi], rpm, rate, recipe.execute_s, ipsi=ipsi, **idx)
-    res = simulate(model, x0, t, controller=SampledHold(law, recipe.dt_s), substeps=4)
+    if rudder == "sampled":
+        res = simulate(model, x0, t, controller=SampledHold(law, recipe.dt_s), substeps=4)
+    else:
+        res = simulate(model, x0, t, controller=law, method="dopri5", rtol=1e-10, atol=1e-12)
     truth = res.to_pandas().reset_index()
     noisy = truth.copy()
     rng = np.random.default_rng(0) if rng is None else rng
@@ -141,17 +153,18 @@ def make_trial(model: Model, recipe: TrialRecipe, rng: np.random.Generator | Non
 
 
 def make_kcs_logs(model: Model | None = None, seed: int = 20261123, recipes=KCS_RECIPES,
-                  noise_std: dict | None = None) -> dict[str, tuple[pd.DataFrame, pd.DataFrame]]:
+                  noise_std: dict | None = None, rudder: str = "continuous") -> dict[str, tuple[pd.DataFrame, pd.DataFrame]]:
     """The bundled KCS logs: {name: (noisy frame, truth frame)} from ``KCS_RECIPES``.
 
-    ``model`` defaults to ``kcs-response`` with its ``synthetic-truth`` set.
+    ``model`` defaults to ``kcs-response`` with its ``synthetic-truth`` set; ``rudder`` as in
+    :func:`make_trial`.
     """
     if model is None:
         from .models import get_model
 
         model = get_model("kcs-response", "synthetic-truth")
     rng = np.random.default_rng(seed)
-    return {r.name: make_trial(model, r, rng, noise_std) for r in recipes}
+    return {r.name: make_trial(model, r, rng, noise_std, rudder) for r in recipes}
 
 
 def schema_frame(df: pd.DataFrame) -> pd.DataFrame:

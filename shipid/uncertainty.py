@@ -298,13 +298,30 @@ def _summary_rows(label: str, kind: str, metric_dicts: list[dict], nominal: dict
     return rows
 
 
-def _failures(metric_objs) -> dict:
+def _unfinished(m, kind: str | None, target: dict) -> str | None:
+    """Why a member did not finish its manoeuvre (None when it did)."""
+    if not m.success:
+        return m.message or "failed"
+    if kind == "turning" and not (getattr(m, "max_heading_change_deg", np.nan) >= target["heading_change_deg"] - 1e-6):
+        return f"heading change did not reach {target['heading_change_deg']:g} deg within t_max"
+    if kind == "zigzag":
+        need = ("overshoot1_deg", "overshoot2_deg") if target["zigzag_executes"] >= 4 else ("overshoot1_deg",)
+        miss = [k for k in need if not np.isfinite(getattr(m, k, np.nan))]
+        if miss:
+            return f"zigzag did not reach {' and '.join(miss)}"
+    return None
+
+
+def _failures(metric_objs, kind: str | None = None, target: dict | None = None) -> dict:
+    """Count of members that did not finish, by reason (see :func:`_unfinished`)."""
+    target = target or {"heading_change_deg": 540.0, "zigzag_executes": 4}
     msgs: dict[str, int] = {}
     n = 0
     for m in metric_objs:
-        if not m.success:
+        why = _unfinished(m, kind, target)
+        if why is not None:
             n += 1
-            msgs[m.message or "failed"] = msgs.get(m.message or "failed", 0) + 1
+            msgs[why] = msgs.get(why, 0) + 1
     return {"n_failed": n, "messages": msgs}
 
 
@@ -389,11 +406,12 @@ def predict_manoeuvres(result, manoeuvres: Sequence = ("turning:35", "zigzag:10/
         runs[spec.label] = run
         dicts = [m.to_dict() for m in run.metrics]
         nominal[spec.label] = dicts[0]
-        if not run.metrics[0].success:
-            status = 2
         summary += _summary_rows(spec.label, spec.kind, dicts[1:], dicts[0], level)
         imo[spec.label] = imo_probability([d["imo"] for d in dicts[1:]])
-        fails[spec.label] = _failures(run.metrics[1:])
+        target = {"heading_change_deg": 540.0, "zigzag_executes": int(zigzag_executes)}
+        fails[spec.label] = _failures(run.metrics[1:], spec.kind, target)
+        if _unfinished(run.metrics[0], spec.kind, target) is not None:
+            status = 2
         if fails[spec.label]["n_failed"] and status == 0:
             status = 1
     n_fail = {k: v["n_failed"] for k, v in fails.items() if v["n_failed"]}
@@ -413,10 +431,14 @@ def predict_manoeuvres(result, manoeuvres: Sequence = ("turning:35", "zigzag:10/
 
 # ----------------------------------------------------------------------------- replays (validate)
 def replay_draws(model, log, params: np.ndarray, *, lpp: float, kind: str, switch_deg=None,
-                 rudder_sign: float = 1.0, substeps: int = 2, level: float = 0.95) -> dict:
+                 rudder_sign: float = 1.0, substeps: int = 2, level: float = 0.95,
+                 with_nominal: bool = False) -> dict:
     """Open-loop replays of one log with N parameter sets as one batch, and the interval of each
     predicted metric (the ``predicted`` block of :func:`shipid.validation.validate` gains
     ``"<metric>_ci"`` and ``"imo_probability"``).
+
+    ``with_nominal``: also replay ``model.params`` as member 0 of the batch (for plots); the
+    statistics are always over the N draws only.
 
     Returns ``{"<metric>_ci": [low, high], ..., "imo_probability": {...}, "draws": {...},
     "simulation": SimulationResult}``.
@@ -428,11 +450,13 @@ def replay_draws(model, log, params: np.ndarray, *, lpp: float, kind: str, switc
     if rudder_sign == -1 and "delta" in data.columns:
         data = data.assign(delta=-data["delta"])
     P = np.asarray(params, dtype=float)
+    if with_nominal:
+        P = np.vstack([model.params[None], P])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         sim = replay(model, data, substeps=substeps, params=P)
     dicts, objs = [], []
-    for b in range(P.shape[0]):
+    for b in range(1 if with_nominal else 0, P.shape[0]):
         frame = pd.DataFrame({n: sim.x[b, :, i] for i, n in enumerate(model.state_names)})
         for i, n in enumerate(model.input_names):
             frame[n] = sim.u[b, :, i]
@@ -453,6 +477,6 @@ def replay_draws(model, log, params: np.ndarray, *, lpp: float, kind: str, switc
     rows = _summary_rows("replay", kind, dicts, {}, level)
     out = ci_block(pd.DataFrame(rows)) if rows else {}
     out["imo_probability"] = imo_probability([d.get("imo", {}) for d in dicts])
-    out["draws"] = {"n": int(P.shape[0]), **_failures(objs)}
+    out["draws"] = {"n": len(dicts), **_failures(objs)}  # a replay is as long as its log: no 540 deg rule
     out["simulation"] = sim
     return out

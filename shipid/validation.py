@@ -206,7 +206,7 @@ def _for_length(model: Model, lpp: float | None, notes: list) -> Model:
 
 # ----------------------------------------------------------------------------- main
 def validate_one(model: Model, log, *, lpp: float | None = None, rudder_sign: float = 1.0,
-                 substeps: int = 2, closed_loop: bool = True) -> LogValidation:
+                 substeps: int = 2, closed_loop: bool = True, zigzag_angles=None) -> LogValidation:
     """Replay ``model`` on one TrialLog and compare; see :func:`validate`."""
     notes: list[str] = []
     name = getattr(log, "name", "log")
@@ -238,7 +238,8 @@ def validate_one(model: Model, log, *, lpp: float | None = None, rudder_sign: fl
         notes.append("no ship length (pass lpp= / --lpp): manoeuvre metrics skipped")
         return res
     try:
-        res.measured = manoeuvre_metrics(log, lpp=L, name=name)
+        rud, chk = zigzag_angles if zigzag_angles is not None else (None, None)
+        res.measured = manoeuvre_metrics(log, lpp=L, name=name, rudder_deg=rud, check_deg=chk)
     except ValueError as exc:
         notes.append(f"measured metrics not available: {exc}")
         return res
@@ -317,15 +318,15 @@ def _standard(model: Model, log, res: LogValidation) -> None:
 
 
 def validate_logs(result_or_model, logs, lpp: float | None = None, *, rudder_sign: float = 1.0,
-                  substeps: int = 2, closed_loop: bool = True) -> list[LogValidation]:
+                  substeps: int = 2, closed_loop: bool = True, zigzag_angles=None) -> list[LogValidation]:
     """Replay a model on each log and compare; returns :class:`LogValidation` objects (see :func:`validate`)."""
     model, _ = resolve_model(result_or_model)
-    return [validate_one(model, lg, lpp=lpp, rudder_sign=rudder_sign, substeps=substeps, closed_loop=closed_loop)
-            for lg in load_logs(logs, lpp=lpp)]
+    return [validate_one(model, lg, lpp=lpp, rudder_sign=rudder_sign, substeps=substeps, closed_loop=closed_loop,
+                         zigzag_angles=zigzag_angles) for lg in load_logs(logs, lpp=lpp)]
 
 
 def validate(result_or_model, logs, lpp: float | None = None, *, rudder_sign: float = 1.0,
-             substeps: int = 2, closed_loop: bool = True) -> list[dict]:
+             substeps: int = 2, closed_loop: bool = True, zigzag_angles=None) -> list[dict]:
     """Validate a model against measured logs by replaying their recorded inputs.
 
     Parameters
@@ -346,6 +347,10 @@ def validate(result_or_model, logs, lpp: float | None = None, *, rudder_sign: fl
         the approach speed; rudder reversed by the model's own heading) with
         :func:`shipid.manoeuvres.turning_circle` / :func:`~shipid.manoeuvres.zigzag`.  Its metrics are
         the ``standard`` entry -- the free-running prediction a trial would compare with.
+    zigzag_angles : (rudder_deg, check_deg), optional
+        Nominal rudder and check angles [deg] of the zigzag logs; either may be None.  By default both
+        come from each log (the check angle from the heading deviation at its rudder reversals,
+        :func:`shipid.manoeuvres.zigzag.infer_check_angle`), and the closed-loop zigzag is run with them.
 
     Returns
     -------
@@ -357,4 +362,5 @@ def validate(result_or_model, logs, lpp: float | None = None, *, rudder_sign: fl
     message), ``success`` and ``notes``.
     """
     return [v.to_dict() for v in validate_logs(result_or_model, logs, lpp, rudder_sign=rudder_sign,
-                                               substeps=substeps, closed_loop=closed_loop)]
+                                               substeps=substeps, closed_loop=closed_loop,
+                                               zigzag_angles=zigzag_angles)]

@@ -15,7 +15,7 @@ EST = ["c1", "c3"]
 def _log(model, name, t, delta):
     x0 = np.array([0.0, 0.0, 0.0, 2.0, 0.0, 0.0])
     u = np.column_stack([delta, np.full(t.size, 10.0)])
-    res = simulate(model, x0, t, u)
+    res = simulate(model, x0, t, u, input_hold="foh")  # the refiner's default input model
     ch = {s: res.x[:, j] for j, s in enumerate(model.state_names)}
     return TrialLog.from_arrays(t, name=name, delta=delta, n=u[:, 1], **ch), x0
 

@@ -6,6 +6,7 @@ input bytes unchanged and write no output."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -181,5 +182,115 @@ def test_demo_runs_and_recovers_the_truth(tmp_path, monkeypatch, capsys):
     out = capsys.readouterr().out
     assert "16/16 coefficients within 3 sigma" in out
     (folder,) = list(tmp_path.glob("shipid-demo-*"))
-    for f in ("result.json", "coefficients.csv", "replay_rmse.csv", "replay.png"):
+    for f in ("result.json", "coefficients.csv", "replay_rmse.csv", "replay.png", "report_known_truth.html",
+              "report.html"):
         assert (folder / f).stat().st_size > 0
+    # each report says what it demonstrates
+    part1 = (folder / "report_known_truth.html").read_text()
+    assert "known coefficients" in part1 and "16/16 coefficients are within 3 standard deviations" in part1
+    assert "cannot represent exactly" in (folder / "report.html").read_text()
+
+
+def test_fit_meas_std_option_reaches_the_filter(tmp_path):
+    out = tmp_path / "m.json"
+    assert main(["fit", str(SRC["kcs_zz_m10"]), "--estimate", "c2", "--passes", "1", "--meas-std", "v=0.001,r=0.0005",
+                 "-o", str(out), "--no-progress"]) == 0
+    ms = json.loads(out.read_text())["settings"]["meas_std"]
+    assert ms["v"] == 0.001 and ms["r"] == 0.0005
+
+
+def test_fit_noise_not_estimable_names_the_cli_option(tmp_path, capsys, monkeypatch):
+    import shipid.identify.identifier as ident
+
+    monkeypatch.setattr(ident, "noise_std_from_data", lambda arrays: np.zeros(6))
+    rc = main(["fit", str(SRC["kcs_zz_m10"]), "--estimate", "c2", "-o", str(tmp_path / "x.json"), "--no-progress"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and "--meas-std CH=STD" in err and "meas_std={" not in err and len(err.splitlines()) == 1
+
+
+@pytest.mark.parametrize("bad,needle", [("v=abc", "'abc' is not a valid value"), ("v=-1", "positive standard deviation"),
+                                        ("v", "NAME=VALUE")])
+def test_fit_meas_std_bad_values(bad, needle, tmp_path, capsys):
+    assert main(["fit", str(SRC["kcs_zz_m10"]), "--meas-std", bad, "-o", str(tmp_path / "x.json")]) == 2
+    err = capsys.readouterr().err
+    assert "--meas-std" in err and needle in err
+
+
+@pytest.mark.parametrize("argv,needle", [
+    (["fit", "{log}", "-o", "{log}", "--force"], "would replace the input file"),
+    (["fit", "{log}", "--params", "{res}", "-o", "{res}", "--force"], "would replace the input file"),
+    (["metrics", "{log}", "-o", "{log}", "--force"], "would replace the input file"),
+    (["simulate", "{res}", "--turning", "35", "-o", "{res}", "--force"], "would replace the input file"),
+    (["fit", "{log}", "-o", ""], "empty file name"),
+    (["fit", "{log}", "-o", "{tmp}"], "is a folder"),
+    (["fit", "{log}", "-o", "{tmp}/nofolder/r.json"], "does not exist"),
+    (["fit", "{log}", "--fixed", "a8=nan", "-o", "{tmp}/r.json"], "finite value"),
+    (["fit", "{log}", "--fixed", "a8=ten", "-o", "{tmp}/r.json"], "'ten' is not a number"),
+    (["fit", "{log}", "--lpp", "0", "-o", "{tmp}/r.json"], "--lpp 0"),
+    (["simulate", "mmg:kvlcc2", "--turning", "35", "--lpp", "0"], "--lpp 0"),
+    (["simulate", "mmg:kvlcc2", "--turning", "nan"], "--turning nan"),
+    (["simulate", "mmg:kvlcc2", "--turning", "35", "--speed", "-1"], "--speed -1"),
+    (["sweep", "mmg:kcs", "--rudder", "nan"], "finite numbers"),
+    (["metrics", "{log}", "--reference-offset", "nan"], "--reference-offset nan"),
+    (["metrics", "{log}", "--lpp", "-3"], "--lpp -3"),
+])
+def test_cli_option_and_output_errors(argv, needle, tmp_path, capsys):
+    res = tmp_path / "res.json"
+    res.write_text(json.dumps({"model": "kcs-response", "coef": {"c3": 0.2}}))
+    log = tmp_path / "log.csv"
+    log.write_bytes(SRC["kcs_zz_m10"].read_bytes())
+    before = {p: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()}
+    argv = [a.format(log=log, res=res, tmp=tmp_path) for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and needle in err and len(err) <= 300, err
+    assert {p: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()} == before
+
+
+def test_divergence_warning_is_one_plain_sentence(capsys):
+    import warnings
+
+    from shipid.cli import _show_warning
+
+    old = warnings.showwarning
+    warnings.showwarning = _show_warning("shipid fit")
+    try:
+        warnings.warn("EKF identification: the filter diverged at t = 12 s", RuntimeWarning)
+    finally:
+        warnings.showwarning = old
+    err = capsys.readouterr().err
+    assert err == "shipid fit: warning: EKF identification: the filter diverged at t = 12 s\n"
+
+
+def test_long_error_messages_are_cut_to_300_characters(tmp_path, capsys):
+    log = tmp_path / "l.csv"
+    log.write_bytes(SRC["kcs_zz_m10"].read_bytes())
+    assert main(["fit", str(log), "--fixed", "a" * 5000 + "=1", "-o", str(tmp_path / "r.json")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err) <= 300 and err.startswith("shipid fit: error:") and "\n" not in err
+
+
+def test_models_lists_meanings_and_units(capsys):
+    assert main(["models"]) == 0
+    out = capsys.readouterr().out
+    assert "u [m/s]" in out and "delta [rad]" in out and "n [rps]" in out
+
+
+def test_models_kcs_equation_text_matches_the_model():
+    """The equations `shipid models` prints for kcs-response are the model's (evaluated and compared)."""
+    from shipid.commands.core import PARAMETER_NOTES
+    from shipid.models import get_model
+
+    m = get_model("kcs-response", "synthetic-truth")
+    rng = np.random.default_rng(1)
+    x = rng.normal(size=6)
+    u = rng.normal(size=2)
+    env = {**dict(zip(m.param_names, m.params)), **dict(zip(m.state_names, x)), **dict(zip(m.input_names, u))}
+    text = PARAMETER_NOTES["kcs-response"].split(" (seed")[0]
+    got = {}
+    for eq in text.split(";"):
+        lhs, rhs = eq.split("=")
+        expr = re.sub(r"(?<=[\w)])\s+(?=[\w(])", "*", rhs.strip().replace("^", "**"))  # implicit products
+        got[lhs.strip()] = eval(expr, {}, env)
+    f = m.rhs(0.0, x, u)
+    np.testing.assert_allclose([got["du/dt"], got["dv/dt"], got["dr/dt"]], f[3:], rtol=1e-12)

@@ -44,8 +44,8 @@ def test_simulate_named_model_writes_csv_and_prints_metrics(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "tactical_diameter_L=3.1" in text
     df = pd.read_csv(out)
-    assert list(df.columns[:3]) == ["member", "time", "x"] and df["member"].unique().tolist() == [0]
-    assert np.degrees(df["psi"].iloc[-1]) >= 540
+    assert list(df.columns[:3]) == ["run", "time [s]", "x [m]"] and df["run"].unique().tolist() == [0]
+    assert np.degrees(df["psi [rad]"].iloc[-1]) >= 540
 
 
 def test_simulate_result_json_zigzag(tmp_path, capsys):

@@ -24,7 +24,7 @@ def test_every_coefficient_within_3_sigma_and_well_determined_within_2_percent(k
     z = (fit.coef_ - truth) / fit.coef_std_
     assert np.all(np.abs(z) < 3.0), f"outside 3 sigma:\n{z[np.abs(z) >= 3]}"
     rel_std = fit.coef_std_ / truth.abs()
-    well = rel_std[rel_std < 0.006].index  # 3 sigma below 2 %
+    well = rel_std[rel_std < 0.02 / 3].index  # 3 sigma below 2 %
     assert {"b4", "c1", "c2", "c3"} <= set(well), rel_std.sort_values()
     rel_err = ((fit.coef_ - truth) / truth).abs()[well]
     assert np.all(rel_err < 0.02), rel_err
@@ -88,7 +88,7 @@ def test_same_filtered_states_and_covariances_as_filterpy(kcs_truth, kcs_logs):
 
     noisy = kcs_logs["kcs_zz_m10"][0].iloc[:150].copy()
     noisy.loc[40:45, ["x", "y", "psi", "u", "v", "r"]] = np.nan  # whole-sample gaps: filterpy update(None)
-    ident = EKFIdentifier(kcs_truth, n_passes=1, init="model", estimate=["b1", "c2", "c3", "a9"])
+    ident = EKFIdentifier(kcs_truth, n_passes=1, init="model", estimate=["b1", "c2", "c3", "a9"], gate=None)
     ident.fit(noisy)
     prob, out = ident.problem_, ident.output_
     model = kcs_truth
@@ -117,7 +117,7 @@ def test_same_filtered_states_and_covariances_as_filterpy(kcs_truth, kcs_logs):
         z = ekf.x[:, 0]
         p = prob.p_base[0].copy()
         p[prob.est_idx] = z[nx:] * prob.scale
-        xn, Fx, Fp = rk4_step_taylor_tangent(model, t[k], z[:nx], U[k], p, t[k + 1] - t[k])
+        xn, Fx, Fp = rk4_step_taylor_tangent(model, t[k], z[:nx], U[k], p, t[k + 1] - t[k], U[k + 1])  # foh
         F = np.eye(nz)
         F[:nx, :nx] = Fx
         F[:nx, nx:] = Fp[:, prob.est_idx] * prob.scale
@@ -231,10 +231,10 @@ def test_a_diverging_batch_member_does_not_stop_the_others(kcs_truth, kcs_logs):
     ident = EKFIdentifier(kcs_truth, n_passes=1, init="model", estimate=["c3"])
     ident.fit(noisy)
     prob = ident.problem_
-    good = run_ekf(prob, store=False)
+    good = run_ekf(replace(prob, gate=None), store=False)
     Y = np.repeat(prob.Y, 3, axis=0)
     Y[1, 150:, 5] += 50.0  # member 1: an absurd yaw-rate jump at sample 150
-    out = run_ekf(_stacked(prob, 3, Y=Y), store=False)
+    out = run_ekf(replace(_stacked(prob, 3, Y=Y), gate=None), store=False)  # ungated: the jump is taken
     assert list(out.diverged) == [False, True, False]
     assert out.diverged_at[1] == 150 and "diverged at sample 150" in out.message[1]
     assert np.all(np.isfinite(out.z_final)) and np.all(np.isfinite(out.P_final))
@@ -324,7 +324,7 @@ def test_load_result_errors(tmp_path):
         load_result(tmp_path / "nope.json")
     p = tmp_path / "bad.json"
     p.write_text("{not json")
-    with pytest.raises(ValueError, match="not a JSON fit result"):
+    with pytest.raises(ValueError, match="not valid JSON .*give a shipid fit result file"):
         load_result(p)
     p.write_text('{"coef": {}}')
     with pytest.raises(ValueError, match="no 'model' entry"):
@@ -388,7 +388,8 @@ def test_prediction_is_the_documented_rk4_map_over_gaps_and_sub_steps(kcs_truth,
 
     noisy = kcs_logs["kcs_zz_p20_rpm"][0].iloc[::1].iloc[:120].copy()
     noisy = noisy.drop(index=range(60, 100))  # a 4 s gap
-    ident = EKFIdentifier(kcs_truth, n_passes=1, init="model", estimate=["c3"], input_hold=hold, substeps=2).fit(noisy)
+    ident = EKFIdentifier(kcs_truth, n_passes=1, init="model", estimate=["c3"], input_hold=hold, substeps=2,
+                          max_gap=None).fit(noisy)  # the gap is integrated across
     prob = replace(ident.problem_, Y=np.full_like(ident.problem_.Y, np.nan))
     assert prob.h_max == pytest.approx(0.075)
     out = run_ekf(prob, store=True)

@@ -186,3 +186,17 @@ def test_exact_tangent_with_first_order_hold_matches_finite_differences():
                       / (2 * d) for d, e in zip(dp, np.eye(m.np))], axis=-1)
     np.testing.assert_allclose(Fx, Fx_fd, rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(Fp, Fp_fd, rtol=1e-5, atol=1e-9)
+
+
+def test_first_order_hold_replay_agrees_between_rk4_and_dopri5_and_differs_from_zoh(turn):
+    m, x0, t, U, _ = turn
+    U = U.copy()
+    U[:, 0] = np.radians(20.0) * np.sin(0.2 * t)  # a rudder that moves between samples
+    fine = simulate(m, x0, t, U, substeps=20, input_hold="foh")
+    adapt = simulate(m, x0, t, U, method="dopri5", rtol=1e-9, input_hold="foh")
+    zoh = simulate(m, x0, t, U, substeps=20)
+    d = lambda a, b: np.max(np.hypot(*(a.x[:, :2] - b.x[:, :2]).T)) / m.lpp  # noqa: E731
+    assert d(fine, adapt) < 1e-6
+    assert d(fine, zoh) > 1e-3  # holding the rudder for 0.5 s shifts the track by more than 0.1 % L
+    with pytest.raises(ValueError, match="input_hold"):
+        simulate(m, x0, t, U, input_hold="linear")

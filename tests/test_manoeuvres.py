@@ -402,3 +402,69 @@ def test_zigzag_heading_reference_is_the_heading_at_the_execute():
         i_rev = int(np.argmax(np.diff(delta) < -1e-9))  # first sample where the rudder swings back
         psi_rev = np.interp(t[i_rev], t, psi)
         assert math.degrees(psi_rev - psi[i_e]) == pytest.approx(20.0, abs=0.3), kw
+
+
+# ----------------------------------------------------------------------------- check angle (issue 11, item 3)
+@pytest.mark.parametrize("rudder, check", [(10.0, 5.0), (20.0, 10.0)])
+def test_zigzag_check_angle_is_read_from_the_log(rudder, check):
+    """A 10/5 and a 20/10 zigzag (simulated with the known check angle) read as a log: the check angle is
+    the heading deviation at the rudder reversals, so the overshoots are those of the simulation (to the
+    0.01 deg of the step); read as rudder/rudder (the old default) they are wrong by degrees."""
+    run = zigzag(get_model("kcs-response"), rudder, check, first="starboard")
+    truth = run.metrics[0]
+    log = run.member(0).reset_index()
+    m = metrics(log, lpp=4.36)
+    assert (m.rudder_deg, m.switch_deg, m.check_deg, m.check_source) == (rudder, check, check, "log")
+    assert m.overshoot1_deg == pytest.approx(truth.overshoot1_deg, abs=0.01)
+    assert m.overshoot2_deg == pytest.approx(truth.overshoot2_deg, abs=0.01)
+    assert truth.overshoot1_deg > 1.0
+    given = metrics(log, lpp=4.36, check_deg=check)
+    assert given.check_source == "given" and given.overshoot1_deg == m.overshoot1_deg
+    wrong = metrics(log, lpp=4.36, check_deg=rudder)
+    assert not (abs(wrong.overshoot1_deg - truth.overshoot1_deg) < 3.0)  # NaN (never reached) or off by > 3 deg
+    with pytest.raises(ValueError, match="check_deg=5.0 and switch_deg=6.0 differ"):
+        zigzag_metrics(log["time"], log["psi"], log["delta"], lpp=4.36, check_deg=5.0, switch_deg=6.0)
+
+
+def test_validation_runs_the_closed_loop_zigzag_with_the_logs_check_angle():
+    """validate() of a 10/5 zigzag log with the model that made it: the closed-loop zigzag is a 10/5 one
+    (settings from the log), and its overshoots equal the log's; an explicit (rudder, check) is used as given."""
+    from shipid.logs import TrialLog
+    from shipid.validation import validate_one
+
+    model = get_model("kcs-response")
+    df = zigzag(model, 10.0, 5.0, first="port").member(0).reset_index()
+    log = TrialLog.from_arrays(df["time"].to_numpy(), name="zz_10_5",
+                               **{c: df[c].to_numpy() for c in ("x", "y", "psi", "u", "v", "r", "delta", "n")})
+    v = validate_one(model, log, lpp=4.36)
+    assert v.standard_settings["switch_deg"] == 5.0 and v.standard_settings["rudder_deg"] == 10.0
+    assert v.standard.overshoot1_deg == pytest.approx(v.measured.overshoot1_deg, abs=0.02)
+    assert v.standard.overshoot2_deg == pytest.approx(v.measured.overshoot2_deg, abs=0.02)
+    v2 = validate_one(model, log, lpp=4.36, zigzag_angles=(10.0, 6.0), closed_loop=False)
+    assert v2.measured.switch_deg == 6.0 and v2.measured.check_source == "given"
+
+
+def test_marin_zigzags_read_as_x_over_x(marin_logs):
+    """The measured KVLCC2 zigzags reverse at 19.2 .. 21.5 deg of heading deviation (steering reaction):
+    within 1.5 deg of the rudder angle they read as 10/10 and 20/20, as their README states."""
+    for name in ("zz_10", "zz_-10", "zz_20", "zz_-20"):
+        m = metrics(marin_logs[name], lpp=320.0)
+        assert m.check_source == "log" and m.switch_deg == m.rudder_deg == abs(float(name.split("_")[1])), name
+
+
+def test_cli_metrics_and_simulate_take_rudder_over_check(tmp_path, capsys):
+    from shipid.cli import main
+    from shipid.logs import TrialLog
+
+    df = zigzag(get_model("kcs-response"), 20.0, 10.0, first="starboard").member(0).reset_index()
+    log = TrialLog.from_arrays(df["time"].to_numpy(), name="zz_20_10",
+                               **{c: df[c].to_numpy() for c in ("x", "y", "psi", "u", "v", "r", "delta", "n")})
+    path = log.to_csv(tmp_path / "zz.csv")
+    assert main(["metrics", str(path), "--lpp", "4.36"]) == 0
+    auto = __import__("json").loads(capsys.readouterr().out)[0]
+    assert auto["switch_deg"] == 10.0 and auto["check_source"] == "log"
+    assert main(["metrics", str(path), "--lpp", "4.36", "--zigzag", "20/20"]) == 0
+    forced = __import__("json").loads(capsys.readouterr().out)[0]
+    assert forced["switch_deg"] == 20.0 and forced["check_source"] == "given"
+    assert main(["metrics", str(path), "--lpp", "4.36", "--zigzag", "20/x"]) == 2
+    assert "--zigzag '20/x': give rudder/heading angles in degrees (rudder/check)" in capsys.readouterr().err

@@ -59,3 +59,40 @@ def test_every_ship_model_predicts_froude_scaled_manoeuvres(name):
     xa, xb = a.simulation.x[0, :n], b.simulation.x[0, :n]
     np.testing.assert_allclose(xb[:, :2] / lam, xa[:, :2], rtol=1e-9, atol=1e-9 * L1)
     np.testing.assert_allclose(xb[:, 2], xa[:, 2], rtol=0, atol=1e-9)
+
+
+
+def test_refinement_from_a_diverging_model_reports_failure():
+    """An output-error refinement whose replay diverges (yaw damping of the wrong sign) ends with capped
+    residuals: it reports failure and says why, never 'success' (the KVLCC2 kcs-response fit did)."""
+    from shipid.datasets import bundled_kcs_logs
+    from shipid.identify.batch import OutputErrorRefiner
+    from shipid.logs import read_log
+
+    log = read_log(bundled_kcs_logs()[0])
+    bad = get_model("kcs-response").with_params({"c2": 50.0})
+    ref = OutputErrorRefiner(bad, estimate=["c2"], max_nfev=3).fit([log])
+    assert not ref.success_ and "diverges" in ref.message_
+    assert not ref.result().success
+
+
+def test_recipe_steps_are_reported_and_switchable():
+    """fit_logs on two bundled KCS turning logs (4.36 m): every sample (tau 0.83 s at 0.1 s logging), a8
+    free (one log changes rpm), no refinement for turning circles alone ('auto'), and the steps land in
+    the result's settings."""
+    from shipid.datasets import bundled_kcs_logs
+    from shipid.identify.recipe import fit_logs
+    from shipid.logs import read_log
+
+    logs = [read_log(p) for p in bundled_kcs_logs()[:2]]
+    lines = []
+    fit = fit_logs(logs, "kcs-response", n_passes=1, refine="auto", log=lines.append)
+    res = fit.result()
+    steps = {s["step"]: s for s in res.settings["recipe"]}
+    assert steps["ship"]["value"] == {"lpp": pytest.approx(4.36)}
+    assert steps["sampling"]["value"] == 1 and "0.827 s" in steps["sampling"]["reason"]
+    assert len(lines) == len(res.settings["recipe"]) and lines[0].startswith("recipe: ship:")
+    assert "a8" not in steps and steps["refinement"]["value"] == "none"
+    assert res.model_options["lpp"] == pytest.approx(4.36) and res.method == "ekf"
+    with pytest.raises(ValueError, match="refine='both'"):
+        fit_logs(logs, "kcs-response", refine="both")

@@ -150,10 +150,10 @@ def test_refiner_tangent_and_forward_difference_agree_on_several_logs():
 
     truth = get_model("response-nl").with_params({"b0": 2.7e-6, "c0": -1.4e-5})
     sim = zigzag(truth, 20.0, speed=1.7, first="both").simulation
-    # logs every 4th sample; states re-simulated with those inputs held over each interval (the
-    # refiner's input model), so the truth reproduces them exactly
+    # logs every 4th sample; states re-simulated with those inputs linear between samples (the
+    # refiner's default input model, first-order hold), so the truth reproduces them exactly
     t, U = sim.t[::4], sim.u[:, ::4]
-    X = simulate(truth, sim.x[:, 0], t, U).x
+    X = simulate(truth, sim.x[:, 0], t, U, input_hold="foh").x
     logs = [TrialLog.from_arrays(t, name=f"z{b}", **dict(zip(truth.state_names, X[b].T)),
                                  **dict(zip(truth.input_names, U[b].T))) for b in range(2)]
     start = truth.with_params({k: truth.params_series()[k] * 1.05 for k in ("c2", "c3", "c0")})

@@ -20,8 +20,7 @@ SEED = 20261123  # data/make_synthetic.py
     (("mmg", "kcs"), KCS_MMG_RECIPES[:1], SEED + 1),  # the noise stream runs through the recipes in order
 ])
 def test_recipe_reproduces_the_bundled_logs(model_name, recipes, seed):
-    """The bundled CSVs were made before the rudder/rpm laws moved to shipid.manoeuvres: the shared laws
-    reproduce them to rounding (rudder, rps schedule with ramps, zigzag reversals, noise stream)."""
+    """data/make_synthetic.py wrote the bundled CSVs from this recipe (continuous rudder, adaptive integration)."""
     logs = make_kcs_logs(get_model(*model_name), seed=seed, recipes=recipes)
     for name in (r.name for r in recipes):
         noisy, _ = logs[name]
@@ -30,12 +29,21 @@ def test_recipe_reproduces_the_bundled_logs(model_name, recipes, seed):
             np.testing.assert_allclose(noisy[ch].to_numpy(), ref[ch].to_numpy(), rtol=0, atol=1e-11, err_msg=f"{name}:{ch}")
 
 
-def test_zigzag_trial_reverses_at_the_first_sample_past_the_switch_heading():
+def test_zigzag_trial_reverses_at_the_crossing_between_samples():
+    """Continuous rudder: the reversal happens when the heading crosses the switch angle (between
+    samples), and the logged rudder is the instantaneous one at the sample times."""
     recipe = next(r for r in KCS_MMG_RECIPES if r.name == "mmg_kcs_zz_p10")
     _, truth = make_trial(get_model("mmg", "kcs"), recipe)
+    t = truth["time"].to_numpy()
     psi, delta = np.degrees(truth["psi"].to_numpy()), np.degrees(truth["delta"].to_numpy())
     k = int(np.argmax(psi >= 10.0))  # first sample with the heading past +10 deg
-    rate_step = recipe.rudder_rate_deg_s * recipe.dt_s
-    assert delta[k - 1] == pytest.approx(10.0) and delta[k] == pytest.approx(10.0 - rate_step)
-    assert np.all(np.abs(np.diff(delta)) <= rate_step + 1e-9)
+    tc = t[k - 1] + (10.0 - psi[k - 1]) / (psi[k] - psi[k - 1]) * (t[k] - t[k - 1])  # crossing time
+    rate = recipe.rudder_rate_deg_s
+    assert delta[k - 1] == pytest.approx(10.0)
+    assert delta[k] == pytest.approx(10.0 - rate * (t[k] - tc), abs=0.01 * rate * recipe.dt_s)
+    assert 0.0 < 10.0 - delta[k] < rate * recipe.dt_s  # moved part of one sample's rudder travel
+    assert np.all(np.abs(np.diff(delta)) <= rate * recipe.dt_s + 1e-9)
     assert math.isclose(truth["n"].iloc[-1], recipe.rpm_steps[0][1])
+    # the old recipe (sampled controller, zero-order hold) is still available and differs
+    _, held = make_trial(get_model("mmg", "kcs"), recipe, rudder="sampled")
+    assert np.max(np.abs(held["psi"].to_numpy() - truth["psi"].to_numpy())) > 1e-3

@@ -93,7 +93,10 @@ def test_truth_closed_loop_manoeuvre_agrees(truth_validation):
                                                                          "steady_diameter_L", "speed_loss")})
     assert v["standard"]["settings"]["side"] == v["measured"]["side"] == "starboard"
     for k in ("advance_L", "transfer_L", "tactical_diameter_L", "steady_diameter_L"):
-        assert abs(s[k]) < 0.03, (k, s[k])
+        # advance: 0.05 since the bundled logs have a continuous rudder (regenerated): the execute is
+        # detected at the first sample past 0.5 deg (5.1 s) while the rudder started at 5.0 s, and
+        # 0.1 s at 1.7 m/s is 0.039 L (was 0.03 with the sample-and-hold rudder)
+        assert abs(s[k]) < (0.05 if k == "advance_L" else 0.03), (k, s[k])
     assert abs(s["speed_loss"]) < 0.01
     for name in ("kcs_zz_m10", "kcs_zz_p20_rpm"):  # the rpm change of zz_p20 comes after the overshoots
         v = truth_validation[name]
@@ -262,7 +265,10 @@ def test_marin_dat_logs_with_published_mmg(mmg_result, tmp_path):
 
 
 def test_marin_wrong_rudder_sign_is_flagged(mmg_result):
-    (d,) = validate(mmg_result, [_marin("zz_10")], lpp=320.0, closed_loop=False)
+    # the MARIN reader flips the file's port-positive rudder; rudder_sign=1 reads the file's sign as is (which
+    # read_log's consistency check refuses: "the first rudder execute ... turned the ship to port")
+    log = read_log(_marin("zz_10"), rudder_sign=1, consistency_checks=False)
+    (d,) = validate(mmg_result, [log], lpp=320.0, closed_loop=False)
     assert any("opposite" in n for n in d["notes"]), d["notes"]
     assert d["predicted"]["first_side"] != d["measured"]["first_side"]
 

@@ -5,7 +5,8 @@ import warnings
 
 
 def parse_pairs(items, option: str, convert=str) -> dict:
-    """``["a=1,b=2", "c=3"]`` -> ``{"a": convert("1"), ...}``; ValueError naming the option otherwise."""
+    """``["a=1,b=2", "c=3"]`` -> ``{"a": convert("1"), ...}``; ValueError naming the option otherwise
+    (also for a name given twice, e.g. ``psi=deg,psi=rad``: which one was meant cannot be guessed)."""
     out: dict = {}
     for item in items or []:
         for part in item.split(","):
@@ -14,44 +15,87 @@ def parse_pairs(items, option: str, convert=str) -> dict:
             if "=" not in part:
                 raise ValueError(f"{option} entry '{part}' must look like NAME=VALUE, e.g. psi=deg")
             k, v = part.split("=", 1)
+            k = k.strip()
+            if k in out:
+                raise ValueError(f"{option}: '{k}' is given twice ({k}={out[k]} and {part.strip()}); give it once")
             try:
-                out[k.strip()] = convert(v.strip())
+                out[k] = convert(v.strip())
             except ValueError:
                 raise ValueError(f"{option} entry '{part}': '{v.strip()}' is not a valid value") from None
     return out
 
 
+def parse_zigzag(text: str, option: str = "--zigzag") -> tuple[float, float]:
+    """``"10/5"`` -> ``(10.0, 5.0)``: a zigzag's rudder and check (heading) angles [deg], both positive;
+    ``"10"`` means 10/10.  ValueError naming the option otherwise."""
+    parts = str(text).split("/")
+    try:
+        vals = [float(v) for v in parts]
+    except ValueError:
+        vals = []
+    if len(vals) == 1:
+        vals = vals * 2
+    if len(vals) != 2 or not all(v > 0 for v in vals):
+        raise ValueError(f"{option} '{text}': give rudder/heading angles in degrees (rudder/check), e.g. 20/20 or 10/5")
+    return vals[0], vals[1]
+
+
 def add_log_options(p) -> None:
-    """The options that say how to read trial logs (same for every command that reads logs)."""
-    p.add_argument("--lpp", type=float, default=None, help="ship length between perpendiculars [m]")
-    p.add_argument("--ship", default=None, help="ship particulars file (JSON or YAML)")
-    p.add_argument("--units", action="append", metavar="CH=UNIT", help="declare units, e.g. psi=deg,n=rpm")
-    p.add_argument("--columns", "--column", dest="columns", action="append", metavar="CH=COLUMN",
+    """The options that say how to read trial logs: one copy for every command that reads logs
+    (fit, log, metrics, validate, report); :func:`read_logs` applies them."""
+    g = p.add_argument_group("reading the logs")
+    g.add_argument("--lpp", type=float, default=None, help="ship length between perpendiculars [m]")
+    g.add_argument("--ship", default=None, help="ship particulars file (JSON or YAML)")
+    g.add_argument("--schema", default=None, metavar="FILE|PRESET",
+                   help="how the file's columns map to channels: a preset (shipid, marin, esso-frt) or a JSON/YAML "
+                        "schema file (columns, units, velocity_frame, rudder_sign, skip_rows, header, delimiter)")
+    g.add_argument("--units", action="append", metavar="CH=UNIT", help="declare units, e.g. psi=deg,n=rpm")
+    g.add_argument("--columns", "--column", dest="columns", action="append", metavar="CH=COLUMN",
                    help="map a channel to the file's column name (or 1-based number), e.g. psi=heading")
-    p.add_argument("--delimiter", default=None, help="CSV delimiter if not a comma (';', tab or 'whitespace')")
-    p.add_argument("--format", dest="fmt", choices=["auto", "csv", "marin"], default="auto",
+    g.add_argument("--delimiter", default=None, help="CSV delimiter if not a comma (';', tab or 'whitespace')")
+    g.add_argument("--skip-rows", type=int, default=None, metavar="N",
+                   help="skip N preamble lines before the header (or before the data with --no-header)")
+    g.add_argument("--no-header", dest="header", action="store_false", default=None,
+                   help="the file has no header line: map the channels by column number (--columns u=5)")
+    g.add_argument("--velocity-frame", choices=["body", "earth"], default=None,
+                   help="axes of the file's u, v: body (default) or earth-fixed dx/dt, dy/dt (rotated by psi)")
+    g.add_argument("--rudder-sign", type=int, choices=[1, -1], default=None, metavar="{1,-1}",
+                   help="-1 when the file's positive rudder turns the ship to port (flipped to shipid's "
+                        "starboard-positive convention; the marin schema already does this)")
+    g.add_argument("--format", dest="fmt", choices=["auto", "csv", "marin"], default="auto",
                    help="file format (default: auto)")
-    p.add_argument("--interpolate-inputs", action="store_true", help="fill gaps in delta/n by interpolation")
-    p.add_argument("--no-unit-checks", action="store_true",
+    g.add_argument("--interpolate-inputs", action="store_true", help="fill gaps in delta/n by interpolation")
+    g.add_argument("--no-unit-checks", action="store_true",
                    help="skip the 'looks like degrees/rpm' heuristics (when a log trips them legitimately)")
-    p.add_argument("--marin-time", choices=["uniform", "drop"], default="uniform",
+    g.add_argument("--marin-time", choices=["uniform", "drop"], default="uniform",
                    help="MARIN .dat: rebuild the 3-digit time stamps (uniform, default) or drop repeats")
+    g.add_argument("--no-consistency-checks", action="store_true",
+                   help="skip the channel-consistency checks (r vs dpsi/dt, u, v vs the track, rudder sign vs the "
+                        "first turn, n vs speed, GNSS freezes, glitches)")
 
 
 def read_logs(paths, args) -> list:
     """Read ``paths`` with the options of :func:`add_log_options`; gap warnings are left to the caller
-    (they are in each log's ``summary()``)."""
+    (they are in each log's ``summary()``), consistency warnings are re-issued (one per finding)."""
     from ..logs import read_log
 
+    if args.skip_rows is not None and args.skip_rows < 0:
+        raise ValueError(f"--skip-rows {args.skip_rows}: give a number of lines >= 0")
     kw = dict(units=parse_pairs(args.units, "--units") or None,
               columns=parse_pairs(args.columns, "--columns") or None,
               fmt=args.fmt, lpp=args.lpp, ship=args.ship, interpolate_inputs=args.interpolate_inputs,
-              delimiter=args.delimiter, unit_checks=not args.no_unit_checks, marin_time=args.marin_time)
+              delimiter=args.delimiter, unit_checks=not args.no_unit_checks, marin_time=args.marin_time,
+              schema=args.schema, skip_rows=args.skip_rows, header=args.header,
+              velocity_frame=args.velocity_frame, rudder_sign=args.rudder_sign,
+              consistency_checks=not args.no_consistency_checks)
     logs = []
     for path in paths:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)
             logs.append(read_log(path, **kw))
+        # consistency warnings (GNSS freezes, a loose yaw rate, rpm?) matter to every command: one line each
+        for f in (logs[-1].consistency.warnings if logs[-1].consistency is not None else []):
+            warnings.warn(f.message, UserWarning, stacklevel=2)
     return logs
 
 
@@ -87,6 +131,15 @@ def add_progress_option(p) -> None:
     p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress output")
 
 
+def progress_iter(items, args, desc: str):
+    """``items`` wrapped in a tqdm bar when :func:`progress_on` (else unchanged)."""
+    if not progress_on(args):
+        return items
+    from tqdm.auto import tqdm
+
+    return tqdm(items, desc=desc, leave=False)
+
+
 def progress_on(args) -> bool:
     """Whether to show progress for ``args`` (see :func:`add_progress_option`)."""
     import sys
@@ -97,23 +150,23 @@ def progress_on(args) -> bool:
     return bool(value)
 
 
-def number(text: str, option: str, *, low: float | None = None, low_open: bool = False,
-           integer: bool = False, high: float | None = None):
-    """Parse an option value as a finite number (ValueError naming the option, the value and the range)."""
-    import math
+#: Units of the channels that appear in CSV outputs (SI, radians), for the headers.
+CHANNEL_UNITS = {"time": "s", "t": "s", "x": "m", "y": "m", "psi": "rad", "u": "m/s", "v": "m/s", "r": "rad/s",
+                 "p": "rad/s", "phi": "rad", "delta": "rad", "n": "rps", "T": "N", "phi_p": "rad"}
 
-    from .._io import short
 
-    kind = "whole number" if integer else "number"
-    try:
-        v = int(text) if integer else float(text)
-    except (TypeError, ValueError, OverflowError):
-        raise ValueError(f"{option} {short(text, 40)}: not a {kind}; give e.g. {option} "
-                         f"{'10' if integer else '1.5'}") from None
-    if not math.isfinite(v):
-        raise ValueError(f"{option} {text}: give a finite {kind}")
-    if low is not None and (v < low or (low_open and v == low)):
-        raise ValueError(f"{option} {short(text, 40)}: must be {'>' if low_open else '>='} {low:g}")
-    if high is not None and v > high:
-        raise ValueError(f"{option} {short(text, 40)}: must be <= {high:g}")
-    return v
+def units_header(frame, model=None):
+    """``frame`` with ``name [unit]`` column (and index) names where the unit is known
+    (the model's ``units`` first, then :data:`CHANNEL_UNITS`); other names unchanged."""
+    units = dict(CHANNEL_UNITS)
+    if model is not None:
+        units.update(getattr(model, "units", {}) or {})
+
+    def label(name):
+        unit = units.get(str(name))
+        return f"{name} [{unit}]" if unit and "[" not in str(name) else name
+
+    out = frame.rename(columns=label)
+    if out.index.name is not None:
+        out.index = out.index.rename(label(out.index.name))
+    return out

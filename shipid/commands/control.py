@@ -1,11 +1,9 @@
 """``shipid plan``: time-optimal manoeuvres (seed 000's scenarios or a PROBLEM.json)."""
 from __future__ import annotations
 
-import json
-
 import numpy as np
 
-from ._common import json_and_csv_outputs
+from ._common import add_progress_option, json_and_csv_outputs, progress_on, units_header
 
 
 def register(sub) -> None:
@@ -26,14 +24,18 @@ def register(sub) -> None:
     p.add_argument("--tol", type=float, default=1e-2, help="admissible scaled constraint violation (default 0.01)")
     p.add_argument("-o", "--output", required=True, help="output plan JSON (the CSV goes beside it)")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    add_progress_option(p)
     p.set_defaults(handler=_plan)
 
 
 def _plan(args) -> int:
-    from .._io import atomic_write_text
+    from .._io import atomic_write_set, dumps_json
     from ..control import SCENARIOS, load_problem, paper_problem, solve_direct, solve_indirect
 
-    out, csv = json_and_csv_outputs(args.output, args.force)
+    out, csv = json_and_csv_outputs(args.output, args.force, inputs=[args.problem])
+    if not (np.isfinite(args.tol) and args.tol > 0):
+        raise ValueError(f"--tol {args.tol}: give the admissible scaled constraint violation, a positive number "
+                         "(default 0.01)")
     if args.intervals is not None and args.intervals < 2:
         raise ValueError(f"--intervals must be >= 2, got {args.intervals}")
     if args.substeps is not None and args.substeps < 1:
@@ -52,16 +54,18 @@ def _plan(args) -> int:
     if args.method == "indirect":
         if opt not in (None, "bfgs", "steepest"):
             raise ValueError(f"--optimizer {opt} is not available with --method indirect; use bfgs or steepest")
-        res = solve_indirect(problem, method=opt or "bfgs", tol=args.tol)
+        res = solve_indirect(problem, method=opt or "bfgs", tol=args.tol, progress=progress_on(args))
     else:
         if opt not in (None, "slsqp", "trust-constr", "ipopt"):
             raise ValueError(f"--optimizer {opt} is not available with --method direct; use slsqp, trust-constr or ipopt")
-        res = solve_direct(problem, method=opt or "slsqp", tol=args.tol)
+        kw = {} if opt == "ipopt" else {"progress": progress_on(args)}
+        res = solve_direct(problem, method=opt or "slsqp", tol=args.tol, **kw)
     doc = res.summary()
     doc["trajectory_csv"] = csv.name
     doc["tolerance"] = args.tol
-    atomic_write_text(csv, res.to_pandas().to_csv(float_format="%.6g"), force=args.force)
-    atomic_write_text(out, json.dumps(doc, indent=2, default=float) + "\n", force=args.force)
+    # the CSV and the JSON are published as a set (both or neither)
+    atomic_write_set([(csv, units_header(res.to_pandas(), res.problem.model).to_csv(float_format="%.6g")),
+                      (out, dumps_json(doc))], force=args.force)
     print(f"{problem.name}: {res.method} final time {res.final_time:.2f} s, switch "
           f"{'none' if res.switch_time is None else f'{res.switch_time:.2f} s'}, max violation "
           f"{res.max_constraint_violation:.2e}, {res.nit} iterations -> {out}")

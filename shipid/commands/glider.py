@@ -1,9 +1,11 @@
 """``shipid glider launch`` and ``shipid glider optimise`` (seed 004 launch study)."""
 from __future__ import annotations
 
-import json
+import math
 
-from .._io import atomic_write_text
+from .._io import atomic_write_set, dumps_json
+
+from ._common import add_progress_option, check_output_path, progress_on
 
 
 def register(sub) -> None:
@@ -34,7 +36,7 @@ def register(sub) -> None:
     op.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     op.add_argument("-o", "--output", required=True, help="JSON to write")
     op.add_argument("--force", action="store_true", help="overwrite an existing output file")
-    op.add_argument("--progress", action="store_true", help="show a progress bar over generations")
+    add_progress_option(op)
     op.set_defaults(handler=_optimise)
     p.set_defaults(handler=lambda args: (p.print_help(), 2)[1])
 
@@ -58,15 +60,26 @@ def _model(spec):
 def _launch(args) -> int:
     from ..glider import launch
 
+    inputs = [args.params]
+    check_output_path(args.output, force=args.force, inputs=inputs)
+    if args.trajectory:
+        check_output_path(args.trajectory, force=args.force, inputs=inputs, what="trajectory")
+        if str(args.trajectory) == str(args.output):
+            raise ValueError(f"--trajectory {args.trajectory}: give a different file from -o")
+    for opt, v in (("--speed", args.speed), ("--angle", args.angle), ("--fin", args.fin), ("--cg", args.cg),
+                   ("--dt", args.dt)):
+        if v is not None and not math.isfinite(v):
+            raise ValueError(f"{opt} {v}: give a finite number")
     model = _model(args.params)
     res = launch(args.speed, args.angle, args.fin, args.cg, model=model, dt=args.dt)
     out = res.as_dict(0)
     out.update({"model": "glider", "params": {k: float(v) for k, v in res.model.params_series().items()},
                 "dt_s": res.dt, "success": bool(res.success), "message": res.message})
     out["params"]["x_g"] = float(args.cg)
+    files = [(args.output, dumps_json(out))]
     if args.trajectory:
-        atomic_write_text(args.trajectory, res.to_pandas(0).to_csv(), force=args.force)
-    atomic_write_text(args.output, json.dumps(out, indent=2) + "\n", force=args.force)
+        files.insert(0, (args.trajectory, res.to_pandas(0).to_csv(float_format="%.10g")))
+    atomic_write_set(files, force=args.force)  # trajectory and summary: both or neither
     print(f"max depth {out['max_depth_m']:.3f} m, horizontal {out['horizontal_m'] if out['horizontal_m'] is not None else float('nan'):.3f} m, "
           f"exit angle {out['exit_angle_deg'] if out['exit_angle_deg'] is not None else float('nan'):.1f} deg, "
           f"duration {out['duration_s'] if out['duration_s'] is not None else float('nan'):.2f} s -> {args.output}")
@@ -76,13 +89,20 @@ def _launch(args) -> int:
 def _optimise(args) -> int:
     from ..glider import optimise_launch
 
+    check_output_path(args.output, force=args.force, inputs=[args.params])
+    if args.popsize < 1 or args.maxiter < 1:
+        raise ValueError(f"--popsize {args.popsize} / --maxiter {args.maxiter}: give whole numbers >= 1")
+    if args.popsize * args.maxiter > 100_000:
+        raise ValueError(f"--popsize {args.popsize} x --maxiter {args.maxiter}: over 100000 generations x members "
+                         "would run for hours; the defaults are 10 and 30")
     model = _model(args.params)
     bounds = {k: tuple(v) for k, v in (("speed", args.speed), ("angle_deg", args.angle), ("fin_deg", args.fin), ("cg_m", args.cg)) if v is not None}
     res = optimise_launch(model=model, bounds=bounds, max_exit_angle_deg=args.max_exit_angle, popsize=args.popsize,
-                          maxiter=args.maxiter, seed=args.seed, progress=args.progress)
+                          maxiter=args.maxiter, seed=args.seed, progress=progress_on(args))
     doc = res.as_dict()
-    atomic_write_text(args.output, json.dumps(doc, indent=2) + "\n", force=args.force)
+    atomic_write_set([(args.output, dumps_json(doc))], force=args.force)
     x = res.x
-    print(f"best: {x['speed']:.2f} m/s, {x['angle_deg']:.1f} deg, fin {x['fin_deg']:.1f} deg, cg {x['cg_m'] * 100:.2f} cm; "
+    print(f"best: speed {x['speed']:.2f} m/s, angle {x['angle_deg']:.1f} deg, fin {x['fin_deg']:.1f} deg, "
+          f"cg {x['cg_m']:.4f} m; "
           f"J = {res.objective:.3f} (depth {res.launch['max_depth_m']:.2f} m, horizontal {res.launch['horizontal_m']:.2f} m) -> {args.output}")
     return 0

@@ -6,10 +6,11 @@ optional parameter set, e.g. ``mmg``, ``mmg:kcs``, ``kcs-response:synthetic-trut
 """
 from __future__ import annotations
 
-import json
 import math
 import sys
 from pathlib import Path
+
+from ._common import add_log_options, check_output_path, parse_zigzag, read_logs
 
 #: Keys printed in the short metric summaries.
 SUMMARY_KEYS = ("advance_L", "transfer_L", "tactical_diameter_L", "steady_diameter_L", "speed_loss",
@@ -19,8 +20,13 @@ SUMMARY_KEYS = ("advance_L", "transfer_L", "tactical_diameter_L", "steady_diamet
 def register(sub) -> None:
     p = sub.add_parser("metrics", help="standard-manoeuvre metrics (ITTC/IMO) of measured logs -> JSON list")
     p.add_argument("logs", nargs="+", metavar="LOG", help="trial logs (CSV or MARIN .dat)")
-    p.add_argument("--lpp", type=float, default=None, help="ship length [m] (default: from the log's particulars)")
-    p.add_argument("--kind", choices=("auto", "turning", "zigzag"), default="auto")
+    add_log_options(p)   # --lpp (default: from the log's particulars), --schema, --units, ...
+    p.add_argument("--kind", choices=("auto", "turning", "zigzag"), default="auto",
+                   help="manoeuvre in the log: turning circle, zigzag, or auto (detected from the rudder "
+                        "history, default)")
+    p.add_argument("--zigzag", metavar="D/C", default=None,
+                   help="nominal rudder/check angles [deg] of zigzag logs, e.g. 10/5 (default: read from each log, "
+                        "the check angle from the heading deviation at the rudder reversals)")
     p.add_argument("--reference-offset", type=float, default=None, metavar="M",
                    help="logged point's distance forward of midship [m]; positions are moved to midship")
     p.add_argument("-o", "--output", default=None, help="JSON file to write (default: print)")
@@ -31,12 +37,18 @@ def register(sub) -> None:
     p.add_argument("model", metavar="MODEL", help="fit-result JSON or model name[:parameter-set]")
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--turning", type=float, metavar="DEG", help="turning circle with this rudder angle [deg]")
-    g.add_argument("--zigzag", metavar="D/P", help="zigzag rudder/heading angles [deg], e.g. 20/20")
+    g.add_argument("--zigzag", metavar="D/C", help="zigzag rudder/check (heading) angles [deg], e.g. 20/20 or 10/5")
     _common(p)
     p.add_argument("--side", choices=("both", "starboard", "port"), default="both",
                    help="turning side / side of the first zigzag execute")
-    p.add_argument("-o", "--output", default=None, help="CSV of the time series (all members, column 'member')")
+    p.add_argument("-o", "--output", default=None,
+                   help="CSV of the time series, units in the headers (with --side both: both turns, column 'run')")
     p.add_argument("--force", action="store_true", help="overwrite the output file")
+    from .uncertainty import add_draws_option
+
+    add_draws_option(p)
+    p.add_argument("--metrics-output", default=None, metavar="FILE",
+                   help="with --draws: JSON of the metrics with 95 %% intervals and IMO probabilities")
     p.set_defaults(handler=_simulate)
 
     p = sub.add_parser("sweep", help="turning-diameter sweep over rudder angle x approach speed (one batch)")
@@ -44,7 +56,8 @@ def register(sub) -> None:
     p.add_argument("--rudder", default="10,15,25", help="rudder angles [deg], comma separated")
     p.add_argument("--speed", default=None, help="approach speeds [m/s], comma separated (default: design speed)")
     p.add_argument("--side", choices=("both", "starboard", "port"), default="starboard")
-    p.add_argument("--lpp", type=float, default=None, help="ship length [m] (default: the model's)")
+    p.add_argument("--lpp", type=float, default=None,
+                   help="ship length [m]: Froude-scale the model to this ship (default: the length it was fitted at)")
     p.add_argument("--rudder-rate", type=float, default=None, metavar="DEG_S", help="rudder rate [deg/s]")
     _integrator(p)
     p.add_argument("-o", "--output", default=None, help="CSV to write (default: print)")
@@ -54,7 +67,8 @@ def register(sub) -> None:
 
 def _common(p):
     p.add_argument("--speed", type=float, default=None, help="approach speed [m/s] (default: design speed)")
-    p.add_argument("--lpp", type=float, default=None, help="ship length [m] (default: the model's)")
+    p.add_argument("--lpp", type=float, default=None,
+                   help="ship length [m]: Froude-scale the model to this ship (default: the length it was fitted at)")
     p.add_argument("--rudder-rate", type=float, default=None, metavar="DEG_S", help="rudder rate [deg/s]")
     _integrator(p)
 
@@ -71,11 +85,19 @@ def _rtol(args) -> float:
     return args.rtol
 
 
-def load_model(spec: str):
-    """Model from a fit-result JSON path or ``name[:parameter-set]`` (ValueError naming the problem)."""
+def load_model(spec: str, lpp: float | None = None):
+    """Model from a fit-result JSON path or ``name[:parameter-set]`` (ValueError naming the problem), at
+    the ship length it was fitted at, or Froude-scaled to ``lpp`` [m] when given and the model can be
+    (``scaled``); a model that cannot be rescaled keeps its coefficients and ``lpp`` only sets the
+    length of the manoeuvre (step, execute time, non-dimensional metrics), as before."""
     from ..identify.result import model_from
 
-    return model_from(spec)[0]
+    model = model_from(spec)[0]
+    ml = getattr(model, "lpp", None)
+    if lpp is not None and ml is not None and abs(ml / lpp - 1.0) > 1e-12 and hasattr(model, "scaled"):
+        print(f"note: {model.name} Froude-scaled from Lpp {ml:g} m to {lpp:g} m", file=sys.stderr)
+        model = model.scaled(lpp)
+    return model
 
 
 def _floats(text: str, what: str) -> list[float]:
@@ -85,6 +107,8 @@ def _floats(text: str, what: str) -> list[float]:
         raise ValueError(f"{what} '{text}': give comma-separated numbers, e.g. 10,15,25") from None
     if not vals:
         raise ValueError(f"{what}: no values given")
+    if not all(math.isfinite(v) for v in vals):
+        raise ValueError(f"{what} '{text}': give finite numbers, e.g. 10,15,25")
     return vals
 
 
@@ -98,15 +122,22 @@ def _write_or_print(text: str, output, force: bool):
 
 
 def _metrics(args) -> int:
-    from ..logs import read_log
+    from .._io import dumps_json
     from ..manoeuvres import metrics
 
+    if args.output:
+        check_output_path(args.output, force=args.force, inputs=args.logs)
+    _positive_lpp(args.lpp)
+    if args.reference_offset is not None and not math.isfinite(args.reference_offset):
+        raise ValueError(f"--reference-offset {args.reference_offset}: give the logged point's distance forward "
+                         "of midship in metres (a finite number)")
     out = []
-    for f in args.logs:
-        log = read_log(f, lpp=args.lpp) if args.lpp else read_log(f)
-        m = metrics(log, lpp=args.lpp, kind=args.kind, reference_offset=args.reference_offset, name=Path(f).name)
+    rud, chk = parse_zigzag(args.zigzag) if args.zigzag else (None, None)
+    for f, log in zip(args.logs, read_logs(args.logs, args)):
+        m = metrics(log, lpp=args.lpp, kind=args.kind, reference_offset=args.reference_offset, name=Path(f).name,
+                    rudder_deg=rud, check_deg=chk)
         out.append({"file": str(f), **m.to_dict()})
-    _write_or_print(json.dumps(out, indent=2) + "\n", args.output, args.force)
+    _write_or_print(dumps_json(out), args.output, args.force)
     if args.output:
         for d in out:
             print(_summary(d["file"], d))
@@ -119,34 +150,55 @@ def _summary(label, d) -> str:
     return f"{label}: {d['manoeuvre']} ({side}) " + " ".join(parts)
 
 
+def _positive_lpp(lpp) -> None:
+    if lpp is not None and not (math.isfinite(lpp) and lpp > 0):
+        raise ValueError(f"--lpp {lpp}: give the ship length between perpendiculars in metres (a positive number)")
+
+
+def _check_common(args) -> None:
+    if args.output:
+        check_output_path(args.output, force=args.force, inputs=[args.model])
+    _positive_lpp(args.lpp)
+    if args.speed is not None and not isinstance(args.speed, str) and not (math.isfinite(args.speed) and args.speed > 0):
+        raise ValueError(f"--speed {args.speed}: give the approach speed in m/s (a positive number)")
+    if args.rudder_rate is not None and not (math.isfinite(args.rudder_rate) and args.rudder_rate > 0):
+        raise ValueError(f"--rudder-rate {args.rudder_rate}: give the rudder rate in deg/s (a positive number)")
+
+
 def _simulate(args) -> int:
     from ..manoeuvres import turning_circle, zigzag
+    from .uncertainty import check_draws, simulate_draws
 
-    model = load_model(args.model)
+    _check_common(args)
+    if check_draws(args):
+        return simulate_draws(args, args.model)
+    if args.metrics_output:
+        raise ValueError("--metrics-output needs --draws N (the intervals of N parameter draws)")
+    model = load_model(args.model, args.lpp)
     rate = math.radians(args.rudder_rate) if args.rudder_rate is not None else None
     if args.turning is not None:
-        if not args.turning > 0:
-            raise ValueError(f"--turning {args.turning}: give the rudder angle as a positive number of degrees (use --side)")
+        if not (math.isfinite(args.turning) and 0 < args.turning <= 90):
+            raise ValueError(f"--turning {args.turning}: give the rudder angle in degrees, 0 < angle <= 90 (use --side)")
         res = turning_circle(model, args.turning, speed=args.speed, side=args.side, rudder_rate=rate, lpp=args.lpp,
                              method=args.method, rtol=_rtol(args))
     else:
-        try:
-            d, p = (float(v) for v in args.zigzag.split("/"))
-        except ValueError:
-            raise ValueError(f"--zigzag '{args.zigzag}': give rudder/heading angles in degrees, e.g. 20/20") from None
+        d, p = parse_zigzag(args.zigzag)
         res = zigzag(model, d, p, speed=args.speed, first=args.side, rudder_rate=rate, lpp=args.lpp,
                      method=args.method, rtol=_rtol(args))
-    for i, m in enumerate(res.metrics):
-        print(_summary(f"{model.name} member {i}", m.to_dict()))
+    for m in res.metrics:
+        print(_summary(model.name, m.to_dict()))
     if args.output:
         import pandas as pd
+
+        from ._common import units_header
 
         frames = []
         for i in range(res.simulation.x.shape[0]):
             df = res.member(i).reset_index()
-            df.insert(0, "member", i)
+            df.insert(0, "run", i)
             frames.append(df)
-        _write_or_print(pd.concat(frames).to_csv(index=False), args.output, args.force)
+        table = units_header(pd.concat(frames), model)
+        _write_or_print(table.to_csv(index=False, float_format="%.10g"), args.output, args.force)
     if not res.success:
         print(f"shipid simulate: warning: {res.message}", file=sys.stderr)
         return 1
@@ -156,7 +208,8 @@ def _simulate(args) -> int:
 def _sweep(args) -> int:
     from ..manoeuvres import ship_info, turning_sweep
 
-    model = load_model(args.model)
+    _check_common(args)
+    model = load_model(args.model, args.lpp)
     rud = _floats(args.rudder, "--rudder")
     if args.speed is None:
         u0 = ship_info(model).get("design_speed")
@@ -170,7 +223,7 @@ def _sweep(args) -> int:
     rate = math.radians(args.rudder_rate) if args.rudder_rate is not None else None
     df = turning_sweep(model, rud, speeds, side=args.side, rudder_rate=rate, lpp=args.lpp,
                        method=args.method, rtol=_rtol(args))
-    _write_or_print(df.to_csv(index=False), args.output, args.force)
+    _write_or_print(df.to_csv(index=False, float_format="%.10g"), args.output, args.force)
     if args.output:
         print(df[["rudder_deg", "speed", "n", "tactical_diameter_L", "steady_diameter_L"]].to_string(index=False))
     return 0 if bool(df["success"].all()) else 1

@@ -6,22 +6,29 @@ Both replay the model with each log's recorded rudder and propeller inputs
 """
 from __future__ import annotations
 
-import json
 import math
 import sys
 from pathlib import Path
+
+from ._common import add_log_options, add_progress_option, progress_iter, read_logs
 
 
 def _common(p) -> None:
     p.add_argument("result", metavar="RESULT.json", help="fit result written by `shipid fit -o`")
     p.add_argument("logs", nargs="+", metavar="LOG", help="trial logs to replay (.csv, MARIN .dat)")
-    p.add_argument("--lpp", type=float, default=None, help="ship length [m] (default: from the log, then the model)")
-    p.add_argument("--rudder-sign", type=float, choices=(1.0, -1.0), default=1.0, metavar="{1,-1}",
-                   help="multiply the logged rudder angle by this before the replay (-1 for the MARIN KVLCC2 files, "
-                        "whose positive rudder turns to port)")
+    # --lpp (default: from the log, then the model), --rudder-sign (-1: the file's rudder is positive to port;
+    # the MARIN reader flips by itself), --schema, --units, ...: read exactly as `shipid fit` reads
+    add_log_options(p)
+    p.add_argument("--zigzag", metavar="D/C", default=None,
+                   help="nominal rudder/check angles [deg] of the zigzag logs, e.g. 10/5 (default: read from each log)")
     p.add_argument("--no-closed-loop", action="store_true",
                    help="skip the model's own closed-loop standard manoeuvre matching each log (replay only)")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.add_argument("--horizon", default="10,30,60", metavar="SECONDS",
+                   help="multi-start open-loop prediction horizons [s], comma-separated (default 10,30,60; "
+                        "'none' to skip): per log median/p90 position and median heading errors from starts "
+                        "every --start-every s")
+    p.add_argument("--start-every", type=float, default=5.0, help="spacing of the horizon starts [s] (default 5)")
 
 
 def register(sub) -> None:
@@ -31,6 +38,9 @@ def register(sub) -> None:
                                    "ITTC/IMO manoeuvre metrics of the log and of the replay.")
     _common(p)
     p.add_argument("-o", "--output", required=True, help="JSON file to write (a list, one object per log)")
+    from .uncertainty import add_draws_option
+
+    add_draws_option(p)
     p.set_defaults(handler=_validate)
 
     r = sub.add_parser("report", help="write a self-contained HTML validation report of a fitted model",
@@ -40,18 +50,26 @@ def register(sub) -> None:
     _common(r)
     r.add_argument("-o", "--output", required=True, help="HTML file to write")
     r.add_argument("--title", default=None, help="report title")
+    from .uncertainty import add_draws_option
+
+    add_draws_option(r)
+    add_progress_option(r)
     r.set_defaults(handler=_report)
 
 
 def _check(args) -> Path:
-    out = Path(args.output)
-    if out.exists() and not args.force:
-        raise ValueError(f"{out}: output exists; choose another name or pass --force to overwrite it")
-    if out.resolve() in {Path(p).resolve() for p in [args.result, *args.logs]}:
-        raise ValueError(f"{out}: the output would replace an input file; choose another name")
+    from ._common import check_output_path
+
+    out = check_output_path(args.output, force=args.force, inputs=[args.result, *args.logs])
     if args.lpp is not None and not (math.isfinite(args.lpp) and args.lpp > 0):
         raise ValueError(f"--lpp {args.lpp}: give the ship length in metres (a positive number)")
     return out
+
+
+def _zigzag(args):
+    from ._common import parse_zigzag
+
+    return parse_zigzag(args.zigzag) if args.zigzag else None
 
 
 def _line(d: dict) -> str:
@@ -69,13 +87,27 @@ def _line(d: dict) -> str:
 
 
 def _validate(args) -> int:
-    from .._io import atomic_write_text
-    from ..validation import validate
+    from .._io import atomic_write_text, dumps_json
+    from ..validation import validate_logs
+    from .uncertainty import validate_draws
 
     out = _check(args)
-    res = validate(args.result, args.logs, args.lpp, rudder_sign=args.rudder_sign,
-                   closed_loop=not args.no_closed_loop)
-    atomic_write_text(out, json.dumps(res, indent=2, allow_nan=False) + "\n", force=args.force)
+    horizons = _horizons(args.horizon)
+    logs = read_logs(args.logs, args)
+    vals = validate_logs(args.result, logs, args.lpp, closed_loop=not args.no_closed_loop,
+                         zigzag_angles=_zigzag(args))
+    res = [v.to_dict() for v in vals]
+    validate_draws(args, args.result, vals, res)  # --draws N: intervals inside each "predicted" block
+    if horizons:
+        for d, (h, _) in zip(res, _horizon_results(args, horizons, logs)):
+            if h is None:
+                continue
+            d["horizon"] = h.summary()
+            print(f"{d['name']}: horizon " + ", ".join(
+                f"{e['seconds']:g} s median {e['position_error_median_m']:.3g} m ({e['n_starts']} starts"
+                f"{', %d blow-ups' % e['n_blowups'] if e['n_blowups'] else ''})"
+                for e in d["horizon"] if e["position_error_median_m"] is not None))
+    atomic_write_text(out, dumps_json(res), force=args.force)
     for d in res:
         print(_line(d))
         for n in d["notes"]:
@@ -88,16 +120,52 @@ def _validate(args) -> int:
     return 0
 
 
+def _horizons(text: str) -> list[float]:
+    if text is None or text.strip().lower() in ("", "none", "off", "0"):
+        return []
+    try:
+        out = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise ValueError(f"--horizon {text}: give comma-separated seconds, e.g. 10,30,60") from None
+    if not out or not all(math.isfinite(v) and v > 0 for v in out):
+        raise ValueError(f"--horizon {text}: horizons must be positive numbers of seconds, e.g. 10,30,60")
+    return out
+
+
+def _horizon_results(args, horizons, logs) -> list:
+    """``(HorizonResult, log)`` per log for ``--horizon``."""
+    from ..validation import resolve_model
+    from ..validation_horizon import horizon_prediction
+
+    model, _ = resolve_model(args.result)
+    out = []
+    for lg in logs:
+        if not {"x", "y", "psi"} <= set(getattr(lg, "data", lg).columns):
+            print(f"note: {getattr(lg, 'name', 'log')}: no x, y, psi channels; horizon prediction skipped",
+                  file=sys.stderr)
+            out.append((None, lg))
+            continue
+        out.append((horizon_prediction(model, lg, horizons=horizons, start_every=args.start_every), lg))
+    return out
+
+
 def _report(args) -> int:
     from .._io import atomic_write_text
     from ..report import render_report
-    from ..validation import load_logs, resolve_model, validate_one
+    from ..validation import resolve_model, validate_one
 
     out = _check(args)
     model, res = resolve_model(args.result)
-    vals = [validate_one(model, lg, lpp=args.lpp, rudder_sign=args.rudder_sign, closed_loop=not args.no_closed_loop)
-            for lg in load_logs(args.logs, lpp=args.lpp)]
-    text = render_report(res, args.logs, title=args.title, validations=vals)
+    logs = read_logs(args.logs, args)
+    vals = [validate_one(model, lg, lpp=args.lpp, closed_loop=not args.no_closed_loop,
+                         zigzag_angles=_zigzag(args))
+            for lg in progress_iter(logs, args, "replaying logs")]
+    from .uncertainty import check_draws
+
+    unc = {"draws": check_draws(args), "seed": args.draws_seed, "samples": args.samples} if check_draws(args) else None
+    horizons = _horizons(args.horizon)
+    hz = [h for h in _horizon_results(args, horizons, logs) if h[0] is not None] if horizons else None
+    text = render_report(res, args.logs, title=args.title, validations=vals, uncertainty=unc, horizons=hz)
     atomic_write_text(out, text, force=args.force)
     for v in vals:
         print(_line(v.to_dict()))

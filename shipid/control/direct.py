@@ -27,7 +27,7 @@ import warnings
 import numpy as np
 from scipy.optimize import BFGS, Bounds, NonlinearConstraint, minimize
 
-from .problem import Problem
+from .problem import Problem, one_blas_thread
 from .result import ControlResult
 from .shooting import _MS
 
@@ -36,7 +36,7 @@ __all__ = ["solve_direct"]
 
 def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int | None = None, max_iter: int = 300,
                  ftol: float = 1e-9, tol: float = 1e-2, U0: np.ndarray | None = None,
-                 tf0: float | None = None) -> ControlResult:
+                 tf0: float | None = None, progress: bool = False) -> ControlResult:
     """Solve ``problem`` by multiple shooting.
 
     Parameters
@@ -58,6 +58,8 @@ def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int | N
         Largest admissible scaled constraint violation for ``success``.
     U0, tf0 : optional
         Initial guess; the node states are initialised by simulating it.
+    progress : bool
+        Show a progress bar over the optimiser's iterations (tqdm, on stderr; SLSQP and trust-constr).
     """
     if method not in ("slsqp", "trust-constr", "ipopt"):
         raise ValueError(f"solve_direct: method must be 'slsqp', 'trust-constr' or 'ipopt', got {method!r}")
@@ -65,8 +67,12 @@ def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int | N
         from .ipopt import solve_ipopt
 
         return solve_ipopt(problem, n_segments=n_segments, max_iter=max_iter, tol=tol, U0=U0, tf0=tf0)
+    from .spec import check_problem_size
+
+    nseg = problem.shooting_segments if n_segments is None else n_segments
+    check_problem_size(problem.model, problem.n_intervals, problem.substeps, problem.name, n_segments=nseg)
     t0 = time.perf_counter()
-    ms = _MS(problem, problem.shooting_segments if n_segments is None else n_segments)
+    ms = _MS(problem, nseg)
     U = problem.initial_controls() if U0 is None else np.clip(np.asarray(U0, float), problem.u_lo, problem.u_hi)
     tf = problem.initial_tf() if tf0 is None else float(tf0)
     _, X, _ = problem.simulate(U, tf)
@@ -74,21 +80,30 @@ def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int | N
     lb, ub = ms.bounds()
     w0 = np.clip(ms.pack(U, S, tf), lb, ub)
     has_ineq = ms.n_ineq() > 0
-    with warnings.catch_warnings():
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=max_iter * (10 if method == "trust-constr" else 1), desc=f"{problem.name} ({method})",
+                   unit="it", leave=False)
+    step = (lambda *a: bar.update(1)) if bar is not None else None
+    with warnings.catch_warnings(), one_blas_thread():
         warnings.simplefilter("ignore", RuntimeWarning)
         if method == "slsqp":
             cons = [{"type": "eq", "fun": ms.eq, "jac": ms.eq_jac}]
             if has_ineq:
                 cons.append({"type": "ineq", "fun": ms.ineq, "jac": ms.ineq_jac})
             res = minimize(ms.cost, w0, jac=True, method="SLSQP", bounds=Bounds(lb, ub), constraints=cons,
-                           options={"maxiter": max_iter, "ftol": ftol})
+                           options={"maxiter": max_iter, "ftol": ftol}, callback=step)
         else:
             cons = [NonlinearConstraint(ms.eq, 0.0, 0.0, jac=ms.eq_jac)]
             if has_ineq:
                 cons.append(NonlinearConstraint(ms.ineq, 0.0, np.inf, jac=ms.ineq_jac))
             res = minimize(ms.cost, w0, jac=True, method="trust-constr", bounds=Bounds(lb, ub, keep_feasible=False),
-                           constraints=cons, hess=BFGS(),
+                           constraints=cons, hess=BFGS(), callback=step,
                            options={"maxiter": max_iter * 10, "gtol": 1e-8, "xtol": 1e-10, "verbose": 0})
+    if bar is not None:
+        bar.close()
     U, S, tf = ms.unpack(res.x)
     nit = int(getattr(res, "nit", 0))
     return ControlResult(problem=problem, method=f"direct-{method}", controls=U, final_time=float(tf), nit=nit,

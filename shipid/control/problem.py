@@ -21,7 +21,21 @@ import numpy as np
 
 from ..models.base import Model
 
-__all__ = ["Problem", "rk4_sensitivities", "Trajectory", "evaluate", "Bounds"]
+__all__ = ["Problem", "rk4_sensitivities", "Trajectory", "evaluate", "Bounds", "one_blas_thread"]
+
+
+def one_blas_thread():
+    """Context in which BLAS/LAPACK use one thread (``threadpoolctl``).
+
+    The optimisers' iterates depend on floating-point summation order, which a
+    multi-threaded BLAS changes with the thread count: SLSQP on scenario 3 stopped
+    at final time 54.624 s with ``OPENBLAS_NUM_THREADS=1`` and 54.712 s with 2.
+    Inside this context the solvers give the same answer on every machine setting
+    (the matrices are small, so one thread costs nothing).
+    """
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1, user_api="blas")
 
 Bounds = Mapping[str, tuple]
 
@@ -174,6 +188,9 @@ class Problem:
         self.u_fixed = hi == lo
         if self.n_intervals < 2 or self.substeps < 1:
             raise ValueError(f"n_intervals must be >= 2 and substeps >= 1, got {self.n_intervals}, {self.substeps}")
+        from .spec import check_problem_size
+
+        check_problem_size(m, self.n_intervals, self.substeps, self.name, n_segments=self.shooting_segments)
         if self.final_time is not None and not self.final_time > 0:
             raise ValueError(f"final_time must be positive [s], got {self.final_time!r}")
         a, b = self.tf_bounds

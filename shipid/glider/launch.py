@@ -278,6 +278,11 @@ def launch(
         dt = _stable_dt(model, x0, fin, params, 0.01)
     dt = float(dt)
     n_total = int(np.ceil(t_max / dt))
+    from .._io import check_memory
+
+    # the trajectory of every launch is kept (6 doubles per step), plus one chunk of the simulation
+    check_memory(8.0 * B * (n_total + 1) * 6 * 2, f"glider launch: dt {dt:g} s over t_max {t_max:g} s "
+                 f"({n_total} steps x {B} launch(es))", "use a larger --dt (default: automatic, <= 0.01 s)")
     chunk = max(1, int(round(1.0 / dt)))      # 1 s of flight per chunk
 
     status = np.array(["t_max"] * B, dtype=object)

@@ -26,7 +26,7 @@ from ..simulate import simulate
 from .data import noise_std_from_data, prepare_logs
 from .diagnostics import identifiability
 from .identifier import NotFittedError
-from .result import FitResult, diagnostics_to_json, software_versions
+from .result import FitResult, _inputs, diagnostics_to_json, fitted_ship, software_versions
 
 __all__ = ["OutputErrorRefiner"]
 
@@ -49,6 +49,9 @@ class OutputErrorRefiner:
         Iteration limit of the least-squares solver.
     substeps : int
         RK4 steps per sample.
+    input_hold : {"foh", "zoh"}
+        Inputs between samples in the simulations: linear between the logged values (default, as
+        the EKF's) or held (see :func:`shipid.simulate.simulate`).
     jacobian : {"fd", "tangent"}
         Sensitivities by forward differences in one batched simulation (default) or
         by the exact tangent of the RK4 map.
@@ -69,7 +72,7 @@ class OutputErrorRefiner:
 
     def __init__(self, model: Model, *, estimate=None, channels=None, meas_std=None, max_nfev: int = 30,
                  substeps: int = 1, jacobian: str = "fd", log_weights=None,
-                 extra_residuals=None):
+                 extra_residuals=None, input_hold: str = "foh"):
         self.model = model
         self.estimate = estimate
         self.channels = channels
@@ -79,6 +82,7 @@ class OutputErrorRefiner:
         self.jacobian = jacobian
         self.log_weights = log_weights
         self.extra_residuals = extra_residuals
+        self.input_hold = input_hold
 
     def fit(self, logs, start=None, x0=None) -> "OutputErrorRefiner":
         """Refine on ``logs``; ``start`` may be a fitted :class:`EKFIdentifier` whose
@@ -87,6 +91,8 @@ class OutputErrorRefiner:
         simulated logs); by default they are the mean of each log's first five samples."""
         if self.jacobian not in ("fd", "tangent"):
             raise ValueError(f"jacobian must be 'fd' or 'tangent', got {self.jacobian!r}")
+        if self.input_hold not in ("foh", "zoh"):
+            raise ValueError(f"input_hold must be 'foh' or 'zoh', got {self.input_hold!r}")
         model = self.model
         arrays, meas = prepare_logs(model, logs)
         if self.log_weights is None:
@@ -164,7 +170,7 @@ class OutputErrorRefiner:
                 Ug = np.broadcast_to(Ug, (B,) + Ug.shape).reshape((B * G,) + Ug.shape[1:])
                 Pg = np.repeat(P, G, axis=0)
                 with np.errstate(all="ignore"):
-                    res = simulate(model, X0, t, Ug, params=Pg, substeps=self.substeps)
+                    res = simulate(model, X0, t, Ug, params=Pg, substeps=self.substeps, input_hold=self.input_hold)
                 xs = res.x.reshape((B, G) + res.x.shape[1:])
                 for j, i in enumerate(g):
                     out[i] = xs[:, j][:, :, st_idx]
@@ -172,7 +178,7 @@ class OutputErrorRefiner:
 
         def tangent_jac(th):
             """Exact sensitivities of the RK4 map along the nominal trajectory, (n_res, ne)."""
-            from ..integrate import rk4_step_tangent
+            from ..integrate import hold_steps, rk4_step_tangent
 
             p = p0.copy()
             p[est_idx] = th * scale
@@ -186,8 +192,9 @@ class OutputErrorRefiner:
                 with np.errstate(all="ignore"):
                     for k in range(t.size - 1):
                         h = (t[k + 1] - t[k]) / self.substeps
-                        for m in range(self.substeps):
-                            x, Fx, Fp = rk4_step_tangent(model, t[k] + m * h, x, Ug[:, k], p, h)
+                        u1 = Ug[:, k + 1] if self.input_hold == "foh" else None
+                        for m, (ua, ub) in enumerate(hold_steps(Ug[:, k], u1, self.substeps)):
+                            x, Fx, Fp = rk4_step_tangent(model, t[k] + m * h, x, ua, p, h, ub)
                             S = Fx @ S + Fp
                         J[:, k + 1] = S[:, st_idx][:, :, est_idx]
                 J = J * scale / sig[ch_idx][:, None]
@@ -207,12 +214,13 @@ class OutputErrorRefiner:
             if self.extra_residuals is not None:
                 rs.append(extra_batch(theta_batch))
             r = np.concatenate(rs, axis=1)
-            return np.where(np.isfinite(r), r, 1e6)
+            # a diverging simulation: finite residuals capped at 1e6 (squares must not overflow), others 1e6
+            return np.where(np.isfinite(r), np.clip(r, -1e6, 1e6), 1e6)
 
         def extra_batch(theta_batch):
             P = params_of(theta_batch)
             out = np.asarray(self.extra_residuals(P), dtype=float).reshape(P.shape[0], -1)
-            return np.where(np.isfinite(out), out, 1e6)
+            return np.where(np.isfinite(out), np.clip(out, -1e6, 1e6), 1e6)
 
         h = 1e-6
 
@@ -236,7 +244,7 @@ class OutputErrorRefiner:
         n_obs = int(sum(m.sum() for m, w in zip(masks, wlog) if w > 0))
         dof = max(n_obs - th0.size, 1)
         s2 = float(np.sum(sol.fun**2) / dof)
-        cov_s = np.linalg.pinv(J.T @ J) * s2
+        cov_s = np.linalg.pinv(J.T @ J) * s2 if np.all(np.isfinite(J)) else np.full((th0.size, th0.size), np.nan)
         theta = sol.x * scale
         cov = cov_s * np.outer(scale, scale)
         coef = p0.copy()
@@ -251,9 +259,22 @@ class OutputErrorRefiner:
         self.cost_ = float(sol.cost)
         self.cost_start_ = float(0.5 * np.sum(fun(th0) ** 2))
         self.rms_normalised_residual_ = float(np.sqrt(s2))
-        self.success_ = bool(sol.success)
+        finite = bool(np.all(np.isfinite(sol.x)) and np.isfinite(sol.cost))
+        capped = finite and bool(np.any(np.abs(sol.fun) >= 1e6))  # a replay still diverges at the end
+        self.success_ = bool(sol.success) and finite and not capped
         self.nfev_ = int(sol.nfev)
-        self.message_ = str(sol.message)
+        if not finite:
+            self.message_ = f"refinement failed: non-finite coefficients or cost ({sol.message}); the start model's replay diverges?"
+        elif capped:
+            self.message_ = (f"refinement failed: the refined model's replay of some logs still diverges ({sol.message}); "
+                             "the model cannot follow these logs")
+        else:
+            self.message_ = str(sol.message)
+        if start is not None and getattr(start, "success_", True) is False:
+            # a start from a diverged filter is not a result, whatever the optimiser says
+            self.success_ = False
+            self.message_ = (f"started from a diverged EKF fit ({getattr(start, 'message_', 'diverged')}); "
+                             f"refinement reported as failed (optimiser: {sol.message})")
         if start is not None and hasattr(start, "prior_std_"):
             prior_cov_s = np.diag((start.prior_std_.reindex(names).to_numpy() / scale) ** 2)
         else:
@@ -274,15 +295,18 @@ class OutputErrorRefiner:
         if not hasattr(self, "coef_"):
             raise NotFittedError("this OutputErrorRefiner is not fitted yet: call fit(logs) first")
         diag = diagnostics_to_json(self.diagnostics_)
+        opts, ship = fitted_ship(self.model, self.logs_)
         return FitResult(
             model=self.model.name, coef={k: float(v) for k, v in self.coef_.items()},
             coef_std={k: float(v) for k, v in self.coef_std_.items()}, cov=self.cov_.copy(), diagnostics=diag,
-            inputs=[dict(m) for m in self.logs_], method="output-error",
+            inputs=_inputs(self.logs_), method="output-error",
             settings={"estimated": self.estimated_, "channels": self.channels_, "max_nfev": self.max_nfev,
+                      "input_hold": self.input_hold,
                       "log_weights": None if self.log_weights is None else [float(w) for w in self.log_weights],
                       "extra_residuals": self.extra_residuals is not None},
             loglik=None, success=self.success_, message=self.message_, versions=software_versions(),
             created=datetime.now(timezone.utc).isoformat(timespec="seconds"),
             extra={"cost_start": self.cost_start_, "cost": self.cost_,
                    "rms_normalised_residual": self.rms_normalised_residual_},
+            model_options=opts, ship=ship,
         )

@@ -13,7 +13,7 @@ import pandas as pd
 
 from ..models.base import Model
 
-__all__ = ["LogArrays", "prepare_logs", "noise_std_from_data"]
+__all__ = ["LogArrays", "prepare_logs", "noise_std_from_data", "resolution_std", "frozen_mask"]
 
 
 @dataclass
@@ -39,6 +39,7 @@ def _frame(log) -> tuple[pd.DataFrame, dict]:
     ship = getattr(log, "ship", None)
     if ship is not None:
         meta["lpp"] = getattr(ship, "lpp", None)
+        meta["ship"] = ship.to_dict() if hasattr(ship, "to_dict") else {"lpp": meta["lpp"]}
     return data, meta
 
 
@@ -96,6 +97,48 @@ def prepare_logs(model: Model, logs) -> tuple[list[LogArrays], list[str]]:
     return out, meas
 
 
+def resolution_std(logs: list[LogArrays]) -> np.ndarray:
+    """Quantisation floor of the noise per channel: ``q / sqrt(12)`` with ``q`` the smallest non-zero
+    step between consecutive recorded values (the channel's resolution), pooled over logs.
+
+    A channel recorded with resolution ``q`` carries at least the rounding error of a uniform variable
+    of width ``q`` (Widrow & Kollar, *Quantization Noise*, 2008, ch. 4).  NaN when a channel never
+    changes.
+    """
+    nm = logs[0].Y.shape[1]
+    out = np.full(nm, np.nan)
+    for j in range(nm):
+        steps = []
+        for lg in logs:
+            y = lg.Y[:, j]
+            y = y[np.isfinite(y)]
+            d = np.abs(np.diff(y))
+            d = d[d > 0]
+            if d.size:
+                steps.append(d.min())
+        if steps:
+            out[j] = min(steps) / np.sqrt(12.0)
+    return out
+
+
+def frozen_mask(y: np.ndarray, min_changing: float = 0.9) -> np.ndarray:
+    """Samples of a channel that repeat the previous value exactly in a channel that otherwise changes.
+
+    A sensor that freezes (a GNSS receiver without a new fix repeats its last position) repeats the
+    value bit for bit; in a channel whose values change at ``min_changing`` or more of the samples
+    such repeats are not measurements.  A quantised, often-steady channel (repeats are normal) gives
+    no mask.  ``y (N,)`` -> bool ``(N,)`` (the first sample of a frozen run is kept: it was a real fix).
+    """
+    y = np.asarray(y, dtype=float)
+    fin = np.isfinite(y)
+    same = np.zeros(y.size, dtype=bool)
+    same[1:] = fin[1:] & fin[:-1] & (y[1:] == y[:-1])
+    n_pairs = int((fin[1:] & fin[:-1]).sum())
+    if n_pairs == 0 or 1.0 - same.sum() / n_pairs < min_changing:
+        return np.zeros(y.size, dtype=bool)
+    return same
+
+
 def noise_std_from_data(logs: list[LogArrays], floor: float = 1e-9) -> np.ndarray:
     """Measurement-noise standard deviation per channel from the data.
 
@@ -103,9 +146,14 @@ def noise_std_from_data(logs: list[LogArrays], floor: float = 1e-9) -> np.ndarra
     difference is dominated by ``e[k+1] - 2 e[k] + e[k-1]`` with variance
     ``6 sigma^2``; a robust (median absolute deviation) estimate of its
     spread divided by ``sqrt(6)`` estimates ``sigma``.  Pooled over logs.
+    Floors: ``1e-4`` of the channel's range, its resolution
+    (:func:`resolution_std`) and ``floor``.  A pre-filtered channel makes the
+    second differences far smaller than the real prediction error; the
+    identifier raises such levels from the innovations of a first pass.
     """
     nm = logs[0].Y.shape[1]
     sig = np.zeros(nm)
+    res = resolution_std(logs)
     for j in range(nm):
         d2 = []
         scale = []
@@ -122,5 +170,5 @@ def noise_std_from_data(logs: list[LogArrays], floor: float = 1e-9) -> np.ndarra
             continue
         mad = np.median(np.abs(d - np.median(d))) / 0.6745
         rng = max(scale) if scale else 1.0
-        sig[j] = max(mad / np.sqrt(6.0), 1e-4 * rng, floor)
+        sig[j] = max(mad / np.sqrt(6.0), 1e-4 * rng, res[j] if np.isfinite(res[j]) else 0.0, floor)
     return sig

@@ -17,7 +17,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-__all__ = ["identifiability"]
+__all__ = ["identifiability", "consistency", "coefficient_plausibility", "ljung_box", "likely_causes",
+           "CONSISTENCY_RULES"]
 
 
 def _combo(vec: np.ndarray, names: list[str], tol: float = 0.25) -> str:
@@ -109,3 +110,175 @@ def identifiability(
         "unidentified_combinations": combos,
         "warnings": warnings,
     }
+
+
+# --------------------------------------------------------------------------- consistency of a fit
+#: Rules of the consistency verdict (fixed from clean synthetic logs before any wrong-physics case was
+#: run; see docs/identification.md "Does the fit say when it is wrong?").
+CONSISTENCY_RULES = {
+    "alpha": 1e-3,          # two-sided level of the statistical tests (per channel and test)
+    "nis_factor": 2.0,      # ... and the mean normalised innovation must be outside [1/f, f] to count
+    "lb_lags": 20,          # Ljung-Box lags (at most a tenth of the samples)
+    "rho_limit": 0.3,       # ... and some |autocorrelation| of the normalised innovations above this
+    "replay_factor": 3.0,   # replay RMS of a dynamic channel above this many noise std
+    "gated_fraction": 0.05, # more than this fraction of a channel's measurements rejected by the gate
+    "coef_factor": 10.0,    # a well-determined coefficient this many times larger or smaller than the model's
+}
+
+
+def ljung_box(x_segments, lags: int):
+    """Ljung-Box portmanteau statistic of a zero-mean sequence given as segments (gaps between them).
+
+    ``Q = n (n + 2) sum_{l=1}^{L} rho_l^2 / (n - l)`` (Ljung & Box 1978, "On a measure of lack of fit in
+    time series models", Biometrika 65:297-303, eq. (2.1) with the sample autocorrelations taken about
+    zero: the innovations of a consistent filter have zero mean, so a bias counts as lack of fit).
+    ``rho_l = sum x_k x_{k+l} / sum x_k^2`` pools the lag products over the segments (NaN entries, e.g.
+    missing or rejected samples, are left out of both sums).
+
+    Returns ``(Q, p_value, rho (L,), n)``; ``p`` from the chi-square distribution with ``L`` degrees of
+    freedom (no fitted ARMA terms are subtracted: the innovations are tested as they are).
+    """
+    from scipy.stats import chi2
+
+    num = np.zeros(lags)
+    den = 0.0
+    n = 0
+    for x in x_segments:
+        x = np.asarray(x, dtype=float)
+        ok = np.isfinite(x)
+        xz = np.where(ok, x, 0.0)
+        den += float(np.sum(xz * xz))
+        n += int(ok.sum())
+        for l in range(1, min(lags, x.size - 1) + 1):
+            num[l - 1] += float(np.dot(xz[:-l], xz[l:]))
+    if n <= lags + 1 or not den > 0:
+        return float("nan"), float("nan"), np.full(lags, np.nan), n
+    rho = num / den
+    Q = float(n * (n + 2) * np.sum(rho**2 / (n - np.arange(1, lags + 1))))
+    return Q, float(chi2.sf(Q, lags)), rho, n
+
+
+def _finite_or_none(v):
+    v = float(v)
+    return v if np.isfinite(v) else None
+
+
+def coefficient_plausibility(names, theta, theta_std, theta_model, prior_std, rules=None) -> list[str]:
+    """Coefficients the data determine that contradict the model's values (the prior) grossly.
+
+    A linear-in-the-input model absorbs a scale or sign error of that input into its coefficient with
+    perfectly consistent innovations (a rudder logged in rad/57.3 gives ``c3 x 57``), so this is the
+    only place such an error can show.  A coefficient counts when it is determined (posterior std below
+    half its prior std, more than 3 std from zero) and the model's value is not zero; it is reported when
+    its sign is opposite to the model's, or its magnitude is more than ``coef_factor`` times larger or
+    smaller.  Returns one sentence per finding.
+    """
+    r = dict(CONSISTENCY_RULES)
+    r.update(rules or {})
+    f = r["coef_factor"]
+    out = []
+    for n, th, sd, tm, ps in zip(names, theta, theta_std, theta_model, prior_std):
+        if not (np.isfinite(th) and np.isfinite(sd) and tm != 0 and sd < 0.5 * ps and abs(th) > 3 * sd):
+            continue
+        if th * tm < 0:
+            out.append(f"coefficient {n} = {th:.4g} +- {sd:.2g} has the opposite sign of the model's value {tm:.4g}: "
+                       "a sign convention (rudder, axes) of a channel?")
+        elif abs(th) > f * abs(tm) or abs(th) < abs(tm) / f:
+            out.append(f"coefficient {n} = {th:.4g} +- {sd:.2g} is {abs(th / tm):.3g} times the model's value {tm:.4g}: "
+                       "a channel in the wrong units (degrees/radians, rpm/rps)?")
+    return out
+
+
+def consistency(names, innov, S_diag, gated, segments, replay_ratio=None, dynamic=(), rules=None,
+                extra_reasons=()) -> dict:
+    """Is the fit consistent with its own noise model?  Per channel and as one verdict.
+
+    Parameters
+    ----------
+    names : list of str  measured channels
+    innov, S_diag : (N, nm)  innovations and their predicted variances (one filter run, logs concatenated)
+    gated : (N, nm) bool  measurements rejected by the innovation gate
+    segments : list of slice  the samples of each log (autocorrelations do not cross logs)
+    replay_ratio : dict channel -> float, optional  RMS of (replay - measurement) / meas_std over all logs
+    dynamic : channels whose replay ratio enters the verdict (those with estimated parameters in their
+        equations; positions and heading integrate and drift in an open-loop replay)
+    rules : dict, optional  overrides of :data:`CONSISTENCY_RULES`
+    extra_reasons : further findings that make the fit inconsistent (e.g. :func:`coefficient_plausibility`)
+
+    Returns
+    -------
+    dict with ``channels`` (name -> statistics), ``consistent`` (bool), ``reasons`` (list of str),
+    ``rules``.  Statistics per channel: ``n`` accepted samples, ``nis_mean`` (expected 1) and
+    ``nis_band`` (its two-sided ``1 - alpha`` chi-square band for ``n_eff`` samples), ``n_eff``
+    (``n / (1 + 2 sum rho_l^2)``: squares of correlated Gaussians are correlated by ``rho^2``),
+    ``mean`` (normalised innovation, expected 0), ``ljung_box`` / ``ljung_box_p`` / ``rho_max``
+    (largest |autocorrelation| over the lags), ``replay_ratio``, ``n_gated``, ``gated_fraction``.
+    Non-finite values are None (the JSON stays strict).
+    """
+    from scipy.stats import chi2
+
+    r = dict(CONSISTENCY_RULES)
+    r.update(rules or {})
+    alpha = r["alpha"]
+    out_ch, reasons = {}, []
+    for j, name in enumerate(names):
+        acc = np.isfinite(innov[:, j]) & ~gated[:, j] & (S_diag[:, j] > 0)
+        nu = np.where(acc, innov[:, j] / np.sqrt(np.where(acc, S_diag[:, j], 1.0)), np.nan)
+        n = int(acc.sum())
+        n_meas = int((np.isfinite(innov[:, j])).sum())
+        n_g = int(gated[:, j].sum())
+        row = {"n": n, "n_gated": n_g, "gated_fraction": n_g / n_meas if n_meas else 0.0}
+        if n < 10:
+            row.update(nis_mean=None, nis_band=None, n_eff=None, mean=None, ljung_box=None, ljung_box_p=None,
+                       rho_max=None)
+        else:
+            lags = int(min(r["lb_lags"], max(1, n // 10)))
+            Q, p, rho, _ = ljung_box([nu[s] for s in segments], lags)
+            rho_f = np.where(np.isfinite(rho), rho, 0.0)
+            n_eff = n / (1.0 + 2.0 * float(np.sum(rho_f**2)))
+            m = float(np.nanmean(nu**2))
+            band = (float(chi2.ppf(alpha / 2, n_eff) / n_eff), float(chi2.ppf(1 - alpha / 2, n_eff) / n_eff))
+            row.update(nis_mean=m, nis_band=list(band), n_eff=n_eff, mean=float(np.nanmean(nu)), ljung_box=Q,
+                       ljung_box_p=p, rho_max=float(np.max(np.abs(rho_f))), lags=lags)
+            f = r["nis_factor"]
+            if not band[0] <= m <= band[1] and not 1.0 / f <= m <= f:
+                what = "larger" if m > 1 else "smaller"
+                reasons.append(f"channel '{name}': innovations {what} than the noise model predicts "
+                               f"(mean normalised innovation {m:.3g}, expected 1, band {band[0]:.2f}-{band[1]:.2f})")
+            if p < alpha and row["rho_max"] > r["rho_limit"]:
+                reasons.append(f"channel '{name}': innovations are not white (Ljung-Box Q = {Q:.4g} over {lags} lags, "
+                               f"p = {p:.2g}, largest autocorrelation {row['rho_max']:.2f})")
+        if n_meas and row["gated_fraction"] > r["gated_fraction"]:
+            reasons.append(f"channel '{name}': {100 * row['gated_fraction']:.1f} % of its measurements were rejected "
+                           "as outliers by the innovation gate")
+        rr = None if replay_ratio is None else replay_ratio.get(name)
+        row["replay_ratio"] = None if rr is None else _finite_or_none(rr)
+        if name in dynamic and rr is not None:
+            if not np.isfinite(rr):
+                reasons.append(f"channel '{name}': the replay of the fitted model failed (non-finite)")
+            elif rr > r["replay_factor"]:
+                reasons.append(f"channel '{name}': the replayed model misses the measurements by {rr:.3g} noise "
+                               f"std (RMS), more than {r['replay_factor']:g}")
+        out_ch[name] = {k: (_finite_or_none(v) if isinstance(v, (float, np.floating)) else v) for k, v in row.items()}
+    reasons += list(extra_reasons)
+    return {"consistent": not reasons, "reasons": reasons, "channels": out_ch, "rules": r}
+
+
+def likely_causes(reasons: list[str]) -> str:
+    """One plain sentence of likely causes for the reasons of an inconsistent fit."""
+    causes = []
+    text = " ".join(reasons)
+    if "larger than" in text or "misses" in text or "not white" in text:
+        causes += ["a channel in the wrong units or sign (e.g. degrees declared as radians)",
+                   "missing physics in the model (wind, current, shallow water)"]
+    if "smaller than" in text:
+        causes.append("a pre-filtered or decimated channel (the noise level estimated from the data is wrong)")
+    if "not white" in text:
+        causes.append("logs sampled too coarsely for the dynamics (decimated)")
+    if "rejected" in text:
+        causes.append("a sensor fault (glitches, frozen positions)")
+    if "opposite sign" in text:
+        causes.append("a sign convention of a channel (rudder positive to port, axes)")
+    if "times the model's value" in text:
+        causes.append("a channel in the wrong units (degrees declared as radians, rpm as rps)")
+    return "; ".join(dict.fromkeys(causes))

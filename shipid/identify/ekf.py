@@ -26,7 +26,7 @@ import numpy as np
 from scipy.linalg.lapack import dpotrf as _potrf
 from scipy.linalg.lapack import dpotrs as _potrs
 
-from ..integrate import STEP_TANGENTS
+from ..integrate import STEP_TANGENTS, hold_steps, interval_steps
 from ..models.base import Model
 from . import _kernel, _memory
 
@@ -184,39 +184,15 @@ def _spd_solve(S: np.ndarray, rhs: np.ndarray):
     return X, logdet
 
 
-def interval_steps(t: np.ndarray, substeps: int, h_max: float | None) -> np.ndarray:
-    """RK4 steps per sample interval: ``n_k = max(substeps, ceil(dt_k / h_max - 1e-9))``.
-
-    ``t (..., N)`` sample times [s] -> ``(..., N-1)`` int; ``h_max`` None gives ``substeps``
-    everywhere.  The ``1e-9`` keeps an interval of exactly ``m * h_max`` (to rounding) at ``m`` steps.
-    """
-    dt = np.diff(np.asarray(t, dtype=float), axis=-1)
-    n = np.full(dt.shape, int(substeps), dtype=np.int64)
-    if h_max is not None:
-        if not h_max > 0:
-            raise ValueError(f"h_max must be positive or None, got {h_max}")
-        n = np.maximum(n, np.ceil(dt / float(h_max) - 1e-9).astype(np.int64))
-    return n
-
-
 def _cross_interval(step, model, t0, x, u0, u1, p, h, n, scale, est, all_est):
     """Cross one sample interval in ``n`` RK4 steps of length ``h`` from ``(t0, x)``.
 
-    Step ``i`` starts at ``t0 + i h``; under first-order hold (``u1`` given) its end
-    inputs are ``(1 - w) u0 + w u1`` at the fractions ``w = i/n`` and ``(i+1)/n`` (so the
-    interval ends on ``u1`` exactly), under zero-order hold (``u1`` None) ``u0`` throughout.
+    Step ``i`` starts at ``t0 + i h`` with the end inputs of :func:`shipid.integrate.hold_steps`
+    (first-order hold when ``u1`` is given, else ``u0`` held).
     Returns ``x(t0 + n h)``, ``dx/dx0 (B, nx, nx)`` and ``dx/dtheta_s (B, nx, ne)``.
     """
-    ua = u0
     Fx = Fp = None
-    for i in range(n):
-        if u1 is None:
-            ub = None
-        elif i == n - 1:
-            ub = u1
-        else:
-            w = (i + 1) / n
-            ub = (1.0 - w) * u0 + w * u1
+    for i, (ua, ub) in enumerate(hold_steps(u0, u1, n)):
         x, Ax, Ap = step(model, t0 + i * h if i else t0, x, ua, p, h, ub)
         Ap = Ap * scale if all_est else Ap[:, :, est] * scale
         if Fx is None:
@@ -224,8 +200,6 @@ def _cross_interval(step, model, t0, x, u0, u1, p, h, n, scale, est, all_est):
         else:
             Fp = Ax @ Fp + Ap
             Fx = Ax @ Fx
-        if ub is not None:
-            ua = ub
     return x, Fx, Fp
 
 

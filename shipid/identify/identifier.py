@@ -9,8 +9,8 @@ import numpy as np
 import pandas as pd
 
 from ..models.base import Model
-from .data import LogArrays, noise_std_from_data, prepare_logs
-from .diagnostics import identifiability
+from .data import LogArrays, frozen_mask, noise_std_from_data, prepare_logs, resolution_std
+from .diagnostics import coefficient_plausibility, consistency, identifiability
 from .ekf import EKFOutput, EKFProblem, rts_smooth, run_ekf
 from .initial import equation_error_fit
 
@@ -95,6 +95,24 @@ class EKFIdentifier:
     gate_run : int
         After this many consecutive rejections of a channel its next measurement
         is accepted (a drifting filter must not reject everything).
+    max_gap : float, "auto" or None
+        A sampling interval longer than this [s] (rows missing from the log: the
+        inputs over it are unknown) restarts the ship state after it, from the
+        measurements that follow, keeping the parameters -- as a new log does.
+        "auto": 10 median sampling intervals.  None: every gap is integrated
+        across (with as many RK4 steps as it needs, inputs as ``input_hold``),
+        right when the inputs are known to be steady over the gaps.
+    adapt_noise : bool
+        Raise the measurement noise of a channel (not given in ``meas_std``) whose
+        first-pass innovations are wider than predicted: its level is multiplied
+        by ``robust std(innovations) / sqrt(median S)`` when that exceeds 1.5,
+        up to three first passes (never lowered).  Second differences of a
+        pre-filtered channel estimate far too little noise, and the filter
+        then trusts the model more than the data allow.
+    drop_frozen : bool
+        Treat exact repeats of the previous value as missing in channels whose
+        values otherwise change at >= 90 % of the samples (a frozen GNSS fix;
+        :func:`~shipid.identify.data.frozen_mask`).
     progress : bool
         Show a tqdm progress bar over passes.
     """
@@ -118,9 +136,12 @@ class EKFIdentifier:
         tune_noise: bool = False,
         substeps: int = 1,
         method: str = "rk4",
-        input_hold: str = "zoh",
-        gate: float | None = None,
+        input_hold: str = "foh",
+        gate: float | None = 5.0,
         gate_run: int = 10,
+        max_gap: float | str | None = "auto",
+        adapt_noise: bool = True,
+        drop_frozen: bool = True,
         progress: bool = False,
     ):
         self.model = model
@@ -142,6 +163,9 @@ class EKFIdentifier:
         self.input_hold = input_hold
         self.gate = gate
         self.gate_run = gate_run
+        self.max_gap = max_gap
+        self.adapt_noise = adapt_noise
+        self.drop_frozen = drop_frozen
         self.progress = progress
 
     # ----------------------------------------------------------------- setup
@@ -164,6 +188,9 @@ class EKFIdentifier:
             raise ValueError(f"gate must be positive or None, got {self.gate}")
         if int(self.gate_run) < 1:
             raise ValueError(f"gate_run must be >= 1, got {self.gate_run}")
+        if not (self.max_gap is None or self.max_gap == "auto" or (isinstance(self.max_gap, (int, float))
+                                                                   and self.max_gap > 0)):
+            raise ValueError(f"max_gap must be a positive number of seconds, 'auto' or None, got {self.max_gap!r}")
         if not self.param_walk >= 0:
             raise ValueError(f"param_walk must be >= 0, got {self.param_walk}")
 
@@ -237,19 +264,25 @@ class EKFIdentifier:
         nx = model.nx
         meas_idx = np.array([model.state_index(s) for s in meas])
 
+        # frozen sensor values are not measurements (the arrays are the identifier's own copies)
+        n_frozen = np.zeros(len(meas), dtype=int)
+        if self.drop_frozen:
+            for a in arrays:
+                for j in range(len(meas)):
+                    fm = frozen_mask(a.Y[:, j])
+                    a.Y[fm, j] = np.nan
+                    n_frozen[j] += int(fm.sum())
         # noise levels
         sig = noise_std_from_data(arrays)
-        for k, v in _as_dict(self.meas_std, meas, "meas_std").items():
+        sig_data = sig.copy()
+        given_sig = _as_dict(self.meas_std, meas, "meas_std")
+        for k, v in given_sig.items():
             sig[meas.index(k)] = v
         bad = [m for m, s in zip(meas, sig) if not (np.isfinite(s) and s > 0)]
         if bad:
             raise ValueError(f"cannot estimate the noise of channel(s) {bad} from the data; give meas_std={{...}}")
         dt = float(np.median(np.concatenate([np.diff(a.t) for a in arrays])))
-        qx = np.full(nx, self.unmeasured_process_std**2)
-        for j, i in enumerate(meas_idx):
-            qx[i] = (0.1 * sig[j]) ** 2 / dt
-        for k, v in _as_dict(self.process_std, model.state_names, "process_std").items():
-            qx[model.state_index(k)] = v**2
+        qx = self._process_noise(sig, meas_idx, dt)
 
         # start values and prior
         theta0 = p_base[est_idx].copy()
@@ -276,8 +309,44 @@ class EKFIdentifier:
                 scale[est_names.index(k)] = v
         scale = np.where(scale > 1e-12, scale, prior_std_abs)
         prior_cov_s = np.diag((prior_std_abs / scale) ** 2)
+        max_gap = None if self.max_gap is None else (10.0 * dt if self.max_gap == "auto" else float(self.max_gap))
+        pieces, start, self.gap_notes_ = [], 0, []
+        for a in arrays:  # (global slice, log) of every stretch without a long gap
+            cuts = [0] + (list(np.flatnonzero(np.diff(a.t) > max_gap) + 1) if max_gap is not None else []) + [a.t.size]
+            for c0, c1 in zip(cuts[:-1], cuts[1:]):
+                pieces.append(slice(start + c0, start + c1))
+            for c in cuts[1:-1]:
+                self.gap_notes_.append(f"log '{a.name}': {a.t[c] - a.t[c - 1]:.3g} s without samples after t = "
+                                       f"{a.t[c - 1]:.6g} s (longer than max_gap = {max_gap:.3g} s): the ship state "
+                                       "restarts from the measurements after it")
+            start += a.t.size
         self._setup = dict(arrays=arrays, meas=meas, meas_idx=meas_idx, p_base=p_base, est_idx=est_idx,
-                           est_names=est_names, sig=sig, qx=qx, scale=scale, prior_cov_s=prior_cov_s, dt=dt)
+                           est_names=est_names, sig=sig, qx=qx, scale=scale, prior_cov_s=prior_cov_s, dt=dt,
+                           pieces=pieces)
+
+        # noise levels raised where the first-pass innovations are wider than predicted
+        factors = np.ones(len(meas))
+        if self.adapt_noise:
+            free = np.array([m not in given_sig for m in meas])
+            for _ in range(3):
+                out0 = run_ekf(self._problem(theta0 / scale), store=False)
+                e, S = out0.innov[0], out0.S_diag[0]
+                f = np.ones(len(meas))
+                for j in np.flatnonzero(free):
+                    ok = np.isfinite(e[:, j]) & np.isfinite(S[:, j])
+                    if ok.sum() >= 10:
+                        spread = 1.4826 * np.median(np.abs(e[ok, j]))
+                        f[j] = spread / np.sqrt(np.median(S[ok, j]))
+                f = np.where(f > 1.5, f, 1.0)
+                if np.all(f == 1.0):
+                    break
+                sig = sig * f
+                factors *= f
+                qx = self._process_noise(sig, meas_idx, dt)
+                self._setup.update(sig=sig, qx=qx)
+        res = resolution_std(arrays)
+        self.noise_ = pd.DataFrame({"second_difference": sig_data, "resolution": res, "innovation_factor": factors,
+                                    "used": sig, "n_frozen": n_frozen}, index=meas)
 
         # optional noise tuning (one batched filter pass over a grid of multipliers)
         q_mult, r_mult = 1.0, 1.0
@@ -320,6 +389,17 @@ class EKFIdentifier:
         self._finish(out, zs, Ps, prob, history, used_eq, q_mult, r_mult)
         return self
 
+    def _process_noise(self, sig, meas_idx, dt) -> np.ndarray:
+        """Process-noise intensities of the ship states: ``(0.1 meas_std)^2 / dt`` for measured states,
+        ``unmeasured_process_std^2`` for the others, ``process_std`` where given."""
+        model = self.model
+        qx = np.full(model.nx, self.unmeasured_process_std**2)
+        for j, i in enumerate(meas_idx):
+            qx[i] = (0.1 * sig[j]) ** 2 / dt
+        for k, v in _as_dict(self.process_std, model.state_names, "process_std").items():
+            qx[model.state_index(k)] = v**2
+        return qx
+
     def _problem(self, theta_s: np.ndarray, q_mult=1.0, r_mult=1.0) -> EKFProblem:
         """Build the (batch of) EKF problems: logs concatenated with resets.
 
@@ -333,7 +413,7 @@ class EKFIdentifier:
         q_mult = np.atleast_1d(np.asarray(q_mult, dtype=float))
         r_mult = np.atleast_1d(np.asarray(r_mult, dtype=float))
         B = max(q_mult.size, r_mult.size)
-        t_all, U_all, Y_all, reset, xr = [], [], [], [], []
+        t_all, U_all, Y_all = [], [], []
         offset = 0.0
         for i, a in enumerate(arrays):
             t = a.t - a.t[0] + offset
@@ -341,13 +421,15 @@ class EKFIdentifier:
             t_all.append(t)
             U_all.append(a.U)
             Y_all.append(a.Y)
-            rs = np.zeros(a.t.size, dtype=bool)
-            rs[0] = i > 0
-            reset.append(rs)
-            x0 = self._initial_state(a)
-            xr.append(np.broadcast_to(x0, (a.t.size, nx)))
         t = np.concatenate(t_all)
-        x_init = self._initial_state(arrays[0])
+        Y = np.concatenate(Y_all)
+        # every log, and every stretch after a long gap, starts its ship state afresh
+        reset = np.zeros(t.size, dtype=bool)
+        xr = np.empty((t.size, nx))
+        for sl in s["pieces"]:
+            reset[sl.start] = sl.start > 0
+            xr[sl] = self._initial_state(LogArrays(name="", t=t[sl], U=np.zeros((sl.stop - sl.start, 0)), Y=Y[sl]))
+        x_init = xr[0]
         P_reset = np.diag(self._initial_state_var(arrays))
         z0 = np.concatenate([x_init, theta_s])
         P0 = np.zeros((ne + nx, ne + nx))
@@ -361,9 +443,9 @@ class EKFIdentifier:
         rep = lambda a: np.broadcast_to(a, (B,) + np.shape(a)).copy()  # noqa: E731
         return EKFProblem(
             model=model, est_idx=s["est_idx"], p_base=rep(s["p_base"]), scale=s["scale"],
-            t=rep(t), U=rep(np.concatenate(U_all)), Y=rep(np.concatenate(Y_all)), meas_idx=s["meas_idx"],
-            R=R, q=qb, z0=rep(z0), P0=rep(P0), reset=rep(np.concatenate(reset)),
-            x_reset=rep(np.concatenate(xr)), P_reset=rep(P_reset), substeps=int(self.substeps), method=self.method,
+            t=rep(t), U=rep(np.concatenate(U_all)), Y=rep(Y), meas_idx=s["meas_idx"],
+            R=R, q=qb, z0=rep(z0), P0=rep(P0), reset=rep(reset),
+            x_reset=rep(xr), P_reset=rep(P_reset), substeps=int(self.substeps), method=self.method,
             input_hold=self.input_hold, h_max=1.5 * s["dt"] / int(self.substeps),
             gate=None if self.gate is None else float(self.gate), gate_run=int(self.gate_run),
         )
@@ -394,15 +476,50 @@ class EKFIdentifier:
         return var
 
     def _tune(self, theta_s):
-        qs = 10.0 ** np.arange(-3.0, 2.01, 1.0)
-        rs = np.array([0.5, 1.0, 2.0])
-        Q, Rm = np.meshgrid(qs, rs, indexing="ij")
-        prob = self._problem(theta_s, Q.ravel(), Rm.ravel())
-        out = run_ekf(prob, store=False)
-        ll = np.where(out.diverged, -np.inf, out.loglik)
-        b = int(np.argmax(ll))
-        table = pd.DataFrame({"q_mult": Q.ravel(), "r_mult": Rm.ravel(), "loglik": out.loglik, "diverged": out.diverged})
-        return float(Q.ravel()[b]), float(Rm.ravel()[b]), table
+        """Noise multipliers by innovation likelihood over a grid, evaluated as one batch per round.
+
+        Start grid: process noise x 10^-3 .. 10^2, measurement noise x 0.5, 1, 2.  When the best point
+        lies on an edge of the grid, the grid grows past that edge (three decades of process noise, two
+        octaves of measurement noise) and is evaluated again, up to four times; an optimum still on the
+        edge is reported in ``tuning_note_``.
+        """
+        q_exp = list(np.arange(-3.0, 2.01, 1.0))
+        r_exp = [-1.0, 0.0, 1.0]
+        rows, seen = [], set()
+        self.tuning_note_ = ""
+        for it in range(5):
+            cand = [(q, r) for q in q_exp for r in r_exp if (q, r) not in seen]
+            if cand:
+                Qm = 10.0 ** np.array([c[0] for c in cand])
+                Rm = 2.0 ** np.array([c[1] for c in cand])
+                out = run_ekf(self._problem(theta_s, Qm, Rm), store=False)
+                for (q, r), ll, dv in zip(cand, out.loglik, out.diverged):
+                    seen.add((q, r))
+                    rows.append({"q_mult": 10.0**q, "r_mult": 2.0**r, "loglik": float(ll), "diverged": bool(dv),
+                                 "q_exp": q, "r_exp": r})
+            table = pd.DataFrame(rows)
+            ll = np.where(table["diverged"], -np.inf, table["loglik"])
+            best = table.iloc[int(np.argmax(ll))]
+            grow = False
+            if best["q_exp"] == min(q_exp):
+                q_exp = [min(q_exp) - d for d in (3.0, 2.0, 1.0)] + q_exp
+                grow = True
+            elif best["q_exp"] == max(q_exp):
+                q_exp = q_exp + [max(q_exp) + d for d in (1.0, 2.0, 3.0)]
+                grow = True
+            if best["r_exp"] == min(r_exp):
+                r_exp = [min(r_exp) - d for d in (2.0, 1.0)] + r_exp
+                grow = True
+            elif best["r_exp"] == max(r_exp):
+                r_exp = r_exp + [max(r_exp) + d for d in (1.0, 2.0)]
+                grow = True
+            if not grow:
+                break
+        else:
+            self.tuning_note_ = (f"noise tuning: the best multipliers (process x {best['q_mult']:.3g}, measurement x "
+                                 f"{best['r_mult']:.3g}) are still on the edge of the widened grid")
+        table = table.drop(columns=["q_exp", "r_exp"])
+        return float(best["q_mult"]), float(best["r_mult"]), table
 
     def _finish(self, out: EKFOutput, zs, Ps, prob: EKFProblem, history, used_eq, q_mult, r_mult):
         s = self._setup
@@ -465,8 +582,60 @@ class EKFIdentifier:
             notes = list(hook(s["arrays"], est))
         self.diagnostics_ = identifiability(est, cov_s, s["prior_cov_s"], notes=notes)
         self.diagnostics_["nis_mean"] = float(np.nanmean(out.nis[0]))
-        self.diagnostics_["nis_expected"] = float(np.mean(np.isfinite(out.innov[0]).sum(axis=1)))
+        self.diagnostics_["nis_expected"] = float(np.mean((np.isfinite(out.innov[0]) & ~out.gated[0]).sum(axis=1)))
+        if self.tune_noise and getattr(self, "tuning_note_", ""):
+            self.diagnostics_["warnings"].append(self.tuning_note_)
+        self.diagnostics_["n_gated"] = {m: int(c) for m, c in zip(s["meas"], out.n_gated[0])}
+        self.diagnostics_["noise"] = {m: {k: (float(v) if np.isfinite(v) else None) for k, v in row.items()}
+                                      for m, row in self.noise_.to_dict(orient="index").items()}
+        self.diagnostics_["consistency"] = self._consistency(out, r_mult)
         self.logs_ = [a.meta for a in s["arrays"]]
+
+    def _consistency(self, out: EKFOutput, r_mult) -> dict:
+        """``diagnostics["consistency"]``: innovation statistics of the reported pass, the replay of the
+        fitted model against the noise model, gated counts, the coefficients against the model's
+        values, and the verdict (:func:`~shipid.identify.diagnostics.consistency`)."""
+        s = self._setup
+        model = self.model
+        meas, arrays, pieces = s["meas"], s["arrays"], s["pieces"]
+        sig = s["sig"] * np.sqrt(r_mult)
+        Jp = np.abs(model.jac_p(0.0, np.ones(model.nx), np.ones(model.nu), self.coef_.to_numpy()))
+        dynamic = [m for m in meas if Jp[model.state_index(m), s["est_idx"]].max() > 0]
+        ratio = None
+        if self.success_:
+            from ..simulate import simulate
+
+            fitted = self.to_model()
+            t = np.concatenate([a.t for a in arrays])
+            U = np.concatenate([a.U for a in arrays])
+            Y = np.concatenate([a.Y for a in arrays])
+            X = np.concatenate([st[list(model.state_names)].to_numpy() for st in self.states_])
+            sq, cnt = np.zeros(len(meas)), np.zeros(len(meas))
+            sub = max(2, int(self.substeps))
+            with np.errstate(all="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                for sl in pieces:  # open-loop replay of every stretch from its smoothed initial state
+                    if sl.stop - sl.start < 2:
+                        continue
+                    sim = simulate(fitted, X[sl.start], t[sl], U[sl], substeps=sub, input_hold=self.input_hold,
+                                   h_max=1.5 * s["dt"] / sub)
+                    e = sim.x[:, s["meas_idx"]] - Y[sl]
+                    ok = np.isfinite(Y[sl])
+                    sq += np.where(ok, np.where(np.isfinite(e), e, np.inf) ** 2, 0.0).sum(axis=0)
+                    cnt += ok.sum(axis=0)
+            ratio = {m: float(np.sqrt(sq[j] / cnt[j]) / sig[j]) if cnt[j] else float("nan") for j, m in enumerate(meas)}
+        est = s["est_idx"]
+        coef_reasons = coefficient_plausibility(s["est_names"], self.coef_.to_numpy()[est],
+                                                self.coef_std_.to_numpy()[est], s["p_base"][est],
+                                                self.prior_std_.to_numpy())
+        res = consistency(meas, out.innov[0], out.S_diag[0], out.gated[0], pieces, replay_ratio=ratio,
+                          dynamic=dynamic, extra_reasons=coef_reasons)
+        res["dynamic_channels"] = dynamic
+        res["gaps"] = list(self.gap_notes_)
+        if not self.success_:
+            res["consistent"] = False
+            res["reasons"].insert(0, f"the filter diverged: {self.message_}")
+        return res
 
     # ----------------------------------------------------------- after fitting
     def _check_fitted(self):

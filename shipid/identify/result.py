@@ -11,9 +11,47 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .._io import (as_mapping, as_number, as_string, atomic_write_text, dumps_json, read_json, short)
+from .._io import (as_bool, as_mapping, as_number, as_string, atomic_write_text, dumps_json, read_json, short)
 
-__all__ = ["FitResult", "load_result", "model_from", "software_versions", "diagnostics_to_json"]
+__all__ = ["FitResult", "load_result", "model_from", "software_versions", "diagnostics_to_json", "fitted_ship"]
+
+
+def fitted_ship(model, inputs, ship: dict | None = None) -> tuple[dict, dict]:
+    """``(model_options, ship)`` of a fit of ``model`` to logs described by ``inputs`` (their metadata:
+    each log's particulars under ``ship``, its ``lpp``): the particulars and the Lpp the fit belongs to.
+
+    A model with dimensional coefficients (``prime_exponents``: kcs-response, response-nl) fitted to logs
+    of one ship belongs to that ship, whatever length its start values had: its ``lpp`` option becomes
+    the logs' and its design speed and rudder rate those of the logs' particulars (Froude-scaled from
+    the start model where the particulars do not state them).  Other models keep their options (an
+    ``mmg`` model's particulars are part of its equations).  ``ship`` overrides the logs' particulars.
+    """
+    opts = dict(model.options())
+    lpps = {float(m["lpp"]) for m in inputs if m.get("lpp")}
+    if ship is None:
+        ships = [m["ship"] for m in inputs if m.get("ship")]
+        ship = dict(ships[0]) if ships and all(s == ships[0] for s in ships) else {}
+    ship = dict(ship)
+    if len(lpps) != 1 and "lpp" not in ship:
+        return opts, ship
+    L = float(ship.get("lpp", next(iter(lpps))))
+    ship["lpp"] = L
+    if getattr(model, "prime_exponents", None):
+        lam = L / opts.get("lpp", L)
+        if "design_speed" in opts:
+            opts["design_speed"] = opts["design_speed"] * lam ** 0.5
+        if "rudder_rate" in opts:
+            opts["rudder_rate"] = opts["rudder_rate"] / lam ** 0.5
+        opts["lpp"] = L
+        for k in ("design_speed", "rudder_rate"):
+            if ship.get(k):
+                opts[k] = float(ship[k])
+    return opts, ship
+
+
+def _inputs(metas) -> list[dict]:
+    """The result's ``inputs`` entries (name, path, sha256, lpp; the particulars go to ``ship``)."""
+    return [{k: v for k, v in m.items() if k != "ship"} for m in metas]
 
 
 def diagnostics_to_json(d: dict) -> dict:
@@ -48,7 +86,9 @@ class FitResult:
     coef_std : dict -- standard deviation (0 for fixed parameters)
     cov : DataFrame -- covariance of the estimated parameters
     diagnostics : dict -- JSON-friendly identifiability diagnostics
-    inputs : list of dict -- one per log: name, path, sha256
+    inputs : list of dict -- one per log: name, path, sha256, lpp
+    model_options : dict -- keyword arguments that rebuild the model (its ship: lpp, particulars, ...)
+    ship : dict -- particulars of the logs the fit was made on (``lpp`` [m], ...; see :func:`fitted_ship`)
     method : str, settings : dict, loglik : float, success : bool, message : str
     versions : dict, created : str (UTC ISO time)
     """
@@ -68,6 +108,7 @@ class FitResult:
     created: str = ""
     extra: dict = field(default_factory=dict)
     model_options: dict = field(default_factory=dict)
+    ship: dict = field(default_factory=dict)
 
     @classmethod
     def from_identifier(cls, ident) -> "FitResult":
@@ -83,12 +124,13 @@ class FitResult:
             "substeps": int(ident.substeps),
             "discretisation": ident.method,
         }
+        opts, ship = fitted_ship(ident.model, ident.logs_)
         return cls(
             model=ident.model.name, coef={k: float(v) for k, v in ident.coef_.items()},
             coef_std={k: float(v) for k, v in ident.coef_std_.items()}, cov=ident.cov_.copy(),
-            diagnostics=diag, inputs=[dict(m) for m in ident.logs_], method="ekf", settings=settings,
+            diagnostics=diag, inputs=_inputs(ident.logs_), method="ekf", settings=settings,
             loglik=ident.loglik_, success=ident.success_, message=ident.message_, versions=software_versions(),
-            created=datetime.now(timezone.utc).isoformat(timespec="seconds"), model_options=ident.model.options(),
+            created=datetime.now(timezone.utc).isoformat(timespec="seconds"), model_options=opts, ship=ship,
         )
 
     # ------------------------------------------------------------------- I/O
@@ -99,7 +141,7 @@ class FitResult:
             "cov": {"names": list(self.cov.index), "matrix": self.cov.to_numpy().tolist()},
             "diagnostics": self.diagnostics, "loglik": self.loglik, "settings": self.settings,
             "inputs": self.inputs, "versions": self.versions, "created": self.created, "extra": self.extra,
-            "model_options": self.model_options,
+            "model_options": self.model_options, "ship": self.ship,
         }
 
     def to_json(self, path, *, force: bool = False) -> Path:
@@ -120,6 +162,7 @@ class FitResult:
             loglik=d["loglik"], success=d["success"], message=d["message"],
             versions=d["versions"], created=d["created"], extra=d["extra"],
             model_options=dict(d["model_options"] or d["extra"].get("model_options") or {}),
+            ship=dict(as_mapping(doc.get("ship") or {}, f"{source}: ship", '{"lpp": 320}')),
         )
 
     def to_model(self):
@@ -195,7 +238,7 @@ def load_result(path) -> FitResult:
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(f"{p}: no such result file; run `shipid fit` first or check the path")
-    doc = read_json(p, "shipid fit result")
+    doc = read_json(p, "JSON fit result", advice="pass the file written by `shipid fit -o`")
     return FitResult.from_dict(doc, source=str(p))
 
 
@@ -264,11 +307,8 @@ def check_result_dict(doc, source: str = "result") -> dict:
     out["inputs"] = inputs
     for key, default in (("method", "ekf"), ("message", ""), ("created", "")):
         out[key] = as_string(doc.get(key, default) if doc.get(key) is not None else default, w + key)
-    for key in ("settings", "versions", "extra", "model_options"):
+    for key in ("settings", "versions", "extra", "model_options", "ship"):
         out[key] = as_mapping(doc.get(key) or {}, w + key)
-    success = doc.get("success", True)
-    if not isinstance(success, bool):
-        raise ValueError(f"{w}success: expected true or false, got {short(success, 40)}")
-    out["success"] = success
+    out["success"] = as_bool(doc.get("success", True), w + "success")
     out["loglik"] = as_number(doc["loglik"], w + "loglik", finite=False) if doc.get("loglik") is not None else None
     return out

@@ -21,10 +21,11 @@ See ``docs/logs.md`` for the user guide and the heuristics behind the
 """
 from __future__ import annotations
 
+from .consistency import ConsistencyResult, check_consistency
 from .reader import read_log
 from .ship import ShipParticulars, read_ship
 from .trial_log import LogError, TrialLog
 from .units import SCHEMA, SHIP_CHANNELS, SI_UNIT, UNITS
 
-__all__ = ["LogError", "ShipParticulars", "TrialLog", "read_log", "read_ship", "UNITS", "SI_UNIT", "SHIP_CHANNELS",
-           "SCHEMA"]
+__all__ = ["LogError", "ShipParticulars", "TrialLog", "read_log", "read_ship", "check_consistency",
+           "ConsistencyResult", "UNITS", "SI_UNIT", "SHIP_CHANNELS", "SCHEMA"]

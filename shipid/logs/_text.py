@@ -28,6 +28,9 @@ def _check_path(p: Path, what: str = "log file") -> None:
         raise LogError(f"`{p}`: {what} does not exist; check the path{hint}", path=p)
     if p.is_dir():
         raise LogError(f"`{p}`: is a directory, not a {what}; give the file inside it", path=p)
+    if not p.is_file():   # a FIFO, socket or device: reading it could block forever
+        raise LogError(f"`{p}`: is not a regular file (a pipe, socket or device); give the {what} itself "
+                       "(save the stream to a file first)", path=p)
 
 
 _HEADER_RE = re.compile(r"^\s*(?P<name>.*?)\s*(?:[\[(](?P<unit>[^\])]*)[\])])?\s*$")
@@ -198,33 +201,26 @@ def _to_float(cells: Sequence[str], ours: str, col: str, where: _Where, decimal_
 _MAX_MAPPING_BYTES = 1_000_000
 
 
-def parse_mapping_text(s: str, source: str, *, yaml_text: bool, example: str = "", what: str = "file") -> object:
-    """JSON (or YAML) text -> the parsed object; ValueError naming ``source`` for bad or hostile text
-    (too large, too deeply nested)."""
+def parse_mapping_text(s: str, source: str, *, yaml_text: bool, what: str = "file") -> object:
+    """JSON (or YAML) text -> the parsed object, through the guarded readers of :mod:`shipid._io` (syntax,
+    nesting deeper than ``_io.MAX_DEPTH`` and size give one-line ValueErrors naming ``source``)."""
+    from .._io import loads_json, loads_yaml
+
     if len(s) > _MAX_MAPPING_BYTES:
-        raise ValueError(f"{source}: {len(s)} characters is far too large for particulars/metadata "
+        raise ValueError(f"{source}: {len(s)} characters is far too large for a {what} "
                          f"(limit {_MAX_MAPPING_BYTES}); give a small mapping")
-    try:
-        if yaml_text:
-            try:
-                import yaml  # type: ignore
-            except ImportError:
-                raise ValueError(f"{source}: reading YAML needs PyYAML (pip install pyyaml); or write the "
-                                 f"{what} as JSON") from None
-            try:
-                return yaml.safe_load(s)
-            except yaml.YAMLError as exc:
-                raise ValueError(f"{source}: not valid YAML ({' '.join(str(exc).split())[:200]})") from None
-        try:
-            return json.loads(s)
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"{source} line {exc.lineno}: not valid JSON ({exc.msg})"
-                             + (f"; write e.g. {example}" if example else "")) from None
-    except RecursionError:
-        raise ValueError(f"{source}: nested too deeply to be particulars/metadata; give a flat mapping") from None
+    kind = what.removesuffix(" file")
+    if yaml_text:
+        import importlib.util
+
+        if importlib.util.find_spec("yaml") is None:
+            raise ValueError(f"{source}: reading YAML needs PyYAML (pip install pyyaml); or write the "
+                             f"{what} as JSON")
+        return loads_yaml(s, source, kind)
+    return loads_json(s, source, kind)
 
 
-def load_mapping_file(p: Path, what: str, example: str = "") -> object:
+def load_mapping_file(p: Path, what: str) -> object:
     """Read a small JSON/YAML file (ship particulars, schema) -> the parsed object."""
     _check_path(p, what=what)
     if p.stat().st_size > _MAX_MAPPING_BYTES:
@@ -235,4 +231,4 @@ def load_mapping_file(p: Path, what: str, example: str = "") -> object:
     except UnicodeDecodeError:
         raise ValueError(f"`{p.name}`: {what} is not UTF-8 text; write it as JSON") from None
     yaml_text = p.suffix.lower() in (".yaml", ".yml")
-    return parse_mapping_text(s, f"`{p.name}`", yaml_text=yaml_text, example=example, what=what)
+    return parse_mapping_text(s, f"`{p.name}`", yaml_text=yaml_text, what=what)

@@ -9,7 +9,6 @@ rudder sign that :func:`shipid.logs.schema.apply_conventions` applies.
 """
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 from typing import Mapping
 
@@ -21,6 +20,10 @@ from .trial_log import LogError, _convert_units, _fmt_value, _Where
 _MARIN_COLS = ("time", "x", "y", "phi", "psi", "u_e", "v_e", "p", "r", "delta", "n")
 _MARIN_UNITS = {"time": "s", "x": "m", "y": "m", "phi": "deg", "psi": "deg", "u_e": "m/s", "v_e": "m/s",
                 "p": "deg/s", "r": "deg/s", "delta": "deg", "n": "rpm"}
+
+
+_MARIN_FILE_NAMES = {"x": "x0", "y": "y0", "phi": "phi", "psi": "psi", "u_e": "u", "v_e": "v", "p": "p", "r": "r",
+                     "delta": "delta", "n": "rev"}
 
 
 def _looks_marin(text: str) -> bool:
@@ -63,15 +66,32 @@ def _read_marin(text: str, p: Path, units: Mapping[str, str], marin_time: str):
     if nrep:
         if marin_time == "uniform":
             tu, dev = _uniform_time(t)
-            if tu is not None:
-                notes.append(f"time printed with 3 significant digits: {nrep} repeated stamps; time rebuilt as "
-                             f"t0 + k dt (dt = {tu[1] - tu[0]:.6g} s), which rounds to every printed stamp "
-                             f"(max deviation {dev:.2f} of the printed resolution)")
-                t = tu
-            else:
-                warnings.warn(f"`{p.name}`: time stamps are not consistent with uniform sampling; "
-                              f"dropping {nrep} repeated stamps instead", stacklevel=3)
-                marin_time = "drop"
+            if tu is None:
+                # a row written twice breaks the uniform time base: repair it (drop the exact repeat) if that
+                # makes the stamps uniform again, else refuse (dropping every repeated stamp loses ~70 %)
+                dup = np.flatnonzero((a[1:] == a[:-1]).all(axis=1)) + 1
+                if dup.size:
+                    keep = np.ones(len(a), dtype=bool)
+                    keep[dup] = False
+                    tu, dev = _uniform_time(t[keep])
+                    if tu is not None:
+                        notes.append(f"{dup.size} row(s) repeating the previous row exactly dropped (rows "
+                                     f"{', '.join(str(int(r)) for r in rows[dup][:5])}): a duplicated row breaks "
+                                     "the uniform time base")
+                        a, rows = a[keep], rows[keep]
+                        where.rows = rows
+                        nrep = int(np.sum(np.diff(a[:, 0]) == 0))
+                if tu is None:
+                    i = _first_off_uniform(a[:, 0])
+                    raise where.error(f"time stamps are not consistent with uniform sampling from this row on "
+                                      f"(printed {_fmt_value(a[i, 0])} s): a row is missing, duplicated with changes "
+                                      "or out of place; fix the file, or pass marin_time='drop' (CLI: --marin-time "
+                                      "drop) to keep only the first sample of each repeated stamp", "time", i,
+                                      value=a[i, 0])
+            notes.append(f"time printed with 3 significant digits: {nrep} repeated stamps; time rebuilt as "
+                         f"t0 + k dt (dt = {tu[1] - tu[0]:.6g} s), which rounds to every printed stamp "
+                         f"(max deviation {dev:.2f} of the printed resolution)")
+            t = tu
         if marin_time == "drop":
             keep = np.concatenate([[True], d != 0])
             a, t, rows = a[keep], t[keep], rows[keep]
@@ -85,6 +105,8 @@ def _read_marin(text: str, p: Path, units: Mapping[str, str], marin_time: str):
     order = ("x", "y", "psi", "u_e", "v_e", "r", "delta", "n", "phi", "p")
     ch_out = {c.removesuffix("_e"): ch[c] for c in order}
     units_in = {c.removesuffix("_e"): units_in.get(c, "") for c in ("time",) + order}
+    where.sources = {c.removesuffix("_e"): f"column {_MARIN_COLS.index(c) + 1} '{_MARIN_FILE_NAMES[c]}'"
+                     for c in order}
     return t2, ch_out, where, units_in, notes
 
 
@@ -108,6 +130,18 @@ def _marin_rows(lines: list[str], idx: list[int], p: Path):
             _to_float(cols[j], c, c, where)
         raise  # pragma: no cover (_to_float raised)
     return a, rows, where
+
+
+def _first_off_uniform(t: np.ndarray) -> int:
+    """Index of the first stamp from which no uniform time base fits (the longest uniform prefix)."""
+    lo, hi = 2, t.size   # _uniform_time(t[:lo]) fits, t[:hi] does not
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if _uniform_time(t[:mid])[0] is not None:
+            lo = mid
+        else:
+            hi = mid
+    return hi - 1
 
 
 def _uniform_time(t: np.ndarray) -> tuple[np.ndarray | None, float]:

@@ -34,6 +34,7 @@ def read_log(
     rudder_sign: float | None = None,
     skip_rows: int | None = None,
     header: bool | None = None,
+    consistency_checks: bool = True,
 ) -> TrialLog:
     """Read and validate a trial log.
 
@@ -98,6 +99,12 @@ def read_log(
     header : bool, optional
         False when the file has no header line; then ``columns`` gives
         1-based column numbers and unmapped columns are named ``col<k>``.
+    consistency_checks : bool
+        Run :func:`shipid.logs.check_consistency` on the log (yaw rate against
+        dpsi/dt, velocities against the track, rudder sign against the first
+        turn, propeller rate against speed, GNSS freezes, glitches): an error
+        raises LogError, a warning is issued as ``UserWarning``; the result is
+        ``log.consistency``.  CLI: ``--no-consistency-checks`` turns them off.
 
     Returns
     -------
@@ -155,9 +162,12 @@ def read_log(
         name = (meta.get("log") or {}).get("name") if isinstance(meta.get("log"), Mapping) else None
         name = name or p.stem
     where.name = name
-    return _finish(t, ch, where=where, name=name, ship=ship_obj, path=p, sha256=sha, inputs=inputs,
+    log = _finish(t, ch, where=where, name=name, ship=ship_obj, path=p, sha256=sha, inputs=inputs,
                    interpolate_inputs=interpolate_inputs, required=required, min_samples=min_samples,
                    unit_checks=unit_checks, units_in=units_in, notes=notes, fmt=sch.fmt)
+    if consistency_checks:
+        _run_consistency(log)
+    return log
 
 
 def _schema_ship(spec: str) -> ShipParticulars:
@@ -167,3 +177,21 @@ def _schema_ship(spec: str) -> ShipParticulars:
     if resources.files("shipid").joinpath("data_ships", f"{spec}.json").is_file():
         return _bundled_ship(spec)
     return read_ship(spec)
+
+
+def _run_consistency(log: TrialLog) -> None:
+    """Check the channels; errors raise LogError (all named, first in full), warnings warn."""
+    import warnings
+
+    from .consistency import check_consistency
+
+    res = check_consistency(log)
+    log.consistency = res
+    for f in res.warnings:
+        warnings.warn(f.message, stacklevel=3)
+    if res.errors:
+        more = len(res.errors) - 1
+        tail = f" (and {more} more consistency error(s))" if more else ""
+        e = res.errors[0]
+        raise LogError(e.message + tail + "; or --no-consistency-checks",
+                       path=log.path, column=e.channels[0] if e.channels else None)

@@ -22,6 +22,7 @@ turning the ship to starboard (positive r).
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping
@@ -30,8 +31,8 @@ import numpy as np
 
 __all__ = ["Schema", "PRESETS", "load_schema"]
 
-_KEYS = ("name", "fmt", "columns", "units", "velocity_frame", "rudder_sign", "skip_rows", "header", "delimiter",
-         "ship", "conventions")
+_KEYS = ("name", "fmt", "columns", "units", "velocity_frame", "rudder_sign", "signs", "skip_rows", "header",
+         "delimiter", "ship", "conventions")
 
 
 @dataclass(frozen=True)
@@ -58,6 +59,9 @@ class Schema:
     rudder_sign : {+1, -1}
         Multiplies the file's rudder angle to give the shipid convention
         (positive delta turns to starboard).
+    signs : dict
+        Channel -> +1 or -1: any other channel logged with the opposite sign
+        to shipid's (e.g. ``{"r": -1}`` for a yaw rate positive to port).
     skip_rows : int
         Lines to skip before the header (or before the data without a header).
     header : bool
@@ -80,6 +84,7 @@ class Schema:
     units: Mapping[str, str] = field(default_factory=dict)
     velocity_frame: str = "body"
     rudder_sign: float = 1.0
+    signs: Mapping[str, float] = field(default_factory=dict)
     skip_rows: int = 0
     header: bool = True
     delimiter: str | None = None
@@ -96,22 +101,28 @@ class Schema:
             raise ValueError(f"{src}: skip_rows = {self.skip_rows!r}; give a whole number >= 0")
         if not isinstance(self.header, bool):
             raise ValueError(f"{src}: header = {self.header!r}; give true or false")
-        for what, m in (("columns", self.columns), ("units", self.units)):
+        for what, m in (("columns", self.columns), ("units", self.units), ("signs", self.signs)):
             if not isinstance(m, Mapping):
                 raise ValueError(f"{src}: {what} must be a mapping channel -> value, got {type(m).__name__}")
         for ch, col in self.columns.items():
             if isinstance(col, bool) or not isinstance(col, (str, int)):
                 raise ValueError(f"{src}: columns['{ch}'] = {col!r}; give a column name or a 1-based number")
         if not self.header:
-            named = [c for c, col in self.columns.items() if not isinstance(col, int)]
+            # without a header, columns are numbers (1-based; "5" from the CLI counts) or the names col1, col2, ...
+            cols = {c: int(col) if isinstance(col, str) and col.strip().isdigit() else col
+                    for c, col in self.columns.items()}
+            object.__setattr__(self, "columns", cols)
+            named = [c for c, col in cols.items() if not isinstance(col, int) and not re.fullmatch(r"col\d+", col)]
             if named:
                 raise ValueError(f"{src}: header = false but columns {named} are given by name; give column "
                                  "numbers (1-based) when the file has no header line")
+        for ch, sg in self.signs.items():
+            check_rudder_sign(sg, f"{src}: signs['{ch}']")
         object.__setattr__(self, "rudder_sign", float(self.rudder_sign))
 
     def to_dict(self) -> dict:
         """Plain dict with the schema-file keys."""
-        return {k: (dict(getattr(self, k)) if k in ("columns", "units") else getattr(self, k)) for k in _KEYS}
+        return {k: (dict(getattr(self, k)) if k in ("columns", "units", "signs") else getattr(self, k)) for k in _KEYS}
 
 
 def earth_to_body(ue: np.ndarray, ve: np.ndarray, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -137,6 +148,10 @@ def apply_conventions(ch: dict, units_in: dict, notes: list, schema: "Schema", w
         units_in["u"] = units_in["v"] = f"{units_in.get('u') or 'm/s'} (earth-fixed)"
         notes.append(f"u, v in the file are earth-fixed (dx/dt, dy/dt; schema '{schema.name}'); rotated into "
                      "body axes by psi")
+    for c, sg in schema.signs.items():
+        if sg == -1 and c in ch:
+            ch[c] = -ch[c]
+            notes.append(f"'{c}' multiplied by -1 (schema '{schema.name}' signs)")
     if schema.rudder_sign == -1 and "delta" in ch:
         ch["delta"] = -ch["delta"]
         notes.append(f"rudder angle multiplied by -1 (schema '{schema.name}': the file's rudder is positive to "
@@ -150,8 +165,8 @@ def check_frame(frame, what: str = "velocity_frame") -> str:
 
 
 def check_rudder_sign(sign, what: str = "rudder_sign") -> float:
-    if isinstance(sign, bool) or sign not in (1, -1):
-        raise ValueError(f"{what} = {sign!r}; use +1 (file already positive to starboard) or -1 (flip)")
+    if isinstance(sign, bool) or not isinstance(sign, (int, float)) or sign not in (1, -1):
+        raise ValueError(f"{what} = {sign!r}; use +1 (file already in shipid's sign) or -1 (flip)")
     return float(sign)
 
 
@@ -173,9 +188,11 @@ PRESETS: dict[str, Schema] = {
         conventions="shipid CSV: SI/radians unless the header's bracketed unit says otherwise, body-axis u, v, "
                     "rudder positive to starboard"),
     "marin": Schema(
-        name="marin", fmt="marin", ship="kvlcc2", velocity_frame="earth",
-        conventions="MARIN SIMMAN 2008 .dat: degrees, deg/s, rpm; u, v earth-fixed (rotated into body axes); "
-                    "rudder positive to port (flipped)"),
+        name="marin", fmt="marin", ship="kvlcc2", velocity_frame="earth", rudder_sign=-1,
+        conventions="MARIN SIMMAN 2008 .dat: degrees, deg/s, rpm; u, v earth-fixed dx0/dt, dy0/dt (rotated into "
+                    "body axes by psi); the file's rudder is positive to port (flipped: checked on tc_35, whose "
+                    "+35 deg in the file turns the ship to port, r < 0, and reads as delta = -35 deg here; tc_-35 "
+                    "reads +35.1 deg with r > 0)"),
     "esso-frt": Schema(
         name="esso-frt", fmt="csv", ship="esso_osaka_3m",
         columns={"time": "t", "x": "x_position_mid", "y": "y_position_mid", "psi": "psi_hat", "u": "u_velo",

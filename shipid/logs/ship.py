@@ -172,7 +172,7 @@ def read_ship(path: str | os.PathLike) -> ShipParticulars:
     from ._text import load_mapping_file
 
     p = Path(path)
-    d = load_mapping_file(p, "ship file", example='{"name": "KVLCC2", "lpp": 320}')
+    d = load_mapping_file(p, "ship file")
     return ShipParticulars.from_dict(d, source=f"`{p.name}`")
 
 

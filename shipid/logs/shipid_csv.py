@@ -77,7 +77,10 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
     def split(s: str) -> list[str]:
         if delim == "whitespace":
             return s.split()
-        return next(csv.reader([s], delimiter=delim))
+        try:
+            return next(csv.reader([s], delimiter=delim))
+        except csv.Error as exc:
+            raise _cell_error(p, h, s, exc) from None
 
     hdr = [c.strip() for c in split(header_line)]
     if not header:  # no header line: the first data row gives the number of columns
@@ -158,19 +161,23 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
         split_rows = (lines[k].split() for k in data_idx)
     else:
         split_rows = csv.reader((lines[k] for k in data_idx), delimiter=delim)
-    for k, cells in zip(data_idx, split_rows):
-        s = lines[k]
-        if (not cells or not cells[0].strip()) and all(not c.strip() for c in cells):  # bare delimiters
-            blank_rows.append(k + 1)
-            continue
-        if len(cells) != ncol:
-            other = [d for d in (";", "\t") if d != delim and d in s]
-            extra = f"; the row contains {_DELIMS[other[0]]}s: wrong delimiter?" if other and len(cells) == 1 else ""
-            raise LogError(f"`{p.name}` row {k + 1}: {len(cells)} field(s) but the header has {ncol}{extra}; "
-                           "fix the row (every row needs one cell per header column, blank = missing)",
-                           path=p, row=k + 1, value=s.strip()[:60])
-        rows_txt.append(cells)
-        keep_rows.append(k + 1)
+    try:
+        for k, cells in zip(data_idx, split_rows):
+            s = lines[k]
+            if (not cells or not cells[0].strip()) and all(not c.strip() for c in cells):  # bare delimiters
+                blank_rows.append(k + 1)
+                continue
+            if len(cells) != ncol:
+                other = [d for d in (";", "\t") if d != delim and d in s]
+                extra = f"; the row contains {_DELIMS[other[0]]}s: wrong delimiter?" if other and len(cells) == 1 else ""
+                raise LogError(f"`{p.name}` row {k + 1}: {len(cells)} field(s) but the header has {ncol}{extra}; "
+                               "fix the row (every row needs one cell per header column, blank = missing)",
+                               path=p, row=k + 1, value=s.strip()[:60])
+            rows_txt.append(cells)
+            keep_rows.append(k + 1)
+    except csv.Error as exc:
+        k = data_idx[max(split_rows.line_num - 1, 0)]
+        raise _cell_error(p, k, lines[k], exc) from None
     if not rows_txt:
         raise LogError(f"`{p.name}`: header only, no data rows; the log needs samples below the header",
                        path=p, row=h + 1)
@@ -198,6 +205,7 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
                      f"(rows {_short_list(blank_rows, 3)})")
     order = ["time"] + [c for c in SCHEMA[1:] if c in arrays] + [c for c in arrays if c not in SCHEMA]
     arrays = {c: arrays[c] for c in order}
+    extra_at: dict[str, int] = {}   # extra channel -> its column index
     for j, nm in enumerate(names):
         if j in taken:
             continue
@@ -215,18 +223,31 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
             notes.append(f"column '{hdr[j]}' ignored: columns= maps '{label}' to '{columns[label]}'")
             continue
         if label in arrays:
-            first = next(jj for jj, nn in enumerate(names) if jj in taken and (nn == label or colmap.get(label) == jj))
+            first = colmap.get(label, extra_at.get(label, j))
             raise LogError(f"`{p.name}` row {h + 1}: column '{label}' appears twice (columns {first + 1} and "
                            f"{j + 1} of the header); rename one, or pick one by number with "
                            f"columns={{'{label}': {first + 1}}}",
                            path=p, column=label, row=h + 1, value=hdr[j])
         a = _to_float(cols[j], label, label, where, decimal_comma=delim != ",")
         arrays[label] = a
+        extra_at[label] = j
         if parsed[j][1] is not None:
             header_units[label] = parsed[j][1]
             file_col[label] = label
+    where.sources = {c: f"column {j + 1} '{hdr[j]}'" for c, j in {**colmap, **extra_at}.items()}
     t, ch, units_in = _convert_units(arrays, units, header_units, where, file_col)
     return t, ch, where, units_in, notes, meta
+
+
+def _cell_error(p: Path, k: int, line: str, exc: Exception) -> LogError:
+    """csv module errors (a field over its size limit, a NUL, a stray quote) as one line naming the row."""
+    msg = str(exc)
+    if "field larger than field limit" in msg:
+        what = (f"a cell of more than {csv.field_size_limit()} characters (the row has {len(line)}); a log cell "
+                "holds a number or a short text: fix or delete the row")
+    else:
+        what = f"cannot be split into cells ({msg}); fix the row's quoting"
+    return LogError(f"`{p.name}` row {k + 1}: {what}", path=p, row=k + 1, value=line[:60])
 
 
 def _find_col(theirs: str, hdr: list[str], names: list[str]) -> int | None:

@@ -80,6 +80,7 @@ class _Where:
         self.path = path
         self.name = name
         self.rows = rows
+        self.sources: dict[str, str] = {}   # channel -> the file's column, e.g. "column 7 'r [deg/s]'"
 
     @property
     def label(self) -> str:
@@ -142,7 +143,7 @@ class TrialLog:
     def __init__(self, data: pd.DataFrame, *, name: str, ship: ShipParticulars | None = None, path: Path | None = None,
                  sha256: str | None = None, rows: np.ndarray | None = None, missing: dict | None = None,
                  dropouts: list | None = None, units_in: dict | None = None, notes: list | None = None,
-                 fmt: str = "arrays"):
+                 fmt: str = "arrays", sources: dict | None = None):
         self.data = data
         self.name = name
         self.ship = ship
@@ -154,6 +155,10 @@ class TrialLog:
         self.units_in = dict(units_in or {})
         self.notes = list(notes or [])
         self.fmt = fmt
+        #: channel -> the file column it was read from (e.g. ``"column 7 'r_angvelo [rad/s]'"``)
+        self.sources = dict(sources or {})
+        #: :class:`shipid.logs.consistency.ConsistencyResult` when read_log ran the checks, else None
+        self.consistency = None
 
     # --- construction from arrays -------------------------------------------------
     @classmethod
@@ -268,7 +273,7 @@ class TrialLog:
             dropouts = [(float(t[k]), float(t[k + 1])) for k in np.flatnonzero(d > 3.0 * med)]
         return TrialLog(data.reset_index(drop=True), name=self.name, ship=self.ship, path=self.path,
                         sha256=self.sha256, rows=rows, missing=missing, dropouts=dropouts, units_in=self.units_in,
-                        notes=[*self.notes, note], fmt=self.fmt)
+                        notes=[*self.notes, note], fmt=self.fmt, sources=self.sources)
 
     def window(self, t_start: float | None = None, t_end: float | None = None) -> "TrialLog":
         """The samples with ``t_start <= time <= t_end`` [s] (None = open end), every channel kept.
@@ -362,6 +367,10 @@ class TrialLog:
             lines.append("  dropouts: none")
         for n in self.notes:
             lines.append(f"  note: {n}")
+        if self.consistency is not None:
+            lines.append(f"  consistency: {self.consistency.status} ({', '.join(self.consistency.checks)} checked)")
+            for f in self.consistency.findings:
+                lines.append(f"  {f.level}: {f.message}")
         return "\n".join(lines)
 
     def plot(self, ax=None, channels: Sequence[str] | None = None):
@@ -580,7 +589,7 @@ def _finish(t: np.ndarray, ch: dict[str, np.ndarray], *, where: _Where, name: st
         warnings.warn(msg, stacklevel=3)
     data = pd.DataFrame({"time": t, **ch})
     return TrialLog(data, name=name, ship=ship, path=path, sha256=sha256, rows=where.rows, missing=missing,
-                    dropouts=dropouts, units_in=units_in, notes=notes, fmt=fmt)
+                    dropouts=dropouts, units_in=units_in, notes=notes, fmt=fmt, sources=where.sources)
 
 
 def _deg_hint(c: str, unit: str) -> str:

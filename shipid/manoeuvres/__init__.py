@@ -48,7 +48,7 @@ from .imo import imo_limits
 from .laws import RampSchedule, SampledHold, TurningRudder, ZigzagRudder
 from .runner import ManoeuvreResult, ship_info, steady_rps
 from .turning import TurningMetrics, _turning_rows, turning_circle, turning_metrics, turning_sweep
-from .zigzag import ZigzagMetrics, zigzag, zigzag_metrics
+from .zigzag import ZigzagMetrics, infer_check_angle, rudder_reversals, zigzag, zigzag_metrics
 from .run_metrics import detect_manoeuvre, metrics
 
 __all__ = [
@@ -70,4 +70,6 @@ __all__ = [
     "TurningRudder",
     "ZigzagRudder",
     "SampledHold",
+    "infer_check_angle",
+    "rudder_reversals",
 ]

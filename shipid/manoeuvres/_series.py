@@ -12,7 +12,6 @@ EXECUTE_THRESHOLD_DEG = 0.5
 def detect_execute(t, delta, threshold_deg: float = EXECUTE_THRESHOLD_DEG) -> tuple[int, float]:
     """Index and time of the rudder execute: first sample with ``|delta - delta[0]| > threshold``.
 
-
     ``delta`` in radians.  Raises ValueError when the rudder never moves.
     """
     delta = np.asarray(delta, dtype=float)
@@ -26,7 +25,6 @@ def detect_execute(t, delta, threshold_deg: float = EXECUTE_THRESHOLD_DEG) -> tu
 def _crossing_rows(t, h, level, start, valid):
     """Per row of ``h (B, n)``: the first sample at or after ``start (B,)`` (and inside ``valid (B, n)``)
     where ``h`` reaches ``level`` upwards, with the crossing linearly interpolated.
-
 
     Returns ``(found, k, f, time)``, arrays (B,): the index after the crossing, the fraction of the
     interval before it (1.0 when the level is reached at ``start`` itself) and the time.
@@ -73,7 +71,6 @@ def _masked_sum(a, mask):
 
 def _circle_fit_rows(x, y, mask):
     """Least-squares (Kasa) circle through the points of each row selected by ``mask``; (xc, yc, radius).
-
 
     Minimises sum (x^2 + y^2 + D x + E y + F)^2 in coordinates centred on the points' mean, where
     the normal equations separate: a 2x2 system for (D, E) and F = -mean(x^2 + y^2).

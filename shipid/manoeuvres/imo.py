@@ -11,7 +11,6 @@ def _le(value, limit):
 def imo_limits(lpp: float, speed: float) -> dict:
     """IMO MSC.137(76) limits for a ship of length ``lpp`` [m] at test speed ``speed`` [m/s].
 
-
     10/10 first overshoot: 10 deg if L/V < 10 s, 20 deg if L/V >= 30 s, 5 + L/V/2 between;
     10/10 second overshoot: 25 / 40 / 17.5 + 0.75 L/V; 20/20 first overshoot 25 deg;
     advance 4.5 L, tactical diameter 5 L, initial turning 2.5 L.

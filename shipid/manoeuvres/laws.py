@@ -13,14 +13,12 @@ from ..simulate import InputLaw
 class RampSchedule:
     """A set-point schedule followed at a limited rate (propeller rps, ...): piecewise linear in time.
 
-
     Parameters
     ----------
     start : float  value at t = 0
     steps : sequence of (t_s, value)  set points ordered from time t_s on
     rate : float  largest rate of change [unit/s]
     """
-
 
     def __init__(self, start: float, steps: Sequence = (), rate: float = math.inf):
         if not rate > 0:
@@ -43,12 +41,10 @@ class RampSchedule:
         self.t = np.array(knots_t)
         self.v = np.array(knots_v)
 
-
     @property
     def stops(self) -> tuple:
         """Kinks of the schedule [s]."""
         return tuple(float(a) for a in self.t[1:])
-
 
     def __call__(self, t):
         """Value(s) at time(s) ``t``."""
@@ -58,31 +54,26 @@ class RampSchedule:
 class _RudderLaw(InputLaw):
     """Shared parts of the manoeuvre laws: rudder ramp at the steering rate, propeller from rps or a schedule."""
 
-
     def __init__(self, nu, idl, inn, n, rate, te, batch):
         self.nu, self.idl, self.inn = nu, idl, inn
         self.rate, self.te, self.batch = float(rate), float(te), batch
         self.n = n
         self._stops = [self.te] + (list(n.stops) if isinstance(n, RampSchedule) else [])
 
-
     @property
     def stops(self) -> tuple:
         return tuple(sorted(set(self._stops)))
-
 
     def _n(self, t):
         if isinstance(self.n, RampSchedule):
             return self.n(t)
         return self.n if np.ndim(t) == 0 else np.asarray(self.n)[..., None]
 
-
     def _pack(self, delta, n, shape):
         u = np.empty(shape + (self.nu,))
         u[..., self.idl] = delta
         u[..., self.inn] = n
         return u
-
 
     def _pack_now(self, delta, t):
         """Inputs at one time: a copy of a cached template with the rps filled (constant rps)."""
@@ -99,7 +90,6 @@ class _RudderLaw(InputLaw):
 class TurningRudder(_RudderLaw):
     """Turning-circle rudder: from 0 at the execute time ``te`` to ``delta`` at the steering ``rate`` [rad/s], then held.
 
-
     Parameters
     ----------
     delta : array (B,)  ordered rudder angles [rad] (signed)
@@ -108,7 +98,6 @@ class TurningRudder(_RudderLaw):
     nu, idl, inn : int  number of inputs, index of the rudder and of the rps input
     """
 
-
     def __init__(self, delta, n, rate, te, *, nu=2, idl=0, inn=1):
         delta = np.asarray(delta, dtype=float)
         super().__init__(nu, idl, inn, n, rate, te, delta.shape)
@@ -116,16 +105,13 @@ class TurningRudder(_RudderLaw):
         self._sign, self._mag = np.sign(delta), np.abs(delta)
         self._stops += sorted(set((self.te + self._mag[delta != 0] / self.rate).tolist()))
 
-
     def _delta(self, t):
         if np.ndim(t) == 0:
             return self._sign * np.minimum(self.rate * max(t - self.te, 0.0), self._mag)
         return self._sign[..., None] * np.minimum(self.rate * np.maximum(t - self.te, 0.0), self._mag[..., None])
 
-
     def inputs(self, t, x):
         return self._pack_now(self._delta(t), t)
-
 
     def input_history(self, t, x):
         return self._pack(self._delta(np.asarray(t)), self._n(np.asarray(t)), self.batch + (np.size(t),))
@@ -135,12 +121,10 @@ class ZigzagRudder(_RudderLaw):
     """Zigzag rudder law: the one implementation of the ITTC/IMO zigzag (used by :func:`zigzag` and by
     :func:`shipid.synthetic.make_trial`).
 
-
     At ``te`` the rudder is ordered to ``first * amp``; it moves at the steering ``rate``; each member
     reverses its order when its heading deviation from ``psi0`` reaches ``switch`` on the side it is
     turning to.  The reversal is a located event (:class:`~shipid.simulate.InputLaw`): it happens at the
     crossing itself, not at the start of the next step, so overshoot angles converge with the step.
-
 
     Parameters
     ----------
@@ -153,16 +137,13 @@ class ZigzagRudder(_RudderLaw):
     rate, te : float  steering rate [rad/s], time of the first execute [s]
     ipsi, nu, idl, inn : int  index of psi in the state; inputs as in :class:`TurningRudder`
 
-
     Attributes
     ----------
     count : ndarray (B,) int  rudder executes so far (1 after the first)
     t_switch : list of (time, mask)  the reversals
     """
 
-
     has_events = True
-
 
     def __init__(self, amp, switch, first, psi0, n, rate, te, *, ipsi=2, nu=2, idl=0, inn=1):
         first = np.asarray(first, dtype=float)
@@ -175,7 +156,6 @@ class ZigzagRudder(_RudderLaw):
         self.count = np.ones(first.shape, dtype=int)
         self.t_switch: list = []
 
-
     def _delta(self, t):
         """Rudder at scalar time ``t``."""
         if t < self.te:
@@ -185,10 +165,8 @@ class ZigzagRudder(_RudderLaw):
         lim = self.rate * (t - self._hist_t[k])
         return d0 + np.clip(cmd - d0, -lim, lim)
 
-
     def inputs(self, t, x):
         return self._pack_now(self._delta(t), t)
-
 
     def event(self, t, x):
         if np.all(np.asarray(t) < self.te):
@@ -198,7 +176,6 @@ class ZigzagRudder(_RudderLaw):
         g = np.sign(self._hist[-1][1]) * (x[..., self.ipsi] - self.psi0) - self.lev
         return np.where(np.asarray(t) < self.te, -1.0, g)
 
-
     def on_event(self, t, x, mask):
         d = self._delta(t)
         cmd = self._hist[-1][1]
@@ -206,7 +183,6 @@ class ZigzagRudder(_RudderLaw):
         self._hist.append((d, np.where(mask, -cmd, cmd)))
         self.count = self.count + mask
         self.t_switch.append((float(t), mask.copy()))
-
 
     def input_history(self, t, x):
         t = np.asarray(t, dtype=float)
@@ -225,7 +201,6 @@ class SampledHold:
     """An input law applied by a sampled (digital) controller with zero-order hold, as a plain
     ``controller(t, x)`` for :func:`shipid.simulate.simulate`.
 
-
     At each sample time ``t`` (the start of an interval of length ``dt``) the law's events are checked on
     the sampled state (a zigzag reverses when the sampled heading deviation has reached the switch
     angle), and the value the law reaches at ``t + dt`` (the rudder after ``dt`` of steering at the
@@ -234,13 +209,11 @@ class SampledHold:
     :func:`shipid.synthetic.make_trial`; :func:`zigzag` / :func:`turning_circle` use the continuous law.
     """
 
-
     def __init__(self, law: InputLaw, dt: float):
         if not dt > 0:
             raise ValueError(f"SampledHold: dt must be positive, got {dt}")
         self.law, self.dt = law, float(dt)
         self._t_last = -math.inf
-
 
     def __call__(self, t, x):
         law = self.law

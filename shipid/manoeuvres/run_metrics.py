@@ -43,9 +43,9 @@ def _frame(data) -> tuple[pd.DataFrame, Any]:
 
 
 def metrics(data, *, lpp: float | None = None, kind: str = "auto", reference_offset: float | None = None,
-            execute_time: float | None = None, switch_deg: float | None = None, name: str | None = None):
+            execute_time: float | None = None, switch_deg: float | None = None, name: str | None = None,
+            rudder_deg: float | None = None, check_deg: float | None = None):
     """Standard-manoeuvre metrics of a log or a simulated run.
-
 
     Parameters
     ----------
@@ -58,8 +58,11 @@ def metrics(data, *, lpp: float | None = None, kind: str = "auto", reference_off
     reference_offset : float, optional
         Distance [m] of the logged point forward of midship; positions are moved to midship
         (``reference="midship"``).  Without it the logged point is used as it is.
-    execute_time, switch_deg : optional overrides (see :func:`turning_metrics`, :func:`zigzag_metrics`).
-
+    execute_time : optional override (see :func:`turning_metrics`, :func:`zigzag_metrics`).
+    rudder_deg, check_deg : float, optional
+        Zigzag: nominal rudder and check (switch) angles [deg] (``switch_deg`` is the older name of
+        ``check_deg``); by default both are read from the log (the check angle from the heading
+        deviation at the rudder reversals, :func:`~shipid.manoeuvres.zigzag.infer_check_angle`).
 
     Returns
     -------
@@ -110,5 +113,5 @@ def metrics(data, *, lpp: float | None = None, kind: str = "auto", reference_off
         return turning_metrics(t, x, y, psi, u, delta, lpp=lpp, v=v, execute_time=execute_time, reference=reference)
     if kind == "zigzag":
         return zigzag_metrics(t, psi, delta, lpp=lpp, u=u, v=v, x=x, y=y, execute_time=execute_time,
-                              switch_deg=switch_deg, reference=reference)
+                              switch_deg=switch_deg, check_deg=check_deg, rudder_deg=rudder_deg, reference=reference)
     raise ValueError(f"kind={kind!r}: use 'auto', 'turning' or 'zigzag'")

@@ -20,7 +20,6 @@ _KNOWN_SHIPS = {"kcs-response": {"lpp": 4.36, "rudder_rate": math.radians(16.8),
 def ship_info(model: Model) -> dict:
     """Ship facts a manoeuvre needs: ``lpp`` [m], ``rudder_rate`` [rad/s], ``design_speed`` [m/s].
 
-
     Taken from model attributes of those names, then from the default parameter set's
     ``operating_point`` (``lpp_m``, ``u0_m_s``, ``rudder_rate_deg_s``), then from the known
     ships of SPEC.md (only for a model of that ship's length); missing ones are absent from the dict.
@@ -63,7 +62,6 @@ def _approach_state(model, speeds):
 def steady_rps(model: Model, speed, *, params=None, n_max: float = 1e3, xtol: float = 1e-10) -> np.ndarray:
     """Propeller rps holding ``speed`` [m/s] in a straight run (du/dt = 0, delta = 0, v = r = 0).
 
-
     Vectorised bisection over a batch of speeds through ``model.rhs``; works for any protocol model
     with states ``u`` and input ``n``.  ``params`` may be one parameter vector (np,) or one per speed
     (B, np).  Raises ValueError when no rps in (0, n_max] gives du/dt = 0.
@@ -76,12 +74,10 @@ def steady_rps(model: Model, speed, *, params=None, n_max: float = 1e3, xtol: fl
     iu, idl, inn = model.state_index("u"), model.input_index("delta"), model.input_index("n")
     x0 = _approach_state(model, speeds)
 
-
     def acc(n):
         uin = np.zeros((speeds.size, model.nu))
         uin[:, inn] = n
         return model.rhs(0.0, x0, uin, p)[:, iu]
-
 
     grid = np.concatenate([[0.0], np.geomspace(1e-3, n_max, 120)])
     G = grid.size
@@ -112,7 +108,6 @@ def steady_rps(model: Model, speed, *, params=None, n_max: float = 1e3, xtol: fl
 class ManoeuvreResult:
     """A batch of simulated standard manoeuvres.
 
-
     Attributes
     ----------
     kind : "turning" or "zigzag"
@@ -125,14 +120,12 @@ class ManoeuvreResult:
     message : str
     """
 
-
     kind: str
     simulation: SimulationResult
     settings: pd.DataFrame
     metrics: list
     success: bool = True
     message: str = "ok"
-
 
     def to_pandas(self) -> pd.DataFrame:
         """Settings and metrics, one row per member (the flat keys of ``to_dict``)."""
@@ -141,7 +134,6 @@ class ManoeuvreResult:
             d = {k: v for k, v in m.to_dict().items() if not isinstance(v, dict)}
             rows.append({**self.settings.iloc[i].to_dict(), **d})
         return pd.DataFrame(rows)
-
 
     def member(self, i: int) -> pd.DataFrame:
         """Time series of member ``i`` (states and inputs)."""
@@ -166,7 +158,6 @@ def _resolve(model, speed, n, rudder_rate, lpp, params):
 
 def _run_batched(model, x0, t_step, controller_factory, done, params, t_max, chunk, method="rk4", rtol=1e-6):
     """Integrate in chunks until ``done(X_all, t_all)`` or ``t_max``; returns a SimulationResult.
-
 
     ``t_step`` is a step [s] or a callable ``(T, X) -> step`` choosing the step of the next chunk from
     the run so far (the time grid of ``simulate`` may be non-uniform).

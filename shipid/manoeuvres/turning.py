@@ -20,12 +20,10 @@ from .runner import ManoeuvreResult, _approach_state, _check_method, _resolve, _
 class TurningMetrics:
     """Turning-circle metrics (ITTC 7.5-04-02-01 / IMO MSC.137(76)).
 
-
     Lengths in metres and in ship lengths (``*_L``); angles in degrees;
     times [s] from the execute; speeds [m/s].  NaN where the run did not
     reach the heading change a metric needs (see ``message``).
     """
-
 
     lpp: float
     side: str                     # "starboard" (heading increasing) or "port"
@@ -46,30 +44,24 @@ class TurningMetrics:
     success: bool = True
     message: str = ""
 
-
     def __post_init__(self):
         self.manoeuvre = "turning"
-
 
     @property
     def advance_L(self) -> float:
         return self.advance / self.lpp
 
-
     @property
     def transfer_L(self) -> float:
         return self.transfer / self.lpp
-
 
     @property
     def tactical_diameter_L(self) -> float:
         return self.tactical_diameter / self.lpp
 
-
     @property
     def steady_diameter_L(self) -> float:
         return self.steady_diameter / self.lpp
-
 
     def imo(self) -> dict:
         """IMO MSC.137(76) turning criteria: advance < 4.5 L, tactical diameter < 5 L (and initial turning
@@ -82,7 +74,6 @@ class TurningMetrics:
             out["initial_turning_limit_L"] = 2.5
             out["initial_turning_pass"] = _le(self.track_reach_10deg / self.lpp, 2.5)
         return out
-
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict (keys ``manoeuvre``, ``advance_L``, ``transfer_L``, ``tactical_diameter_L``,
@@ -98,7 +89,6 @@ class TurningMetrics:
 def turning_metrics(t, x, y, psi, u, delta, *, lpp: float, v=None, execute_time: float | None = None,
                     reference: str = "logged point") -> TurningMetrics:
     """Turning-circle metrics from time series.
-
 
     Parameters
     ----------
@@ -122,7 +112,6 @@ def turning_metrics(t, x, y, psi, u, delta, *, lpp: float, v=None, execute_time:
 
 def _turning_rows(t, x, y, psi, U, delta, lpp, ie, te, reference, n_valid) -> list[TurningMetrics]:
     """:func:`turning_metrics` of B runs on one time grid at once (the one copy of the definitions).
-
 
     ``x, y, psi, U, delta`` (B, n); ``ie, te`` (B,) execute index and time (``t[ie - 1] < te <= t[ie]``);
     row ``b`` uses its first ``n_valid[b]`` samples (a simulation that failed later).
@@ -214,7 +203,6 @@ def turning_circle(model: Model, rudder_deg: float | Sequence[float] = 35.0, *, 
                    method: str = "rk4", rtol: float = 1e-6) -> ManoeuvreResult:
     """Simulate turning circles as one batch.
 
-
     Parameters
     ----------
     model : Model  with states x, y, psi, u, v, r and inputs delta, n
@@ -236,7 +224,6 @@ def turning_circle(model: Model, rudder_deg: float | Sequence[float] = 35.0, *, 
         ``dt``, or adaptive Dormand-Prince 5(4) at tolerance ``rtol`` (then ``dt`` is only the output
         spacing the metrics interpolate on; far fewer model evaluations at equal accuracy)
     rtol : float  ``dopri5`` relative tolerance (absolute: 1e-3 rtol)
-
 
     Returns
     -------
@@ -279,10 +266,8 @@ def _simulate_turns(model, delta_target, speeds, ns, rate, L, heading_change_deg
     idl, inn, ipsi = model.input_index("delta"), model.input_index("n"), model.state_index("psi")
     target = math.radians(heading_change_deg)
 
-
     def factory():
         return TurningRudder(delta_target, ns, rate, te, nu=model.nu, idl=idl, inn=inn)
-
 
     def done(T, X):
         ke = int(np.searchsorted(T, te))
@@ -291,9 +276,7 @@ def _simulate_turns(model, delta_target, speeds, ns, rate, L, heading_change_deg
         dpsi = np.abs(X[:, ke:, ipsi] - X[:, ke:ke + 1, ipsi])
         return bool(np.all(dpsi.max(axis=1) >= target))
 
-
     coarse = min(coarsen, 0.25 * L / float(np.max(speeds)) / h) if coarsen > 1 else 1.0
-
 
     def step(T, X):
         # once every member has turned 270 deg the turn is steady: larger steps (the metrics at 90 and
@@ -303,7 +286,6 @@ def _simulate_turns(model, delta_target, speeds, ns, rate, L, heading_change_deg
         ke = int(np.searchsorted(T, te))
         steady = np.all(np.abs(X[:, -1, ipsi] - X[:, ke, ipsi]) >= math.radians(270))
         return h * coarse if steady else h
-
 
     chunk = max(10 * L / float(np.min(speeds)), te + h)
     sim = _run_batched(model, _approach_state(model, speeds), step, factory, done, params, t_max, chunk, method, rtol)
@@ -333,9 +315,7 @@ def turning_sweep(model: Model, rudder_deg: Sequence[float] = (10.0, 15.0, 25.0)
                   rtol: float = 1e-6) -> pd.DataFrame:
     """Turning diameters over rudder angle x approach speed, simulated as ONE batch (seed 002 studies).
 
-
     The rps of each approach speed is the steady rps of the model at that speed (:func:`steady_rps`).
-
 
     Returns
     -------

@@ -19,10 +19,9 @@ from .runner import ManoeuvreResult, _approach_state, _check_method, _resolve, _
 class ZigzagMetrics:
     """Zigzag metrics (ITTC 7.5-04-02-01 / IMO MSC.137(76)); angles [deg], times [s] from the first execute."""
 
-
     lpp: float
     rudder_deg: float            # rudder amplitude (positive)
-    switch_deg: float            # heading deviation at which the rudder is reversed (positive)
+    switch_deg: float            # check angle: heading deviation at which the rudder is reversed (positive)
     first_side: str              # side of the first heading change: "starboard" or "port"
     approach_speed: float
     overshoot1_deg: float = math.nan
@@ -34,24 +33,26 @@ class ZigzagMetrics:
     initial_turning: float = math.nan  # track length first -> second execute [m]
     execute_time: float = math.nan
     reference: str = "logged point"
+    check_source: str = "given"  # where the check angle came from: "given", "log" (rudder reversals), "rudder"
     success: bool = True
     message: str = ""
-
 
     def __post_init__(self):
         self.manoeuvre = "zigzag"
 
+    @property
+    def check_deg(self) -> float:
+        """The check (switch) angle [deg]: heading deviation at which the rudder is reversed."""
+        return self.switch_deg
 
     @property
     def initial_turning_L(self) -> float:
         return self.initial_turning / self.lpp
 
-
     @property
     def l_over_v(self) -> float:
         """L/V [s] with the approach speed."""
         return self.lpp / self.approach_speed
-
 
     def imo(self) -> dict:
         """IMO MSC.137(76) checks that apply to this zigzag (10/10: first and second overshoot with the
@@ -66,7 +67,6 @@ class ZigzagMetrics:
             out.update(overshoot1_limit_deg=lim["zz20_overshoot1_deg"], overshoot1_pass=_le(self.overshoot1_deg, lim["zz20_overshoot1_deg"]))
         return out
 
-
     def to_dict(self) -> dict:
         """Plain JSON-able dict (keys ``manoeuvre``, ``overshoot1_deg``, ``overshoot2_deg``, ... ``imo``)."""
         d = {"manoeuvre": "zigzag", **asdict(self), "initial_turning_L": self.initial_turning_L}
@@ -75,10 +75,9 @@ class ZigzagMetrics:
 
 
 def zigzag_metrics(t, psi, delta, *, lpp: float, u=None, v=None, x=None, y=None, execute_time: float | None = None,
-                   switch_deg: float | None = None, rudder_deg: float | None = None,
+                   switch_deg: float | None = None, rudder_deg: float | None = None, check_deg: float | None = None,
                    reference: str = "logged point") -> ZigzagMetrics:
     """Zigzag metrics from time series.
-
 
     Parameters
     ----------
@@ -87,9 +86,17 @@ def zigzag_metrics(t, psi, delta, *, lpp: float, u=None, v=None, x=None, y=None,
     u, v : arrays, optional  speeds [m/s] (approach speed for the IMO L/V limits)
     x, y : arrays, optional  positions [m] (initial turning track length)
     execute_time : float, optional  known first-execute time (else detected)
-    switch_deg, rudder_deg : float, optional  nominal switch heading and rudder amplitude [deg];
-        default: the rudder amplitude rounded to a whole degree, and switch = rudder (an x/x zigzag).
+    rudder_deg : float, optional  nominal rudder amplitude [deg]; default the rudder's swing about its
+        mean, rounded to a whole degree.
+    check_deg : float, optional  nominal check (switch) angle [deg], the heading deviation at which the
+        rudder is reversed (``switch_deg`` is the same, older name).  Default: inferred from the log --
+        the heading deviation from the first execute at the rudder reversals (:func:`infer_check_angle`:
+        median of the first three; the rudder angle when within 1.5 deg of it, else rounded to a whole
+        degree), so a 10/5 zigzag reads as 10/5; the rudder angle when the log has no reversal.
     """
+    if check_deg is not None and switch_deg is not None and float(check_deg) != float(switch_deg):
+        raise ValueError(f"zigzag_metrics: check_deg={check_deg} and switch_deg={switch_deg} differ; give one")
+    check = check_deg if check_deg is not None else switch_deg
     t, delta = np.asarray(t, dtype=float), np.asarray(delta, dtype=float)
     psi = _unwrap(psi)
     ie, te = _execute(t, delta, execute_time)
@@ -100,7 +107,12 @@ def zigzag_metrics(t, psi, delta, *, lpp: float, u=None, v=None, x=None, y=None,
     # zigzag: MARIN zz_10 starts at -0.8 deg and swings -9.95 .. +10.7)
     amp = float((da.max() - da.min()) / 2) if (da.max() > 0 > da.min()) else float(np.max(np.abs(da)))
     rud = float(round(math.degrees(amp))) if rudder_deg is None else float(rudder_deg)
-    sw = rud if switch_deg is None else float(switch_deg)
+    source = "given"
+    if check is None:
+        inferred = infer_check_angle(t, dpsi, delta, ie, rud)
+        sw, source = (inferred, "log") if inferred is not None else (rud, "rudder")
+    else:
+        sw = float(check)
     if sw <= 0:
         raise ValueError(f"zigzag_metrics: switch angle must be positive, got {sw}")
     after = np.nonzero(t >= te)[0]
@@ -116,7 +128,7 @@ def zigzag_metrics(t, psi, delta, *, lpp: float, u=None, v=None, x=None, y=None,
         U = np.abs(uu) if v is None else np.hypot(uu, np.asarray(v, dtype=float))
         U_app = float(np.mean(U[: ie + 1][-max(1, min(ie + 1, 20)):]))
     res = ZigzagMetrics(lpp=float(lpp), rudder_deg=rud, switch_deg=sw, first_side=_side(s), approach_speed=U_app,
-                        execute_time=te, reference=reference)
+                        execute_time=te, reference=reference, check_source=source)
     lev = math.radians(sw)
     msgs = []
     c2 = _crossing(t, h, lev, ie)
@@ -158,12 +170,61 @@ def zigzag_metrics(t, psi, delta, *, lpp: float, u=None, v=None, x=None, y=None,
     return res
 
 
+def rudder_reversals(delta, start: int, tol_deg: float = 0.5) -> list[int]:
+    """Indices of the rudder reversals after sample ``start``: at each extreme of the rudder, the last
+    sample within ``tol_deg / 2`` of it before the rudder has moved back by more than ``tol_deg`` (the
+    rudder order changed sides there).
+
+    ``delta`` [rad] (n,); the first motion away from ``delta[start]`` by more than ``tol_deg`` sets the
+    initial direction.  A rudder held with sensor noise below ``tol_deg`` gives no reversal.
+    """
+    d = np.asarray(delta, dtype=float)
+    tol = math.radians(tol_deg)
+    direction, ext, k_ext, out = 0, d[start], start, []
+    for k in range(start + 1, d.size):
+        x = d[k]
+        if not np.isfinite(x):
+            continue
+        if direction == 0:
+            if abs(x - d[start]) > tol:
+                direction, ext, k_ext = (1 if x > d[start] else -1), x, k
+            continue
+        if direction * (x - ext) >= -0.5 * tol:  # still at the extreme (held with sensor noise) or beyond it
+            if direction * (x - ext) > 0:
+                ext = x
+            k_ext = k
+        elif direction * (ext - x) > tol:
+            out.append(k_ext)
+            direction, ext, k_ext = -direction, x, k
+    return out
+
+
+#: Largest difference [deg] between the heading deviation at the logged rudder reversals and the rudder
+#: angle for which a zigzag reads as an x/x zigzag: the logged reversal lags the heading's crossing of the
+#: check angle by the steering reaction (MARIN KVLCC2 20/20: 19.2 .. 21.5 deg at the reversals).
+CHECK_SNAP_DEG = 1.5
+
+
+def infer_check_angle(t, dpsi, delta, start: int, rudder_deg: float | None = None, n_use: int = 3) -> float | None:
+    """The zigzag's check angle [deg] from a log: the heading deviation ``|dpsi|`` [rad] from the first
+    execute at the first ``n_use`` rudder reversals (:func:`rudder_reversals`), their median.  Within
+    :data:`CHECK_SNAP_DEG` of the rudder angle ``rudder_deg`` it is the rudder angle (an x/x zigzag);
+    else rounded to a whole degree (nominal check angles are whole degrees).  None when the log has
+    no reversal."""
+    rev = rudder_reversals(delta, start)[:n_use]
+    if not rev:
+        return None
+    val = float(np.median(np.degrees(np.abs(np.asarray(dpsi, dtype=float)[rev]))))
+    if rudder_deg is not None and abs(val - rudder_deg) <= CHECK_SNAP_DEG:
+        return float(rudder_deg)
+    return float(max(round(val), 1.0))
+
+
 def zigzag(model: Model, rudder_deg: float = 10.0, switch_deg: float | None = None, *, speed=None, n=None,
            first: str = "both", rudder_rate: float | None = None, n_executes: int = 4,
            execute_time: float | None = None, dt: float | None = None, t_max: float | None = None,
            lpp: float | None = None, params=None, method: str = "rk4", rtol: float = 1e-6) -> ManoeuvreResult:
     """Simulate zigzag manoeuvres (delta/psi, e.g. 10/10, 20/20) as one batch.
-
 
     Parameters
     ----------
@@ -172,10 +233,8 @@ def zigzag(model: Model, rudder_deg: float = 10.0, switch_deg: float | None = No
     first : {"both", "starboard", "port"}  side of the first rudder execute
     n_executes : int  run until this many rudder executes have happened (>= 4 gives the second overshoot)
 
-
     method, rtol : integrator and ``dopri5`` tolerance (see :func:`turning_circle`); ``dt`` is the RK4 step
         or, for ``dopri5``, the output spacing
-
 
     The rudder logic is :class:`ZigzagRudder`: each member reverses its rudder order when its own
     heading deviation reaches the switch angle on the side it is turning to (located within the step);
@@ -208,16 +267,13 @@ def zigzag(model: Model, rudder_deg: float = 10.0, switch_deg: float | None = No
     x0 = _approach_state(model, speeds)
     law: list = []
 
-
     def factory():
         # reference heading: each member's heading at the execute (ITTC), not at the start of the approach
         law[:] = [ZigzagRudder(amp, lev, F, None, ns, rate, te, ipsi=ipsi, nu=model.nu, idl=idl, inn=inn)]
         return law[0]
 
-
     def done(T, X):
         return bool(np.all(law[0].count >= n_executes + 1)) and T[-1] > te
-
 
     chunk = max(10 * L / float(np.min(speeds)), te + h)
     sim = _run_batched(model, x0, h, factory, done, params, t_max, chunk, method, rtol)

@@ -35,7 +35,7 @@ def _figure(width: float, height: float) -> Figure:
 def _margins(fig: Figure) -> None:
     """Fixed margins in inches (one draw per figure; ``bbox_inches='tight'`` would draw twice)."""
     w, h = fig.get_size_inches()
-    fig.subplots_adjust(left=0.85 / w, right=1 - 0.2 / w, bottom=0.5 / h, top=1 - 0.35 / h, hspace=0.12)
+    fig.subplots_adjust(left=1.0 / w, right=1 - 0.2 / w, bottom=0.6 / h, top=1 - 0.4 / h, hspace=0.15)
 
 
 def to_data_uri(fig: Figure) -> str:
@@ -49,21 +49,23 @@ def correlation_figure(names: list[str], matrix) -> Figure:
     """Heat-map of the posterior correlation matrix (values printed where |rho| >= 0.5)."""
     C = np.asarray(matrix, dtype=float)
     n = len(names)
-    size = max(3.5, 0.42 * n + 1.5)
-    fig = _figure(size + 0.8, size)
+    size = max(4.0, 0.5 * n + 1.8)
+    fig = _figure(size + 1.6, size)  # room on the right for the colour bar, its tick labels and its label
     ax = fig.add_subplot()
     im = ax.imshow(C, cmap="RdBu_r", vmin=-1, vmax=1)
-    ax.set_xticks(range(n), names, rotation=90, fontsize=8)
-    ax.set_yticks(range(n), names, fontsize=8)
+    ax.set_xticks(range(n), names, rotation=90, fontsize=11)
+    ax.set_yticks(range(n), names, fontsize=11)
     for i in range(n):
         for j in range(n):
             if i != j and np.isfinite(C[i, j]) and abs(C[i, j]) >= 0.5:
                 ax.text(j, i, f"{C[i, j]:+.1f}" if n > 12 else f"{C[i, j]:+.2f}", ha="center", va="center",
-                        fontsize=6 if n > 12 else 7, color="white" if abs(C[i, j]) > 0.8 else "black")
-    fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04, label="correlation")
-    ax.set_title("posterior correlation of the estimated coefficients", fontsize=9)
+                        fontsize=8 if n > 12 else 9, color="white" if abs(C[i, j]) > 0.8 else "black")
+    cb = fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04)
+    cb.set_label("correlation coefficient (-1 .. +1)", fontsize=11)
+    cb.ax.tick_params(labelsize=10)
+    ax.set_title("posterior correlation of the estimated coefficients", fontsize=12)
     w, h = fig.get_size_inches()
-    fig.subplots_adjust(left=0.8 / w, right=1 - 0.1 / w, bottom=0.8 / h, top=1 - 0.4 / h)
+    fig.subplots_adjust(left=1.0 / w, right=1 - 1.3 / w, bottom=1.0 / h, top=1 - 0.5 / h)
     return fig
 
 
@@ -79,12 +81,12 @@ def time_series_figure(log_frame: pd.DataFrame, sim_frame: pd.DataFrame, title: 
             ax.plot(t_log, f * log_frame[ch].to_numpy(float), ".", ms=1.5, color="0.35", label="measured")
         if ch in sim_frame.columns and ch != "delta":
             ax.plot(t_sim, f * sim_frame[ch].to_numpy(float), "-", lw=1.2, color="C3", label="replay (model)")
-        ax.set_ylabel(label, fontsize=8)
-        ax.tick_params(labelsize=7)
+        ax.set_ylabel(label, fontsize=11)
+        ax.tick_params(labelsize=10)
         ax.grid(alpha=0.3)
-    axs[0].legend(fontsize=7, loc="best", markerscale=4)
-    axs[0].set_title(title, fontsize=9)
-    axs[-1].set_xlabel("time [s]", fontsize=8)
+    axs[0].legend(fontsize=10, loc="best", markerscale=4)
+    axs[0].set_title(title, fontsize=12)
+    axs[-1].set_xlabel("time [s]", fontsize=11)
     _margins(fig)
     return fig
 
@@ -103,13 +105,13 @@ def track_figure(log_frame: pd.DataFrame, sim_frame: pd.DataFrame, title: str, l
                 label="replay (model)")
         ax.plot(s * sim_frame["y"].iloc[0], s * sim_frame["x"].iloc[0], "o", color="k", ms=4, label="start")
     ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel(f"y (east) [{unit}]", fontsize=8)
-    ax.set_ylabel(f"x (north) [{unit}]", fontsize=8)
-    ax.tick_params(labelsize=7)
+    ax.set_xlabel(f"y (east) [{unit}]", fontsize=11)
+    ax.set_ylabel(f"x (north) [{unit}]", fontsize=11)
+    ax.tick_params(labelsize=10)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, markerscale=3)
-    ax.set_title(title, fontsize=9)
-    fig.subplots_adjust(left=0.16, right=0.97, bottom=0.11, top=0.93)
+    ax.legend(fontsize=10, markerscale=3)
+    ax.set_title(title, fontsize=12)
+    fig.subplots_adjust(left=0.18, right=0.97, bottom=0.13, top=0.92)
     return fig
 
 
@@ -125,17 +127,18 @@ def residual_figure(log_frame: pd.DataFrame, sim_frame: pd.DataFrame, title: str
         e = f * (log_frame[ch].to_numpy(float) - sim_frame[ch].to_numpy(float))
         ax.plot(t, e, "-", lw=0.8, color="C0")
         ax.axhline(0, color="k", lw=0.6)
-        ax.set_ylabel(f"{ch} [{unit}]", fontsize=8)
-        ax.tick_params(labelsize=7)
+        ax.set_ylabel(f"{ch} [{unit}]", fontsize=11)
+        ax.tick_params(labelsize=10)
         ax.grid(alpha=0.3)
-    axs[0].set_title(title, fontsize=9)
-    axs[-1].set_xlabel("time [s]", fontsize=8)
+    axs[0].set_title(title, fontsize=12)
+    axs[-1].set_xlabel("time [s]", fontsize=11)
     _margins(fig)
     return fig
 
 
 def innovation_figure(innov: pd.DataFrame, title: str) -> Figure:
-    """EKF innovations with their +-2 sqrt(S) band (filter's predicted spread)."""
+    """EKF innovations (measured minus the filter's one-step prediction) with the band of
+    +-2 predicted standard deviations (``2 sqrt(S)``, S the innovation variance)."""
     chans = [c for c in innov.columns if c != "time" and not c.endswith("_S") and f"{c}_S" in innov.columns]
     fig = _figure(8.5, 1.25 * max(1, len(chans)) + 0.6)
     axs = fig.subplots(max(1, len(chans)), 1, sharex=True, squeeze=False)[:, 0]
@@ -144,7 +147,7 @@ def innovation_figure(innov: pd.DataFrame, title: str) -> Figure:
         unit, f = _PLOT_UNITS.get(ch, ("", 1.0))
         e = f * innov[ch].to_numpy(float)
         band = 2 * f * np.sqrt(np.clip(innov[f"{ch}_S"].to_numpy(float), 0, None))
-        ax.fill_between(t, -band, band, color="C1", alpha=0.25, lw=0, label="+-2 sqrt(S)")
+        ax.fill_between(t, -band, band, color="C1", alpha=0.25, lw=0, label="filter's predicted ±2σ")
         ax.plot(t, e, "-", lw=0.7, color="C0", label="innovation")
         # the first samples (filter start-up) can be far larger than the rest: scale to the bulk
         fin = np.abs(e[np.isfinite(e)])
@@ -152,11 +155,11 @@ def innovation_figure(innov: pd.DataFrame, title: str) -> Figure:
         lim = max(np.percentile(fin, 99.5) if fin.size else 0.0, np.percentile(bnd, 99.5) if bnd.size else 0.0)
         if lim > 0:
             ax.set_ylim(-1.3 * lim, 1.3 * lim)
-        ax.set_ylabel(f"{ch} [{unit}]", fontsize=8)
-        ax.tick_params(labelsize=7)
+        ax.set_ylabel(f"{ch} [{unit}]", fontsize=11)
+        ax.tick_params(labelsize=10)
         ax.grid(alpha=0.3)
-    axs[0].legend(fontsize=7, loc="upper right")
-    axs[0].set_title(title, fontsize=9)
-    axs[-1].set_xlabel("time [s]", fontsize=8)
+    axs[0].legend(fontsize=10, loc="upper right")
+    axs[0].set_title(title, fontsize=12)
+    axs[-1].set_xlabel("time [s]", fontsize=11)
     _margins(fig)
     return fig

@@ -48,6 +48,7 @@ td.pass{background:#dff5df}td.fail{background:#f9dcdc;font-weight:bold}td.na{col
 .note{color:#444;font-size:0.9em}
 .mono{font-family:Menlo,Consolas,monospace;font-size:0.85em;word-break:break-all}
 img{max-width:100%;height:auto;display:block;margin:6px 0}
+p.intro{background:#f3f6fa;border-left:4px solid #4a78a8;padding:6px 10px}
 .figs{display:flex;flex-wrap:wrap;gap:12px;align-items:flex-start}
 nav a{margin-right:12px}
 """
@@ -302,6 +303,9 @@ def _section_log(v: LogValidation, i: int, identifier) -> str:
                 f"residuals {log.name}")
     inn = _innovations_for(identifier, log.name)
     if inn is not None:
+        out += ("<p class=\"note\">Innovations: each measurement minus the filter's one-step prediction "
+                "(final pass). For a consistent filter about 95 % of them lie inside the shaded band of "
+                "&plusmn;2 predicted standard deviations.</p>")
         out += _fig(figures.innovation_figure(inn, f"{log.name}: EKF innovations (final pass)"),
                     f"innovations {log.name}")
     elif identifier is not None:
@@ -335,13 +339,44 @@ def _section_versions(result) -> str:
 
 
 # ----------------------------------------------------------------------------- public
+def _section_horizon(horizons) -> str:
+    """Multi-start open-loop prediction errors (:func:`shipid.validation_horizon.horizon_prediction`) and
+    predicted-vs-measured track overlays; ``horizons`` is a list of ``(HorizonResult, log)``."""
+    if not horizons:
+        return ""
+    import matplotlib.pyplot as plt
+
+    rows, figs = [], []
+    for h, log in horizons:
+        for e in h.summary():
+            rows.append([_e(h.name), _f(e["seconds"], "{:g}"), _f(e["position_error_median_m"], "{:.3f}"),
+                         _f(e["position_error_p90_m"], "{:.3f}"), _f(e["heading_error_median_deg"], "{:.2f}"),
+                         _f(e["n_starts"], "{:.0f}"), (_f(e["n_blowups"], "{:.0f}"), "bad" if e["n_blowups"] else "")])
+        ax = h.plot(log, every=max(1, len(h.start_times) // 12))
+        ax.set_title(f"{h.name}: predictions over {h.horizons.max():g} s")
+        figs.append(_fig(ax.figure, f"predicted vs measured tracks, {h.name}"))
+        plt.close(ax.figure)
+    return ('<h2 id="horizon">Open-loop prediction from the measured state</h2><p>From starts every few seconds '
+            "the model runs open loop with the measured inputs; errors at each horizon (blow-ups count with "
+            "infinite error).</p>" + _table(["log", "horizon [s]", "median position error [m]", "p90 [m]",
+                                               "median heading error [deg]", "starts", "blow-ups"], rows)
+            + "".join(figs))
+
+
 def render_report(result, logs, *, identifier=None, title: str | None = None, lpp: float | None = None,
                   rudder_sign: float = 1.0, closed_loop: bool = True,
-                  validations: list[LogValidation] | None = None) -> str:
+                  validations: list[LogValidation] | None = None, uncertainty: dict | None = None,
+                  intro: str | None = None, horizons=None) -> str:
     """The report as an HTML string (see :func:`write_report`).
 
+    ``intro`` is plain text shown under the title (what the report demonstrates); blank
+    lines separate paragraphs.
+
     ``validations`` (from :func:`shipid.validation.validate_logs`) reuses replays already computed;
-    ``logs``, ``lpp``, ``rudder_sign`` and ``closed_loop`` are then ignored.
+    ``logs``, ``lpp``, ``rudder_sign`` and ``closed_loop`` are then ignored.  ``uncertainty``
+    (``{"draws": N, "seed": s, "samples": None}``) adds the prediction-uncertainty section
+    (:func:`shipid.report.uncertainty.uncertainty_section`).  ``horizons``: a list of
+    ``(HorizonResult, log)`` adds the open-loop prediction section.
     """
     if result is None:
         if identifier is None:
@@ -353,6 +388,11 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
     if validations is None:
         validations = [validate_one(model, lg, lpp=lpp, rudder_sign=rudder_sign, closed_loop=closed_loop)
                        for lg in load_logs(logs, lpp=lpp)]
+    extra = []
+    if uncertainty:
+        from .uncertainty import uncertainty_section
+
+        extra.append(uncertainty_section(res, validations, **uncertainty))
     title = title or f"Validation report: {res.model} model"
     stamp = datetime.now(timezone.utc).isoformat(timespec="seconds")
     n_ok = sum(v.success for v in validations)
@@ -366,8 +406,11 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
             f"validated on {len(validations)} log(s) "
             f"({n_ok} replayed with both metric sets). Report written {_e(stamp)} by shipid "
             f"{_e(_versions_now().get('shipid'))}.</p>",
+            *[f"<p class=\"intro\">{_e(par.strip())}</p>" for par in (intro or "").split("\n\n") if par.strip()],
             f"<nav>{nav}</nav>",
-            _section_summary(validations), _section_imo(validations), _section_coefficients(res),
+            _section_summary(validations), _section_horizon(horizons), _section_imo(validations),
+            *extra,
+            _section_coefficients(res),
             _section_identifiability(res), _section_model(res, model),
             "<h2 id=\"logs\">Measured vs simulated, per log</h2>",
             *[_section_log(v, i, identifier) for i, v in enumerate(validations)],
@@ -379,7 +422,7 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
 
 def write_report(result, logs, path: str | os.PathLike, *, force: bool = False, identifier=None,
                  title: str | None = None, lpp: float | None = None, rudder_sign: float = 1.0,
-                 closed_loop: bool = True) -> Path:
+                 closed_loop: bool = True, intro: str | None = None) -> Path:
     """Write a self-contained HTML validation report.
 
     Parameters
@@ -392,6 +435,8 @@ def write_report(result, logs, path: str | os.PathLike, *, force: bool = False, 
     identifier : EKFIdentifier, optional
         The fitted identifier; adds innovation plots for the logs it was fitted to.
     title : str, optional
+    intro : str, optional
+        Plain text under the title saying what the report shows (paragraphs separated by blank lines).
     lpp : float, optional
         Ship length [m] for the metrics (default: from each log, then the model).
     rudder_sign : {1, -1}
@@ -407,5 +452,5 @@ def write_report(result, logs, path: str | os.PathLike, *, force: bool = False, 
     if p.exists() and not force:  # fail before the (slow) replays and figures
         raise OutputExistsError(f"{p}: output exists; choose another name or pass --force (force=True) to overwrite it")
     text = render_report(result, logs, identifier=identifier, title=title, lpp=lpp, rudder_sign=rudder_sign,
-                         closed_loop=closed_loop)
+                         closed_loop=closed_loop, intro=intro)
     return atomic_write_text(p, text, force=force)

@@ -911,16 +911,21 @@ def paper_scenario(*, time_scale: float = 0.1, kinematics: str = "paper",
                       origin=(lon0, lat0))
 
 
-def compare_planners(problem: USVProblem, *, rng=0, n_particles: int = 25, max_iter: int = 120) -> dict:
+def compare_planners(problem: USVProblem, *, rng=0, n_particles: int = 25, max_iter: int = 120,
+                     replan_times: Sequence[float] | None = None) -> dict:
     """DOPSO (sailed through the time-varying fields), EOPSO at t = 0 and OCPSO; the paper's comparison.
 
+    ``replan_times`` [s] are passed to :func:`plan_ocpso` (default: the fields' breakpoints).
     Returns a dict with the three paths, their voyages and
     ``saving_vs_distance_optimal = 1 - W_OCPSO / W_DOPSO`` (both sailed).
     """
+    from .spec import check_pso_size
+
+    check_pso_size(int(n_particles), int(max_iter), len(problem.obstacles), "compare_planners")
     rng = np.random.default_rng(rng)
     do = plan_dopso(problem, rng=rng, n_particles=n_particles, max_iter=max_iter)
     eo = plan_eopso(problem, rng=rng, n_particles=n_particles, max_iter=max_iter)
-    oc = plan_ocpso(problem, rng=rng, n_particles=n_particles, max_iter=max_iter)
+    oc = plan_ocpso(problem, rng=rng, n_particles=n_particles, max_iter=max_iter, replan_times=replan_times)
     vd, ve = sail(problem, do.points), sail(problem, eo.points)
     ok = vd.arrived and oc.voyage.arrived
     return {"dopso": do, "eopso": eo, "ocpso": oc, "dopso_voyage": vd, "eopso_voyage": ve,

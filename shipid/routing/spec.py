@@ -34,19 +34,27 @@ FIELD::
 
 (``path`` is relative to the JSON file.)  Wind fields give the air's velocity
 (towards); use ``"convention": "from"`` for a meteorological direction.
+
+``replan_times`` [s] are the times at which OCPSO measures the environment and
+replans (default: the breakpoints of piecewise current/wind fields).  Every
+object is checked by hand-written checks: unknown keys are refused (a typo never
+silently falls back to a default), numbers must be numbers (``true`` is not 1),
+counts must be whole and in range, and ``n_particles`` x ``max_iter`` is bounded
+by a memory estimate.
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from .._io import as_int, as_mapping, as_string, check_keys, check_memory, read_json, short
 from .fields import (AffineField, Field, GridField, PiecewiseTimeField, SumField, UniformField, VortexField,
                      linear_shear)
 
-__all__ = ["field_from_spec", "load_problem_spec", "zermelo_from_spec", "usv_from_spec", "vessel_from_spec"]
+__all__ = ["field_from_spec", "load_problem_spec", "zermelo_from_spec", "usv_from_spec", "vessel_from_spec",
+           "check_pso_settings", "check_pso_size"]
 
 
 def _need(spec: dict, key: str, where: str):
@@ -56,23 +64,32 @@ def _need(spec: dict, key: str, where: str):
 
 
 def _vec(value, where: str, n: int = 2) -> np.ndarray:
-    try:
-        arr = np.asarray(value, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
-        raise ValueError(f"{where}: expected {n} numbers, got {value!r}") from None
-    if arr.size != n or not np.all(np.isfinite(arr)):
-        raise ValueError(f"{where}: expected {n} finite numbers, got {value!r}")
-    return arr
+    if not (isinstance(value, list) and len(value) == n):
+        raise ValueError(f"{where}: expected a list of {n} numbers, got {short(value, 40)}")
+    return np.array([_num(v, f"{where}[{i}]") for i, v in enumerate(value)])
 
 
-def _num(value, where: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{where}: expected a number, got {value!r}") from None
-    if not np.isfinite(v):
-        raise ValueError(f"{where}: expected a finite number, got {value!r}")
-    return v
+def _num(value, where: str, *, low: float | None = None, low_open: bool = False) -> float:
+    from .._io import as_number
+
+    return as_number(value, where, low=low, low_open=low_open)
+
+
+_FIELD_KEYS = {"uniform": {"type", "velocity", "speed", "direction_deg", "convention"},
+               "linear_shear": {"type", "k"}, "affine": {"type", "G", "w0", "origin"},
+               "vortex": {"type", "gamma", "rc", "center"},
+               "grid_csv": {"type", "path", "x", "y", "u", "v", "t", "outside"},
+               "piecewise": {"type", "times", "fields"}, "sum": {"type", "fields"}}
+ZERMELO_KEYS = {"type", "speed", "start", "target", "current", "solver", "units", "n", "t0"}
+PSO_KEYS = {"type", "start", "start_lonlat", "goal", "goal_lonlat", "obstacles", "current", "wind", "r_min",
+            "kinematics", "vessel", "replan_times", "seed", "n_particles", "max_iter", "n_sub"}
+_VESSEL_KEYS = {"paper": {"type"}, "model": {"type", "model", "params", "result", "n", "power_coefficient"}}
+
+
+def _list(value, where: str, what: str) -> list:
+    if not isinstance(value, list):
+        raise ValueError(f"{where}: expected a list of {what}, got {type(value).__name__} {short(value, 40)}")
+    return value
 
 
 def field_from_spec(spec, where: str = "field", base_dir: Path | None = None) -> Field:
@@ -80,8 +97,11 @@ def field_from_spec(spec, where: str = "field", base_dir: Path | None = None) ->
     if spec is None:
         return UniformField()
     if not isinstance(spec, dict):
-        raise ValueError(f"{where}: expected an object with a 'type', got {spec!r}")
+        raise ValueError(f"{where}: expected an object with a 'type', got {short(spec, 40)}")
     kind = _need(spec, "type", where)
+    if not isinstance(kind, str) or kind not in _FIELD_KEYS:
+        raise ValueError(f"{where}.type: unknown field type {short(kind, 30)}; use {', '.join(_FIELD_KEYS)}")
+    check_keys(spec, _FIELD_KEYS[kind], where)
     if kind == "uniform":
         if "velocity" in spec:
             return UniformField(*_vec(spec["velocity"], f"{where}.velocity"))
@@ -94,29 +114,46 @@ def field_from_spec(spec, where: str = "field", base_dir: Path | None = None) ->
     if kind == "linear_shear":
         return linear_shear(_num(_need(spec, "k", where), f"{where}.k"))
     if kind == "affine":
-        G = np.asarray(_need(spec, "G", where), dtype=float)
-        if G.shape != (2, 2):
-            raise ValueError(f"{where}.G: expected a 2x2 matrix, got {spec['G']!r}")
+        G = _list(_need(spec, "G", where), f"{where}.G", "two rows")
+        if len(G) != 2:
+            raise ValueError(f"{where}.G: expected a 2x2 matrix, got {short(G, 40)}")
+        G = np.array([_vec(row, f"{where}.G[{i}]") for i, row in enumerate(G)])
         return AffineField(G, _vec(spec.get("w0", [0, 0]), f"{where}.w0"), _vec(spec.get("origin", [0, 0]), f"{where}.origin"))
     if kind == "vortex":
         return VortexField(_num(_need(spec, "gamma", where), f"{where}.gamma"), _num(_need(spec, "rc", where), f"{where}.rc"),
                            _vec(spec.get("center", [0, 0]), f"{where}.center"))
     if kind == "grid_csv":
-        path = Path(_need(spec, "path", where))
+        path = Path(as_string(_need(spec, "path", where), f"{where}.path"))
         if base_dir is not None and not path.is_absolute():
             path = base_dir / path
-        if not path.exists():
+        if not path.is_file():
             raise ValueError(f"{where}.path: file {path} does not exist")
-        df = pd.read_csv(path)
-        return GridField.from_dataframe(df, x=spec.get("x", "x"), y=spec.get("y", "y"), u=spec.get("u", "u"),
-                                        v=spec.get("v", "v"), t=spec.get("t"), outside=spec.get("outside", "nearest"),
-                                        name=str(path))
+        cols = {k: spec.get(k, k) for k in ("x", "y", "u", "v")}
+        for k, c in cols.items():
+            as_string(c, f"{where}.{k}")
+        t = None if spec.get("t") is None else as_string(spec["t"], f"{where}.t")
+        try:
+            df = pd.read_csv(path)
+        except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+            raise ValueError(f"{path}: not a readable CSV of currents ({' '.join(str(exc).split())[:120]})") from None
+        missing = [c for c in [*cols.values(), t] if c is not None and c not in df.columns]
+        if missing:
+            raise ValueError(f"{path}: no column(s) {short(missing, 60)}; the file has {short(list(df.columns), 80)}")
+        try:
+            return GridField.from_dataframe(df, **cols, t=t, outside=as_string(spec.get("outside", "nearest"),
+                                            f"{where}.outside"), name=str(path))
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{path}: {exc}") from None
+    fields = [field_from_spec(f, f"{where}.fields[{i}]", base_dir)
+              for i, f in enumerate(_list(_need(spec, "fields", where), f"{where}.fields", "fields"))]
     if kind == "piecewise":
-        fields = [field_from_spec(f, f"{where}.fields[{i}]", base_dir) for i, f in enumerate(_need(spec, "fields", where))]
-        return PiecewiseTimeField(_need(spec, "times", where), fields)
-    if kind == "sum":
-        return SumField([field_from_spec(f, f"{where}.fields[{i}]", base_dir) for i, f in enumerate(_need(spec, "fields", where))])
-    raise ValueError(f"{where}.type: unknown field type {kind!r}; use uniform, linear_shear, affine, vortex, grid_csv, piecewise or sum")
+        times = [_num(t, f"{where}.times[{i}]") for i, t in enumerate(_list(_need(spec, "times", where),
+                                                                             f"{where}.times", "times [s]"))]
+        try:
+            return PiecewiseTimeField(times, fields)
+        except ValueError as exc:
+            raise ValueError(f"{where}: {exc}") from None
+    return SumField(fields)
 
 
 def load_problem_spec(path) -> tuple[dict, Path]:
@@ -124,13 +161,57 @@ def load_problem_spec(path) -> tuple[dict, Path]:
     path = Path(path)
     if not path.exists():
         raise ValueError(f"{path}: no such problem file; use zermelo-paper, pso-paper or a JSON problem")
-    try:
-        spec = json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno} column {exc.colno})") from None
+    spec = read_json(path, "routing problem file", advice="see shipid/routing/spec.py for the format")
     if not isinstance(spec, dict) or spec.get("type") not in ("zermelo", "pso"):
         raise ValueError(f"{path}: top-level 'type' must be 'zermelo' or 'pso'")
+    check_keys(spec, ZERMELO_KEYS if spec["type"] == "zermelo" else PSO_KEYS, str(path))
+    if spec["type"] == "zermelo":
+        if "solver" in spec and spec["solver"] not in ("pmp", "transcription", "both"):
+            raise ValueError(f"{path}: 'solver' must be pmp, transcription or both, got {short(spec['solver'], 30)}")
+        if "n" in spec:
+            as_int(spec["n"], f"{path}: n", low=2, high=100_000)
+    else:
+        check_pso_settings(spec, str(path))
     return spec, path.parent
+
+
+def check_pso_settings(spec: dict, where: str) -> dict:
+    """``seed``, ``n_particles``, ``max_iter``, ``n_sub`` and ``replan_times`` of a PSO spec, checked;
+    returns them (absent keys omitted)."""
+    out = {}
+    if "seed" in spec:
+        out["seed"] = as_int(spec["seed"], f"{where}: seed", low=0)
+    if "n_particles" in spec:
+        out["n_particles"] = as_int(spec["n_particles"], f"{where}: n_particles", low=2)
+    if "max_iter" in spec:
+        out["max_iter"] = as_int(spec["max_iter"], f"{where}: max_iter", low=1)
+    if "n_sub" in spec:
+        out["n_sub"] = as_int(spec["n_sub"], f"{where}: n_sub", low=1, high=10_000)
+    if "replan_times" in spec:
+        times = [_num(t, f"{where}: replan_times[{i}]", low=0.0)
+                 for i, t in enumerate(_list(spec["replan_times"], f"{where}: replan_times", "times [s]"))]
+        if any(b <= a for a, b in zip(times, times[1:])):
+            raise ValueError(f"{where}: replan_times must increase, got {short(times, 60)}")
+        out["replan_times"] = times
+    n_obst = len(spec["obstacles"]) if isinstance(spec.get("obstacles"), list) else 3
+    check_pso_size(out.get("n_particles", 25), out.get("max_iter", 120), n_obst, where)
+    return out
+
+
+def check_pso_size(n_particles: int, max_iter: int, n_obstacles: int, where: str = "PSO") -> None:
+    """Refuse a PSO run whose estimated memory exceeds :func:`shipid._io.memory_limit_bytes`.
+
+    One swarm per left/right class (``2**k`` for ``k`` obstacles, at most 64 counted), each of
+    ``n_particles`` particles with ``k`` waypoints; a cost evaluation holds about 64 doubles per
+    particle and leg, and the initialisation draws ``4 n_particles`` candidates per class.
+    """
+    k = max(int(n_obstacles), 1)
+    swarms = 2 ** min(k, 6)
+    need = 8.0 * swarms * 4 * n_particles * (k + 1) * 64
+    check_memory(need, f"{where}: n_particles {n_particles}", "use fewer n_particles (25 is the default)")
+    if n_particles * max_iter > 10**9:
+        raise ValueError(f"{where}: n_particles x max_iter = {n_particles * max_iter:.3g} evaluations would run "
+                         "for days; use n_particles <= 1000 and max_iter <= 10000")
 
 
 def zermelo_from_spec(spec: dict, where: str = "problem", base_dir: Path | None = None):
@@ -139,8 +220,8 @@ def zermelo_from_spec(spec: dict, where: str = "problem", base_dir: Path | None 
 
     units = spec.get("units", "si")
     if units not in ("si", "nautical"):
-        raise ValueError(f"{where}.units: expected 'si' or 'nautical', got {units!r}")
-    return ZermeloProblem(_num(_need(spec, "speed", where), f"{where}.speed"),
+        raise ValueError(f"{where}.units: expected 'si' or 'nautical', got {short(units, 30)}")
+    return ZermeloProblem(_num(_need(spec, "speed", where), f"{where}.speed", low=0.0, low_open=True),
                           field_from_spec(spec.get("current"), f"{where}.current", base_dir),
                           _vec(_need(spec, "start", where), f"{where}.start"),
                           _vec(_need(spec, "target", where), f"{where}.target"),
@@ -151,26 +232,35 @@ def vessel_from_spec(spec, where: str = "vessel", base_dir: Path | None = None):
     """Speed-power model from ``{"type": "paper"}`` or ``{"type": "model", ...}`` (module docstring)."""
     from .energy import ModelSpeedPower, PaperUSVModel
 
-    if spec is None or spec.get("type", "paper") == "paper":
+    if spec is None:
         return PaperUSVModel()
-    if spec.get("type") != "model":
-        raise ValueError(f"{where}.type: expected 'paper' or 'model', got {spec.get('type')!r}")
+    as_mapping(spec, where, '{"type": "paper"}')
+    kind = spec.get("type", "paper")
+    if not isinstance(kind, str) or kind not in _VESSEL_KEYS:
+        raise ValueError(f"{where}.type: expected 'paper' or 'model', got {short(kind, 30)}")
+    check_keys(spec, _VESSEL_KEYS[kind], where)
+    if kind == "paper":
+        return PaperUSVModel()
     from ..identify.result import model_from
     from ..models import get_model
 
     if "result" in spec:
-        rpath = Path(spec["result"])
+        rpath = Path(as_string(spec["result"], f"{where}.result"))
         if base_dir is not None and not rpath.is_absolute():
             rpath = base_dir / rpath
         if not rpath.exists():
             raise ValueError(f"{where}.result: file {rpath} does not exist")
         model, _ = model_from(rpath)
     elif spec.get("model") is not None:
-        model = get_model(spec["model"], spec.get("params"))
+        params = spec.get("params")
+        if params is not None and not isinstance(params, str):
+            params = {k: _num(v, f"{where}.params.{short(k, 20)}") for k, v in
+                      as_mapping(params, f"{where}.params", '{"a1": 0.1}').items()}
+        model = get_model(as_string(spec["model"], f"{where}.model"), params)
     else:
         raise ValueError(f"{where}: give 'model' (a registered model name) or 'result' (a shipid fit JSON)")
-    n = _num(_need(spec, "n", where), f"{where}.n")
-    cp = _num(_need(spec, "power_coefficient", where), f"{where}.power_coefficient")
+    n = _num(_need(spec, "n", where), f"{where}.n", low=0.0, low_open=True)
+    cp = _num(_need(spec, "power_coefficient", where), f"{where}.power_coefficient", low=0.0, low_open=True)
     return ModelSpeedPower(model, n, cp)
 
 
@@ -194,21 +284,32 @@ def usv_from_spec(spec: dict, where: str = "problem", base_dir: Path | None = No
 
     goal = pos("goal")
     obstacles = []
-    for i, o in enumerate(_need(spec, "obstacles", where)):
+    for i, o in enumerate(_list(_need(spec, "obstacles", where), f"{where}.obstacles",
+                                '{"x": .., "y": .., "radius": ..} objects')):
         w = f"{where}.obstacles[{i}]"
         if not isinstance(o, dict):
             raise ValueError(f"{w}: expected an object with x, y (or lon, lat) and radius")
+        check_keys(o, {"lon", "lat", "radius"} if "lon" in o else {"x", "y", "radius"}, w)
         if "lon" in o:
             if origin is None:
                 raise ValueError(f"{w}: lon/lat obstacles need start_lonlat")
             c = lonlat_to_local(_num(o["lon"], f"{w}.lon"), _num(_need(o, "lat", w), f"{w}.lat"), *origin)
         else:
             c = np.array([_num(_need(o, "x", w), f"{w}.x"), _num(_need(o, "y", w), f"{w}.y")])
-        obstacles.append(Obstacle(float(c[0]), float(c[1]), _num(_need(o, "radius", w), f"{w}.radius")))
-    return USVProblem(start, goal, obstacles,
-                      current=field_from_spec(spec.get("current"), f"{where}.current", base_dir),
-                      wind=field_from_spec(spec.get("wind"), f"{where}.wind", base_dir),
-                      vessel=vessel_from_spec(spec.get("vessel"), f"{where}.vessel", base_dir),
-                      r_min=_num(spec.get("r_min", 15.0), f"{where}.r_min"),
-                      kinematics=spec.get("kinematics", "paper"),
-                      n_sub=int(spec.get("n_sub", 1)), origin=origin)
+        obstacles.append(Obstacle(float(c[0]), float(c[1]), _num(_need(o, "radius", w), f"{w}.radius",
+                                                                 low=0.0, low_open=True)))
+    kin = spec.get("kinematics", "paper")
+    if kin not in ("paper", "crab"):
+        raise ValueError(f"{where}.kinematics: expected 'paper' or 'crab', got {short(kin, 30)}")
+    settings = check_pso_settings(spec, where)
+    try:
+        return USVProblem(start, goal, obstacles,
+                          current=field_from_spec(spec.get("current"), f"{where}.current", base_dir),
+                          wind=field_from_spec(spec.get("wind"), f"{where}.wind", base_dir),
+                          vessel=vessel_from_spec(spec.get("vessel"), f"{where}.vessel", base_dir),
+                          r_min=_num(spec.get("r_min", 15.0), f"{where}.r_min", low=0.0),
+                          kinematics=kin, n_sub=settings.get("n_sub", 1), origin=origin)
+    except ValueError as exc:
+        if str(exc).startswith(where):
+            raise
+        raise ValueError(f"{where}: {exc}") from None

@@ -1,0 +1,134 @@
+"""Speed of the uncertainty machinery, as ratios measured in the same run.
+
+1. 500 parameter draws of a 35 deg turning circle as ONE batch (``predict_manoeuvres``) against 500
+   single-member ``turning_circle`` runs (goal >= 30x).
+2. A campaign of 16 fits on 2 Dask worker processes (LocalCluster) against the same 16 fits serially
+   (goal >= 1.7x on 2 free cores; the cluster start-up is reported separately).
+3. MCMC effective samples per second: emcee with vectorised walkers (one batched simulation per half
+   ensemble) against emcee calling the likelihood once per walker, same chain settings.
+
+Run: ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_uncertainty.py [--draws 500] [--fits 16] [--steps 300]``.
+The numbers depend on the load of the machine: state it with the result.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+warnings.simplefilter("ignore", RuntimeWarning)
+REPO = Path(__file__).resolve().parents[1]
+
+
+def bench_draws(n: int) -> None:
+    from shipid.identify import FitResult
+    from shipid.manoeuvres import turning_circle
+    from shipid.models import get_model
+    from shipid.uncertainty import parameter_draws, predict_manoeuvres
+
+    import pandas as pd
+
+    m = get_model("kcs-response", "synthetic-truth")
+    est = ["b1", "b2", "b3", "b4", "c1", "c2", "c3"]
+    sd = 0.01 * np.abs(m.params_series()[est].to_numpy())
+    res = FitResult("kcs-response", m.params_series().to_dict(), {}, pd.DataFrame(np.diag(sd**2), index=est, columns=est))
+    t0 = time.perf_counter()
+    pred = predict_manoeuvres(res, ["turning:35"], draws=n, seed=0)
+    t_batch = time.perf_counter() - t0
+    P = parameter_draws(res, n, seed=0)
+    t0 = time.perf_counter()
+    td = [turning_circle(m, 35, side="starboard", params=p).metrics[0].tactical_diameter_L for p in P]
+    t_loop = time.perf_counter() - t0
+    same = np.allclose(np.sort(td), np.sort([r.tactical_diameter_L for r in pred.runs["turning_35_starboard"].metrics[1:]]),
+                       rtol=1e-6)
+    print(f"[1] {n} draws of a 35 deg turn: one batch {t_batch:.2f} s, {n} single runs {t_loop:.2f} s -> "
+          f"{t_loop / t_batch:.1f}x (goal >= 30x); same tactical diameters: {same}")
+
+
+def _short_logs(tmp: Path) -> list[str]:
+    out = []
+    for name in ("kcs_tc_p35", "kcs_zz_m10", "kcs_zz_p20_rpm", "kcs_tc_m25_rpm"):
+        lines = (REPO / "data" / f"{name}.csv").read_text().splitlines()
+        p = tmp / f"{name}_60s.csv"
+        p.write_text("\n".join(lines[:601]) + "\n")
+        out.append(str(p))
+    return out
+
+
+def bench_campaign(n_fits: int, workers: int) -> None:
+    import json
+
+    from shipid.campaign import Engine, run_campaign
+
+    with tempfile.TemporaryDirectory() as d:
+        tmp = Path(d)
+        logs = _short_logs(tmp)
+        fits = [{"name": f"fit{i:02d}", "logs": [logs[i % 4], logs[(i + 1) % 4]], "passes": 2} for i in range(n_fits)]
+        camp = tmp / "c.json"
+        camp.write_text(json.dumps({"seed": 1, "fits": fits}))
+        t0 = time.perf_counter()
+        run_campaign(camp, tmp / "serial", engine=Engine(1, progress=False))
+        t_serial = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        with Engine(workers, progress=False) as eng:
+            eng._start()
+            t_start = time.perf_counter() - t0
+            t1 = time.perf_counter()
+            run_campaign(camp, tmp / "dask", engine=eng)
+            t_dask = time.perf_counter() - t1
+        same = all(json.loads((tmp / "serial" / f["name"] / "result.json").read_text())["coef"] ==
+                   json.loads((tmp / "dask" / f["name"] / "result.json").read_text())["coef"] for f in fits)
+    print(f"[2] campaign of {n_fits} fits: serial {t_serial:.1f} s, {workers} Dask workers {t_dask:.1f} s "
+          f"(+ {t_start:.1f} s cluster start) -> {t_serial / t_dask:.2f}x without, {t_serial / (t_dask + t_start):.2f}x "
+          f"with start-up (goal >= 1.7x); identical coefficients: {same}; load average {os.getloadavg()[0]:.1f} "
+          f"on {os.cpu_count()} CPUs")
+
+
+def bench_mcmc(steps: int) -> None:
+    from shipid.identify import EKFIdentifier
+    from shipid.identify.posterior import sample_posterior
+    from shipid.models import get_model
+    from shipid.synthetic import TrialRecipe, make_trial
+
+    m = get_model("kcs-response", "synthetic-truth")
+    log = make_trial(m, TrialRecipe("short_tc", "turning", 25.0, 20.0, dt_s=0.2, execute_s=2.0), np.random.default_rng(5))[0]
+    res = EKFIdentifier(m, estimate=["c2", "c3"], init="model").fit(log).result()
+    out, chains = {}, {}
+    for vec in (True, False):
+        t0 = time.perf_counter()
+        s = sample_posterior(res, log, walkers=32, steps=steps, burn=steps // 4, seed=3, vectorize=vec)
+        dt = time.perf_counter() - t0
+        chains[vec] = s.samples
+        out[vec] = (s.diagnostics["ess_min"] / dt, dt, s.diagnostics["ess_min"], s.diagnostics["n_likelihood_calls"])
+    v, n = out[True], out[False]
+    # same seed and moves: the two samplers produce the same chain, so the ESS is the same and the ESS/s
+    # ratio is the wall-time ratio (the ESS of a short chain is itself rough: it is printed, not compared)
+    same = np.allclose(chains[True], chains[False], rtol=1e-10, atol=0)
+    print(f"[3] MCMC (2 coefficients, 32 walkers, {steps} steps): vectorised {v[1]:.1f} s ({v[3]} batched calls), "
+          f"per walker {n[1]:.1f} s ({n[3]} calls); identical chains: {same}; ESS_min {v[2]:.0f} -> "
+          f"{v[0]:.1f} vs {n[0]:.1f} ESS/s = {v[0] / n[0]:.1f}x")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--draws", type=int, default=500)
+    ap.add_argument("--fits", type=int, default=16)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--steps", type=int, default=300)
+    ap.add_argument("--only", choices=("draws", "campaign", "mcmc"), default=None)
+    a = ap.parse_args()
+    if a.only in (None, "draws"):
+        bench_draws(a.draws)
+    if a.only in (None, "campaign"):
+        bench_campaign(a.fits, a.workers)
+    if a.only in (None, "mcmc"):
+        bench_mcmc(a.steps)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,184 @@
+"""``shipid sample`` (MCMC posterior of a fit) and ``shipid campaign`` (many fits on Dask), plus the
+``--draws`` helpers of ``shipid simulate`` / ``validate`` / ``report`` (the logic is in
+:mod:`shipid.uncertainty`)."""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from ._common import add_log_options, read_logs
+
+
+def register(sub) -> None:
+    p = sub.add_parser("sample", help="sample the posterior of a fit's coefficients by MCMC (emcee) -> samples JSON",
+                       description="Sample the posterior of the estimated coefficients of RESULT.json over the "
+                                   "output-error likelihood of the logs (noise levels and prior widths from the fit), "
+                                   "started from the EKF posterior; reports acceptance, autocorrelation time, effective "
+                                   "sample size and split-R-hat, and exits 1 when the chain has not converged.")
+    p.add_argument("result", metavar="RESULT.json", help="fit result written by `shipid fit -o`")
+    p.add_argument("logs", nargs="+", metavar="LOG", help="trial logs of the likelihood (usually the fit's)")
+    p.add_argument("-o", "--output", required=True, help="samples JSON to write")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.add_argument("--walkers", type=int, default=None, help="ensemble size (default max(4 x n_coef, 32))")
+    p.add_argument("--steps", type=int, default=2000, help="steps per walker (default 2000)")
+    p.add_argument("--burn", type=int, default=None, help="steps discarded (default steps/3)")
+    p.add_argument("--thin", type=int, default=1, help="keep every THIN-th step")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--channels", default=None, help="output-error channels, comma separated (default u,v,r)")
+    p.add_argument("--no-vectorize", action="store_true", help="one simulation per walker (slow; for comparison)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_log_options(p)
+    p.set_defaults(handler=_sample)
+
+    c = sub.add_parser("campaign", help="run the fits of a campaign file (JSON/YAML) on Dask workers",
+                       description="Run many fits, each with its own logs and settings, from a campaign file; "
+                                   "an embedded LocalCluster of --workers processes by default, an existing cluster "
+                                   "with --scheduler, serially with --workers 1.  Writes OUTDIR/<name>/result.json "
+                                   "(+ predictions.json with draws) and OUTDIR/campaign.json.")
+    c.add_argument("campaign", metavar="CAMPAIGN", help="campaign file (.json, .yaml)")
+    c.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="output folder (new or empty)")
+    add_engine_options(c)
+    c.add_argument("--force", action="store_true", help="write into a non-empty output folder")
+    c.set_defaults(handler=_campaign)
+
+
+def add_engine_options(p) -> None:
+    p.add_argument("--workers", type=int, default=None,
+                   help="worker processes of the embedded Dask LocalCluster (default: CPUs; 1 = serial)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS", help="existing Dask scheduler, e.g. tcp://host:8786")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def engine_from(args):
+    from ..campaign import Engine
+
+    return Engine(args.workers, scheduler=args.scheduler, progress=not args.no_progress)
+
+
+def add_draws_option(p) -> None:
+    """``--draws N`` (+ ``--seed``, ``--samples``) for simulate / validate / report."""
+    p.add_argument("--draws", type=int, default=0, metavar="N",
+                   help="propagate the fit's uncertainty: N parameter draws simulated as one batch (95 %% intervals, "
+                        "IMO probabilities)")
+    p.add_argument("--draws-seed", type=int, default=0, metavar="SEED", help="seed of the draws (default 0)")
+    p.add_argument("--samples", default=None, metavar="SAMPLES.json",
+                   help="draw from MCMC samples (`shipid sample`) instead of the fit's Gaussian posterior")
+
+
+def check_draws(args) -> int:
+    n = int(getattr(args, "draws", 0) or 0)
+    if n < 0:
+        raise ValueError(f"--draws {n}: give a positive number of parameter draws (or 0 for none)")
+    return n
+
+
+def _sample(args) -> int:
+    from ..identify.posterior import sample_posterior
+
+    out = Path(args.output)
+    if out.exists() and not args.force:
+        raise ValueError(f"{out}: output exists; choose another name or pass --force to overwrite it")
+    logs = read_logs(args.logs, args)
+    chans = [c.strip() for c in args.channels.split(",") if c.strip()] if args.channels else None
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        s = sample_posterior(args.result, logs, walkers=args.walkers, steps=args.steps, burn=args.burn, thin=args.thin,
+                             seed=args.seed, vectorize=not args.no_vectorize, channels=chans,
+                             progress=not args.no_progress)
+    s.to_json(out, force=args.force)
+    import pandas as pd
+
+    with pd.option_context("display.float_format", "{:.5g}".format, "display.width", 140):
+        print(s.summary().to_string())
+    d = s.diagnostics
+    print(f"acceptance {d['acceptance_mean']:.3f}, tau_max {d['tau_max']:.1f} steps, ESS_min {d['ess_min']:.0f}, "
+          f"split-R-hat_max {d['rhat_max']:.4f}")
+    print(s.message)
+    print(f"wrote {out}")
+    return 0 if s.converged else 1
+
+
+def _campaign(args) -> int:
+    from ..campaign import load_campaign, run_campaign
+
+    camp = load_campaign(args.campaign)  # validate before starting any worker
+    with engine_from(args) as eng:
+        summary = run_campaign(camp, args.output, engine=eng, force=args.force)
+    for m in summary["members"]:
+        state = ("ok" if m.get("success", True) else "fit did not converge") if m["ok"] else f"FAILED: {m['error']}"
+        print(f"{m['name']}: {state}")
+    print(f"{summary['n_members'] - summary['n_failed']}/{summary['n_members']} members completed "
+          f"({summary['engine']}); wrote {Path(args.output) / 'campaign.json'}")
+    return 1 if summary["n_failed"] else 0
+
+
+# ----------------------------------------------------------------------------- --draws hunks
+def simulate_draws(args, model_spec: str) -> int:
+    """``shipid simulate RESULT.json --turning 35 --draws N [--metrics-output FILE]``."""
+    from ..uncertainty import predict_manoeuvres
+
+    if not (model_spec.lower().endswith(".json") and Path(model_spec).is_file()):
+        raise ValueError(f"--draws needs a fit result JSON (with a covariance), got '{model_spec}'")
+    if args.output:
+        raise ValueError("-o/--output (time series CSV) is not written with --draws; use --metrics-output FILE")
+    if args.turning is not None:
+        specs = [f"turning:{args.turning:g}:{s}" for s in _sides(args.side)]
+    else:
+        d, _, p = args.zigzag.partition("/")
+        specs = [f"zigzag:{d}/{p or d}:{s}" for s in _sides(args.side)]
+    import math
+
+    pred = predict_manoeuvres(model_spec, specs, draws=check_draws(args), seed=args.draws_seed, samples=args.samples,
+                              speed=args.speed, lpp=args.lpp, method=args.method,
+                              rudder_rate=math.radians(args.rudder_rate) if args.rudder_rate is not None else None)
+    tab = pred.to_pandas()
+    print(tab[["manoeuvre", "metric", "nominal", "median", "low", "high", "n_nonfinite"]].to_string(
+        index=False, float_format=lambda v: f"{v:.4g}"))
+    for lab, blk in pred.imo.items():
+        for crit, v in blk.items():
+            print(f"{lab}: IMO {crit} met with probability {v['probability']:.3f} "
+                  f"({v['n_met']}/{pred.draws}; {v['n_not_evaluated']} not evaluated)")
+    print(pred.message)
+    if getattr(args, "metrics_output", None):
+        pred.to_json(args.metrics_output, force=args.force)
+        print(f"wrote {args.metrics_output}")
+    return 0 if pred.status == 0 else 1
+
+
+def _sides(side: str) -> list[str]:
+    return ["starboard", "port"] if side == "both" else [side]
+
+
+def validate_draws(args, result_path, vals: list, out: list) -> None:
+    """Add ``"<metric>_ci"`` / ``"imo_probability"`` / ``"draws"`` to each log's ``predicted`` block."""
+    from ..uncertainty import parameter_draws, replay_draws
+    from ..validation import _for_length, resolve_model
+
+    n = check_draws(args)
+    if n == 0:
+        return
+    model, res = resolve_model(result_path)
+    if res is None:
+        raise ValueError("--draws needs a fit result (with a covariance), not a model name")
+    P = parameter_draws(res, n, seed=args.draws_seed, samples=args.samples)
+    for v, d in zip(vals, out):
+        if v.measured is None or v.lpp is None or not d.get("predicted"):
+            continue
+        m = _for_length(model, v.lpp, [])
+        blk = replay_draws(m, v.log, P, lpp=v.lpp, kind=v.measured.manoeuvre,
+                           switch_deg=getattr(v.measured, "switch_deg", None), rudder_sign=v.rudder_sign)
+        blk.pop("simulation")
+        d["predicted"].update(blk)
+
+
+def write_json(path, obj, force) -> None:
+    from .._io import atomic_write_text
+
+    atomic_write_text(path, json.dumps(obj, indent=2, allow_nan=False) + "\n", force=force)
+
+
+def warn(msg: str) -> None:
+    print(msg, file=sys.stderr)

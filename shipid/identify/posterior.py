@@ -1,0 +1,461 @@
+"""Posterior sampling of model coefficients by MCMC over the output-error likelihood.
+
+The EKF's Gaussian (Laplace) posterior is an approximation; for non-linear,
+correlated coefficients the exact posterior of the coefficients given the logs
+can be skewed or wider.  :func:`sample_posterior` samples it with emcee's
+affine-invariant ensemble sampler (Goodman & Weare 2010; Foreman-Mackey et al.
+2013), started from the EKF posterior, with **vectorised walkers**: every
+evaluation of the log-probability simulates all proposed walkers of a half
+ensemble (emcee's red-blue split) and all logs as one batched simulation
+(:func:`shipid.simulate.simulate` with ``params`` of shape ``(B, np)``).
+
+Likelihood (output error): each log is simulated with its recorded inputs from
+its initial state (mean of the first five samples of each measured state);
+the residuals of the channels in ``channels`` (default ``u, v, r``) are
+independent Gaussian with the fit's measurement-noise standard deviations
+(``result.settings["meas_std"]``, else estimated from the data).  This is the
+exact likelihood when the logs have sensor noise only (no process noise);
+with process noise or model error it is over-confident (see
+``docs/uncertainty.md``).  Prior: independent Gaussians centred on the fitted
+coefficients with the fit's prior standard deviations
+(``result.settings["prior_std"]``, >= 100 % of each start value in the EKF;
+the result does not record the prior centre, so the estimate is used -- a weak
+prior of that width barely moves the posterior).
+
+Convergence is judged, never assumed: the mean acceptance fraction, the
+integrated autocorrelation time tau per coefficient (Sokal's automatic window,
+:func:`emcee.autocorr.integrated_time`), the effective sample size
+``n_kept * n_walkers / tau`` and the rank-normalised split-R-hat of Vehtari,
+Gelman, Simpson, Carpenter & Buerkner (2021, Bayesian Analysis 16(2),
+"Rank-normalization, folding, and localization: an improved R-hat"), which
+extends the split-R-hat of Gelman et al., *Bayesian Data Analysis* 3rd ed.
+(2013) sect. 11.4, computed treating each walker as a chain.  The chain is
+called converged only when every check passes (:data:`CONVERGENCE`).
+"""
+from __future__ import annotations
+
+import json
+import os
+import warnings
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy.special import ndtri
+from scipy.stats import rankdata
+
+__all__ = ["sample_posterior", "PosteriorSamples", "load_samples", "split_rhat", "CONVERGENCE",
+           "OutputErrorLikelihood"]
+
+#: Convergence thresholds: split-R-hat below 1.01 and bulk ESS of at least 400 (Vehtari et al. 2021,
+#: sect. 4), chain length at least 50 integrated autocorrelation times (emcee's guidance), mean acceptance
+#: fraction in [0.1, 0.9] (outside it the stretch move is not exploring).
+CONVERGENCE = {"rhat_max": 1.01, "ess_min": 400.0, "tau_factor": 50.0, "acceptance": (0.1, 0.9)}
+
+
+# ----------------------------------------------------------------------------- diagnostics
+def _rhat_classic(chains: np.ndarray) -> np.ndarray:
+    """Potential scale reduction of ``chains (m, n, k)`` (BDA3 eq. 11.4 without the split)."""
+    m, n = chains.shape[:2]
+    means = chains.mean(axis=1)
+    W = chains.var(axis=1, ddof=1).mean(axis=0)
+    B_over_n = means.var(axis=0, ddof=1)
+    var_plus = (n - 1) / n * W + B_over_n
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.sqrt(var_plus / W)
+    return np.where(W > 0, r, np.where(B_over_n > 0, np.inf, 1.0))
+
+
+def _rank_normalise(x: np.ndarray) -> np.ndarray:
+    """Normal scores of the pooled ranks of ``x (m, n, k)`` per last-axis column (Blom's offsets 3/8)."""
+    m, n, k = x.shape
+    flat = x.reshape(m * n, k)
+    z = np.empty_like(flat)
+    for j in range(k):
+        r = rankdata(flat[:, j], method="average")
+        z[:, j] = ndtri((r - 0.375) / (m * n + 0.25))
+    return z.reshape(m, n, k)
+
+
+def split_rhat(chains, *, rank_normalised: bool = True) -> np.ndarray:
+    """Split-R-hat per parameter.
+
+    Parameters
+    ----------
+    chains : array (n_chains, n_draws) or (n_chains, n_draws, n_params)
+    rank_normalised : bool
+        True (default): Vehtari et al. (2021) -- the maximum of the split-R-hat of the rank-normalised
+        draws (bulk) and of the rank-normalised folded draws ``|x - median|`` (tails).  False: the
+        classic split-R-hat of BDA3 sect. 11.4 on the draws themselves.
+
+    Returns
+    -------
+    ndarray (n_params,) (a float for 2-D input)
+    """
+    c = np.asarray(chains, dtype=float)
+    two_d = c.ndim == 2
+    if two_d:
+        c = c[..., None]
+    if c.ndim != 3 or c.shape[1] < 4:
+        raise ValueError(f"chains must have shape (n_chains, n_draws[, n_params]) with n_draws >= 4, got {np.shape(chains)}")
+    half = c.shape[1] // 2
+    split = np.concatenate([c[:, :half], c[:, c.shape[1] - half:]], axis=0)
+    if rank_normalised:
+        bulk = _rhat_classic(_rank_normalise(split))
+        fold = np.abs(split - np.median(split.reshape(-1, split.shape[2]), axis=0))
+        tail = _rhat_classic(_rank_normalise(fold))
+        r = np.maximum(bulk, tail)
+    else:
+        r = _rhat_classic(split)
+    return float(r[0]) if two_d else r
+
+
+# ----------------------------------------------------------------------------- likelihood
+class OutputErrorLikelihood:
+    """Log-posterior of coefficient batches: Gaussian output-error likelihood of the logs plus
+    independent Gaussian priors (see the module docstring).
+
+    Parameters
+    ----------
+    model : Model  (its parameters are the values of the coefficients not sampled)
+    logs : TrialLog, DataFrame or list of them
+    names : list of str  -- sampled coefficients
+    meas_std : mapping channel -> std, optional  (default: from the data)
+    channels : list of str, optional  (default: measured u, v, r where present, else every measured state)
+    prior_mean, prior_std : arrays (n_names,), optional  (no prior when ``prior_std`` is None)
+    substeps : int  -- RK4 steps per sample
+    """
+
+    def __init__(self, model, logs, names, *, meas_std=None, channels=None, prior_mean=None, prior_std=None,
+                 substeps: int = 1):
+        from .data import noise_std_from_data, prepare_logs
+
+        self.model = model
+        self.names = list(names)
+        self.idx = np.array([model.param_index(n) for n in self.names])
+        arrays, meas = prepare_logs(model, logs)
+        sig = noise_std_from_data(arrays)
+        for k, v in (meas_std or {}).items():
+            if k in meas:
+                sig[meas.index(k)] = float(v)
+        if channels is None:
+            channels = [c for c in ("u", "v", "r") if c in meas] or list(meas)
+        unknown = [c for c in channels if c not in meas]
+        if unknown:
+            raise ValueError(f"channels {unknown} are not measured in the logs (measured: {meas})")
+        self.channels = list(channels)
+        cj = [meas.index(c) for c in self.channels]
+        self.st_idx = [model.state_index(c) for c in self.channels]
+        self.sig = sig[cj]
+        self.arrays = arrays
+        self.Y = [a.Y[:, cj] for a in arrays]
+        self.masks = [np.isfinite(y) for y in self.Y]
+        self.n_obs = int(sum(m.sum() for m in self.masks))
+        self.x0 = []
+        for a in arrays:
+            x0 = np.zeros(model.nx)
+            for j, s in enumerate(meas):
+                col = a.Y[:5, j]
+                if np.isfinite(col).any():
+                    x0[model.state_index(s)] = np.nanmean(col)
+            self.x0.append(x0)
+        self.prior_mean = None if prior_mean is None else np.asarray(prior_mean, dtype=float)
+        self.prior_std = None if prior_std is None else np.asarray(prior_std, dtype=float)
+        self.substeps = int(substeps)
+        self.base = model.params.astype(float).copy()
+        self.n_calls = 0
+        self.n_sims = 0
+        # logs on one uniform sampling interval run as ONE batch (B walkers x G logs): the shorter logs
+        # are padded to the longest with their last input held and the padding masked out
+        self.groups = self._groups()
+
+    def _groups(self):
+        arrays = self.arrays
+        dts = [np.diff(a.t) for a in arrays]
+        h = float(np.median(dts[0]))
+        if all(np.allclose(d, h, rtol=1e-9, atol=0.0) for d in dts):
+            n = max(a.t.size for a in arrays)
+            t = arrays[0].t[0] + h * np.arange(n)
+            U = np.stack([np.vstack([a.U, np.repeat(a.U[-1:], n - a.t.size, axis=0)]) for a in arrays])
+            Y = np.stack([np.vstack([y, np.full((n - y.shape[0], y.shape[1]), np.nan)]) for y in self.Y])
+            return [(t, U, Y, np.isfinite(Y), np.stack(self.x0))]
+        return [(a.t, a.U[None], y[None], m[None], x0[None]) for a, y, m, x0 in zip(arrays, self.Y, self.masks, self.x0)]
+
+    def __call__(self, theta):
+        """Log-posterior (up to a constant) of ``theta (B, n_names)`` -> (B,), or of one vector -> float."""
+        from ..simulate import simulate
+
+        th = np.asarray(theta, dtype=float)
+        single = th.ndim == 1
+        th = np.atleast_2d(th)
+        B = th.shape[0]
+        P = np.broadcast_to(self.base, (B, self.model.np)).copy()
+        P[:, self.idx] = th
+        lp = np.zeros(B)
+        if self.prior_std is not None:
+            lp -= 0.5 * np.sum(((th - self.prior_mean) / self.prior_std) ** 2, axis=1)
+        self.n_calls += 1
+        nx = self.model.nx
+        for t, U, Y, m, x0 in self.groups:
+            G = U.shape[0]
+            X0 = np.broadcast_to(x0, (B, G, nx)).reshape(B * G, nx)
+            Ub = np.broadcast_to(U, (B,) + U.shape).reshape((B * G,) + U.shape[1:])
+            with warnings.catch_warnings(), np.errstate(all="ignore"):
+                warnings.simplefilter("ignore", RuntimeWarning)
+                sim = simulate(self.model, X0, t, Ub, params=np.repeat(P, G, axis=0), substeps=self.substeps)
+            self.n_sims += B * G
+            xs = sim.x.reshape((B, G) + sim.x.shape[1:])[..., self.st_idx]
+            e = np.where(m[None], (xs - Y[None]) / self.sig, 0.0)
+            lp -= 0.5 * np.sum(e * e, axis=(1, 2, 3))
+        lp = np.where(np.isfinite(lp), lp, -np.inf)
+        return float(lp[0]) if single else lp
+
+
+# ----------------------------------------------------------------------------- samples
+@dataclass
+class PosteriorSamples:
+    """MCMC samples of a model's coefficients and the diagnostics of the chain.
+
+    Attributes
+    ----------
+    model : str
+    names : list of str  -- sampled coefficients
+    samples : ndarray (n, n_names)  -- kept draws (after burn-in and thinning, walkers pooled)
+    chain : ndarray (n_kept_steps, n_walkers, n_names) or None  -- the kept chain (not stored in JSON)
+    diagnostics : dict  -- acceptance, tau, ess, rhat per coefficient and the checks
+    converged : bool
+    message : str
+    settings : dict
+    success : bool (alias of ``converged``), status : 0 converged / 1 not converged
+    """
+
+    model: str
+    names: list
+    samples: np.ndarray
+    diagnostics: dict
+    converged: bool
+    message: str
+    settings: dict = field(default_factory=dict)
+    chain: np.ndarray | None = None
+    created: str = ""
+
+    @property
+    def success(self) -> bool:
+        return bool(self.converged)
+
+    @property
+    def status(self) -> int:
+        return 0 if self.converged else 1
+
+    def to_pandas(self) -> pd.DataFrame:
+        """The kept draws, one row per draw, one column per coefficient."""
+        return pd.DataFrame(self.samples, columns=self.names)
+
+    def summary(self) -> pd.DataFrame:
+        """Per coefficient: mean, std, 2.5/50/97.5 % quantiles, tau, ESS, split-R-hat."""
+        s = self.samples
+        d = self.diagnostics
+        return pd.DataFrame({
+            "mean": s.mean(axis=0), "std": s.std(axis=0, ddof=1), "q2.5": np.quantile(s, 0.025, axis=0),
+            "median": np.median(s, axis=0), "q97.5": np.quantile(s, 0.975, axis=0),
+            "tau": [d["tau"][n] for n in self.names], "ess": [d["ess"][n] for n in self.names],
+            "rhat": [d["rhat"][n] for n in self.names]}, index=self.names)
+
+    def cov(self) -> pd.DataFrame:
+        return pd.DataFrame(np.cov(self.samples, rowvar=False), index=self.names, columns=self.names)
+
+    def most_correlated(self, k: int = 4) -> list[str]:
+        """The ``k`` coefficients with the largest absolute posterior correlation with another one."""
+        c = np.corrcoef(self.samples, rowvar=False)
+        np.fill_diagonal(c, 0.0)
+        score = np.nanmax(np.abs(c), axis=0)
+        order = np.argsort(-score, kind="stable")[: min(k, len(self.names))]
+        return [self.names[i] for i in sorted(order)]
+
+    def to_dict(self) -> dict:
+        return {"kind": "shipid posterior samples", "model": self.model, "names": list(self.names),
+                "samples": self.samples.tolist(), "diagnostics": self.diagnostics, "converged": bool(self.converged),
+                "message": self.message, "settings": self.settings, "created": self.created}
+
+    def to_json(self, path, *, force: bool = False) -> Path:
+        from .._io import atomic_write_text
+
+        return atomic_write_text(path, json.dumps(self.to_dict(), indent=1, allow_nan=True) + "\n", force=force)
+
+    @classmethod
+    def from_dict(cls, doc: dict, source: str = "samples") -> "PosteriorSamples":
+        for k in ("model", "names", "samples"):
+            if k not in doc:
+                raise ValueError(f"{source}: not a shipid samples file (no '{k}' entry); write it with `shipid sample`")
+        S = np.asarray(doc["samples"], dtype=float)
+        if S.ndim != 2 or S.shape[1] != len(doc["names"]) or S.shape[0] < 1:
+            raise ValueError(f"{source}: 'samples' must be a list of rows with one value per name ({len(doc['names'])})")
+        return cls(model=doc["model"], names=list(doc["names"]), samples=S, diagnostics=doc.get("diagnostics", {}),
+                   converged=bool(doc.get("converged", False)), message=doc.get("message", ""),
+                   settings=doc.get("settings", {}), created=doc.get("created", ""))
+
+
+def load_samples(obj) -> PosteriorSamples:
+    """PosteriorSamples from itself, its dict or a JSON path written by ``shipid sample``."""
+    if isinstance(obj, PosteriorSamples):
+        return obj
+    if isinstance(obj, dict):
+        return PosteriorSamples.from_dict(obj)
+    if isinstance(obj, (str, os.PathLike)):
+        p = Path(obj)
+        if not p.is_file():
+            raise FileNotFoundError(f"{p}: no such samples file; write it with `shipid sample`")
+        try:
+            doc = json.loads(p.read_text(encoding="utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise ValueError(f"{p}: not a JSON samples file ({exc})") from None
+        if not isinstance(doc, dict):
+            raise ValueError(f"{p}: not a shipid samples file (top level is not an object)")
+        return PosteriorSamples.from_dict(doc, source=str(p))
+    raise ValueError(f"samples: expected PosteriorSamples, a dict or a JSON path, got {type(obj).__name__}")
+
+
+def chain_diagnostics(chain: np.ndarray, acceptance: np.ndarray, names, n_total_steps: int) -> dict:
+    """Diagnostics of an ensemble chain ``(n_steps, n_walkers, n_params)`` and the convergence verdict."""
+    from emcee.autocorr import integrated_time
+
+    n, w, k = chain.shape
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tau = np.asarray(integrated_time(chain, quiet=True), dtype=float)
+    ess = n * w / tau
+    rhat = split_rhat(np.moveaxis(chain, 1, 0)) if n >= 4 else np.full(k, np.inf)
+    acc = float(np.mean(acceptance))
+    lo, hi = CONVERGENCE["acceptance"]
+    checks = {
+        "acceptance": bool(lo <= acc <= hi),
+        "rhat": bool(np.all(rhat < CONVERGENCE["rhat_max"])),
+        "ess": bool(np.all(ess >= CONVERGENCE["ess_min"])),
+        "length": bool(n >= CONVERGENCE["tau_factor"] * np.max(tau)),
+    }
+    why = []
+    if not checks["acceptance"]:
+        why.append(f"mean acceptance {acc:.3f} outside [{lo}, {hi}]")
+    if not checks["rhat"]:
+        j = int(np.argmax(rhat))
+        why.append(f"split-R-hat {rhat[j]:.3f} >= {CONVERGENCE['rhat_max']} ({names[j]})")
+    if not checks["ess"]:
+        j = int(np.argmin(ess))
+        why.append(f"ESS {ess[j]:.0f} < {CONVERGENCE['ess_min']:.0f} ({names[j]})")
+    if not checks["length"]:
+        why.append(f"kept chain of {n} steps < {CONVERGENCE['tau_factor']:.0f} x tau_max = {CONVERGENCE['tau_factor'] * np.max(tau):.0f}")
+    return {"acceptance_mean": acc, "acceptance_min": float(np.min(acceptance)),
+            "tau": dict(zip(names, map(float, tau))), "ess": dict(zip(names, map(float, ess))),
+            "rhat": dict(zip(names, map(float, rhat))), "tau_max": float(np.max(tau)),
+            "ess_min": float(np.min(ess)), "rhat_max": float(np.max(rhat)), "n_kept_steps": int(n),
+            "n_walkers": int(w), "n_steps": int(n_total_steps), "checks": checks, "thresholds": CONVERGENCE,
+            "not_converged_because": why}
+
+
+def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2000, burn: int | None = None,
+                     thin: int = 1, seed=0, vectorize: bool = True, channels=None, substeps: int = 1,
+                     start_scale: float = 1.0, use_prior: bool = True, moves: str = "de",
+                     progress: bool = False) -> PosteriorSamples:
+    """Sample the posterior of a fit's estimated coefficients with emcee (optional extra ``mcmc``).
+
+    Parameters
+    ----------
+    result : FitResult, dict or path to a result JSON
+        Supplies the model, the estimated coefficients (``cov`` names), the start (the Gaussian
+        ``N(coef, start_scale**2 cov)``), the noise levels (``settings["meas_std"]``) and the prior widths
+        (``settings["prior_std"]``).
+    logs : TrialLog, DataFrame or list of them (the logs of the fit, or others)
+    walkers : int, optional  -- ensemble size (default ``max(4 * n_coef, 32)``, even)
+    steps : int  -- steps per walker
+    burn : int, optional  -- steps discarded (default ``steps // 3``)
+    thin : int  -- keep every ``thin``-th step
+    seed : int  -- seeds the start and emcee's moves (same seed, same chain)
+    vectorize : bool  -- one batched simulation per half ensemble (True) or one simulation per walker
+    channels : list of str, optional  -- output-error channels (default u, v, r)
+    substeps : int  -- RK4 steps per log sample
+    start_scale : float  -- spread of the start relative to the EKF posterior
+    use_prior : bool  -- include the result's prior (Gaussian, see module docstring)
+    moves : {"de", "stretch"}
+        emcee proposal: "de" (default) the mixture 0.8 differential evolution + 0.2 DE snooker
+        (ter Braak 2006; ter Braak & Vrugt 2008), which decorrelates faster than "stretch", the
+        Goodman & Weare (2010) move, on these near-Gaussian, strongly correlated posteriors
+        (benchmarks/bench_uncertainty.py measures both)
+    progress : bool  -- emcee's tqdm progress bar
+
+    Returns
+    -------
+    PosteriorSamples  (``converged`` False, with the reasons in ``message``, when any check fails)
+    """
+    try:
+        import emcee
+    except ImportError:
+        raise ValueError("MCMC sampling needs emcee: pip install 'shipid[mcmc]' (or pip install emcee)") from None
+    from ..uncertainty import _result_of
+
+    res = _result_of(result)
+    model = res.to_model()
+    names = list(res.cov.index)
+    if not names:
+        raise ValueError("result has no estimated coefficients (empty covariance): nothing to sample")
+    k = len(names)
+    steps, thin = int(steps), int(thin)
+    burn = steps // 3 if burn is None else int(burn)
+    if steps < 10 or thin < 1 or not 0 <= burn < steps:
+        raise ValueError(f"need steps >= 10, thin >= 1 and 0 <= burn < steps; got steps={steps}, burn={burn}, thin={thin}")
+    nw = int(walkers) if walkers is not None else max(4 * k, 32)
+    nw += nw % 2
+    if nw < 2 * k:
+        raise ValueError(f"walkers={nw}: emcee needs at least 2 x {k} coefficients = {2 * k} walkers")
+    mu = np.array([res.coef[n] for n in names], dtype=float)
+    cov = res.cov.loc[names, names].to_numpy(dtype=float)
+    meas_std = (res.settings or {}).get("meas_std") or None
+    pstd = (res.settings or {}).get("prior_std") or {}
+    prior_std = np.array([pstd.get(n, np.nan) for n in names], dtype=float) if use_prior and pstd else None
+    if prior_std is not None and not np.all(np.isfinite(prior_std) & (prior_std > 0)):
+        prior_std = None
+    like = OutputErrorLikelihood(model, logs, names, meas_std=meas_std, channels=channels,
+                                 prior_mean=mu if prior_std is not None else None, prior_std=prior_std,
+                                 substeps=substeps)
+    rng = np.random.default_rng(seed)
+    w, V = np.linalg.eigh(0.5 * (cov + cov.T))
+    A = V * np.sqrt(np.clip(w, 0, None))
+    p0 = mu + start_scale * rng.standard_normal((nw, k)) @ A.T
+    lp0 = like(p0)
+    for _ in range(20):  # re-draw walkers that start where the simulation fails
+        bad = ~np.isfinite(lp0)
+        if not bad.any():
+            break
+        p0[bad] = mu + 0.5 * start_scale * rng.standard_normal((int(bad.sum()), k)) @ A.T
+        lp0[bad] = like(p0[bad])
+    if not np.all(np.isfinite(lp0)):
+        raise ValueError("the EKF posterior gives non-finite likelihoods for some walkers after 20 re-draws; "
+                         "check the fit (success, covariance) and the logs")
+    fn = like if vectorize else (lambda th: like(th))
+    if moves not in ("de", "stretch"):
+        raise ValueError(f"moves={moves!r}: use 'de' or 'stretch'")
+    mv = [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)] if moves == "de" else emcee.moves.StretchMove()
+    sampler = emcee.EnsembleSampler(nw, k, fn, vectorize=vectorize, moves=mv)
+    sampler._random = np.random.mtrand.RandomState(int(rng.integers(2**31 - 1)))  # emcee's own stream, seeded
+    sampler.run_mcmc(emcee.State(p0, log_prob=lp0), steps, progress=progress)  # start values evaluated once
+    chain = sampler.get_chain(discard=burn, thin=thin)
+    diag = chain_diagnostics(chain, sampler.acceptance_fraction, names, steps)
+    diag["n_simulations"] = int(like.n_sims)
+    diag["n_likelihood_calls"] = int(like.n_calls)
+    ok = all(diag["checks"].values())
+    msg = "converged: " + ", ".join(f"{c} ok" for c in diag["checks"]) if ok else \
+        "NOT converged: " + "; ".join(diag["not_converged_because"]) + " -- run longer (more steps) or check the fit"
+    if not ok:
+        warnings.warn(f"sample_posterior: {msg}", RuntimeWarning, stacklevel=2)
+    settings = {"walkers": nw, "steps": steps, "moves": moves, "burn": burn, "thin": thin, "seed": seed if isinstance(seed, int) else None,
+                "vectorize": bool(vectorize), "channels": like.channels, "substeps": int(substeps),
+                "meas_std": dict(zip(like.channels, map(float, like.sig))), "start_scale": float(start_scale),
+                "prior": ({"kind": "gaussian", "mean": "fit estimate", "std": dict(zip(names, map(float, prior_std)))}
+                          if prior_std is not None else {"kind": "flat"}),
+                "likelihood": "output error, independent Gaussian residuals", "n_obs": like.n_obs,
+                "logs": [a.meta for a in like.arrays], "result_method": res.method,
+                "coef": {kk: float(v) for kk, v in res.coef.items()}}
+    return PosteriorSamples(model=res.model, names=names, samples=chain.reshape(-1, k), diagnostics=diag,
+                            converged=ok, message=msg, settings=settings, chain=chain,
+                            created=datetime.now(timezone.utc).isoformat(timespec="seconds"))

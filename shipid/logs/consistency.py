@@ -1,0 +1,620 @@
+"""Channel-consistency checks of a trial log, before any fit.
+
+Aircraft system identification calls this *data compatibility analysis*: the
+measured channels must agree with each other kinematically before a model is
+fitted to them, and constant biases and scale factors are estimated where the
+data allow (Klein & Morelli, *Aircraft System Identification*, AIAA 2006,
+ch. 10).  For a ship in the horizontal plane the kinematics are
+
+    dpsi/dt = r,   dx/dt = u cos psi - v sin psi,   dy/dt = u sin psi + v cos psi,
+
+and the conventions say that a positive rudder angle turns the ship to
+starboard (heading increasing) when it moves ahead, and that the propeller
+turns ahead (n > 0) when it drives the ship ahead.
+
+:func:`check_consistency` compares the channels by *increments over a lag*
+(the heading change over L samples against the integral of r over the same
+samples, the position change against the integrated velocities), which is
+robust to the coarse printing of real files (MARIN prints 3 significant
+digits: 1 deg of heading, 10 m of position) where finite differences are not.
+Each finding is one plain sentence naming the file and columns and saying
+what to do.  :func:`shipid.logs.read_log` runs the checks: errors raise
+:class:`~shipid.logs.LogError`, warnings are issued as ``UserWarning``, and the
+result is kept as ``log.consistency``.  docs/logs.md explains every message.
+"""
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+__all__ = ["Finding", "ConsistencyResult", "check_consistency", "CHECKS"]
+
+#: the checks run by default, in order
+CHECKS = ("yaw_rate", "velocity_frame", "rudder_sign", "propeller", "position_freeze", "glitches")
+
+# thresholds (see docs/logs.md for how they were chosen: no error on the bundled logs, the six MARIN
+# and the 33 Esso Osaka files; each injected defect of tests/test_logs_consistency.py found)
+_FIT_GOOD = 0.3          # yaw rate vs dpsi/dt: rms of the unexplained heading increments / their rms, "agrees"
+_FIT_BAD = 0.7           # above: does not agree (error); between: loosely (warning)
+_FRAME_GOOD = 0.3        # relative error of the velocity integral against the track, "agrees"
+_EXECUTE = math.radians(5.0)     # rudder execute: |delta - delta0| above this
+_TURN_ERR = math.radians(10.0)   # heading change against the rudder that is an error (below: warning)
+_TURN_WARN = math.radians(3.0)
+_NU_WARN, _NU_ERR = 300.0, 3000.0  # median n*u [rps m/s] while moving ahead: looks like rpm
+_FREEZE_WARN = 0.01      # fraction of frozen position samples that is warned about
+_GLITCH_SIGMA = 12.0     # single-sample spike threshold in robust sigmas of the second difference
+
+
+@dataclass
+class Finding:
+    """One consistency finding.
+
+    Attributes
+    ----------
+    level : {"error", "warning", "info"}
+    check : str
+        Which check (one of :data:`CHECKS`).
+    channels : tuple of str
+        The channels concerned.
+    message : str
+        One sentence naming the file and the columns and saying what to do.
+    values : dict
+        The numbers behind the finding (correlations, scale, bias, counts, ...).
+    """
+
+    level: str
+    check: str
+    channels: tuple
+    message: str
+    values: dict = field(default_factory=dict)
+
+
+@dataclass
+class ConsistencyResult:
+    """Findings of :func:`check_consistency` for one log.
+
+    ``success`` is False when there is an error; ``status`` is ``"ok"``,
+    ``"warnings"`` or ``"errors"``; ``message`` says so in one line.
+    """
+
+    name: str
+    findings: list
+    checks: tuple = CHECKS
+
+    @property
+    def errors(self) -> list:
+        return [f for f in self.findings if f.level == "error"]
+
+    @property
+    def warnings(self) -> list:
+        return [f for f in self.findings if f.level == "warning"]
+
+    @property
+    def success(self) -> bool:
+        return not self.errors
+
+    @property
+    def status(self) -> str:
+        return "errors" if self.errors else ("warnings" if self.warnings else "ok")
+
+    @property
+    def message(self) -> str:
+        ne, nw = len(self.errors), len(self.warnings)
+        if not ne and not nw:
+            return f"log '{self.name}': channels consistent ({', '.join(self.checks)} checked)"
+        return f"log '{self.name}': {ne} consistency error(s), {nw} warning(s)"
+
+    def to_pandas(self) -> pd.DataFrame:
+        """One row per finding: level, check, channels, message."""
+        return pd.DataFrame([{"level": f.level, "check": f.check, "channels": ", ".join(f.channels),
+                              "message": f.message} for f in self.findings],
+                            columns=["level", "check", "channels", "message"])
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "success": self.success, "status": self.status, "message": self.message,
+                "findings": [{"level": f.level, "check": f.check, "channels": list(f.channels),
+                              "message": f.message, "values": f.values} for f in self.findings]}
+
+    def __str__(self) -> str:
+        return "\n".join([self.message] + [f"  {f.level}: {f.message}" for f in self.findings])
+
+
+# --------------------------------------------------------------------------------------
+# helpers
+# --------------------------------------------------------------------------------------
+
+
+class _Ctx:
+    def __init__(self, log):
+        self.log = log
+        self.label = f"`{log.path.name}`" if log.path is not None else f"log '{log.name}'"
+        self.t = log.time
+        self.findings: list[Finding] = []
+        self._sig: dict = {}
+        self._arrays: dict = {}
+        # kinematic checks on at most ~2048 samples (>= 1024) (increments over lags; integrals at the full rate)
+        self.stride = max(1, self.t.size // 1024)
+
+    def col(self, c: str) -> str:
+        """``'r' (column 7)``, or ``'r' (column 7 'r_angvelo')`` when the file names it differently."""
+        src = self.log.sources.get(c)
+        if not src:
+            return f"'{c}'"
+        m = re.match(r"column (\d+) '(.*?)\s*(?:[\[(].*)?'$", src)
+        if not m:
+            return f"'{c}' ({src})"
+        return f"'{c}' (column {m.group(1)})" if m.group(2) in ("", c) else f"'{c}' (column {m.group(1)} '{m.group(2)}')"
+
+    def add(self, level, check, channels, text, **values):
+        self.findings.append(Finding(level, check, tuple(channels), f"{self.label}: {text}", values))
+
+    def get(self, c: str):
+        """Channel ``c`` as an array, or None when absent or all NaN (arrays extracted once)."""
+        if c not in self._arrays:
+            a = self.log.data[c].to_numpy() if c in self.log.data.columns else None
+            self._arrays[c] = a if a is not None and np.isfinite(a).any() else None
+        return self._arrays[c]
+
+    def _digits(self, c: str) -> tuple[int, float]:
+        """(significant digits the file's values of ``c`` are printed with, factor file unit -> SI); judged on
+        up to 256 values spread over the log.  16 = full precision."""
+        if c not in self._sig:
+            from .units import UNITS
+
+            unit = str(self.log.units_in.get(c, "")).split(" (")[0].strip().lower()
+            factor = UNITS.get(unit, ("", 1.0))[1]
+            a = self.get(c)
+            f = a[np.isfinite(a) & (a != 0)]
+            f = f[::max(1, f.size // 256)] / factor
+            self._sig[c] = (_sig_digits(f), factor)
+        return self._sig[c]
+
+    def resolution(self, c: str, idx=slice(None)) -> np.ndarray:
+        """Print resolution of channel ``c`` [SI] at samples ``idx``, from the digits of the file's values in
+        the file's own unit (MARIN prints 3 significant digits: 0.1 deg at 35 deg, 10 m at 1000 m)."""
+        s, factor = self._digits(c)
+        a = np.abs(self.get(c)[idx]) / factor
+        if s >= 16:
+            return np.zeros_like(a)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ex = np.floor(np.log10(np.where(a > 0, a, 1.0)))
+        return 10.0 ** (ex - (s - 1)) * factor
+
+    def typical_resolution(self, c: str) -> float:
+        """A channel's coarse print resolution: at its 90th-percentile magnitude."""
+        s, factor = self._digits(c)
+        a = np.abs(self.get(c))
+        a = a[np.isfinite(a)][::max(1, a.size // 1024)]
+        if s >= 16 or a.size == 0:
+            return 0.0
+        top = float(np.percentile(a, 90)) / factor
+        return 10.0 ** (math.floor(math.log10(top)) - (s - 1)) * factor if top > 0 else 0.0
+
+
+def _cumint(t: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Cumulative trapezoidal integral of a(t), shape (n,), starting at 0 (NaN propagates)."""
+    return np.concatenate([[0.0], np.cumsum(0.5 * (a[1:] + a[:-1]) * np.diff(t))])
+
+
+def _quantum(a: np.ndarray) -> float:
+    """Typical resolution of a channel: the median non-zero step between samples (0 if none)."""
+    d = np.abs(np.diff(a[np.isfinite(a)]))
+    d = d[d > 0]
+    d = d[::max(1, d.size // 1024)]
+    return float(np.median(d)) if d.size else 0.0
+
+
+def _lag(n: int, step: np.ndarray, resolution: float) -> int:
+    """Samples per increment: the smallest power of 2 whose median |increment| is >= 10 resolutions."""
+    lag = 1
+    csum = np.concatenate([[0.0], np.cumsum(np.abs(np.nan_to_num(step)))])
+    while lag * 8 < n:
+        inc = csum[lag:] - csum[:-lag]
+        if np.median(inc) >= 10.0 * max(resolution, 1e-300):
+            break
+        lag *= 2
+    return lag
+
+
+def _incr(a: np.ndarray, lag: int) -> np.ndarray:
+    return a[lag:] - a[:-lag]
+
+
+def _corr(a: np.ndarray, b: np.ndarray) -> float:
+    ok = np.isfinite(a) & np.isfinite(b)
+    if ok.sum() < 5:
+        return float("nan")
+    a, b = a[ok], b[ok]
+    sa, sb = a.std(), b.std()
+    if sa == 0 or sb == 0:
+        return float("nan")
+    return float(np.mean((a - a.mean()) * (b - b.mean())) / (sa * sb))
+
+
+def _lags(lag0: int, n: int) -> list[int]:
+    """lag0, 2 lag0, 4 lag0, ... while at least 16 increments fit."""
+    out = [lag0]
+    while out[-1] * 32 < n:
+        out.append(out[-1] * 2)
+    return out
+
+
+def _yaw_fit(t, psi, int_r, lag):
+    """Heading increments over ``lag`` samples against those of the integral of r (``int_r``, same samples):
+    (unexplained fraction with r as logged, unexplained fraction with scale k and bias b fitted, k,
+    b [rad/s], correlation)."""
+    dpsi, dt_l, ir = _incr(psi, lag), _incr(t, lag), _incr(int_r, lag)
+    scale = float(np.sqrt(np.mean(dpsi ** 2)))
+    if scale == 0:
+        return float("inf"), float("inf"), float("nan"), float("nan"), float("nan")
+    # dpsi/dt = k (r - b): dpsi = k ir - k b dt  (least squares in k and k b)
+    A = np.stack([ir, dt_l], axis=1)
+    if abs(_corr(ir, dt_l)) > 0.999 or np.std(dt_l) == 0 and np.std(ir) < 1e-3 * np.mean(np.abs(ir)):
+        A = A[:, :1]   # r (nearly) constant: a scale and a bias cannot be told apart; fit the scale only
+    coef, *_ = np.linalg.lstsq(A, dpsi, rcond=None)
+    k = float(coef[0])
+    bias = float(-coef[1] / k) if k != 0 and coef.size > 1 else float("nan")
+    e_direct = float(np.sqrt(np.mean((dpsi - ir) ** 2)) / scale)
+    e_fit = float(np.sqrt(np.mean((dpsi - A @ coef) ** 2)) / scale)
+    return e_direct, e_fit, k, bias, _corr(dpsi, ir)
+
+
+def _deg(x: float) -> str:
+    return f"{math.degrees(x):+.3g} deg"
+
+
+# --------------------------------------------------------------------------------------
+# the checks
+# --------------------------------------------------------------------------------------
+
+
+def _check_yaw_rate(c: _Ctx) -> None:
+    psi, r = c.get("psi"), c.get("r")
+    if psi is None or r is None:
+        return
+    t = c.t
+    ok = np.isfinite(psi) & np.isfinite(r)
+    if ok.sum() < 20:
+        return
+    st = c.stride   # on ~1024-2048 samples; the integrals at the full rate (r may be noisy)
+    t_full = t[ok]
+    ir_s = _cumint(t_full, r[ok])[::st]
+    t, psi, r = t_full[::st], psi[ok][::st], r[ok]
+    if np.ptp(psi) < math.radians(5.0):
+        c.add("info", "yaw_rate", ("r", "psi"), f"heading {c.col('psi')} changes by less than 5 deg: yaw rate "
+              "not compared with dpsi/dt")
+        return
+    lag0 = _lag(psi.size, np.diff(psi), max(c.typical_resolution("psi"), _quantum(psi)))
+    # the time scale at which r explains the heading best (short lags: noise; long: few increments)
+    fits = {lag: _yaw_fit(t, psi, ir_s, lag) for lag in _lags(lag0, psi.size)}
+    lag = min(fits, key=lambda g: fits[g][1])
+    e_direct, e_fit, k, bias, rho = fits[lag]
+    vals = dict(rho=rho, scale=k, bias_rad_s=bias, error_direct=e_direct, error_fitted=e_fit, lag_samples=lag)
+    who = f"yaw rate {c.col('r')}"
+    shown = f"{rho:.3f}" if math.isfinite(rho) else "undefined"
+    if e_fit <= _FIT_GOOD and k < -0.5:
+        c.add("error", "yaw_rate", ("r", "psi"),
+              f"{who} has the opposite sign to dpsi/dt of {c.col('psi')} (rho = {shown}, dpsi/dt = {k:.3g} r): "
+              "negate r (schema \"signs\": {\"r\": -1}) or the heading", **vals)
+        return
+    if e_fit > _FIT_GOOD:
+        # r does not explain the heading: which other column does?
+        best, best_e, best_rho = None, float("inf"), float("nan")
+        for other in c.log.channels:
+            if other in ("psi", "r"):
+                continue
+            a = c.get(other)
+            if a is None or not np.isfinite(a[ok]).all():
+                continue
+            io = _cumint(t_full, a[ok])[::st]
+            eo, rho_o = min((_yaw_fit(t, psi, io, g)[0], _yaw_fit(t, psi, io, g)[4]) for g in fits)
+            if eo < best_e:
+                best, best_e, best_rho = other, eo, rho_o
+        if best is not None and best_e <= _FIT_GOOD:
+            src = c.log.sources.get(best)
+            target = src.split(" '")[0] if src else f"'{best}'"
+            c.add("error", "yaw_rate", ("r", best),
+                  f"{c.col(best)} agrees with dpsi/dt (rho = {best_rho:.3f}), {who} does not (rho = {shown}): "
+                  f"columns swapped? map r to {target}", other=best, rho_other=best_rho, **vals)
+        elif e_fit > _FIT_BAD:
+            c.add("error", "yaw_rate", ("r", "psi"),
+                  f"{who} does not agree with dpsi/dt of {c.col('psi')} (rho = {shown}; no other column does): "
+                  "check the column, its unit and the heading", **vals)
+        else:
+            c.add("warning", "yaw_rate", ("r", "psi"),
+                  f"{who} agrees only loosely with dpsi/dt of {c.col('psi')} (rho = {shown}, {100 * e_fit:.0f} % "
+                  "unexplained): check the column, its filtering and time alignment", **vals)
+        return
+    if 40.0 < k < 80.0 or 1 / 80.0 < k < 1 / 40.0:
+        fix = "psi is in degrees: declare units={'psi': 'deg'} (CLI: --units psi=deg)" if k > 1 else \
+            "r is in deg/s: declare units={'r': 'deg/s'} (CLI: --units r=deg/s)"
+        c.add("error", "yaw_rate", ("r", "psi"), f"dpsi/dt = {k:.4g} x {who} (57.3 = deg/rad): {fix}", **vals)
+        return
+    if abs(k - 1.0) > 0.1:
+        c.add("warning", "yaw_rate", ("r", "psi"),
+              f"dpsi/dt = {k:.3g} x {who} (rho = {shown}): a scale error of {100 * (k - 1):+.0f} %; check r's "
+              "unit or calibration", **vals)
+        return
+    rmax = float(np.max(np.abs(r)))
+    if abs(bias) > 0.05 * rmax:
+        c.add("warning", "yaw_rate", ("r",),
+              f"{who} carries a constant bias of {_deg(bias)}/s ({100 * abs(bias) / rmax:.0f} % of its largest "
+              "value) against dpsi/dt: subtract it or fit a yaw-rate bias", **vals)
+        return
+    c.add("info", "yaw_rate", ("r", "psi"),
+          f"{who} agrees with dpsi/dt (rho = {shown}, scale {k:.3f}, "
+          + (f"bias {_deg(bias)}/s)" if math.isfinite(bias) else "bias not separable: r nearly constant)"), **vals)
+
+
+def _check_velocity_frame(c: _Ctx) -> None:
+    x, y, u, v, psi = (c.get(k) for k in ("x", "y", "u", "v", "psi"))
+    if any(a is None for a in (x, y, u, v, psi)):
+        return
+    ok = np.isfinite(x) & np.isfinite(y) & np.isfinite(u) & np.isfinite(v) & np.isfinite(psi)
+    if ok.sum() < 20:
+        return
+    st = c.stride   # on ~1024-2048 samples; the integrals at the full rate
+    t, x, y, u, v, psi = (a[ok] for a in (c.t, x, y, u, v, psi))
+    cs, sn = np.cos(psi), np.sin(psi)
+    h = np.diff(t)[:, None] * 0.5
+    integ: dict = {}
+
+    def integrate(**cols):   # full-rate trapezoidal integrals, then the ~1-2k sample grid
+        V = np.stack(list(cols.values()), axis=1)
+        I = np.concatenate([np.zeros((1, V.shape[1])), np.cumsum((V[1:] + V[:-1]) * h, axis=0)])[::st]
+        integ.update(zip(cols, I.T))
+
+    integrate(ub=u * cs - v * sn, vb=u * sn + v * cs)
+    t, x, y = t[::st], x[::st], y[::st]
+    step = np.hypot(np.diff(x), np.diff(y))
+    lag0 = _lag(x.size, step, max(c.typical_resolution("x"), c.typical_resolution("y"), _quantum(x), _quantum(y)))
+
+    def err(ke, kn, lag):
+        dx, dy = _incr(x, lag), _incr(y, lag)
+        scale = float(np.median(np.hypot(dx, dy)))
+        if scale <= 0:
+            return float("inf")
+        px, py = _incr(integ[ke], lag), _incr(integ[kn], lag)
+        return float(np.median(np.hypot(dx - px, dy - py)) / scale)
+
+    lags = _lags(lag0, x.size)
+    body = {lag: err("ub", "vb", lag) for lag in lags}
+    lag = min(body, key=body.get)
+    uv = f"{c.col('u')}, {c.col('v')}"
+    if body[lag] <= _FRAME_GOOD:
+        c.add("info", "velocity_frame", ("u", "v"),
+              f"body-axis {uv} integrate to the track of x, y (median error {100 * body[lag]:.0f} %)",
+              error_body=body[lag], lag_samples=lag)
+        return
+    # body axes do not fit: earth-fixed? swapped?
+    uf, vf = (a[ok] for a in (c.get("u"), c.get("v")))
+    integrate(u=uf, v=vf, ubs=vf * cs - uf * sn, vbs=vf * sn + uf * cs)
+    errs = {g: (body[g], err("u", "v", g)) for g in lags}
+    lag = min(errs, key=lambda g: min(errs[g]))
+    e_body, e_earth = errs[lag]
+    if not math.isfinite(min(e_body, e_earth)):
+        return
+    vals = dict(error_body=e_body, error_earth=e_earth, lag_samples=lag)
+    if e_earth <= _FRAME_GOOD and e_earth < 0.5 * e_body:
+        c.add("error", "velocity_frame", ("u", "v"),
+              f"{uv} agree with the earth-fixed dx/dt, dy/dt (error {100 * e_earth:.0f} %), not with body axes "
+              f"({100 * e_body:.0f} %): pass velocity_frame='earth' (CLI: --velocity-frame earth)", **vals)
+        return
+    e_swap = err("ubs", "vbs", lag)
+    if e_swap <= _FRAME_GOOD:
+        c.add("error", "velocity_frame", ("u", "v"),
+              f"{uv} look swapped: (v, u) fit the track (error {100 * e_swap:.0f} %), (u, v) do not "
+              f"({100 * e_body:.0f} %): map u and v to each other's column", error_swapped=e_swap, **vals)
+        return
+    c.add("warning", "velocity_frame", ("u", "v", "x", "y"),
+          f"{uv} agree with neither the body-axis ({100 * e_body:.0f} %) nor the earth-fixed ({100 * e_earth:.0f} %) "
+          "reading of the track x, y: check the columns, their units and the heading", **vals)
+
+
+def _check_rudder_sign(c: _Ctx) -> None:
+    d, psi, u = c.get("delta"), c.get("psi"), c.get("u")
+    if d is None or psi is None or u is None:
+        return
+    n = c.get("n")
+    t = c.t
+    d0 = float(np.nanmedian(d[:max(5, d.size // 50)]))
+    off = d - d0
+    hit = np.flatnonzero(np.abs(off) > _EXECUTE)
+    if hit.size == 0:
+        return
+    i = int(hit[0])
+    side = math.copysign(1.0, off[i])
+    # the rudder hold: until it comes back within half the execute angle or changes side
+    rest = np.flatnonzero((side * off[i:] < 0.5 * _EXECUTE))
+    j = i + int(rest[0]) if rest.size else d.size - 1
+    if j - i < 3:
+        return
+    seg = slice(i, j + 1)
+    umax = float(np.nanmax(u))
+    ahead = umax > 0 and float(np.nanmin(u[seg])) > 0.3 * umax
+    if n is not None:
+        ahead = ahead and float(np.nanmin(n[seg])) >= 0
+    turn = float(psi[j] - psi[i])
+    if not ahead or not math.isfinite(turn):
+        return
+    held = float(d[seg][int(np.nanargmax(np.abs(off[seg])))])
+    vals = dict(execute_time=float(t[i]), delta_held=held, heading_change=turn)
+    what = (f"the first rudder execute ({c.col('delta')} {math.degrees(held):+.1f} deg, t = {t[i]:.4g} s) turned the "
+            f"ship to {'port' if turn < 0 else 'starboard'} (heading {math.degrees(turn):+.0f} deg)")
+    if side * turn <= -_TURN_ERR:
+        c.add("error", "rudder_sign", ("delta",),
+              f"{what}: rudder sign opposite to shipid's; pass rudder_sign=-1 (CLI: --rudder-sign -1)", **vals)
+    elif side * turn <= -_TURN_WARN:
+        c.add("warning", "rudder_sign", ("delta",),
+              f"{what}, against shipid's convention (positive rudder to starboard); check the rudder sign "
+              "(rudder_sign=-1 flips it)", **vals)
+
+
+def _check_propeller(c: _Ctx) -> None:
+    n, u = c.get("n"), c.get("u")
+    if n is None or u is None:
+        return
+    umax = float(np.nanmax(u))
+    if not umax > 0:
+        return
+    ahead = np.isfinite(u) & np.isfinite(n) & (u > 0.3 * umax)
+    if ahead.sum() < 10:
+        return
+    neg = float(np.mean(n[ahead] < 0))
+    if neg > 0.8:
+        c.add("warning", "propeller", ("n",),
+              f"{c.col('n')} is negative (astern) in {100 * neg:.0f} % of the samples while the ship moves ahead "
+              f"(u up to {umax:.3g} m/s): propeller sign flipped? (shipid: n > 0 ahead); negate n",
+              fraction_negative=neg)
+        return
+    # n u [rps m/s] ~ g Fn^2 / (J D/L): 1..150 for displacement ships and their models at any scale
+    # (KVLCC2 full scale 12, KCS 4.36 m model 17, Esso Osaka 3 m model 4..8); rpm gives 60 x that
+    score = float(np.median(np.abs(n[ahead]) * u[ahead]))
+    vals = dict(n_times_u=score)
+    if c.log.ship is not None and score > _NU_WARN:
+        if np.nanmax(np.abs(n)) * math.sqrt(c.log.ship.lpp) <= 200.0:
+            return   # the ship's length says rps (checked when reading)
+    if score > _NU_ERR:
+        c.add("error", "propeller", ("n",),
+              f"{c.col('n')} looks like rpm: n x u = {score:.0f} rps m/s while moving ahead (ships and models: "
+              "~1-150); declare units={'n': 'rpm'} (CLI: --units n=rpm)", **vals)
+    elif score > _NU_WARN:
+        c.add("warning", "propeller", ("n",),
+              f"{c.col('n')} may be in rpm: n x u = {score:.0f} rps m/s while moving ahead (ships and models: "
+              "~1-150; fast craft more); if so declare units={'n': 'rpm'}, or give lpp", **vals)
+
+
+def _sig_digits(f: np.ndarray) -> int:
+    """Fewest significant digits that reproduce every (non-zero, finite) value of ``f``; 16 if none do."""
+    if f.size == 0:
+        return 16
+    ex = np.floor(np.log10(np.abs(f)))
+    for s in range(1, 16):
+        q = 10.0 ** (ex - (s - 1))
+        if np.all(np.abs(np.round(f / q) * q - f) <= 1e-9 * np.abs(f)):
+            return s
+    return 16
+
+
+def _check_position_freeze(c: _Ctx) -> None:
+    x, y, u, v = (c.get(k) for k in ("x", "y", "u", "v"))
+    if x is None or y is None or u is None or v is None:
+        return
+    t = c.t
+    dx, dy = np.diff(x), np.diff(y)
+    frozen = (dx == 0) & (dy == 0)
+    cand = np.flatnonzero(frozen)
+    if cand.size:
+        expected = np.hypot(u[cand + 1], v[cand + 1]) * (t[cand + 1] - t[cand])
+        res = np.maximum(c.resolution("x", cand + 1), c.resolution("y", cand + 1))
+        frozen[cand] = (expected > 2.0 * res) & np.isfinite(expected)
+    nf = int(frozen.sum())
+    if nf == 0:
+        return
+    f = np.concatenate([[False], frozen, [False]]).astype(np.int8)
+    starts, ends = np.flatnonzero(np.diff(f) == 1), np.flatnonzero(np.diff(f) == -1)   # runs [s, e)
+    longest = float(max(t[e] - t[s] for s, e in zip(starts, ends)))
+    jumps = [float(np.hypot(dx[e], dy[e])) for e in ends if e < dx.size]
+    frac = nf / max(dx.size, 1)
+    vals = dict(frozen_samples=nf, fraction=frac, stretches=int(starts.size), longest_s=longest,
+                max_jump_m=max(jumps) if jumps else 0.0)
+    level = "warning" if frac > _FREEZE_WARN else "info"
+    c.add(level, "position_freeze", ("x", "y"),
+          f"positions {c.col('x')}, {c.col('y')} freeze on {nf} samples while the ship moves ({100 * frac:.1f} %, "
+          f"{starts.size} stretches, longest {longest:.3g} s), then jump (up to {vals['max_jump_m']:.3g} m): "
+          "GNSS freezes; give x, y little weight", **vals)
+
+
+def _check_glitches(c: _Ctx) -> None:
+    from .units import SHIP_CHANNELS
+
+    counts, first = {}, {}
+    units = c.log.units()
+    names = [ch for ch in c.log.channels if c.get(ch) is not None]
+    if len(c.t) < 10 or not names:
+        return
+    # first differences of all channels at once, (n-1, channels); wrapped angles (wind directions) wrapped
+    A = c.log.data[names].to_numpy(dtype=float)
+    D = A[1:] - A[:-1]
+    for j, ch in enumerate(names):
+        if units.get(ch) == "rad" and ch not in SHIP_CHANNELS:
+            D[:, j] = (D[:, j] + math.pi) % (2 * math.pi) - math.pi
+    step = max(1, D.shape[0] // 1024)
+    sub, sub2 = D[::step], (D[1:] - D[:-1])[::step]   # first and second differences, a subset
+    thr = np.zeros(len(names))
+    for j in range(len(names)):
+        d1, d2 = sub[:, j][np.isfinite(sub[:, j])], sub2[:, j][np.isfinite(sub2[:, j])]
+        if d2.size < 10:
+            continue
+        sig = 1.4826 * float(np.median(np.abs(d2 - np.median(d2))))
+        nz = np.abs(d1[d1 != 0])
+        # beyond 12 robust sigmas and 10 typical steps (quantised sensors dither by one step: the Esso rudder
+        # by 0.56 deg), and (below) 3 print resolutions at the sample (MARIN: 0.1 deg at 35 deg)
+        thr[j] = max(_GLITCH_SIGMA * sig, 10.0 * (float(np.median(nz)) if nz.size else 0.0))
+    with np.errstate(invalid="ignore"):
+        big = np.abs(D) > np.where(thr > 0, thr, np.inf)
+    # a spike at sample i: a big step up to it and a big step back, the neighbours agreeing
+    both = big[:-1] & big[1:]
+    hit = np.flatnonzero(both.any(axis=1))
+    sub_rows, cols = np.nonzero(both[hit])
+    rows = hit[sub_rows]
+    if rows.size:
+        up, back = D[rows, cols], D[rows + 1, cols]
+        ok = (np.sign(up) == -np.sign(back)) & (np.abs(up + back) < 0.25 * np.minimum(np.abs(up), np.abs(back)))
+        rows, cols, up, back = rows[ok], cols[ok], up[ok], back[ok]
+    for j in np.unique(cols):
+        ch = names[j]
+        i = rows[cols == j] + 1
+        res = 3.0 * c.resolution(ch, i)
+        keep = i[(np.abs(up[cols == j]) > res) & (np.abs(back[cols == j]) > res)]
+        if keep.size:
+            counts[ch] = int(keep.size)
+            first[ch] = int(c.log.rows[int(keep[0])])
+    if not counts:
+        return
+    total = sum(counts.values())
+    parts = ", ".join(f"{c.col(ch)} {k} (first at row {first[ch]})" for ch, k in counts.items())
+    level = "warning" if total > max(2, 0.001 * len(c.log)) else "info"
+    c.add(level, "glitches", tuple(counts),
+          f"single-sample spikes: {parts}; check the sensor or blank those cells", counts=counts, first_rows=first)
+
+
+_RUN = {"yaw_rate": _check_yaw_rate, "velocity_frame": _check_velocity_frame, "rudder_sign": _check_rudder_sign,
+        "propeller": _check_propeller, "position_freeze": _check_position_freeze, "glitches": _check_glitches}
+
+
+def check_consistency(log, *, checks=CHECKS) -> ConsistencyResult:
+    """Check that a log's channels agree with each other (kinematics and sign conventions).
+
+    Parameters
+    ----------
+    log : TrialLog
+    checks : sequence of str
+        Which of :data:`CHECKS` to run (default all): ``yaw_rate`` (r against
+        dpsi/dt: correlation, scale, bias; names another column that agrees
+        when r does not), ``velocity_frame`` (u, v against the track: body or
+        earth axes, or swapped), ``rudder_sign`` (direction of the first turn),
+        ``propeller`` (n x u separates rps from rpm without a length; n < 0
+        while moving ahead), ``position_freeze`` (GNSS positions that freeze
+        and jump, counted), ``glitches`` (single-sample spikes per channel).
+
+    Returns
+    -------
+    ConsistencyResult
+        ``findings`` (level, check, channels, message, values), ``success``
+        (no error), ``status``, ``message``, ``to_pandas()``.
+    """
+    unknown = [k for k in checks if k not in _RUN]
+    if unknown:
+        raise ValueError(f"checks: unknown {unknown}; choose from {list(CHECKS)}")
+    ctx = _Ctx(log)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        for k in checks:
+            _RUN[k](ctx)
+    order = {"error": 0, "warning": 1, "info": 2}
+    ctx.findings.sort(key=lambda f: order[f.level])
+    return ConsistencyResult(name=log.name, findings=ctx.findings, checks=tuple(checks))

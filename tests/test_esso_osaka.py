@@ -1,0 +1,98 @@
+"""The Esso Osaka study (shipid.studies.esso_osaka) in its fast mode, and horizon prediction on the
+measured runs.  The full study is ``python -m shipid.studies.esso_osaka`` (docs/environment.md)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+DATA = Path(__file__).parents[1] / ".." / "shared" / "data" / "esso_osaka_frt"
+
+pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"Esso Osaka data set (FRT-DS-ESSO) not found at {DATA}")
+
+
+def test_horizon_prediction_on_a_measured_run():
+    from shipid.logs import read_log
+    from shipid.validation_horizon import dead_reckoning, horizon_prediction
+
+    lg = read_log(DATA / "berthing" / "berthing_12-Nov-2020_11_07_23.csv", schema="esso-frt")
+    r = horizon_prediction(dead_reckoning(), lg)
+    s = r.summary()
+    assert [e["seconds"] for e in s] == [10.0, 30.0, 60.0]
+    assert s[0]["n_starts"] >= s[1]["n_starts"] >= s[2]["n_starts"] > 20
+    assert s[0]["position_error_median_m"] < s[1]["position_error_median_m"] < s[2]["position_error_median_m"]
+    # starts every 5 s: the first start is the first sample, the next 50 samples (5 s) later
+    assert np.diff(r.start_times[:2])[0] == pytest.approx(5.0)
+    with pytest.raises(ValueError, match="lacks input channel"):
+        from shipid.environment import with_environment
+        from shipid.models import get_model
+
+        horizon_prediction(with_environment(get_model("lowspeed"), wind="esso-osaka-3m"), lg.data.drop(
+            columns=["wind_speed_true"]))
+
+
+def test_blowups_are_counted_not_dropped():
+    from shipid.logs import read_log
+    from shipid.models import get_model
+    from shipid.validation_horizon import horizon_prediction
+
+    lg = read_log(DATA / "random" / "random_31-Jul-2020_12_29_58.csv", schema="esso-frt")
+    bad = get_model("lowspeed").with_params({"Nr": 3.0, "Yv": 2.0})  # unstable: yaw and sway amplify
+    r = horizon_prediction(bad, lg.data.iloc[:1500], horizons=(30.0,))
+    e = r.summary()[0]
+    assert e["n_blowups"] > 0 and not r.success and "blew up" in r.message
+    assert e["n_starts"] == int(np.sum(~np.isnan(r.position_error[:, 0])))
+
+
+@pytest.mark.slow
+def test_study_fast_mode():
+    """Two random runs, two folds (about 30 s on a free core; more on a loaded machine)."""
+    from shipid.studies.esso_osaka import run_study
+
+    res = run_study(types=("random",), max_runs=2, folds=2, fit_every=50, progress=False)
+    h = res.horizon
+    assert set(h.model) >= {"dead reckoning", "lowspeed fitted (no environment)", "lowspeed + wind + current fitted"}
+    assert (h.n_starts > 0).all()
+    assert all(f["success"] for fold in res.fits.values() for f in fold.values())
+    t10 = res.table(10.0)
+    # on held-out runs the fitted environment-aware model predicts 10 s better than dead reckoning
+    assert t10.loc["lowspeed + wind + current fitted", "random"] < t10.loc["dead reckoning", "random"]
+    assert set(res.currents.columns) >= {"cx", "cx_std", "cy", "cy_std"}
+    assert (res.currents.cx_std > 0).all()
+
+
+@pytest.mark.slow
+def test_cli_fit_wind_current_then_validate_and_report_with_horizons(tmp_path, capsys):
+    import json
+
+    import pandas as pd
+
+    from shipid.cli import main
+
+    src = DATA / "random" / "random_31-Jul-2020_12_29_58.csv"
+    short = tmp_path / "random_short.csv"
+    pd.read_csv(src).iloc[:900].to_csv(short, index=False)  # 90 s of a measured run, the file's own columns
+    res = tmp_path / "fit.json"
+    rc = main(["fit", str(short), "--schema", "esso-frt", "--model", "lowspeed", "--wind", "--current",
+               "--estimate", "Yv,Nr,wY1", "--passes", "1", "--no-progress", "-o", str(res)])
+    assert rc == 0
+    doc = json.loads(res.read_text())
+    assert doc["model"] == "with-environment" and doc["model_options"]["current"] == "constant"
+    assert doc["model_options"]["wind"]["A_L"] == pytest.approx(0.52038)
+    out = tmp_path / "val.json"
+    rc = main(["validate", str(res), str(short), "--schema", "esso-frt", "--horizon", "10,30", "--no-closed-loop",
+               "-o", str(out)])
+    assert rc == 0
+    h = json.loads(out.read_text())[0]["horizon"]
+    assert [e["seconds"] for e in h] == [10.0, 30.0]
+    assert set(h[0]) == {"seconds", "position_error_median_m", "position_error_p90_m", "heading_error_median_deg",
+                         "n_starts", "n_blowups"}
+    assert h[0]["n_starts"] == 18 - 2 and h[1]["n_starts"] == 18 - 6  # starts every 5 s that reach the horizon
+    html = tmp_path / "r.html"
+    assert main(["report", str(res), str(short), "--schema", "esso-frt", "--horizon", "10", "--no-closed-loop",
+                 "-o", str(html)]) == 0
+    assert "Open-loop prediction from the measured state" in html.read_text()
+    assert main(["validate", str(res), str(short), "--schema", "esso-frt", "--horizon", "ten", "-o",
+                 str(tmp_path / "x.json")]) == 2
+    assert "--horizon ten" in capsys.readouterr().err

@@ -1,0 +1,137 @@
+"""Low-speed four-quadrant model (shipid.models.lowspeed) and the defect fixes of mmg, the response
+models and simulate() found on the Esso Osaka runs (issue 13)."""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from shipid.models import get_model
+from shipid.models.base import Model
+from shipid.models.lowspeed import LowSpeedModel
+from shipid.simulate import simulate
+
+
+@pytest.fixture(scope="module")
+def ls():
+    return get_model("lowspeed")
+
+
+def test_registered_with_esso_particulars(ls):
+    assert isinstance(ls, LowSpeedModel) and ls.lpp == 3.0
+    P = ls.particulars
+    assert P.rho * P.displacement == pytest.approx(244.6)  # README mass
+    assert P.D_p == 0.084 and P.A_R == 0.0106 and P.x_G == 0.094
+    assert "NOT identified" in ls.parameter_set("esso-osaka-prior").caveat
+
+
+@pytest.mark.parametrize("quadrant", [(1, 1), (1, -1), (-1, 1), (-1, -1)])
+def test_jacobians_match_finite_differences_in_all_quadrants(ls, quadrant):
+    su, sn = quadrant
+    rng = np.random.default_rng(3)
+    x, u = ls.sample_point(rng, (6,))
+    x[:, 3] = su * (0.05 + np.abs(x[:, 3]))
+    x[:, 4] = np.where(np.arange(6) % 2, 1.0, 0.1) * x[:, 4] * 5  # drift angles up to ~90 deg and beyond
+    u[:, 1] = sn * (2.0 + np.abs(u[:, 1]))
+    for which in ("x", "u", "p"):
+        a = getattr(ls, f"jac_{which}")(0.0, x, u)
+        fd = Model._fd(ls, 0.0, x, u, ls.params, which)
+        np.testing.assert_allclose(a, fd, rtol=1e-5, atol=1e-8, err_msg=f"jac_{which} quadrant {quadrant}")
+
+
+def test_finite_at_rest_and_astern(ls):
+    for n in (-10.0, 0.0, 10.0):
+        for d in (-0.6, 0.0, 0.6):
+            f = ls.rhs(0.0, np.zeros(6), [d, n])
+            assert np.all(np.isfinite(f))
+    f_ahead = ls.rhs(0.0, np.zeros(6), [0.0, 10.0])
+    f_astern = ls.rhs(0.0, np.zeros(6), [0.0, -10.0])
+    assert f_ahead[3] > 0 > f_astern[3]
+    # astern bollard thrust / ahead bollard thrust = CTa0 / ((1 - tP) k0)
+    p = ls.params_series()
+    assert f_astern[3] / f_ahead[3] == pytest.approx(p["CTa0"] / ((1 - p["tP"]) * p["k0"]), rel=1e-9)
+    # pure sway at 90 deg drift and going astern stay finite with the right sign of the damping
+    assert ls.rhs(0.0, [0, 0, 0, 0.0, 0.2, 0.0], [0.0, 0.0])[4] < 0
+    assert ls.rhs(0.0, [0, 0, 0, -0.2, 0.0, 0.0], [0.0, 0.0])[3] > 0
+
+
+def test_cross_flow_integral_against_closed_form(ls):
+    """The Gauss-Legendre cross-flow integral against int (a + b s)|a + b s| ds = [w^2 |w| / 3]/b."""
+    m = ls.with_params({"Yv": 0.0, "Yr": 0.0, "CD": 1.0, "CrY": 1.0})
+    q = 0.5 * m.particulars.rho * m.lpp * m.particulars.draught
+    for v, r in ((0.1, 0.0), (0.05, 0.05), (-0.02, 0.08), (0.0, -0.1)):
+        a, b = v, r * m.lpp
+        if b == 0:
+            exact = a * abs(a)
+        else:
+            w1, w2 = a - b / 2, a + b / 2
+            exact = (w2**2 * abs(w2) - w1**2 * abs(w1)) / (3 * b)
+        YH = m.forces([0, 0, 0, 0.0, v, r], [0.0, 0.0])["Y_H"]
+        assert YH == pytest.approx(-q * exact, rel=2e-3, abs=1e-12)
+
+
+def test_port_starboard_mirror_ahead(ls):
+    x = np.array([0, 0, 0, 0.3, 0.04, 0.02])
+    u = np.array([0.3, 8.0])
+    f = ls.rhs(0.0, x, u)
+    g = ls.rhs(0.0, x * [1, 1, 1, 1, -1, -1], u * [-1, 1])
+    np.testing.assert_allclose(g[3:], f[3:] * [1, -1, -1], rtol=1e-12)
+
+
+def test_rudder_force_reverses_in_reversed_flow(ls):
+    fa = ls.forces([0, 0, 0, 0.2, 0, 0], [0.3, 0.0])["F_N"]
+    fb = ls.forces([0, 0, 0, -0.2, 0, 0], [0.3, 0.0])["F_N"]
+    assert fa > 0 > fb
+
+
+def test_froude_scaling(ls):
+    lam = 2.0
+    big = ls.scaled(3.0 * lam)
+    t = np.arange(0.0, 40.0, 0.1)
+    U = np.column_stack([np.where(t > 5, 0.5, 0.0), np.full(t.size, 8.0)])
+    x0 = np.array([0, 0, 0, 0.2, 0, 0])
+    a = simulate(ls, x0, t, U)
+    ts = t * np.sqrt(lam)
+    Us = U * [1.0, 1.0 / np.sqrt(lam)]
+    b = simulate(big, x0 * np.sqrt(lam), ts, Us)
+    np.testing.assert_allclose(b.x[:, :2], lam * a.x[:, :2], rtol=1e-8, atol=1e-9)
+
+
+# ------------------------------------------------------------------ defects found on the Esso runs
+def test_mmg_finite_at_rest_and_thrust_reverses_astern():
+    m = get_model("mmg", "kvlcc2", lpp=3.0)
+    for n in (-10.0, 0.0, 10.0):
+        f = m.rhs(0.0, np.zeros(6), [0.1, n])
+        assert np.all(np.isfinite(f)), n
+    T = {n: m.forces([0, 0, 0, 0.2, 0, 0], [0.0, n])["T"] for n in (-10.0, 10.0)}
+    assert T[10.0] > 0 > T[-10.0]
+    # at rest the n|n| K_T(0) bollard thrust is antisymmetric in n
+    Tb = {n: m.forces([0, 0, 0, 0.0, 0, 0], [0.0, n])["T"] for n in (-10.0, 10.0)}
+    assert Tb[-10.0] == pytest.approx(-Tb[10.0], rel=1e-12)
+
+
+@pytest.mark.parametrize("name", ["kcs-response", "response-nl"])
+def test_response_a9_term_keeps_the_sign_of_n(name):
+    m = get_model(name)
+    only = m.with_params({k: (1.0 if k == "a9" else 0.0) for k in m.param_names})
+    du = [only.rhs(0.0, np.zeros(6) + [0, 0, 0, 1.0, 0, 0], [0.0, n])[3] for n in (-3.0, 3.0)]
+    assert du[0] == pytest.approx(-9.0) and du[1] == pytest.approx(9.0)
+
+
+def test_simulate_batch_finishes_the_other_members():
+    m = get_model("lowspeed")
+    x0 = np.zeros((3, 6))
+    x0[:, 3] = 0.2
+    x0[1, 3] = np.nan
+    t = np.arange(0.0, 3.0, 0.1)
+    U = np.column_stack([np.zeros(t.size), np.full(t.size, 8.0)])
+    with pytest.warns(RuntimeWarning, match="1 of 3 batch member"):
+        r = simulate(m, x0, t, U)
+    assert not r.success and r.meta["failed"] == [1]
+    assert np.all(np.isfinite(r.x[[0, 2]])) and np.all(np.isnan(r.x[1, 1:]))
+    single = simulate(m, x0[0], t, U)
+    np.testing.assert_allclose(r.x[0], single.x)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert simulate(m, x0[[0, 2]], t, U).success

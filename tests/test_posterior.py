@@ -1,0 +1,121 @@
+"""MCMC posterior sampling (shipid.identify.posterior): split-R-hat, convergence verdicts, accuracy against
+an exact grid posterior."""
+from __future__ import annotations
+
+import json
+import sys
+
+import numpy as np
+import pytest
+
+from shipid.identify.posterior import OutputErrorLikelihood, sample_posterior, split_rhat
+
+pytest.importorskip("emcee")
+
+
+def test_split_rhat_iid_and_shifted_chains():
+    rng = np.random.default_rng(0)
+    iid = rng.standard_normal((8, 1000, 2))
+    assert np.all(split_rhat(iid) < 1.01)
+    assert np.all(split_rhat(iid, rank_normalised=False) < 1.01)
+    shifted = iid + np.arange(8)[:, None, None] * 0.5  # chains that disagree
+    assert np.all(split_rhat(shifted) > 1.1)
+    trend = iid + np.linspace(0, 3, 1000)[None, :, None]  # drifting chains: caught by the split
+    assert np.all(split_rhat(trend) > 1.1)
+    scale = iid * np.where(np.arange(8) < 4, 1.0, 3.0)[:, None, None]  # same centre, different spread: caught
+    assert split_rhat(scale)[0] > 1.01 and split_rhat(scale, rank_normalised=False)[0] < split_rhat(scale)[0]
+
+
+def test_split_rhat_classic_formula_by_hand():
+    c = np.array([[1.0, 2.0, 3.0, 4.0], [2.0, 3.0, 4.0, 9.0]])
+    # split into four chains of two draws: (1,2) (2,3) (3,4) (4,9)
+    halves = np.array([[1, 2], [2, 3], [3, 4], [4, 9]], dtype=float)
+    W = halves.var(axis=1, ddof=1).mean()
+    B_n = halves.mean(axis=1).var(ddof=1)
+    expect = np.sqrt((W / 2 + B_n) / W)
+    assert split_rhat(c, rank_normalised=False) == pytest.approx(expect)
+    with pytest.raises(ValueError, match="n_draws >= 4"):
+        split_rhat(np.zeros((2, 3)))
+
+
+@pytest.fixture(scope="module")
+def small_problem(kcs_truth):
+    """One short turn (20 s, 0.2 s sampling) and a fit of the two yaw coefficients c2, c3."""
+    from shipid.identify import EKFIdentifier
+    from shipid.synthetic import TrialRecipe, make_trial
+
+    rec = TrialRecipe("short_tc", "turning", 25.0, 20.0, dt_s=0.2, execute_s=2.0)
+    log = make_trial(kcs_truth, rec, np.random.default_rng(5))[0]
+    res = EKFIdentifier(kcs_truth, estimate=["c2", "c3"], init="model", n_passes=2).fit(log).result()
+    return res, log
+
+
+def test_short_chain_is_not_called_converged(small_problem):
+    res, log = small_problem
+    with pytest.warns(RuntimeWarning, match="NOT converged"):
+        s = sample_posterior(res, log, walkers=8, steps=30, seed=1)
+    assert not s.converged and s.status == 1 and "NOT converged" in s.message
+    assert not s.diagnostics["checks"]["length"]
+    assert s.samples.shape == (8 * 20, 2)
+    assert s.diagnostics["n_likelihood_calls"] == 1 + 2 * 30  # start + one batched call per half ensemble
+
+
+def test_vectorised_and_serial_likelihood_agree(small_problem, kcs_truth):
+    res, log = small_problem
+    like = OutputErrorLikelihood(res.to_model(), log, ["c2", "c3"])
+    th = np.array([[res.coef["c2"], res.coef["c3"]], [res.coef["c2"] * 1.01, res.coef["c3"]]])
+    batch = like(th)
+    np.testing.assert_allclose(batch, [like(th[0]), like(th[1])], rtol=1e-12)
+    assert batch[0] > batch[1]
+
+
+def test_missing_emcee_is_a_clear_error(small_problem, monkeypatch):
+    res, log = small_problem
+    monkeypatch.setitem(sys.modules, "emcee", None)
+    with pytest.raises(ValueError, match=r"pip install 'shipid\[mcmc\]'"):
+        sample_posterior(res, log, steps=20)
+
+
+def test_sample_cli_writes_samples_and_exit_code(small_problem, tmp_path, capsys):
+    from shipid.cli import main
+    from shipid.synthetic import schema_frame
+
+    res, log = small_problem
+    rp = res.to_json(tmp_path / "res.json")
+    lp = tmp_path / "log.csv"
+    schema_frame(log).to_csv(lp, index=False)
+    out = tmp_path / "s.json"
+    assert main(["sample", str(rp), str(lp), "-o", str(out), "--walkers", "8", "--steps", "30", "--no-progress"]) == 1
+    doc = json.loads(out.read_text())
+    assert doc["names"] == ["c2", "c3"] and doc["converged"] is False and len(doc["samples"]) == 160
+    assert "split-R-hat_max" in capsys.readouterr().out
+    mo = tmp_path / "m.json"  # the samples feed the propagation
+    assert main(["simulate", str(rp), "--turning", "35", "--side", "starboard", "--draws", "10", "--samples", str(out),
+                 "--metrics-output", str(mo)]) == 0
+    doc = json.loads(mo.read_text())
+    assert doc["source"] == "mcmc" and doc["manoeuvres"]["turning_35_starboard"]["draws"]["n"] == 10
+    assert main(["sample", str(rp), str(lp), "-o", str(out), "--steps", "30"]) == 2  # exists, no --force
+
+
+@pytest.mark.slow
+def test_mcmc_matches_the_exact_grid_posterior(small_problem):
+    """Two coefficients: the posterior on a fine grid (one batched evaluation) is exact; the converged chain
+    must reproduce its means (within 0.1 posterior std) and std (within 10 %)."""
+    res, log = small_problem
+    s = sample_posterior(res, log, walkers=32, steps=1500, burn=300, seed=2)
+    assert s.converged, s.message
+    like = OutputErrorLikelihood(res.to_model(), log, ["c2", "c3"],
+                                 meas_std=res.settings["meas_std"],
+                                 prior_mean=[res.coef["c2"], res.coef["c3"]],
+                                 prior_std=[res.settings["prior_std"]["c2"], res.settings["prior_std"]["c3"]])
+    m, sd = s.samples.mean(axis=0), s.samples.std(axis=0)
+    g = [np.linspace(m[j] - 6 * sd[j], m[j] + 6 * sd[j], 81) for j in range(2)]
+    G2, G3 = np.meshgrid(*g, indexing="ij")
+    lp = like(np.column_stack([G2.ravel(), G3.ravel()]))
+    w = np.exp(lp - lp.max())
+    w /= w.sum()
+    pts = np.column_stack([G2.ravel(), G3.ravel()])
+    gm = w @ pts
+    gsd = np.sqrt(w @ (pts - gm) ** 2)
+    np.testing.assert_array_less(np.abs(m - gm) / gsd, 0.1)
+    np.testing.assert_allclose(sd, gsd, rtol=0.10)
