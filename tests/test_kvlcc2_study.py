@@ -191,7 +191,10 @@ def _cli_fit_validate(tmp_path, model, params=None):
     args = ["fit", *[files[k] for k in ks.TRAIN], "--model", model, "-o", str(out), "--no-progress"]
     if params:
         args += ["--params", params]
-    assert main(args) in (0, 1)
+    # 3: done, but the EKF stage is not consistent with its noise model -- on these measured runs it is
+    # flagged (x innovations ~2x the model's, not white, ~12 % gated: model error), said on stderr and in
+    # the result; the fit is still written and used
+    assert main(args) in (0, 1, 3)
     shown = ("zz_20", "zz_-20", "tc_35", "tc_-35")  # the README's validate command
     assert main(["validate", str(out), *[files[k] for k in shown], "-o", str(val)]) in (0, 1)
     res = load_result(out)
@@ -239,7 +242,7 @@ def test_cli_mmg_metric_refinement_on_the_holdout(tmp_path):
     files = dict(zip(ks.RUNS, marin_files(tmp_path, ks.RUNS)))
     out, val = tmp_path / "r.json", tmp_path / "v.json"
     assert main(["fit", *[files[k] for k in ks.TRAIN], "--model", "mmg", "--params", "kvlcc2", "--refine", "metrics",
-                 "-o", str(out), "--no-progress"]) == 0
+                 "-o", str(out), "--no-progress"]) in (0, 3)  # 3: EKF stage flagged not consistent (see above)
     assert main(["validate", str(out), files["zz_20"], files["zz_-20"], files["tc_35"], files["tc_-35"],
                  "-o", str(val)]) == 0
     v = {d["name"][18:-2]: d for d in json.loads(val.read_text())}

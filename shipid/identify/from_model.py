@@ -96,7 +96,9 @@ def fit_to_model(truth: Model, *, speeds=(1.4, 1.7, 2.0), turning_rudders=(10.0,
         U0 = float(np.max(speeds))
         ref = OutputErrorRefiner(model.with_params(p), estimate=free, channels=["u", "v", "r", "psi"],
                                  meas_std={"u": U0, "v": U0, "r": U0 / L, "psi": 1.0}, max_nfev=max_nfev,
-                                 jacobian="tangent")
+                                 jacobian="tangent", input_hold="zoh")
+        # zoh: the truth's manoeuvres were simulated with the rudder law evaluated once per output step and
+        # held over it, so a held-input replay reproduces them exactly (a real log would use foh)
         ref.fit(logs, x0=x0s)
         p = ref.coef_.to_numpy()
         info.update(cost=(ref.cost_start_, ref.cost_), nfev=ref.nfev_, success=ref.success_, message=ref.message_)
