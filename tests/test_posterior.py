@@ -57,7 +57,8 @@ def test_short_chain_is_not_called_converged(small_problem):
     assert not s.converged and s.status == 1 and "NOT converged" in s.message
     assert not s.diagnostics["checks"]["length"]
     assert s.samples.shape == (8 * 20, 2)
-    assert s.diagnostics["n_likelihood_calls"] == 1 + 2 * 30  # start + one batched call per half ensemble
+    # start + one batched call per split of the ensemble (2 for DE, 4 for the DE snooker move), never per walker
+    assert 1 + 2 * 30 <= s.diagnostics["n_likelihood_calls"] <= 1 + 4 * 30 + 20
 
 
 def test_vectorised_and_serial_likelihood_agree(small_problem, kcs_truth):

@@ -63,7 +63,13 @@ def _replicate(task: dict) -> dict:
     truth = task["truth"]
     rng = np.random.default_rng(task["seed"])
     logs = [make_trial(truth, r, rng, task["noise_std"])[0] for r in task["recipes"]]
-    start = truth.with_params(truth.params * (1 + task["perturb"] * rng.standard_normal(truth.np)))
+    # only the estimated coefficients start away from the truth; the fixed ones are the truth's (a
+    # perturbed fixed coefficient would be model error, which no interval of the fit covers)
+    factor = 1 + task["perturb"] * rng.standard_normal(truth.np)
+    if task["estimate"] is not None:
+        keep = np.array([n not in set(task["estimate"]) for n in truth.param_names])
+        factor[keep] = 1.0
+    start = truth.with_params(truth.params * factor)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         ident = EKFIdentifier(start, estimate=task["estimate"], n_passes=task["n_passes"],

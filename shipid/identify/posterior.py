@@ -126,10 +126,12 @@ class OutputErrorLikelihood:
     channels : list of str, optional  (default: measured u, v, r where present, else every measured state)
     prior_mean, prior_std : arrays (n_names,), optional  (no prior when ``prior_std`` is None)
     substeps : int  -- RK4 steps per sample
+    input_hold : {"foh", "zoh"}  -- inputs between samples (:func:`shipid.simulate.simulate`); default "foh",
+        the identifier's default, so that the likelihood treats the inputs as the fit did
     """
 
     def __init__(self, model, logs, names, *, meas_std=None, channels=None, prior_mean=None, prior_std=None,
-                 substeps: int = 1):
+                 substeps: int = 1, input_hold: str = "foh"):
         from .data import noise_std_from_data, prepare_logs
 
         self.model = model
@@ -164,6 +166,9 @@ class OutputErrorLikelihood:
         self.prior_mean = None if prior_mean is None else np.asarray(prior_mean, dtype=float)
         self.prior_std = None if prior_std is None else np.asarray(prior_std, dtype=float)
         self.substeps = int(substeps)
+        if input_hold not in ("foh", "zoh"):
+            raise ValueError(f"input_hold must be 'foh' or 'zoh', got {input_hold!r}")
+        self.input_hold = input_hold
         self.base = model.params.astype(float).copy()
         self.n_calls = 0
         self.n_sims = 0
@@ -204,7 +209,8 @@ class OutputErrorLikelihood:
             Ub = np.broadcast_to(U, (B,) + U.shape).reshape((B * G,) + U.shape[1:])
             with warnings.catch_warnings(), np.errstate(all="ignore"):
                 warnings.simplefilter("ignore", RuntimeWarning)
-                sim = simulate(self.model, X0, t, Ub, params=np.repeat(P, G, axis=0), substeps=self.substeps)
+                sim = simulate(self.model, X0, t, Ub, params=np.repeat(P, G, axis=0), substeps=self.substeps,
+                               input_hold=self.input_hold)
             self.n_sims += B * G
             xs = sim.x.reshape((B, G) + sim.x.shape[1:])[..., self.st_idx]
             e = np.where(m[None], (xs - Y[None]) / self.sig, 0.0)
@@ -357,7 +363,7 @@ def chain_diagnostics(chain: np.ndarray, acceptance: np.ndarray, names, n_total_
 def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2000, burn: int | None = None,
                      thin: int = 1, seed=0, vectorize: bool = True, channels=None, substeps: int = 1,
                      start_scale: float = 1.0, use_prior: bool = True, moves: str = "de",
-                     progress: bool = False) -> PosteriorSamples:
+                     input_hold: str | None = None, progress: bool = False) -> PosteriorSamples:
     """Sample the posterior of a fit's estimated coefficients with emcee (optional extra ``mcmc``).
 
     Parameters
@@ -382,6 +388,8 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
         (ter Braak 2006; ter Braak & Vrugt 2008), which decorrelates faster than "stretch", the
         Goodman & Weare (2010) move, on these near-Gaussian, strongly correlated posteriors
         (benchmarks/bench_uncertainty.py measures both)
+    input_hold : {"foh", "zoh"}, optional  -- inputs between samples; default the fit's
+        (``result.settings["input_hold"]`` when recorded, else "foh", the identifier's default)
     progress : bool  -- emcee's tqdm progress bar
 
     Returns
@@ -417,7 +425,8 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
         prior_std = None
     like = OutputErrorLikelihood(model, logs, names, meas_std=meas_std, channels=channels,
                                  prior_mean=mu if prior_std is not None else None, prior_std=prior_std,
-                                 substeps=substeps)
+                                 substeps=substeps,
+                                 input_hold=input_hold or (res.settings or {}).get("input_hold") or "foh")
     rng = np.random.default_rng(seed)
     w, V = np.linalg.eigh(0.5 * (cov + cov.T))
     A = V * np.sqrt(np.clip(w, 0, None))
@@ -450,6 +459,7 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
         warnings.warn(f"sample_posterior: {msg}", RuntimeWarning, stacklevel=2)
     settings = {"walkers": nw, "steps": steps, "moves": moves, "burn": burn, "thin": thin, "seed": seed if isinstance(seed, int) else None,
                 "vectorize": bool(vectorize), "channels": like.channels, "substeps": int(substeps),
+                "input_hold": like.input_hold,
                 "meas_std": dict(zip(like.channels, map(float, like.sig))), "start_scale": float(start_scale),
                 "prior": ({"kind": "gaussian", "mean": "fit estimate", "std": dict(zip(names, map(float, prior_std)))}
                           if prior_std is not None else {"kind": "flat"}),
