@@ -31,7 +31,7 @@ from typing import Mapping
 
 import numpy as np
 
-from ..models.base import Model, complex_step_jacobian
+from ..models.base import ComplexStepJacobians, Model
 from .wind import WIND_PARAM_NAMES, WindForce, _air_body
 
 __all__ = ["EnvironmentModel", "with_environment", "CURRENT_KINDS", "WIND_INPUTS", "CURRENT_STATES"]
@@ -62,7 +62,7 @@ def with_environment(model: Model, *, wind=None, current: str | None = None, vel
                             current_walk=current_walk)
 
 
-class EnvironmentModel(Model):
+class EnvironmentModel(ComplexStepJacobians, Model):
     """A ship model with wind inputs/parameters and current states (build with :func:`with_environment`).
 
     Parameters
@@ -178,15 +178,6 @@ class EnvironmentModel(Model):
             out += [0.0 * cx, 0.0 * cy]
         shape = np.broadcast_shapes(*[np.shape(o) for o in out])
         return np.stack([np.broadcast_to(o, shape) for o in out], axis=-1)
-
-    def _jac_x(self, t, x, u, p):
-        return complex_step_jacobian(self._rhs, t, x, u, p, "x")
-
-    def _jac_u(self, t, x, u, p):
-        return complex_step_jacobian(self._rhs, t, x, u, p, "u")
-
-    def _jac_p(self, t, x, u, p):
-        return complex_step_jacobian(self._rhs, t, x, u, p, "p")
 
     def __repr__(self) -> str:
         return (f"<EnvironmentModel '{self.base.name}' + wind={'fujiwara' if self.wind is not None else None}, "

@@ -351,3 +351,17 @@ def complex_step_jacobian(rhs, t, x, u, p, which: str, h: float = 1e-30) -> np.n
     pert = base[..., None, :] + 1j * h * np.eye(base.shape[-1])
     a = {w: (pert if w == which else arr[..., None, :]) for w, arr in args.items()}
     return np.swapaxes(np.imag(rhs(t, a["x"], a["u"], a["p"])) / h, -1, -2)
+
+
+class ComplexStepJacobians:
+    """Mixin: a model's Jacobians by complex step of its own ``_rhs`` (:func:`complex_step_jacobian`),
+    for models whose equations accept complex arrays and have no analytic Jacobians."""
+
+    def _jac_x(self, t, x, u, p):
+        return complex_step_jacobian(self._rhs, t, x, u, p, "x")
+
+    def _jac_u(self, t, x, u, p):
+        return complex_step_jacobian(self._rhs, t, x, u, p, "u")
+
+    def _jac_p(self, t, x, u, p):
+        return complex_step_jacobian(self._rhs, t, x, u, p, "p")

@@ -54,7 +54,7 @@ from typing import Mapping
 
 import numpy as np
 
-from .base import Model, complex_step_jacobian
+from .base import ComplexStepJacobians, Model
 from .kinematics import planar_rates
 from .mmg import MMGParticulars, eq4_mass_matrix
 
@@ -92,7 +92,7 @@ def _ssqrt(z):
     return s * np.sqrt(np.where(_re(a) > 0, a, 1.0)) * (_re(a) > 0)
 
 
-class LowSpeedModel(Model):
+class LowSpeedModel(ComplexStepJacobians, Model):
     """Low-speed four-quadrant manoeuvring model (see the module docstring for the equations).
 
     Parameters
@@ -206,14 +206,6 @@ class LowSpeedModel(Model):
         return _motion(self.particulars, self._coef(p), x, X, Y, N)
 
     # ------------------------------------------------------------- Jacobians
-    def _jac_x(self, t, x, u, p):
-        return complex_step_jacobian(self._rhs, t, x, u, p, "x")
-
-    def _jac_u(self, t, x, u, p):
-        return complex_step_jacobian(self._rhs, t, x, u, p, "u")
-
-    def _jac_p(self, t, x, u, p):
-        return complex_step_jacobian(self._rhs, t, x, u, p, "p")
 
     @classmethod
     def sample_point(cls, rng, batch=()):
