@@ -29,6 +29,7 @@ def _common(p) -> None:
                         "'none' to skip): per log median/p90 position and median heading errors from starts "
                         "every --start-every s")
     p.add_argument("--start-every", type=float, default=5.0, help="spacing of the horizon starts [s] (default 5)")
+    add_progress_option(p)
 
 
 def register(sub) -> None:
@@ -53,7 +54,6 @@ def register(sub) -> None:
     from .uncertainty import add_draws_option
 
     add_draws_option(r)
-    add_progress_option(r)
     r.set_defaults(handler=_report)
 
 
@@ -94,8 +94,9 @@ def _validate(args) -> int:
     out = _check(args)
     horizons = _horizons(args.horizon)
     logs = read_logs(args.logs, args)
-    vals = validate_logs(args.result, logs, args.lpp, closed_loop=not args.no_closed_loop,
-                         zigzag_angles=_zigzag(args))
+    vals = [v for lg in progress_iter(logs, args, "replaying logs")
+            for v in validate_logs(args.result, [lg], args.lpp, closed_loop=not args.no_closed_loop,
+                                   zigzag_angles=_zigzag(args))]
     res = [v.to_dict() for v in vals]
     validate_draws(args, args.result, vals, res)  # --draws N: intervals inside each "predicted" block
     if horizons:
