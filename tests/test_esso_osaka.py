@@ -76,8 +76,9 @@ def test_cli_fit_wind_current_then_validate_and_report_with_horizons(tmp_path, c
     res = tmp_path / "fit.json"
     rc = main(["fit", str(short), "--schema", "esso-frt", "--model", "lowspeed", "--wind", "--current",
                "--estimate", "Yv,Nr,wY1", "--passes", "1", "--no-progress", "-o", str(res)])
-    assert rc == 0
     doc = json.loads(res.read_text())
+    # 3: written, but flagged not consistent with its noise model (measured, pre-filtered channels with gusty wind)
+    assert rc == 0 or (rc == 3 and doc["diagnostics"]["consistency"]["consistent"] is False)
     assert doc["model"] == "with-environment" and doc["model_options"]["current"] == "constant"
     assert doc["model_options"]["wind"]["A_L"] == pytest.approx(0.52038)
     out = tmp_path / "val.json"

@@ -103,7 +103,7 @@ def test_mcmc_matches_the_exact_grid_posterior(small_problem):
     """Two coefficients: the posterior on a fine grid (one batched evaluation) is exact; the converged chain
     must reproduce its means (within 0.1 posterior std) and std (within 10 %)."""
     res, log = small_problem
-    s = sample_posterior(res, log, walkers=32, steps=1500, burn=300, seed=2)
+    s = sample_posterior(res, log, walkers=32, steps=3000, burn=600, seed=2)  # 1500 steps ended at R-hat 1.011-1.02
     assert s.converged, s.message
     like = OutputErrorLikelihood(res.to_model(), log, ["c2", "c3"],
                                  meas_std=res.settings["meas_std"],

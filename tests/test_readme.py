@@ -25,17 +25,21 @@ REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
 
 
-def readme_commands(text: str) -> list[str]:
-    """The commands of the README's ```bash blocks, in order."""
+def readme_commands(text: str, with_exit: bool = False) -> list:
+    """The commands of the README's ```bash blocks, in order; with ``with_exit``, pairs
+    ``(command, expected exit status)``: 0 unless the line's comment says ``exit N`` (e.g. a fit
+    the consistency verdict flags, exit 3, documented beside the command)."""
     out = []
     for block in re.findall(r"^```bash\n(.*?)^```", text, flags=re.S | re.M):
         for line in block.splitlines():
             words = shlex.split(line, comments=True)
+            m = re.search(r"#.*\bexit (\d)\b", line)
+            expected = int(m.group(1)) if m else 0
             cmd: list[str] = []
             for w in words + ["&&"]:
                 if w == "&&":
                     if cmd:
-                        out.append(shlex.join(cmd))
+                        out.append((shlex.join(cmd), expected) if with_exit else shlex.join(cmd))
                     cmd = []
                 else:
                     cmd.append(w)
@@ -64,7 +68,7 @@ def test_readme_commands_run_in_sequence_in_a_fresh_folder(tmp_path, monkeypatch
         (tmp_path / "shared").symlink_to(SHARED, target_is_directory=True)
     monkeypatch.chdir(work)
     ran, skipped = [], []
-    for cmd in readme_commands((REPO / "README.md").read_text()):
+    for cmd, expected in readme_commands((REPO / "README.md").read_text(), with_exit=True):
         argv = shlex.split(cmd)
         if argv[0] == "pip" or argv[:3] == ["python", "-m", "pytest"] or argv[:2] == ["shipid", "demo"]:
             continue
@@ -83,7 +87,7 @@ def test_readme_commands_run_in_sequence_in_a_fresh_folder(tmp_path, monkeypatch
         t0 = time.perf_counter()
         rc = main(args)
         err = capsys.readouterr().err
-        assert rc == 0, f"{cmd} -> exit {rc}: {err[-500:]}"
+        assert rc == expected, f"{cmd} -> exit {rc} (README says {expected}): {err[-500:]}"
         ran.append((cmd, time.perf_counter() - t0))
     with capsys.disabled():
         for cmd, dt in ran:
