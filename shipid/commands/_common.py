@@ -155,12 +155,14 @@ CHANNEL_UNITS = {"time": "s", "t": "s", "x": "m", "y": "m", "psi": "rad", "u": "
                  "p": "rad/s", "phi": "rad", "delta": "rad", "n": "rps", "T": "N", "phi_p": "rad"}
 
 
-def units_header(frame, model=None):
+def units_header(frame, model=None, units=None):
     """``frame`` with ``name [unit]`` column (and index) names where the unit is known
-    (the model's ``units`` first, then :data:`CHANNEL_UNITS`); other names unchanged."""
-    units = dict(CHANNEL_UNITS)
+    (``units`` first, then the model's ``units``, then :data:`CHANNEL_UNITS`); other names unchanged."""
+    table = dict(CHANNEL_UNITS)
     if model is not None:
-        units.update(getattr(model, "units", {}) or {})
+        table.update(getattr(model, "units", {}) or {})
+    table.update(units or {})
+    units = table
 
     def label(name):
         unit = units.get(str(name))
