@@ -179,8 +179,9 @@ def _schema_ship(spec: str) -> ShipParticulars:
     return read_ship(spec)
 
 
-def _run_consistency(log: TrialLog) -> None:
-    """Check the channels; errors raise LogError (all named, first in full), warnings warn."""
+def _run_consistency(log: TrialLog, opt_out: str = "or --no-consistency-checks") -> None:
+    """Check the channels; errors raise LogError (all named, first in full, then ``opt_out``: how to
+    skip the checks), warnings warn."""
     import warnings
 
     from .consistency import check_consistency
@@ -193,5 +194,5 @@ def _run_consistency(log: TrialLog) -> None:
         more = len(res.errors) - 1
         tail = f" (and {more} more consistency error(s))" if more else ""
         e = res.errors[0]
-        raise LogError(e.message + tail + "; or --no-consistency-checks",
+        raise LogError(e.message + tail + "; " + opt_out,
                        path=log.path, column=e.channels[0] if e.channels else None)
