@@ -306,7 +306,7 @@ def _check_yaw_rate(c: _Ctx) -> None:
     if e_fit <= _FIT_GOOD and k < -0.5:
         c.add("error", "yaw_rate", ("r", "psi"),
               f"{who} has the opposite sign to dpsi/dt of {c.col('psi')} (rho = {shown}, dpsi/dt = {k:.3g} r): "
-              "negate r (schema \"signs\": {\"r\": -1}) or the heading", **vals)
+              "negate r (CLI: --sign r=-1; schema \"signs\": {\"r\": -1}) or the heading", **vals)
         return
     if e_fit > _FIT_GOOD:
         # r does not explain the heading: which other column does?
