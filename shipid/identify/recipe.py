@@ -124,6 +124,11 @@ class RecipeFit:
         if self.refiner is not None:
             res.settings["ekf_stage"] = {"success": bool(self.ekf.success_), "message": self.ekf.message_,
                                          "coef": {k: float(v) for k, v in self.ekf.coef_.items()}}
+            # the verdict `shipid fit` exits on is the EKF stage's (the refiner has no innovations): the result
+            # JSON carries it where the CLI's epilog says, marked as that stage's
+            verdict = getattr(self.ekf, "diagnostics_", {}).get("consistency")
+            if verdict is not None and "consistency" not in res.diagnostics:
+                res.diagnostics["consistency"] = {**verdict, "stage": "ekf"}
             if not self.ekf.success_:
                 res.success = False
                 res.message = f"EKF stage failed ({self.ekf.message_}); refinement: {res.message}"
