@@ -22,7 +22,7 @@ from shipid.cli import main
 from shipid.datasets import bundled_kcs_logs
 from shipid.identify import FitResult
 from shipid.identify.result import software_versions
-from shipid.logs import TrialLog, read_log
+from shipid.logs import LogError, TrialLog, read_log
 from shipid.manoeuvres import metrics
 from shipid.models import get_model
 from shipid.simulate import replay, replay_errors
@@ -142,7 +142,9 @@ def test_rudder_sign_convention():
     log = read_log(PATHS["kcs_tc_p35"])
     cols = {c: log.data[c].to_numpy() for c in log.channels}
     cols["delta"] = -cols["delta"]
-    flipped = TrialLog.from_arrays(log.time, name="flipped", ship=log.ship, **cols)
+    with pytest.raises(LogError, match="rudder sign opposite to shipid.s; pass rudder_sign=-1.*pass consistency_checks=False"):  # from_arrays checks too
+        TrialLog.from_arrays(log.time, name="flipped", ship=log.ship, **cols)
+    flipped = TrialLog.from_arrays(log.time, name="flipped", ship=log.ship, consistency_checks=False, **cols)
     (wrong,) = validate(model, [flipped], closed_loop=False)
     assert any("opposite" in n and "rudder_sign=-1" in n for n in wrong["notes"]), wrong["notes"]
     (right,) = validate(model, [flipped], rudder_sign=-1, closed_loop=False)

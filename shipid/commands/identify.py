@@ -41,6 +41,9 @@ def register(sub) -> None:
     p.add_argument("--max-nfev", type=int, default=60, help="evaluation limit of the refinement (default 60)")
     p.add_argument("--dt", default="auto", metavar="auto|K",
                    help="use every K-th sample; default auto: >= 25 steps per fastest time constant of the model")
+    p.add_argument("--max-drift", default="auto", metavar="auto|DEG|none",
+                   help="models linear in v and r (kcs-response): use each log until its drift angle first exceeds "
+                        "DEG (default auto: 10 deg for such models, every sample for the others; none: every sample)")
     p.add_argument("--no-neutral", action="store_true",
                    help="do not take the rudder neutral angle (delta0) from the straight approaches of the logs")
     p.add_argument("--start", choices=("staged", "given"), default="staged",
@@ -131,6 +134,20 @@ def _dt(args):
     return k
 
 
+def _max_drift(args):
+    text = str(args.max_drift).strip().lower()
+    if text in ("auto", "none"):
+        return None if text == "none" else "auto"
+    try:
+        deg = float(text)
+    except ValueError:
+        deg = float("nan")
+    if not 0 < deg < 90:
+        raise ValueError(f"--max-drift {args.max_drift}: give 'auto', 'none' or a drift angle in degrees between 0 "
+                         "and 90, e.g. --max-drift 10")
+    return deg
+
+
 def _lib_errors(call):
     """Run ``call()``; the library's advice re-worded for the CLI."""
     try:
@@ -180,7 +197,7 @@ def _fit(args) -> int:
     else:
         recipe = _lib_errors(lambda: fit_logs(
             logs, model, lpp=args.lpp, estimate=_names(args.estimate) or None, fixed=_fixed(args, model),
-            start=args.start, neutral=not args.no_neutral, dt=_dt(args),
+            start=args.start, neutral=not args.no_neutral, dt=_dt(args), max_drift_deg=_max_drift(args),
             refine=None if args.refine == "none" else args.refine, n_passes=args.passes, max_nfev=args.max_nfev,
             tune_noise=args.tune_noise, progress=progress_on(args), meas_std=meas_std, log=print))
         fit, ident = recipe, recipe.ekf
