@@ -24,7 +24,7 @@ from ..validation import validate
 
 __all__ = ["RUNS", "TRAIN", "TEST", "RUDDER_SIGN", "MEASURED_README", "START", "GOAL_TOL", "load_runs", "fit_model",
            "evaluate", "neutral_rudder_angle", "common_grid", "metric_residuals", "rudder_sign", "leave_one_run_out",
-           "LORO_VARIANTS", "REFINE_VARIANTS", "leave_one_run_out_refinements"]
+           "LORO_VARIANTS", "REFINE_VARIANTS", "REFINE_VARIANTS_2", "leave_one_run_out_refinements"]
 
 RUNS = ("tc_35", "tc_-35", "zz_10", "zz_-10", "zz_20", "zz_-20")
 TRAIN = ("tc_35", "tc_-35", "zz_10", "zz_-10")
@@ -134,6 +134,12 @@ REFINE_VARIANTS = {
     "metrics": {"mode": "metrics"},
     "metrics, weight 0.3": {"mode": "metrics", "metric_weight": 0.3},
     "output-error, u v r psi": {"mode": "output-error", "channels": ["u", "v", "r", "psi"]},
+}
+#: Second round (fixed after the first, before running it): the metric weight bracketed around the first
+#: round's best (0.3).
+REFINE_VARIANTS_2 = {
+    "metrics, weight 0.1": {"mode": "metrics", "metric_weight": 0.1},
+    "metrics, weight 0.5": {"mode": "metrics", "metric_weight": 0.5},
 }
 
 
