@@ -96,3 +96,32 @@ def test_recipe_steps_are_reported_and_switchable():
     assert res.model_options["lpp"] == pytest.approx(4.36) and res.method == "ekf"
     with pytest.raises(ValueError, match="refine='both'"):
         fit_logs(logs, "kcs-response", refine="both")
+
+
+def test_refine_fit_reuses_one_ekf_stage_and_weighs_the_metrics():
+    """refine_fit on one EKF stage (bundled KCS turning circle + zigzag, 4.36 m): the metric residuals at
+    weight 0 are the output-error refinement exactly; at weight 1 the training metrics move the fit and its
+    tactical-diameter error does not grow; the weight is reported in the steps; a bad weight is refused."""
+    from shipid.datasets import bundled_kcs_logs
+    from shipid.identify.recipe import fit_logs, metric_residuals, refine_fit
+    from shipid.logs import read_log
+
+    logs = [read_log(p) for p in bundled_kcs_logs()[1:3]]  # tc +35, zz -10
+    ekf = fit_logs(logs, "kcs-response", n_passes=1, refine=None)
+    kw = dict(max_nfev=4)
+    oe = refine_fit(ekf, logs, "output-error", **kw)
+    m0 = refine_fit(ekf, logs, "metrics", metric_weight=0.0, **kw)
+    m1 = refine_fit(ekf, logs, "metrics", metric_weight=1.0, **kw)
+    assert ekf.refiner is None and [s["step"] for s in ekf.steps][-1] == "refinement"  # the EKF stage untouched
+    np.testing.assert_array_equal(m0.refiner.coef_.to_numpy(), oe.refiner.coef_.to_numpy())
+    assert "weight 1" in m1.steps[-2]["reason"] and "weight 0" in m0.steps[-2]["reason"]
+    f, used = metric_residuals(ekf.to_model(), logs)
+    assert len(used) == 2
+    P = np.stack([oe.to_model().params, m1.to_model().params])
+    e = np.abs(f(P))  # (2, 3): TD of the turn, overshoots of the zigzag, over their tolerances
+    assert not np.allclose(P[0], P[1])
+    assert np.sum(e[1] ** 2) <= np.sum(e[0] ** 2) + 1e-9  # the metrics enter the objective
+    with pytest.raises(ValueError, match="metric_weight"):
+        refine_fit(ekf, logs, "metrics", metric_weight=-1.0)
+    with pytest.raises(ValueError, match="mode="):
+        refine_fit(ekf, logs, "both")

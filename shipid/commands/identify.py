@@ -36,8 +36,11 @@ def register(sub) -> None:
     p.add_argument("--refine", nargs="?", const="output-error", default="auto",
                    choices=("auto", "none", "output-error", "metrics"),
                    help="refinement after the EKF: 'output-error', 'metrics' (output error + the training runs' own "
-                        "standard-manoeuvre metrics), 'none'; default 'auto' = output-error when the logs hold turning "
+                        "standard-manoeuvre metrics), 'none'; default 'auto' = metrics when the logs hold turning "
                         "circles and zigzags, else none; a bare --refine means output-error")
+    p.add_argument("--metric-weight", type=float, default=None, metavar="W",
+                   help="weight of the metric residuals of the 'metrics' refinement (default 0.1, chosen by "
+                        "leave-one-run-out on the KVLCC2 training runs)")
     p.add_argument("--max-nfev", type=int, default=60, help="evaluation limit of the refinement (default 60)")
     p.add_argument("--dt", default="auto", metavar="auto|K",
                    help="use every K-th sample; default auto: >= 25 steps per fastest time constant of the model")
@@ -176,6 +179,8 @@ def _fit(args) -> int:
     for k, v in (meas_std or {}).items():
         if not (np.isfinite(v) and v > 0):
             raise ValueError(f"--meas-std {k}={v}: give a positive standard deviation in SI units, e.g. psi=0.002")
+    if args.metric_weight is not None and not (np.isfinite(args.metric_weight) and args.metric_weight >= 0):
+        raise ValueError(f"--metric-weight {args.metric_weight}: give a finite weight >= 0 (default 0.1)")
     if args.max_nfev < 1:
         raise ValueError(f"--max-nfev must be >= 1, got {args.max_nfev}")
     logs = read_logs(args.logs, args)
@@ -198,7 +203,8 @@ def _fit(args) -> int:
         recipe = _lib_errors(lambda: fit_logs(
             logs, model, lpp=args.lpp, estimate=_names(args.estimate) or None, fixed=_fixed(args, model),
             start=args.start, neutral=not args.no_neutral, dt=_dt(args), max_drift_deg=_max_drift(args),
-            refine=None if args.refine == "none" else args.refine, n_passes=args.passes, max_nfev=args.max_nfev,
+            refine=None if args.refine == "none" else args.refine, metric_weight=args.metric_weight,
+            n_passes=args.passes, max_nfev=args.max_nfev,
             tune_noise=args.tune_noise, progress=progress_on(args), meas_std=meas_std, log=print))
         fit, ident = recipe, recipe.ekf
     result = fit.result()
