@@ -180,3 +180,32 @@ def test_a_run_that_would_not_fit_is_refused_with_the_numbers(kcs_problem, monke
     monkeypatch.setenv("SHIPID_MEMORY_LIMIT", "lots")
     with pytest.raises(ValueError, match="SHIPID_MEMORY_LIMIT='lots'"):
         run_ekf(kcs_problem, store=True)
+
+
+@pytest.mark.parametrize("hold", ["foh", "zoh"])
+def test_benchmark_reference_solves_the_same_problem(kcs_truth, hold):
+    """``benchmarks/bench_ekf.py``'s filterpy loop is the same filter as ``run_ekf`` (both paths), under
+    the problem's input hold.  It once held the input (zero-order) while the identifier's problem is
+    first-order hold: the printed "final-state agreement" was 9e-2, which looked like a state bug."""
+    import importlib.util
+    from pathlib import Path
+
+    from shipid.synthetic import TrialRecipe, make_trial
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_ekf.py"
+    spec = importlib.util.spec_from_file_location("bench_ekf", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    log, _ = make_trial(kcs_truth, TrialRecipe("zz", "zigzag", 20.0, 40.0, ((0.0, 10.0), (20.0, 12.0)), psi_deg=20.0),
+                        np.random.default_rng(1))
+    with _jit.disabled():
+        prob = EKFIdentifier(kcs_truth, n_passes=1, init="model").fit(log).problem_
+    prob = replace(prob, input_hold=hold, gate=None)
+    x_fp = bench.filterpy_loop(prob)
+    for z in (run_ekf(prob, store=False).z_final[0], _numpy(lambda: run_ekf(prob, store=False)).z_final[0]):
+        np.testing.assert_allclose(x_fp, z, rtol=1e-10, atol=1e-10 * np.abs(z).max())
+
+
+def _numpy(fn):
+    with _jit.disabled():
+        return fn()
