@@ -33,7 +33,7 @@ import numpy as np
 
 from .. import _jit
 
-__all__ = ["filter_functions", "run_compiled", "smooth_compiled", "METHODS"]
+__all__ = ["filter_functions", "run_compiled", "smooth_compiled", "replay_compiled", "METHODS"]
 
 #: Transition methods of the kernel (codes of ``EKFProblem.method``).
 METHODS = {"rk4": 0, "rk4-exact": 1, "euler": 2}
@@ -435,8 +435,66 @@ def ekf_batch(t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, R, z
                    div, div_at, d2_at)
 
 
+def rk4_replay(t, U, x0, p, Pk, nsteps, foh, X):
+    """Open-loop RK4 of every member from ``x0 (B, nx)`` over the sample times ``t (nt,)`` under the
+    inputs ``U (B, nt, nu)`` with parameters ``p (1 or B, np)``, ``nsteps (nt-1,)`` steps per interval,
+    the input hold of :func:`cross_interval`, into ``X (B, nt, nx)`` -- the map of
+    :func:`shipid.integrate.rk4_map` (stage inputs start, middle, middle, end).  Returns the number of
+    members whose state became non-finite (they are left unfinished; the caller decides)."""
+    B, nx = x0.shape
+    nt = t.shape[0]
+    nu = U.shape[2]
+    k1, k2, k3, k4 = np.empty(nx), np.empty(nx), np.empty(nx), np.empty(nx)
+    x, xs = np.empty(nx), np.empty(nx)
+    ua, ub, um = np.empty(nu), np.empty(nu), np.empty(nu)
+    bad = 0
+    c = k_consts(p[0], Pk)
+    for b in range(B):
+        if p.shape[0] > 1:
+            c = k_consts(p[b], Pk)
+        x[:] = x0[b]
+        X[b, 0] = x
+        ok = True
+        for k in range(nt - 1):
+            n = nsteps[k]
+            h = (t[k + 1] - t[k]) / n
+            ua[:] = U[b, k]
+            for i in range(n):
+                for j in range(nu):
+                    if not foh:
+                        ub[j] = U[b, k, j]
+                    elif i == n - 1:
+                        ub[j] = U[b, k + 1, j]
+                    else:
+                        wt = (i + 1) / n
+                        ub[j] = (1.0 - wt) * U[b, k, j] + wt * U[b, k + 1, j]
+                    um[j] = 0.5 * (ua[j] + ub[j]) if foh else ua[j]
+                ti = t[k] + i * h if i else t[k]
+                k_rhs(ti, x, ua, c, k1)
+                for m in range(nx):
+                    xs[m] = x[m] + h / 2 * k1[m]
+                k_rhs(ti + h / 2, xs, um, c, k2)
+                for m in range(nx):
+                    xs[m] = x[m] + h / 2 * k2[m]
+                k_rhs(ti + h / 2, xs, um, c, k3)
+                for m in range(nx):
+                    xs[m] = x[m] + h * k3[m]
+                k_rhs(ti + h, xs, ub, c, k4)
+                for m in range(nx):
+                    x[m] = x[m] + h / 6 * (k1[m] + 2 * k2[m] + 2 * k3[m] + k4[m])
+                ua[:] = ub
+            for m in range(nx):
+                if not math.isfinite(x[m]):
+                    ok = False
+            X[b, k + 1] = x
+            if not ok:
+                bad += 1
+                break
+    return bad
+
+
 FILTER = {"mat_mul": mat_mul, "tangent": tangent, "_work": _work, "cross_interval": cross_interval,
-          "ekf_member": ekf_member, "ekf_batch": ekf_batch}
+          "ekf_member": ekf_member, "ekf_batch": ekf_batch, "rk4_replay": rk4_replay}
 
 
 # ------------------------------------------------------------------ RTS smoother (model-free)
@@ -490,16 +548,16 @@ def _source_hash(functions: dict) -> str:
     return h.hexdigest()[:10]
 
 
-def filter_functions(model):
+def filter_functions(model, notice: bool = True):
     """The compiled filter for ``model`` (a dict of numba functions), or ``None`` when compilation is
-    off (:func:`shipid._jit.enabled`) or the model declares no equations (then a one-line notice,
-    once per model class)."""
+    off (:func:`shipid._jit.enabled`) or the model declares no equations (then, with ``notice``, a
+    one-line notice, once per model class)."""
     if not _jit.enabled():
         return None
     eq = getattr(model, "_equations", None)
     if eq is None:
         key = type(model).__name__
-        if key not in _noticed:
+        if notice and key not in _noticed:
             _noticed.add(key)
             warnings.warn(f"shipid: model '{model.name}' declares no compiled equations (Model._equations); "
                           "the EKF runs on the numpy path", RuntimeWarning, stacklevel=3)
@@ -587,6 +645,26 @@ def run_compiled(prob, store: bool, nis_limit: float):
         loglik=loglik, nis=nis, diverged=div, diverged_at=div_at, message=message,
         gated=gated, n_gated=gated.sum(axis=1),
     )
+
+
+def replay_compiled(model, x0, t, U, p, nsteps, foh: bool):
+    """Open-loop RK4 of ``model`` on the compiled equations (what :func:`shipid.simulate.simulate` does
+    with sampled inputs and ``method="rk4"``), or ``None`` when compilation is off, the model declares
+    no compiled equations, or a state became non-finite (the caller's numpy path then reports it with
+    its own failure semantics).
+
+    ``x0 (B, nx)``, ``t (nt,)``, ``U (B, nt, nu)``, ``p (np,)`` or ``(B, np)``, ``nsteps (nt-1,)`` int,
+    ``foh``: first-order hold.  Returns ``X (B, nt, nx)``.
+    """
+    fns = filter_functions(model, notice=False)  # the simulator's numpy path is not slower than expected
+    if fns is None:
+        return None
+    f64 = lambda a: np.ascontiguousarray(a, dtype=float)  # noqa: E731
+    x0 = f64(x0)
+    X = np.empty((x0.shape[0], len(t), x0.shape[1]))
+    bad = fns["rk4_replay"](f64(t), f64(U), x0, f64(np.atleast_2d(p)), f64(model._kernel_constants()),
+                            np.ascontiguousarray(nsteps, dtype=np.int64), bool(foh), X)
+    return None if bad else X
 
 
 def smooth_compiled(out):
