@@ -225,6 +225,17 @@ def simulate(
     if method == "dopri5":
         return _simulate_dopri5(model, x0, t, U, controller, law, p, rtol, 1e-3 * rtol if atol is None else atol,
                                 first_step, foh=input_hold == "foh" and U is not None)
+    foh = input_hold == "foh" and U is not None
+    n_int = interval_steps(t, substeps, h_max).tolist()
+    if U is not None and controller is None and p.dtype.kind == "f" and (p.ndim == 1 or p.shape[:-1] == batch):
+        # sampled inputs: the same RK4 map on the model's compiled equations (issue 15), when available
+        from .identify._kernel import replay_compiled
+
+        Xc = replay_compiled(model, x0.reshape(-1, model.nx), t, U.reshape(-1, n_t, model.nu), p, n_int, foh)
+        if Xc is not None:
+            meta = {"method": "rk4", **({"failed": [], "failed_at": []} if batch else {})}
+            return SimulationResult(t=t, x=Xc.reshape(batch + (n_t, model.nx)), u=np.array(U), model=model,
+                                    params=np.array(p), success=True, message="integration finished", meta=meta)
     X = np.full(batch + (n_t, model.nx), np.nan)
     Uout = np.full(batch + (n_t, model.nu), np.nan)
     x = x0.copy()
@@ -232,8 +243,6 @@ def simulate(
     ok, msg = True, "integration finished"
     f = model._rhs_bound(p)
     failed_at = np.full(batch, np.nan)  # time at which each batch member became non-finite
-    foh = input_hold == "foh" and U is not None
-    n_int = interval_steps(t, substeps, h_max).tolist()
     for k in range(n_t - 1):
         nk = n_int[k]
         h = (t[k + 1] - t[k]) / nk
