@@ -89,7 +89,8 @@ from .._jit import compiled, rebind
 from . import _mmg_equations as _eq
 from .base import Model, batch_shape
 
-__all__ = ["MMGModel", "MMGParticulars", "MMG_PARAM_NAMES", "eq4_mass_matrix", "ShipEquationsModel", "resolve_particulars"]
+__all__ = ["MMGModel", "MMGParticulars", "MMG_PARAM_NAMES", "eq4_mass_matrix", "ShipEquationsModel", "DerivedConstants",
+           "resolve_particulars", "components"]
 
 #: Non-dimensional (prime-system) parameters, in order.
 MMG_PARAM_NAMES = _eq.PARAM_NAMES
@@ -221,7 +222,7 @@ def _no_default(f) -> bool:
     return f.default is dataclasses.MISSING
 
 
-def _components(a):
+def components(a):
     """View of ``a (..., k)`` with the component axis first (cheap for 1-D and 2-D arrays)."""
     return a.T if a.ndim <= 2 else np.moveaxis(a, -1, 0)
 
@@ -253,7 +254,52 @@ def resolve_particulars(model: Model, params, particulars, lpp: float | None) ->
     return particulars.scaled(lpp) if lpp is not None else particulars
 
 
-class ShipEquationsModel(Model):
+class DerivedConstants:
+    """Mixin: the constants of a model's equations (its ``_derived(p)``) cached by parameter value and
+    ``self.particulars`` (used by :class:`ShipEquationsModel` and :class:`shipid.environment.EnvironmentModel`)."""
+
+    def _derived_of(self, p, form: str = "floats"):
+        """:meth:`_derived` with a cache for real 1-D parameter arrays (keyed by value and particulars).
+
+        ``form``: ``"floats"`` (a tuple of Python floats), ``"arrays"`` (a tuple of 0-d float arrays:
+        numpy multiplies those by arrays faster than Python floats), ``"vector"`` (one float array,
+        for the compiled equations) or ``"rows"`` (the same as a (1, nc) array).  Other ``p``
+        (batched, complex) gives a tuple of arrays.
+        """
+        if isinstance(p, np.ndarray) and p.ndim == 1 and p.dtype.kind == "f":
+            def build():
+                val = self._derived(p.tolist())
+                vec = np.array(val, dtype=float)
+                return {"floats": val, "arrays": tuple(np.array(v) for v in val), "vector": vec, "rows": vec[None]}
+
+            return self._cached("_derived_cache", p.tobytes(), 64, build)[form]
+        return self._derived(p if isinstance(p, (list, tuple)) else components(p))
+
+    def _cached(self, store: str, key: bytes, limit: int, build):
+        """``build()`` cached under ``key`` in this model's dict ``store`` (at most ``limit`` entries;
+        entries made with other particulars are rebuilt)."""
+        cache = self.__dict__.setdefault(store, {})
+        hit = cache.get(key)
+        if hit is None or hit[0] is not self.particulars:
+            if len(cache) > limit:
+                cache.clear()
+            hit = cache[key] = (self.particulars, build())
+        return hit[1]
+
+    def _constant_rows(self, p, lead) -> np.ndarray:
+        """The constants of :meth:`_derived` for real parameters ``p`` broadcast to the batch ``lead``:
+        (1, nc) when shared (1-D ``p``), else (N, nc), one row per sample (cached by value)."""
+        if p.ndim == 1:
+            return self._derived_of(p, "rows")
+        P = np.broadcast_to(p, lead + p.shape[-1:]).reshape(-1, p.shape[-1])
+
+        def build():
+            return np.ascontiguousarray(np.stack(np.broadcast_arrays(*self._derived(P.T)), axis=-1), dtype=float)
+
+        return self._cached("_rows_cache", P.tobytes(), 16, build)
+
+
+class ShipEquationsModel(DerivedConstants, Model):
     """Base of the 3-DOF ship models whose equations are one scalar source (:mod:`._mmg_equations`,
     :mod:`._lowspeed_equations`) run on floats, numpy arrays, complex steps and, with numba, compiled.
 
@@ -323,34 +369,6 @@ class ShipEquationsModel(Model):
         in ``param_names`` order (floats or arrays)."""
         return self._eqm.derived(p, self._particulars_tuple())
 
-    def _derived_of(self, p, form: str = "floats"):
-        """:meth:`_derived` with a cache for real 1-D parameter arrays (keyed by value and particulars).
-
-        ``form``: ``"floats"`` (a tuple of Python floats), ``"arrays"`` (a tuple of 0-d float arrays:
-        numpy multiplies those by arrays faster than Python floats), ``"vector"`` (one float array,
-        for the compiled equations) or ``"rows"`` (the same as a (1, nc) array).  Other ``p``
-        (batched, complex) gives a tuple of arrays.
-        """
-        if isinstance(p, np.ndarray) and p.ndim == 1 and p.dtype.kind == "f":
-            def build():
-                val = self._derived(p.tolist())
-                vec = np.array(val, dtype=float)
-                return {"floats": val, "arrays": tuple(np.array(v) for v in val), "vector": vec, "rows": vec[None]}
-
-            return self._cached("_derived_cache", p.tobytes(), 64, build)[form]
-        return self._derived(p if isinstance(p, (list, tuple)) else _components(p))
-
-    def _cached(self, store: str, key: bytes, limit: int, build):
-        """``build()`` cached under ``key`` in this model's dict ``store`` (at most ``limit`` entries;
-        entries made with other particulars are rebuilt)."""
-        cache = self.__dict__.setdefault(store, {})
-        hit = cache.get(key)
-        if hit is None or hit[0] is not self.particulars:
-            if len(cache) > limit:
-                cache.clear()
-            hit = cache[key] = (self.particulars, build())
-        return hit[1]
-
     def _forces(self, x, u, p) -> dict:
         """Forces/moments at midship and intermediate quantities (numpy; complex-step safe).
 
@@ -358,25 +376,13 @@ class ShipEquationsModel(Model):
         dict keyed by the equations' ``FORCE_KEYS``.
         """
         cplx = any(np.iscomplexobj(a) for a in (x, u, p))
-        x, u = _components(x), _components(u)
+        x, u = components(x), components(u)
         forces = (self._eq_complex if cplx else self._eq_numpy)["forces"]
         return dict(zip(self._eqm.FORCE_KEYS, forces(x[3], x[4], x[5], u[0], u[1], self._derived_of(p, "arrays"))))
 
     def forces(self, x, u, params=None) -> dict:
         """Public view of :meth:`_forces` (forces [N], moments [N m], speeds [m/s], angles [rad])."""
         return self._forces(np.asarray(x, dtype=float), np.asarray(u, dtype=float), self._p(params))
-
-    def _constant_rows(self, p, lead) -> np.ndarray:
-        """The constants of :meth:`_derived` for real parameters ``p`` broadcast to the batch ``lead``:
-        (1, nc) when shared (1-D ``p``), else (N, nc), one row per sample (cached by value)."""
-        if p.ndim == 1:
-            return self._derived_of(p, "rows")
-        P = np.broadcast_to(p, lead + p.shape[-1:]).reshape(-1, p.shape[-1])
-
-        def build():
-            return np.ascontiguousarray(np.stack(np.broadcast_arrays(*self._derived(P.T)), axis=-1), dtype=float)
-
-        return self._cached("_rows_cache", P.tobytes(), 16, build)
 
     def _compiled(self, cs: bool = False):
         """The compiled equations (real set, or the complex-step set), or None without numba."""
@@ -397,7 +403,7 @@ class ShipEquationsModel(Model):
         if real and x.ndim == 1 and u.ndim == 1 and p.ndim == 1:  # one sample: Python floats
             return np.array(self._eqm.rates(*x[2:].tolist(), *u.tolist(), self._derived_of(p)))
         rates = (self._eq_numpy if real else self._eq_complex)["rates"]
-        xc, uc = _components(x), _components(u)
+        xc, uc = components(x), components(u)
         out = rates(xc[2], xc[3], xc[4], xc[5], uc[0], uc[1], self._derived_of(p, "arrays"))
         try:
             return np.stack(out, axis=-1)
