@@ -117,7 +117,6 @@ class EnvironmentModel(DerivedConstants, ComplexStepJacobians, Model):
         self.units = {**base.units, "cx": "m/s", "cy": "m/s", "wind_speed_true": "m/s", "wind_dir_true": "rad",
                       **{k: "-" for k in WIND_PARAM_NAMES}}
         self._nb = base.np
-        self._sets = _eqe.equation_sets(base._eqm)
         super().__init__(params)
 
     def _default_params(self) -> np.ndarray:
@@ -152,6 +151,8 @@ class EnvironmentModel(DerivedConstants, ComplexStepJacobians, Model):
 
     # ------------------------------------------------------------- equations
     particulars = property(lambda self: self.base.particulars, doc="The base ship's particulars.")
+    #: The equation sets on the base model's equations (module-level cache; not stored: models pickle).
+    _sets = property(lambda self: _eqe.equation_sets(self.base._eqm))
 
     def _kernel_constants(self) -> np.ndarray:
         """``P`` of :func:`shipid.environment._equations.env_derived`: base particulars, the number of base

@@ -336,9 +336,6 @@ def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shi
                     fit_every=a.fit_every, estimate=tuple(a.estimate.split(",")), by_type=not a.no_by_type,
                     calm_water=() if a.no_calm_water else ("mmg",), turning=not a.no_turning, progress=False)
     print(f"settings: {res.settings | {'runs': len(res.settings['runs']), 'fold_of': '...'}}; {time.time() - t0:.0f} s")
-    if a.save:
-        with open(a.save, "wb") as fh:
-            pickle.dump(res, fh)
     with pd.option_context("display.width", 200, "display.max_rows", 500, "display.float_format", "{:.3f}".format):
         for H in (10.0, 30.0, 60.0):
             print(f"median position error after {H:g} s [m]")
@@ -352,6 +349,9 @@ def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shi
         if len(res.turning):
             print(res.turning.groupby("model")[["steady_diameter_L", "steady_speed", "time_360_s"]].median().to_string())
         print({k: {m: (v["success"], round(v["seconds"], 1)) for m, v in f.items()} for k, f in res.fits.items()})
+    if a.save:
+        with open(a.save, "wb") as fh:
+            pickle.dump(res, fh)
 
 
 if __name__ == "__main__":  # pragma: no cover
