@@ -68,6 +68,8 @@ REFINE_MODES = ("output-error", "metrics")
 #: drag grows with v|v|).  Taken as that usual value, not tuned: 6 and 10 deg were both tried on the KVLCC2
 #: training runs (tc+-35, zz+-10) and give the same (physical) yaw signs; the hold-out runs were not used.
 LINEAR_DRIFT_DEG = 10.0
+#: Fewest samples a log keeps in the linear range to be fitted at all (fewer: the log is left out, and said).
+MIN_WINDOW_SAMPLES = 20
 #: What ``refine="auto"`` does when the logs hold turning circles and zigzags.  Chosen by leave-one-run-out
 #: within the four KVLCC2 training runs (fit on three, predict the fourth's tactical diameter or overshoots;
 #: score = the worst goal-normalised error; rule fixed before any variant ran; the held-out zz+-20 never
@@ -473,9 +475,18 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
                              "between 0 and 90, e.g. 10")
         why_drift = "asked"
     if drift is not None:
-        used = [linear_window(lg, drift) for lg in used]
+        windows = [linear_window(lg, drift) for lg in used]
+        short = [lg.name for lg in windows if len(lg) < MIN_WINDOW_SAMPLES]
+        if len(short) == len(windows):
+            raise ValueError(f"no log stays below {drift:g} deg of drift for {MIN_WINDOW_SAMPLES} samples from its "
+                             f"start: {name} is linear in v and r and holds for small drift only; fit a model with "
+                             "non-linear terms (response-nl, mmg) or pass max_drift_deg=None (--max-drift none)")
+        used = [lg for lg in windows if len(lg) >= MIN_WINDOW_SAMPLES]
         kept = ", ".join(f"{lg.name} {lg.time[-1] - lg.time[0]:.4g} s" for lg in used)
         why_drift += f"; each log until its drift angle first exceeds {drift:g} deg ({kept})"
+        if short:
+            why_drift += (f"; left out (fewer than {MIN_WINDOW_SAMPLES} samples below it from the start): "
+                          + ", ".join(short))
     step("linear range", drift, why_drift)
     # estimated / fixed
     est = list(estimate) if estimate is not None else DEFAULT_ESTIMATE.get(name)
