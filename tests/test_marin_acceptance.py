@@ -100,3 +100,28 @@ def test_linear_window_and_max_drift_option_errors(tmp_path, capsys):
     err = capsys.readouterr().err
     assert rc == 2 and "--max-drift abc: give 'auto', 'none' or a drift angle in degrees between 0 and 90" in err
     assert "Traceback" not in err
+
+
+def test_linear_range_leaves_out_logs_that_start_beyond_it():
+    """A log that starts at 15 deg of drift has no linear range: left out and said; when every log is like
+    that, a clear error names the way out."""
+    from shipid.identify.recipe import fit_logs
+    from shipid.logs import TrialLog
+
+    t = np.arange(200) * 0.1
+    drifting = TrialLog.from_arrays(t, name="drifting", u=np.full(200, 1.0), v=np.full(200, -0.27),
+                                    r=np.full(200, 0.0), psi=np.zeros(200), x=t.copy(), y=-0.27 * t,
+                                    delta=np.zeros(200), n=np.full(200, 10.0), consistency_checks=False)
+    with pytest.raises(ValueError, match=r"no log stays below 10 deg of drift for 20 samples from its start: "
+                                         r"kcs-response is linear in v and r .* \(--max-drift none\)"):
+        fit_logs([drifting], "kcs-response", lpp=4.36)
+    from shipid.datasets import bundled_kcs_logs
+    from shipid.logs import read_log
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        zz = read_log(next(p for p in bundled_kcs_logs() if "zz_m10" in str(p)))
+        fit = fit_logs([zz, drifting], "kcs-response", lpp=4.36, n_passes=1, refine=None)
+    step = next(s for s in fit.steps if s["step"] == "linear range")
+    assert "left out (fewer than 20 samples below it from the start): drifting" in step["reason"]
+    assert [lg.name for lg in fit.logs] == [zz.name]

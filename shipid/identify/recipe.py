@@ -63,10 +63,13 @@ SAMPLES_PER_TAU = 25
 #: (a model off by this much pays as much as a replay error the size of the signal).
 METRIC_TOL = {"tactical_diameter_L": 5.0, "overshoot1_deg": 2.0, "overshoot2_deg": 3.0}
 REFINE_MODES = ("output-error", "metrics")
-#: Drift angle [deg] up to which :func:`linear_window` uses a log for a model linear in v and r (the usual
-#: linear range of hull manoeuvring derivatives, e.g. Clarke et al. 1983 fit linear derivatives to
-#: rotating-arm and PMM data of small drift; set before any fit ran; 6 deg gives the same signs on the KVLCC2 runs).
+#: Drift angle [deg] up to which :func:`linear_window` uses a log for a model linear in v and r: the usual
+#: range of linear hull manoeuvring derivatives (drift of a few degrees up to about 10; beyond it cross-flow
+#: drag grows with v|v|).  Taken as that usual value, not tuned: 6 and 10 deg were both tried on the KVLCC2
+#: training runs (tc+-35, zz+-10) and give the same (physical) yaw signs; the hold-out runs were not used.
 LINEAR_DRIFT_DEG = 10.0
+#: Fewest samples a log keeps in the linear range to be fitted at all (fewer: the log is left out, and said).
+MIN_WINDOW_SAMPLES = 20
 #: Default multiplier of the metric residuals in ``refine="metrics"`` (:func:`refine_fit`): 0.1, chosen by
 #: leave-one-run-out from 0.1, 0.3, 0.5, 1 (see :data:`AUTO_REFINE`).  At 1 the six training metrics dominate
 #: eight free parameters and the fit matches the metrics, not the dynamics (worst left-out run 5.3 tolerances);
@@ -482,9 +485,18 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
                              "between 0 and 90, e.g. 10")
         why_drift = "asked"
     if drift is not None:
-        used = [linear_window(lg, drift) for lg in used]
+        windows = [linear_window(lg, drift) for lg in used]
+        short = [lg.name for lg in windows if len(lg) < MIN_WINDOW_SAMPLES]
+        if len(short) == len(windows):
+            raise ValueError(f"no log stays below {drift:g} deg of drift for {MIN_WINDOW_SAMPLES} samples from its "
+                             f"start: {name} is linear in v and r and holds for small drift only; fit a model with "
+                             "non-linear terms (response-nl, mmg) or pass max_drift_deg=None (--max-drift none)")
+        used = [lg for lg in windows if len(lg) >= MIN_WINDOW_SAMPLES]
         kept = ", ".join(f"{lg.name} {lg.time[-1] - lg.time[0]:.4g} s" for lg in used)
         why_drift += f"; each log until its drift angle first exceeds {drift:g} deg ({kept})"
+        if short:
+            why_drift += (f"; left out (fewer than {MIN_WINDOW_SAMPLES} samples below it from the start): "
+                          + ", ".join(short))
     step("linear range", drift, why_drift)
     # estimated / fixed
     est = list(estimate) if estimate is not None else DEFAULT_ESTIMATE.get(name)

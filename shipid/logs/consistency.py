@@ -500,11 +500,10 @@ def _sig_digits(f: np.ndarray) -> int:
     if f.size == 0:
         return 16
     ex = np.floor(np.log10(np.abs(f)))
-    for s in range(1, 16):
-        q = 10.0 ** (ex - (s - 1))
-        if np.all(np.abs(np.round(f / q) * q - f) <= 1e-9 * np.abs(f)):
-            return s
-    return 16
+    s = np.arange(1, 16)[:, None]
+    q = 10.0 ** (ex[None, :] - (s - 1))   # (15, n): the print step of each value at 1..15 digits, all at once
+    ok = np.all(np.abs(np.round(f / q) * q - f) <= 1e-9 * np.abs(f), axis=1)
+    return int(np.argmax(ok)) + 1 if ok.any() else 16
 
 
 def _check_position_freeze(c: _Ctx) -> None:
