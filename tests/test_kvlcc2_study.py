@@ -226,6 +226,7 @@ def test_cli_mmg_default_recipe_on_the_holdout(tmp_path):
     assert steps["sampling"] == 4 and steps["neutral rudder angle"] == pytest.approx(0.915, abs=0.01)
     assert steps["refinement"] == "metrics" and res.method == "output-error" and res.success
     assert "weight 0.1" in next(s["reason"] for s in res.settings["recipe"] if s["step"] == "metric residuals")
+    assert res.settings["metric_weight"] == 0.1
     assert abs(errs["tc_35"]["TD"]) < 5.0                                      # goal met (+4.7 %)
     assert -6.8 < errs["tc_-35"]["TD"] < -5.0                                  # goal missed (-5.8 %)
     assert 1.5 < errs["zz_20"]["overshoot1_deg"] < 2.6                         # at the goal's edge (+2.07)

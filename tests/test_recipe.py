@@ -115,6 +115,7 @@ def test_refine_fit_reuses_one_ekf_stage_and_weighs_the_metrics():
     assert ekf.refiner is None and [s["step"] for s in ekf.steps][-1] == "refinement"  # the EKF stage untouched
     np.testing.assert_array_equal(m0.refiner.coef_.to_numpy(), oe.refiner.coef_.to_numpy())
     assert "weight 1" in m1.steps[-2]["reason"] and "weight 0" in m0.steps[-2]["reason"]
+    assert m1.result().settings["metric_weight"] == 1.0 and "metric_weight" not in oe.result().settings
     f, used = metric_residuals(ekf.to_model(), logs)
     assert len(used) == 2
     P = np.stack([oe.to_model().params, m1.to_model().params])
