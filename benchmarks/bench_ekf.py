@@ -36,7 +36,10 @@ from shipid.synthetic import TrialRecipe, make_trial
 
 
 def filterpy_loop(prob):
-    """The reference: filterpy's EKF driven step by step (update, then predict)."""
+    """The reference: filterpy's EKF driven step by step (update, then predict), on the same problem:
+    the problem's input hold (first-order hold: the step's end input ``U[k+1]``), one RK4 step per
+    interval, no innovation gate (a gate that rejects nothing changes nothing; the final-state agreement
+    printed says whether it did)."""
     from filterpy.kalman import ExtendedKalmanFilter
 
     model = prob.model
@@ -57,6 +60,7 @@ def filterpy_loop(prob):
     hx = lambda x: H @ x  # noqa: E731
     t, U, Y = prob.t[0], prob.U[0], prob.Y[0]
     F = np.eye(nz)
+    foh = prob.input_hold == "foh"
     for k in range(t.size):
         ekf.update(Y[k][:, None], hj, hx)
         if k == t.size - 1:
@@ -64,7 +68,8 @@ def filterpy_loop(prob):
         z = ekf.x[:, 0]
         p = prob.p_base[0].copy()
         p[prob.est_idx] = z[nx:] * prob.scale
-        xn, Fx, Fp = rk4_step_taylor_tangent(model, t[k], z[:nx], U[k], p, t[k + 1] - t[k])
+        xn, Fx, Fp = rk4_step_taylor_tangent(model, t[k], z[:nx], U[k], p, t[k + 1] - t[k],
+                                             U[k + 1] if foh else None)
         F[:nx, :nx] = Fx
         F[:nx, nx:] = Fp[:, prob.est_idx] * prob.scale
         ekf.F = F

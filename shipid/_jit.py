@@ -62,7 +62,7 @@ def disabled():
         _off[0] = prev
 
 
-def rebind(functions: dict, namespace: dict, jit: bool = False, tag: str = "") -> dict:
+def rebind(functions: dict, namespace: dict, jit: bool = False, tag: str = "", fastmath=False) -> dict:
     """The ``functions`` (name -> function, in dependency order) with their globals overridden.
 
     Each function is rebuilt from its own code object with its module's globals updated by
@@ -70,7 +70,9 @@ def rebind(functions: dict, namespace: dict, jit: bool = False, tag: str = "") -
     new set.  Names that ``namespace`` provides are not rebuilt (the namespace's object is used).
     With ``jit`` each rebuilt function is compiled by ``numba.njit(cache=True)`` (lazily, at its
     first call); ``tag`` is appended to the qualified names so that two sets built from the same
-    functions with different globals keep separate disk caches.
+    functions with different globals keep separate disk caches.  ``fastmath`` is numba's option (e.g.
+    ``{"reassoc", "contract"}``: sums may be reordered and fused, so loops vectorise; never the flags
+    that assume finite values, which the divergence checks rely on).
     """
     if jit:
         _import_numba()
@@ -84,7 +86,7 @@ def rebind(functions: dict, namespace: dict, jit: bool = False, tag: str = "") -
         new = types.FunctionType(fn.__code__, g, fn.__name__, fn.__defaults__, fn.__closure__)
         new.__qualname__, new.__doc__ = fn.__qualname__ + tag, fn.__doc__
         if jit:
-            new = _numba.njit(cache=True)(new)
+            new = _numba.njit(cache=True, fastmath=fastmath)(new)
         ns[name] = out[name] = new
     return out
 
@@ -100,12 +102,13 @@ def _import_numba():
     return _numba
 
 
-def compiled(functions: dict, namespace: dict | None = None, tag: str = "") -> dict | None:
+def compiled(functions: dict, namespace: dict | None = None, tag: str = "", fastmath=False) -> dict | None:
     """numba-compiled ``functions`` with globals overridden by ``namespace`` (see :func:`rebind`; built
     once per ``functions`` dict), or ``None`` when compilation is not :func:`enabled`."""
     if not _HAVE_NUMBA or _ENV_OFF or _off[0]:
         return None
     out = _compiled.get(id(functions))
     if out is None:
-        out = _compiled[id(functions)] = (functions, rebind(functions, namespace or {}, jit=True, tag=tag))
+        out = _compiled[id(functions)] = (functions, rebind(functions, namespace or {}, jit=True, tag=tag,
+                                                                fastmath=fastmath))
     return out[1]

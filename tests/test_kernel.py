@@ -180,3 +180,60 @@ def test_a_run_that_would_not_fit_is_refused_with_the_numbers(kcs_problem, monke
     monkeypatch.setenv("SHIPID_MEMORY_LIMIT", "lots")
     with pytest.raises(ValueError, match="SHIPID_MEMORY_LIMIT='lots'"):
         run_ekf(kcs_problem, store=True)
+
+
+@pytest.mark.parametrize("hold", ["foh", "zoh"])
+def test_benchmark_reference_solves_the_same_problem(kcs_truth, hold):
+    """``benchmarks/bench_ekf.py``'s filterpy loop is the same filter as ``run_ekf`` (both paths), under
+    the problem's input hold.  It once held the input (zero-order) while the identifier's problem is
+    first-order hold: the printed "final-state agreement" was 9e-2, which looked like a state bug."""
+    import importlib.util
+    from pathlib import Path
+
+    from shipid.synthetic import TrialRecipe, make_trial
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_ekf.py"
+    spec = importlib.util.spec_from_file_location("bench_ekf", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    log, _ = make_trial(kcs_truth, TrialRecipe("zz", "zigzag", 20.0, 40.0, ((0.0, 10.0), (20.0, 12.0)), psi_deg=20.0),
+                        np.random.default_rng(1))
+    with _jit.disabled():
+        prob = EKFIdentifier(kcs_truth, n_passes=1, init="model").fit(log).problem_
+    prob = replace(prob, input_hold=hold, gate=None)
+    x_fp = bench.filterpy_loop(prob)
+    for z in (run_ekf(prob, store=False).z_final[0], _numpy(lambda: run_ekf(prob, store=False)).z_final[0]):
+        np.testing.assert_allclose(x_fp, z, rtol=1e-10, atol=1e-10 * np.abs(z).max())
+
+
+def _numpy(fn):
+    with _jit.disabled():
+        return fn()
+
+
+@pytest.mark.parametrize("name", ["kcs-response", "response-nl", "mmg"])
+def test_simulate_on_the_compiled_equations_equals_numpy(name, kcs_logs):
+    """``simulate`` with sampled inputs (the fit's consistency replay, ``replay``) runs the model's
+    compiled equations: same trajectory as the numpy path to 1e-10, for one ship and a batch with
+    per-member parameters, both input holds, sub-steps and a longer interval (h_max)."""
+    from shipid.simulate import simulate
+
+    model = shipid.get_model(name, "kcs") if name == "mmg" else get_model(name)
+    frame = kcs_logs["kcs_zz_p20_rpm"][0].iloc[:300]
+    t = frame["time"].to_numpy().copy()
+    t[150:] += 0.35  # one long interval: more steps there
+    U = frame[list(model.input_names)].to_numpy()
+    if name == "mmg":
+        U = np.column_stack([U[:, 0], np.full(len(t), 10.0)])
+    x0 = frame[list(model.state_names)].to_numpy()[0]
+    x0b = np.stack([x0, x0 * 1.01])
+    pb = np.stack([model.params, model.params * 1.02])
+    assert _kernel.replay_compiled(model, x0[None], t, U[None], model.params, np.full(len(t) - 1, 2), True) is not None
+    for hold in ("foh", "zoh"):
+        for args in ((x0, None), (x0b, pb)):
+            kw = dict(substeps=2, input_hold=hold, h_max=0.06, params=args[1])
+            fast = simulate(model, args[0], t, U if args[1] is None else np.stack([U, U]), **kw)
+            slow = _numpy(lambda: simulate(model, args[0], t, U if args[1] is None else np.stack([U, U]), **kw))
+            assert fast.success and slow.success and fast.meta == slow.meta
+            _close(fast.x, slow.x, f"{name} {hold} states")
+            _close(fast.u, slow.u, f"{name} {hold} inputs")

@@ -33,7 +33,7 @@ import numpy as np
 
 from .. import _jit
 
-__all__ = ["filter_functions", "run_compiled", "smooth_compiled", "METHODS"]
+__all__ = ["filter_functions", "run_compiled", "smooth_compiled", "replay_compiled", "METHODS"]
 
 #: Transition methods of the kernel (codes of ``EKFProblem.method``).
 METHODS = {"rk4": 0, "rk4-exact": 1, "euler": 2}
@@ -229,13 +229,14 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
     sel = np.empty(nm, dtype=np.int64)
     run = np.zeros(nm, dtype=np.int64)
     S = np.empty((nm, nm))
+    S0 = np.empty((nm, nm))
     L = np.empty((nm, nm))
-    PHt = np.empty((nz, nm))
+    PH = np.empty((nm, nz))
     Kt = np.empty((nm, nz))
+    W = np.empty((nm, nz))
     e = np.empty(nm)
     a = np.empty(nm)
-    A = np.empty((nz, nm))
-    colb = np.empty(nm)
+    dz = np.empty(nz)
     z_fin[b] = z
     P_fin[b] = P
     if store:
@@ -265,14 +266,17 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
             ld = 0.0
             ok = True
             if cnt > 0:
+                # rows of P at the measured states (P is exactly symmetric: H P), contiguous
                 for a_ in range(cnt):
                     ja = sel[a_]
                     e[a_] = Y[b, k, ja] - z[meas_idx[ja]]
+                    r_ = meas_idx[ja]
                     for i in range(nz):
-                        PHt[i, a_] = P[i, meas_idx[ja]]
+                        PH[a_, i] = P[r_, i]
                 for a_ in range(cnt):
                     for c_ in range(cnt):
-                        S[a_, c_] = PHt[meas_idx[sel[a_]], c_]
+                        S0[a_, c_] = PH[c_, meas_idx[sel[a_]]]  # H P H^T
+                        S[a_, c_] = S0[a_, c_]
                     S[a_, a_] += R[b, sel[a_]]
                 # Cholesky S = L L^T (fails: not positive definite or not finite)
                 for i in range(cnt):
@@ -290,50 +294,62 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
                     if not ok:
                         break
                 if ok:
-                    # X = S^-1 [H P, e]: forward then backward substitution, column by column
-                    for col in range(nz + 1):
-                        for i in range(cnt):
-                            s = PHt[col, i] if col < nz else e[i]
-                            for m in range(i):
-                                s -= L[i, m] * colb[m]
-                            colb[i] = s / L[i, i]
-                        for i in range(cnt - 1, -1, -1):
-                            s = colb[i]
-                            for m in range(i + 1, cnt):
-                                s -= L[m, i] * colb[m]
-                            colb[i] = s / L[i, i]
-                        for i in range(cnt):
-                            if col < nz:
-                                Kt[i, col] = colb[i]
-                            else:
-                                a[i] = colb[i]
+                    # [K^T, a] = S^-1 [H P, e]: forward then backward substitution, a row (nz long) at a time
+                    for i in range(cnt):
+                        for j in range(nz):
+                            Kt[i, j] = PH[i, j]
+                        s = e[i]
+                        for m in range(i):
+                            lim = L[i, m]
+                            s -= lim * a[m]
+                            for j in range(nz):
+                                Kt[i, j] -= lim * Kt[m, j]
+                        lii = L[i, i]
+                        a[i] = s / lii
+                        for j in range(nz):
+                            Kt[i, j] = Kt[i, j] / lii
+                    for i in range(cnt - 1, -1, -1):
+                        s = a[i]
+                        for m in range(i + 1, cnt):
+                            lmi = L[m, i]
+                            s -= lmi * a[m]
+                            for j in range(nz):
+                                Kt[i, j] -= lmi * Kt[m, j]
+                        lii = L[i, i]
+                        a[i] = s / lii
+                        for j in range(nz):
+                            Kt[i, j] = Kt[i, j] / lii
                     for i in range(cnt):
                         ld += 2.0 * math.log(L[i, i])
                         d2 += e[i] * a[i]
                     for i in range(nz):
-                        s = 0.0
+                        dz[i] = 0.0
+                    for c_ in range(cnt):
+                        ec = e[c_]
+                        for i in range(nz):
+                            dz[i] += Kt[c_, i] * ec
+                    for i in range(nz):
+                        z[i] += dz[i]
+                    # Joseph form A - (A H^T - K R) K^T with A = P - K H P: W = (A H^T - K R)^T, then the
+                    # lower triangle of P - K (H P) - W^T K^T, mirrored (P stays exactly symmetric)
+                    for d_ in range(cnt):
+                        for i in range(nz):
+                            W[d_, i] = PH[d_, i]
                         for c_ in range(cnt):
-                            s += Kt[c_, i] * e[c_]
-                        z[i] += s
-                    # Joseph form A - (A H^T - K R) K^T with A = P - K H P (H P = PHt^T); the result is
-                    # symmetric, so the lower triangle is computed and mirrored (P stays exactly symmetric)
-                    for i in range(nz):  # the columns of A the correction needs: A H^T
-                        for d_ in range(cnt):
-                            s = PHt[i, d_]
-                            for c_ in range(cnt):
-                                s -= Kt[c_, i] * PHt[meas_idx[sel[d_]], c_]
-                            A[i, d_] = s
+                            sdc = S0[d_, c_]
+                            for i in range(nz):
+                                W[d_, i] -= sdc * Kt[c_, i]
+                        rd = R[b, sel[d_]]
+                        for i in range(nz):
+                            W[d_, i] -= Kt[d_, i] * rd
                     for i in range(nz):
                         for c_ in range(cnt):
-                            colb[c_] = A[i, c_] - Kt[c_, i] * R[b, sel[c_]]
-                        for j in range(i + 1):
-                            s = P[i, j]
-                            for c_ in range(cnt):
-                                s -= Kt[c_, i] * PHt[j, c_]
-                            for c_ in range(cnt):
-                                s -= colb[c_] * Kt[c_, j]
-                            P[i, j] = s
-                            P[j, i] = s
+                            kci = Kt[c_, i]
+                            wci = W[c_, i]
+                            for j in range(i + 1):
+                                P[i, j] -= kci * PH[c_, j] + wci * Kt[c_, j]
+                        for j in range(i):
+                            P[j, i] = P[i, j]
                 else:
                     d2 = np.nan
                     ld = np.nan
@@ -386,12 +402,13 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
         for i in range(nx, nz):
             zn[i] = z[i]
         # P_next = F P F^T with F = [[Ftop], [0 I]] + Q (P is exactly symmetric, so is P_next)
-        for i in range(nx):  # M = top rows of F P (nx, nz)
+        for i in range(nx):  # M = top rows of F P (nx, nz), a row of P at a time
             for j in range(nz):
-                s = 0.0
-                for m in range(nz):
-                    s += Ftop[i, m] * P[m, j]
-                M[i, j] = s
+                M[i, j] = 0.0
+            for m in range(nz):
+                f = Ftop[i, m]
+                for j in range(nz):
+                    M[i, j] += f * P[m, j]
         for i in range(nx):  # top-left block M F_top^T (symmetric: P is)
             for j in range(i + 1):
                 s = 0.0
@@ -435,33 +452,154 @@ def ekf_batch(t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, R, z
                    div, div_at, d2_at)
 
 
+def rk4_replay(t, U, x0, p, Pk, nsteps, foh, X):
+    """Open-loop RK4 of every member from ``x0 (B, nx)`` over the sample times ``t (nt,)`` under the
+    inputs ``U (B, nt, nu)`` with parameters ``p (1 or B, np)``, ``nsteps (nt-1,)`` steps per interval,
+    the input hold of :func:`cross_interval`, into ``X (B, nt, nx)`` -- the map of
+    :func:`shipid.integrate.rk4_map` (stage inputs start, middle, middle, end).  Returns the number of
+    members whose state became non-finite (they are left unfinished; the caller decides)."""
+    B, nx = x0.shape
+    nt = t.shape[0]
+    nu = U.shape[2]
+    k1, k2, k3, k4 = np.empty(nx), np.empty(nx), np.empty(nx), np.empty(nx)
+    x, xs = np.empty(nx), np.empty(nx)
+    ua, ub, um = np.empty(nu), np.empty(nu), np.empty(nu)
+    bad = 0
+    c = k_consts(p[0], Pk)
+    for b in range(B):
+        if p.shape[0] > 1:
+            c = k_consts(p[b], Pk)
+        x[:] = x0[b]
+        X[b, 0] = x
+        ok = True
+        for k in range(nt - 1):
+            n = nsteps[k]
+            h = (t[k + 1] - t[k]) / n
+            ua[:] = U[b, k]
+            for i in range(n):
+                for j in range(nu):
+                    if not foh:
+                        ub[j] = U[b, k, j]
+                    elif i == n - 1:
+                        ub[j] = U[b, k + 1, j]
+                    else:
+                        wt = (i + 1) / n
+                        ub[j] = (1.0 - wt) * U[b, k, j] + wt * U[b, k + 1, j]
+                    um[j] = 0.5 * (ua[j] + ub[j]) if foh else ua[j]
+                ti = t[k] + i * h if i else t[k]
+                k_rhs(ti, x, ua, c, k1)
+                for m in range(nx):
+                    xs[m] = x[m] + h / 2 * k1[m]
+                k_rhs(ti + h / 2, xs, um, c, k2)
+                for m in range(nx):
+                    xs[m] = x[m] + h / 2 * k2[m]
+                k_rhs(ti + h / 2, xs, um, c, k3)
+                for m in range(nx):
+                    xs[m] = x[m] + h * k3[m]
+                k_rhs(ti + h, xs, ub, c, k4)
+                for m in range(nx):
+                    x[m] = x[m] + h / 6 * (k1[m] + 2 * k2[m] + 2 * k3[m] + k4[m])
+                ua[:] = ub
+            for m in range(nx):
+                if not math.isfinite(x[m]):
+                    ok = False
+            X[b, k + 1] = x
+            if not ok:
+                bad += 1
+                break
+    return bad
+
+
 FILTER = {"mat_mul": mat_mul, "tangent": tangent, "_work": _work, "cross_interval": cross_interval,
-          "ekf_member": ekf_member, "ekf_batch": ekf_batch}
+          "ekf_member": ekf_member, "ekf_batch": ekf_batch, "rk4_replay": rk4_replay}
 
 
 # ------------------------------------------------------------------ RTS smoother (model-free)
 def rts_member(zf, Pf, zp, Pp, F, zs, Ps):
-    """Backward recursion of one member: ``G = Pf F^T Pp^-1`` (solved as ``Pp G^T = F Pf``),
-    ``zs_k = zf_k + G (zs_{k+1} - zp_{k+1})``, ``Ps_k = Pf_k + G (Ps_{k+1} - Pp_{k+1}) G^T`` (symmetrised)."""
+    """Backward recursion of one member: ``G = Pf F^T Pp^-1`` (solved as ``Pp G^T = F Pf`` by Cholesky;
+    the pseudo-inverse where ``Pp`` is not positive definite), ``zs_k = zf_k + G (zs_{k+1} - zp_{k+1})``,
+    ``Ps_k = Pf_k + G (Ps_{k+1} - Pp_{k+1}) G^T`` (its lower triangle, mirrored).  Loops over rows of
+    ``nz`` (they vectorise); the zero entries of ``F`` (its parameter rows are the identity) are skipped
+    (exact: the filtered covariances of a member that did not diverge are finite)."""
     N, nz = zf.shape
     zs[N - 1] = zf[N - 1]
     Ps[N - 1] = Pf[N - 1]
     d = np.empty(nz)
+    dzs = np.empty(nz)
+    Gt = np.empty((nz, nz))
+    T = np.empty((nz, nz))
+    L = np.empty((nz, nz))
     for k in range(N - 2, -1, -1):
-        rhs = np.dot(F[k], Pf[k])
-        try:
-            Gt = np.linalg.solve(Pp[k + 1], rhs)
-        except Exception:  # singular prediction covariance: pseudo-inverse
-            Gt = np.dot(np.linalg.pinv(Pp[k + 1]), rhs)
-        Gt = np.ascontiguousarray(Gt)
-        G = np.ascontiguousarray(Gt.T)
+        Fk, Pfk, Ppk = F[k], Pf[k], Pp[k + 1]
+        for i in range(nz):  # Gt = F Pf
+            for j in range(nz):
+                Gt[i, j] = 0.0
+            for m in range(nz):
+                f = Fk[i, m]
+                if f != 0.0:
+                    for j in range(nz):
+                        Gt[i, j] += f * Pfk[m, j]
+        ok = True
+        for i in range(nz):  # Pp = L L^T
+            for j in range(i + 1):
+                s = Ppk[i, j]
+                for m in range(j):
+                    s -= L[i, m] * L[j, m]
+                if i == j:
+                    if not s > 0.0:
+                        ok = False
+                        break
+                    L[i, i] = math.sqrt(s)
+                else:
+                    L[i, j] = s / L[j, j]
+            if not ok:
+                break
+        if ok:  # Gt = Pp^-1 F Pf: forward and backward substitution a row at a time
+            for i in range(nz):
+                for m in range(i):
+                    lim = L[i, m]
+                    for j in range(nz):
+                        Gt[i, j] -= lim * Gt[m, j]
+                lii = L[i, i]
+                for j in range(nz):
+                    Gt[i, j] = Gt[i, j] / lii
+            for i in range(nz - 1, -1, -1):
+                for m in range(i + 1, nz):
+                    lmi = L[m, i]
+                    for j in range(nz):
+                        Gt[i, j] -= lmi * Gt[m, j]
+                lii = L[i, i]
+                for j in range(nz):
+                    Gt[i, j] = Gt[i, j] / lii
+        else:  # not positive definite (singular prediction covariance): pseudo-inverse
+            Gt[:, :] = np.dot(np.linalg.pinv(np.ascontiguousarray(Ppk)), np.ascontiguousarray(Gt))
         for i in range(nz):
             d[i] = zs[k + 1, i] - zp[k + 1, i]
-        zs[k] = zf[k] + np.dot(G, d)
-        D = np.dot(np.dot(G, Ps[k + 1] - Pp[k + 1]), Gt)
+            dzs[i] = 0.0
+        for m in range(nz):  # zs = zf + G d = zf + Gt^T d
+            dm = d[m]
+            for i in range(nz):
+                dzs[i] += Gt[m, i] * dm
         for i in range(nz):
+            zs[k, i] = zf[k, i] + dzs[i]
+        for i in range(nz):  # T = (Ps - Pp)_{k+1} Gt
             for j in range(nz):
-                Ps[k, i, j] = Pf[k, i, j] + 0.5 * (D[i, j] + D[j, i])
+                T[i, j] = 0.0
+            for m in range(nz):
+                dl = Ps[k + 1, i, m] - Ppk[i, m]
+                for j in range(nz):
+                    T[i, j] += dl * Gt[m, j]
+        for i in range(nz):  # Ps = Pf + Gt^T T, lower triangle, mirrored
+            for j in range(i + 1):
+                d[j] = 0.0
+            for m in range(nz):
+                g = Gt[m, i]
+                for j in range(i + 1):
+                    d[j] += g * T[m, j]
+            for j in range(i + 1):
+                v = Pfk[i, j] + d[j]
+                Ps[k, i, j] = v
+                Ps[k, j, i] = v
 
 
 def rts_batch(zf, Pf, zp, Pp, F, zs, Ps):
@@ -490,16 +628,16 @@ def _source_hash(functions: dict) -> str:
     return h.hexdigest()[:10]
 
 
-def filter_functions(model):
+def filter_functions(model, notice: bool = True):
     """The compiled filter for ``model`` (a dict of numba functions), or ``None`` when compilation is
-    off (:func:`shipid._jit.enabled`) or the model declares no equations (then a one-line notice,
-    once per model class)."""
+    off (:func:`shipid._jit.enabled`) or the model declares no equations (then, with ``notice``, a
+    one-line notice, once per model class)."""
     if not _jit.enabled():
         return None
     eq = getattr(model, "_equations", None)
     if eq is None:
         key = type(model).__name__
-        if key not in _noticed:
+        if notice and key not in _noticed:
             _noticed.add(key)
             warnings.warn(f"shipid: model '{model.name}' declares no compiled equations (Model._equations); "
                           "the EKF runs on the numpy path", RuntimeWarning, stacklevel=3)
@@ -510,11 +648,14 @@ def filter_functions(model):
     out = _cache.get(key)
     if out is None:
         funcs = _jit.rebind(eq, ns, jit=True, tag=tag)
-        out = _cache[key] = _jit.rebind(FILTER, {**ns, **funcs}, jit=True, tag=tag)
+        out = _cache[key] = _jit.rebind(FILTER, {**ns, **funcs}, jit=True, tag=tag, fastmath=FASTMATH)
     return out
 
 
 _cache: dict = {}
+#: numba's fastmath flags of the filter and smoother: sums may be reassociated and fused (so that the
+#: loops vectorise); not "nnan"/"ninf", which would break the NaN-based divergence checks.
+FASTMATH = {"reassoc", "contract"}
 
 
 def run_compiled(prob, store: bool, nis_limit: float):
@@ -589,9 +730,29 @@ def run_compiled(prob, store: bool, nis_limit: float):
     )
 
 
+def replay_compiled(model, x0, t, U, p, nsteps, foh: bool):
+    """Open-loop RK4 of ``model`` on the compiled equations (what :func:`shipid.simulate.simulate` does
+    with sampled inputs and ``method="rk4"``), or ``None`` when compilation is off, the model declares
+    no compiled equations, or a state became non-finite (the caller's numpy path then reports it with
+    its own failure semantics).
+
+    ``x0 (B, nx)``, ``t (nt,)``, ``U (B, nt, nu)``, ``p (np,)`` or ``(B, np)``, ``nsteps (nt-1,)`` int,
+    ``foh``: first-order hold.  Returns ``X (B, nt, nx)``.
+    """
+    fns = filter_functions(model, notice=False)  # the simulator's numpy path is not slower than expected
+    if fns is None:
+        return None
+    f64 = lambda a: np.ascontiguousarray(a, dtype=float)  # noqa: E731
+    x0 = f64(x0)
+    X = np.empty((x0.shape[0], len(t), x0.shape[1]))
+    bad = fns["rk4_replay"](f64(t), f64(U), x0, f64(np.atleast_2d(p)), f64(model._kernel_constants()),
+                            np.ascontiguousarray(nsteps, dtype=np.int64), bool(foh), X)
+    return None if bad else X
+
+
 def smooth_compiled(out):
     """:func:`shipid.identify.ekf.rts_smooth` compiled, or ``None`` when compilation is off."""
-    fns = _jit.compiled(SMOOTHER)
+    fns = _jit.compiled(SMOOTHER, fastmath=FASTMATH)
     if fns is None:
         return None
     c = lambda a: np.ascontiguousarray(a, dtype=float)  # noqa: E731

@@ -11,6 +11,14 @@ switchable steps (each one recorded in the result's ``settings["recipe"]``, with
    dynamics linearised at the logs' approach speed (the eigenvalues of ``jac_x``); never finer than
    the log.  (For the MARIN KVLCC2 runs: tau = 13.7 s, dt_log = 0.135 s -> k = 4, the value the
    KVLCC2 study had set by hand; for the 4.36 m KCS logs: tau = 0.83 s -> every sample.)
+2b. **Linear range** (``max_drift_deg="auto"``) -- a model whose sway and yaw equations are linear in
+   ``v`` and ``r`` (:func:`linear_sway_yaw`: ``kcs-response``) holds for small drift only: linear hull
+   derivatives describe the forces up to drift angles of about :data:`LINEAR_DRIFT_DEG`, beyond which
+   cross-flow drag (``v|v|``, ``r|r|``) dominates.  Each log is then used until its drift angle
+   ``atan2(|v|, u)`` first exceeds that (:func:`linear_window`).  On the MARIN KVLCC2 training runs
+   (tc+-35 reach 23-25 deg of drift, zz+-10 stay below 9 deg) the whole turning circles turn the linear
+   yaw equation over (c2 > 0, c3 < 0, at every sampling step, input hold, gate and start tried), the
+   window gives c2 = -0.055, c3 = +0.00063 (docs/identification.md).
 3. **Rudder neutral angle** (``neutral=True``, models with a ``delta0`` parameter) -- the mean rudder
    of the straight approach segments of all logs (:func:`neutral_rudder_angle`: from each log's start
    until the rudder first departs, kept only when the heading changed by less than
@@ -45,6 +53,7 @@ import numpy as np
 import pandas as pd
 
 __all__ = ["fit_logs", "RecipeFit", "neutral_rudder_angle", "approach_segment", "choose_sampling", "common_grid",
+           "linear_sway_yaw", "linear_window", "LINEAR_DRIFT_DEG",
            "metric_residuals", "refine_fit", "METRIC_TOL", "METRIC_WEIGHT", "SAMPLES_PER_TAU", "REFINE_MODES", "AUTO_REFINE"]
 
 #: Samples per fastest time constant of the model at the EKF step (RK4 with h = tau/25 is accurate to ~1e-7
@@ -54,6 +63,10 @@ SAMPLES_PER_TAU = 25
 #: (a model off by this much pays as much as a replay error the size of the signal).
 METRIC_TOL = {"tactical_diameter_L": 5.0, "overshoot1_deg": 2.0, "overshoot2_deg": 3.0}
 REFINE_MODES = ("output-error", "metrics")
+#: Drift angle [deg] up to which :func:`linear_window` uses a log for a model linear in v and r (the usual
+#: linear range of hull manoeuvring derivatives, e.g. Clarke et al. 1983 fit linear derivatives to
+#: rotating-arm and PMM data of small drift; set before any fit ran; 6 deg gives the same signs on the KVLCC2 runs).
+LINEAR_DRIFT_DEG = 10.0
 #: Default multiplier of the metric residuals in ``refine="metrics"`` (:func:`refine_fit`): 0.1, chosen by
 #: leave-one-run-out from 0.1, 0.3, 0.5, 1 (see :data:`AUTO_REFINE`).  At 1 the six training metrics dominate
 #: eight free parameters and the fit matches the metrics, not the dynamics (worst left-out run 5.3 tolerances);
@@ -125,6 +138,11 @@ class RecipeFit:
         if self.refiner is not None:
             res.settings["ekf_stage"] = {"success": bool(self.ekf.success_), "message": self.ekf.message_,
                                          "coef": {k: float(v) for k, v in self.ekf.coef_.items()}}
+            # the verdict `shipid fit` exits on is the EKF stage's (the refiner has no innovations): the result
+            # JSON carries it where the CLI's epilog says, marked as that stage's
+            verdict = getattr(self.ekf, "diagnostics_", {}).get("consistency")
+            if verdict is not None and "consistency" not in res.diagnostics:
+                res.diagnostics["consistency"] = {**verdict, "stage": "ekf"}
             if not self.ekf.success_:
                 res.success = False
                 res.message = f"EKF stage failed ({self.ekf.message_}); refinement: {res.message}"
@@ -212,6 +230,46 @@ def choose_sampling(model, logs, samples_per_tau: int = SAMPLES_PER_TAU) -> tupl
                f"log step {dt_log:.3g} s")
 
 
+def linear_sway_yaw(model) -> bool:
+    """True when every regressor of the model's sway and yaw equations is at most linear in ``v, r``:
+    ``jac_p`` of the ``v`` and ``r`` rows changes by exactly twice as much from ``v = r = 0`` to
+    ``(2 v, 2 r)`` as to ``(v, r)`` (any speed, rudder, propeller rate).  A model with cross-flow terms
+    (``v|v|``, ``r|r|``, ``v^2 r / u``: ``response-nl``, ``mmg``) is not linear."""
+    if not all(s in model.state_names for s in ("u", "v", "r")):
+        return False
+    rows = [model.state_index("v"), model.state_index("r")]
+    x = np.zeros(model.nx)
+    x[model.state_index("u")] = 5.0
+    u_in = np.full(model.nu, 0.1)
+    if "n" in model.input_names:
+        u_in[model.input_index("n")] = 1.0
+    J = []
+    for f in (0.0, 1.0, 2.0):
+        x[rows] = f * np.array([0.3, 0.01])
+        J.append(np.asarray(model.jac_p(0.0, x, u_in), dtype=float)[rows])
+    return bool(np.allclose(J[2] - J[0], 2.0 * (J[1] - J[0]), rtol=1e-9, atol=1e-12))
+
+
+def linear_window(log, max_drift_deg: float = LINEAR_DRIFT_DEG):
+    """The log up to (not including) the first sample whose drift angle ``atan2(|v|, u)`` exceeds
+    ``max_drift_deg``; the whole log when it never does.  Keeps name, ship and provenance; a note says
+    what was left out."""
+    from ..logs import TrialLog
+
+    if "v" not in log.channels:
+        return log
+    beta = np.degrees(np.arctan2(np.abs(np.asarray(log["v"], dtype=float)), np.asarray(log["u"], dtype=float)))
+    out = np.flatnonzero(np.isfinite(beta) & (beta > max_drift_deg))
+    if not out.size:
+        return log
+    end = int(out[0])
+    return TrialLog(log.data.iloc[:end].reset_index(drop=True), name=log.name, ship=log.ship, path=log.path,
+                    sha256=log.sha256, rows=log.rows[:end], units_in=log.units_in,
+                    notes=list(log.notes) + [f"samples from t = {log.time[end]:.4g} s on left out: drift angle "
+                                             f"{beta[end]:.3g} deg above {max_drift_deg:g} deg (fit recipe, linear range)"],
+                    fmt=log.fmt)
+
+
 def _every(log, k: int):
     """The log with every ``k``-th sample, keeping its name, ship and provenance (path, sha256)."""
     if k == 1:
@@ -246,7 +304,7 @@ def common_grid(logs, dt: float) -> list:
             ch[c] = v if c in ("delta", "n") else np.where(inside, v, np.nan)
         with warnings.catch_warnings():  # the padding is missing data by design
             warnings.simplefilter("ignore", UserWarning)
-            new = TrialLog.from_arrays(t, name=lg.name, ship=lg.ship, **ch)
+            new = TrialLog.from_arrays(t, name=lg.name, ship=lg.ship, consistency_checks=False, **ch)
         new.path, new.sha256 = lg.path, lg.sha256
         out.append(new)
     return out
@@ -353,7 +411,7 @@ def _start_model(model, params, L):
 
 def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estimate=None, fixed=None,
              start: str = "staged", neutral: bool = True, free_neutral: bool = True, dt="auto",
-             refine: str | None = "auto", metric_weight: float | None = None,
+             max_drift_deg="auto", refine: str | None = "auto", metric_weight: float | None = None,
              n_passes: int = 2, max_nfev: int = 60, tune_noise: bool = False, progress: bool = False,
              meas_std=None, ekf_options=None, log=None) -> RecipeFit:
     """Fit ``model`` to ``logs`` with the project's recipe (module docstring: steps 1-6).
@@ -370,6 +428,8 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
     neutral : bool  rudder neutral angle from the straight approaches (step 3), where the model has ``delta0``
     free_neutral : bool  free that angle again in the refinement (default) or keep it fixed
     dt : "auto", int or None  step 2: ``"auto"``; an int k: every k-th sample; None: every sample
+    max_drift_deg : "auto", float or None  step 2b: ``"auto"`` = :data:`LINEAR_DRIFT_DEG` for models linear in
+        v and r (:func:`linear_sway_yaw`), else every sample; a number [deg]: that window for any model; None: off
     refine : {"auto", "metrics", "output-error", None}  step 6
     n_passes, tune_noise, progress, meas_std : passed to the EKF
     ekf_options : dict, optional  further keyword arguments of the EKF identifier (e.g. ``input_hold``, ``gate``)
@@ -413,6 +473,23 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
         reason = f"every {k}. sample (asked)"
     step("sampling", k, reason)
     used = [_every(lg, k) for lg in logs]
+    if max_drift_deg == "auto":
+        drift = LINEAR_DRIFT_DEG if linear_sway_yaw(m0) else None
+        why_drift = (f"{name}'s sway and yaw equations are linear in v and r: linear derivatives hold for small "
+                     "drift only") if drift is not None else f"{name} has non-linear sway/yaw terms: every sample"
+    elif max_drift_deg is None:
+        drift, why_drift = None, "off (asked)"
+    else:
+        drift = float(max_drift_deg)
+        if not 0 < drift < 90:
+            raise ValueError(f"max_drift_deg={max_drift_deg!r}: give 'auto', None or an angle in degrees "
+                             "between 0 and 90, e.g. 10")
+        why_drift = "asked"
+    if drift is not None:
+        used = [linear_window(lg, drift) for lg in used]
+        kept = ", ".join(f"{lg.name} {lg.time[-1] - lg.time[0]:.4g} s" for lg in used)
+        why_drift += f"; each log until its drift angle first exceeds {drift:g} deg ({kept})"
+    step("linear range", drift, why_drift)
     # estimated / fixed
     est = list(estimate) if estimate is not None else DEFAULT_ESTIMATE.get(name)
     fix: dict = {}
@@ -450,13 +527,17 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
 
         seed_model = get_model("kcs-response", lpp=L)
         seed_fix = {k2: v for k2, v in fix.items() if k2 in seed_model.param_names}
+        # the seed is linear in v and r: fitted on the linear range (step 2b) unless that is switched off
+        seed_drift = LINEAR_DRIFT_DEG if max_drift_deg == "auto" else drift
+        seed_logs = [linear_window(lg, seed_drift) for lg in used] if seed_drift is not None else used
         seed = EKFIdentifier(seed_model, fixed=seed_fix or None, n_passes=n_passes, progress=progress,
-                             meas_std=meas_std, **(ekf_options or {})).fit(used)
+                             meas_std=meas_std, **(ekf_options or {})).fit(seed_logs)
         vals = {k2: float(seed.coef_.get(k2, 0.0)) for k2 in m0.param_names}
         vals.update({k2: v for k2, v in fix.items()})
         m0 = m0.with_params(vals)
-        step("start values", "staged", "kcs-response (the seed's 16 terms) fitted at the logs' scale "
-             f"({seed.message_}); the non-linear terms start at 0")
+        step("start values", "staged", "kcs-response (the seed's 16 terms) fitted at the logs' scale"
+             + (f" up to {seed_drift:g} deg of drift" if seed_drift is not None else "")
+             + f" ({seed.message_}); the non-linear terms start at 0")
     else:
         step("start values", "as built", why)
     ekf_opts = dict(ekf_options or {})
