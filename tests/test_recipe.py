@@ -144,3 +144,14 @@ def test_leave_one_run_out_of_refinements_scores_each_variant_on_one_ekf_stage()
     assert list(tab["variant"]) == ["oe", "m0"] and set(tab["left_out"]) == {"kcs_zz_p20_rpm"}
     assert np.all(np.isfinite(tab["error"])) and tab["error"].iloc[0] > 0
     assert tab["error"].iloc[1] == tab["error"].iloc[0]
+
+
+def test_cli_metric_weight_is_checked(tmp_path, capsys):
+    """shipid fit --metric-weight -1: exit 2 with a one-line message naming the option (no fit run)."""
+    from shipid.cli import main
+    from shipid.datasets import bundled_kcs_logs
+
+    out = tmp_path / "r.json"
+    assert main(["fit", str(bundled_kcs_logs()[1]), "--metric-weight", "-1", "-o", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "--metric-weight -1" in err and "Traceback" not in err and not out.exists()
