@@ -255,7 +255,7 @@ def test_cli_mmg_metric_refinement_on_the_holdout(tmp_path):
 def test_cli_response_nl_default_recipe_on_the_holdout(tmp_path):
     """``shipid fit <tc+-35, zz+-10> --model response-nl -o r.json`` then ``shipid validate``: the default recipe
     (every 3rd sample, staged start from a kcs-response seed fitted up to 10 deg drift, 26 terms, metrics at
-    weight 0.1).  Measured at session 5 (after merging main, ~5 min on the loaded machine): TD +4.7 % / -4.6 %,
+    weight 0.1).  Measured at session 5 (after merging main; the test takes ~3 min on the loaded machine): TD +4.7 % / -4.6 %,
     zz_20 +0.71 / +1.89 deg, zz_-20 +3.65 / -1.50 deg -- five of the six goals; zz_-20's first overshoot
     misses 2 deg.  (A report, not a choice: the model was not chosen by the hold-out.)"""
     errs, res = _cli_fit_validate(tmp_path, "response-nl")
