@@ -226,6 +226,7 @@ def test_cli_mmg_default_recipe_on_the_holdout(tmp_path):
     assert steps["sampling"] == 4 and steps["neutral rudder angle"] == pytest.approx(0.915, abs=0.01)
     assert steps["refinement"] == "metrics" and res.method == "output-error" and res.success
     assert "weight 0.1" in next(s["reason"] for s in res.settings["recipe"] if s["step"] == "metric residuals")
+    assert res.settings["metric_weight"] == 0.1
     assert abs(errs["tc_35"]["TD"]) < 5.0                                      # goal met (+4.7 %)
     assert -6.8 < errs["tc_-35"]["TD"] < -5.0                                  # goal missed (-5.8 %)
     assert 1.5 < errs["zz_20"]["overshoot1_deg"] < 2.6                         # at the goal's edge (+2.07)
@@ -237,13 +238,31 @@ def test_cli_mmg_default_recipe_on_the_holdout(tmp_path):
 @pytest.mark.slow
 def test_cli_mmg_metric_refinement_on_the_holdout(tmp_path):
     """The same with ``--refine metrics --metric-weight 1`` (session 4's metric objective, the training metrics
-    at full weight; not the default: leave-one-run-out score 5.34 against 1.96 at weight 0.1).  Measured:
-    both turns within 5 % (+4.2 %, -4.4 %), zz_-20 first overshoot +0.95 deg, zz_20 second +2.1 deg: four
-    of the six goals; zz_20 first +2.6 deg and zz_-20 second +4.5 deg missed."""
+    at full weight; not the default: leave-one-run-out score 5.34 against 1.96 at weight 0.1).  Measured after
+    merging main at session 5: both turns within 5 % (+4.3 %, -4.7 %), zz_-20 first overshoot +1.3 deg: three
+    of the six goals; zz_20 +2.5 / +3.1 deg and zz_-20 second +5.3 deg missed (before that merge: four, zz_20
+    second +2.1 deg)."""
     errs, res = _cli_fit_validate(tmp_path, "mmg", extra=["--refine", "metrics", "--metric-weight", "1"])
-    assert res.method == "output-error" and res.success
-    assert abs(errs["tc_35"]["TD"]) < 5.0 and abs(errs["tc_-35"]["TD"]) < 5.0  # goals met (+4.2 %, -4.4 %)
-    assert abs(errs["zz_-20"]["overshoot1_deg"]) < 2.0                         # goal met (+0.95)
-    assert abs(errs["zz_20"]["overshoot2_deg"]) < 3.0                          # goal met (+2.1)
-    assert 1.6 < errs["zz_20"]["overshoot1_deg"] < 3.6                         # missed (+2.6)
-    assert 3.5 < errs["zz_-20"]["overshoot2_deg"] < 5.5                        # missed (+4.5)
+    assert res.method == "output-error" and res.success and res.settings["metric_weight"] == 1.0
+    assert abs(errs["tc_35"]["TD"]) < 5.0 and abs(errs["tc_-35"]["TD"]) < 5.0  # goals met (+4.3 %, -4.7 %)
+    assert abs(errs["zz_-20"]["overshoot1_deg"]) < 2.0                         # goal met (+1.3)
+    assert 1.5 < errs["zz_20"]["overshoot1_deg"] < 3.5                         # missed (+2.5)
+    assert 2.5 < errs["zz_20"]["overshoot2_deg"] < 4.0                         # at the goal's edge (+3.1)
+    assert 4.3 < errs["zz_-20"]["overshoot2_deg"] < 6.3                        # missed (+5.3)
+
+
+@pytest.mark.slow
+def test_cli_response_nl_default_recipe_on_the_holdout(tmp_path):
+    """``shipid fit <tc+-35, zz+-10> --model response-nl -o r.json`` then ``shipid validate``: the default recipe
+    (every 3rd sample, staged start from a kcs-response seed fitted up to 10 deg drift, 26 terms, metrics at
+    weight 0.1).  Measured at session 5 (after merging main; the test takes ~3 min on the loaded machine): TD +4.7 % / -4.6 %,
+    zz_20 +0.71 / +1.89 deg, zz_-20 +3.65 / -1.50 deg -- five of the six goals; zz_-20's first overshoot
+    misses 2 deg.  (A report, not a choice: the model was not chosen by the hold-out.)"""
+    errs, res = _cli_fit_validate(tmp_path, "response-nl")
+    steps = {s["step"]: s["value"] for s in res.settings["recipe"]}
+    assert steps["refinement"] == "metrics" and res.method == "output-error" and res.success
+    assert abs(errs["tc_35"]["TD"]) < 5.0 and abs(errs["tc_-35"]["TD"]) < 5.0  # goals met (+4.7 %, -4.6 %)
+    assert abs(errs["zz_20"]["overshoot1_deg"]) < 2.0                          # goal met (+0.71)
+    assert abs(errs["zz_20"]["overshoot2_deg"]) < 3.0                          # goal met (+1.89)
+    assert 2.6 < errs["zz_-20"]["overshoot1_deg"] < 4.7                        # missed (+3.65)
+    assert abs(errs["zz_-20"]["overshoot2_deg"]) < 3.0                         # goal met (-1.50)

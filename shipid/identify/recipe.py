@@ -103,6 +103,7 @@ class RecipeFit:
     logs : list of TrialLog  the logs as the EKF used them (sampled)
     free_in_refine : list of str  parameters fixed in the EKF stage and freed in the refinement
     lpp : float  the ship length the fit is at [m]
+    metric_weight : float or None  weight of the metric residuals of a ``"metrics"`` refinement (else None)
     """
 
     ekf: object
@@ -111,6 +112,7 @@ class RecipeFit:
     logs: list = field(default_factory=list)
     free_in_refine: list = field(default_factory=list)
     lpp: float | None = None
+    metric_weight: float | None = None
 
     @property
     def final(self):
@@ -134,6 +136,8 @@ class RecipeFit:
         """The :class:`~shipid.identify.result.FitResult` of the last stage, its settings holding the recipe."""
         res = self.final.result()
         res.settings["recipe"] = [dict(s) for s in self.steps]
+        if self.metric_weight is not None:
+            res.settings["metric_weight"] = float(self.metric_weight)
         if self.refiner is not None:
             res.settings["ekf_stage"] = {"success": bool(self.ekf.success_), "message": self.ekf.message_,
                                          "coef": {k: float(v) for k, v in self.ekf.coef_.items()}}
@@ -622,6 +626,7 @@ def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: in
     start_model = ekf.to_model()
     extra = None
     if mode == "metrics":
+        out.metric_weight = w
         f, with_metrics = metric_residuals(start_model, logs, lpp=L)
         if with_metrics and w > 0:
             extra = f if w == 1.0 else (lambda P, _f=f: w * np.asarray(_f(P)))
