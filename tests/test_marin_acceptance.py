@@ -29,9 +29,13 @@ def _files():
 
 def _fit(tmp_path, *model_args):
     out = tmp_path / "fit.json"
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
         rc = main(["fit", *_files(), *model_args, "--lpp", "320", "-o", str(out)])
+    # the refinement replays the logs on one grid, padded to the longest: a short log's replay may run away
+    # after its own last sample, where nothing is fitted -- that is no reason to alarm the user
+    blown = [str(w.message) for w in caught if "became non-finite" in str(w.message)]
+    assert not blown, blown
     return rc, json.loads(out.read_text())
 
 
@@ -125,3 +129,14 @@ def test_linear_range_leaves_out_logs_that_start_beyond_it():
     step = next(s for s in fit.steps if s["step"] == "linear range")
     assert "left out (fewer than 20 samples below it from the start): drifting" in step["reason"]
     assert [lg.name for lg in fit.logs] == [zz.name]
+
+
+@pytest.mark.slow
+@needs_marin
+def test_output_error_refinement_of_padded_short_logs_does_not_warn(tmp_path):
+    """The linear-range step cuts the turns to about a minute; on the refinement's common grid they are padded
+    to the zigzags' length and their replay (35 deg held) ran away after their own end, which printed
+    'state became non-finite in 2 of 4 batch member(s)' on every such fit (output-error refinement).  Nothing is
+    fitted there: :func:`_fit` asserts no such warning."""
+    rc, res = _fit(tmp_path, "--model", "kcs-response", "--refine", "output-error")
+    assert rc in (0, 3) and res["success"] is True
