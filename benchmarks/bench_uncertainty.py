@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import tempfile
 import time
 import warnings
@@ -23,6 +24,7 @@ import numpy as np
 
 warnings.simplefilter("ignore", RuntimeWarning)
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))  # measure this checkout (the Dask workers inherit the path), not an installed copy
 
 
 def bench_draws(n: int) -> None:

@@ -40,15 +40,27 @@ def test_output_error_refinement_column():
 
 @pytest.mark.slow
 def test_coverage_of_100_replicates():
-    """100 synthetic data sets (two 40 s manoeuvres each, independent noise; about 5 CPU-minutes): the fraction
-    of 95 % intervals containing the truth.  The intervals must not be over-confident anywhere (coverage >= 0.90,
-    spread of the standardised errors <= 1.1) nor grossly biased (|mean z| <= 0.6).  Measured (docs/uncertainty.md):
-    coverage 0.97-1.00, z spread 0.43-0.76 (conservative: the default process noise), yaw offsets up to 0.52."""
-    r = coverage_study(n_replicates=100, draws=40, seed=2026)
+    """The EKF posterior on 100 synthetic data sets (two 40 s manoeuvres each, independent noise; about 2
+    CPU-minutes): the fraction of 95 % intervals containing the truth.  The intervals must not be over-confident
+    anywhere (coverage >= 0.90, spread of the standardised errors <= 1.1) nor grossly biased (|mean z| <= 0.6).
+    Measured (docs/uncertainty.md): coverage 0.98-1.00, z spread 0.43-0.71 (conservative: the default process
+    noise), yaw offsets up to 0.46."""
+    r = coverage_study(n_replicates=100, draws=0, seed=2026)
     t = r.table.set_index("quantity")
-    assert r.n_failed == 0 and (t["n"] == 100).all()
+    assert r.n_failed == 0 and (t["n"] == 100).all() and len(t) == 16
     assert (t["coverage"] >= 0.90).all(), t["coverage"].to_dict()
-    coef = t[t["z_std"].notna()]
-    assert len(coef) == 16
-    assert (coef["z_std"] <= 1.1).all() and (coef["z_mean"].abs() <= 0.6).all(), coef[["z_mean", "z_std"]].to_dict()
-    assert {"turning_35_starboard:tactical_diameter_L", "zigzag_10_10_starboard:overshoot1_deg"} <= set(t.index)
+    assert (t["z_std"] <= 1.1).all() and (t["z_mean"].abs() <= 0.6).all(), t[["z_mean", "z_std"]].to_dict()
+
+
+@pytest.mark.slow
+def test_output_error_intervals_are_calibrated():
+    """The output-error ML fit started from the EKF (refine="output-error") on the same 100 data sets (about 3
+    CPU-minutes; coefficients only -- docs/uncertainty.md has the predicted metrics of this study).  Calibrated
+    means neither conservative nor over-confident: every coverage >= 0.90 and every coefficient's standardised
+    errors spread 0.8-1.25 (their sampling spread with 100 replicates is about +-0.07; the EKF posterior's
+    0.43-0.71 fails this) with |mean z| <= 0.4.  Measured: coverage 0.92-0.99, z spread 0.90-1.14, |mean z| <= 0.18."""
+    r = coverage_study(n_replicates=100, draws=0, seed=2026, refine="output-error")
+    t = r.table.set_index("quantity")
+    assert r.n_failed == 0 and (t["n"] == 100).all() and len(t) == 16 and set(t["method"]) == {"output-error"}
+    assert (t["coverage"] >= 0.90).all(), t["coverage"].to_dict()
+    assert t["z_std"].between(0.8, 1.25).all() and (t["z_mean"].abs() <= 0.4).all(), t[["z_mean", "z_std"]].to_dict()
