@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from ._common import add_log_options, read_logs
+from ._common import add_log_options, add_progress_option, progress_on, read_logs
 
 
 def _command(sub, name, handler, help, description, *, positional, output_help, output_metavar=None,
@@ -57,7 +57,7 @@ def register(sub) -> None:
 
 
 def _progress_option(p) -> None:
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_progress_option(p)  # --progress / --no-progress, on at a terminal, as every long-running command
 
 
 def add_engine_options(p) -> None:
@@ -70,7 +70,7 @@ def add_engine_options(p) -> None:
 def engine_from(args):
     from ..campaign import Engine
 
-    return Engine(args.workers, scheduler=args.scheduler, progress=not args.no_progress)
+    return Engine(args.workers, scheduler=args.scheduler, progress=progress_on(args))
 
 
 def add_draws_option(p) -> None:
@@ -104,7 +104,7 @@ def _sample(args) -> int:
         warnings.simplefilter("ignore", RuntimeWarning)
         s = sample_posterior(args.result, logs, walkers=args.walkers, steps=args.steps, burn=args.burn, thin=args.thin,
                              seed=args.seed, vectorize=not args.no_vectorize, channels=chans,
-                             progress=not args.no_progress)
+                             progress=progress_on(args))
     s.to_json(out, force=args.force)
     import pandas as pd
 
