@@ -556,6 +556,14 @@ class EKFIdentifier:
         self.message_ = "converged" if self.success_ else self.pass_messages_[-1].split(": ", 1)[1]
         if self.success_ and self.pass_messages_:
             self.message_ += f" (result of pass {len(history)}; {self.pass_messages_[-1]})"
+        var = np.diag(cov)
+        broken = [n for n, c, v in zip(est, coef[s["est_idx"]], var) if not (np.isfinite(c) and np.isfinite(v) and v > 0)]
+        if self.success_ and broken:
+            # a filter that ran to the end but whose covariance broke down has no uncertainty to report
+            self.success_ = False
+            self.message_ = (f"the filter finished but the covariance of {', '.join(broken[:6])}"
+                             f"{' ...' if len(broken) > 6 else ''} is not finite and positive (numerical breakdown; "
+                             "try other noise levels or method='rk4')")
         if not self.success_:
             warnings.warn(f"EKF identification: {self.message_}", RuntimeWarning, stacklevel=3)
         # per-log smoothed states and innovations
