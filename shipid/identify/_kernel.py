@@ -236,8 +236,8 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
     e = np.empty(nm)
     a = np.empty(nm)
     dz = np.empty(nz)
-    z_fin[b] = z
-    P_fin[b] = P
+    zg = z0[b].copy()  # the last good posterior (before any update: the initial condition)
+    Pg = P0[b].copy()
     if store:
         z_prior[b, 0] = z
         P_prior[b, 0] = P
@@ -375,12 +375,12 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
                     z_prior[b, k + 1:] = np.nan
                     P_prior[b, k + 1:] = np.nan
                     Fs[b, k:] = np.nan
+                z_fin[b] = zg
+                P_fin[b] = Pg
                 return
         if store:
             z_post[b, k] = z
             P_post[b, k] = P
-        z_fin[b] = z
-        P_fin[b] = P
         if k == N - 1:
             break
         # ---- predict to sample k+1 (nothing is integrated into a reset sample)
@@ -433,8 +433,11 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
                     Fs[b, k, i, j] = Ftop[i, j] if i < nx else (1.0 if i == j else 0.0)
             z_prior[b, k + 1] = zn
             P_prior[b, k + 1] = Pn
-        z[:] = zn
-        P[:, :] = Pn
+        # the posterior becomes the last good one, the prediction the state: buffers rotate, nothing is copied
+        zg, z, zn = z, zn, zg
+        Pg, P, Pn = P, Pn, Pg
+    z_fin[b] = z
+    P_fin[b] = P
     if store:
         for i in range(nz):
             for j in range(nz):
