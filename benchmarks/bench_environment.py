@@ -1,20 +1,25 @@
 """EKF fit time per sample with and without the environment terms (wind inputs and coefficients,
-current states), as a ratio measured in the same run.
+current states), on the compiled EKF kernel and on the numpy path, as ratios measured in the same run.
 
 The same synthetic logs (shipid.environment.synthetic.environment_log, a known wind and current) are
 fitted twice with the same settings: the plain ``lowspeed`` model estimating hydrodynamic coefficients,
 and ``with_environment(lowspeed, wind, current="constant")`` estimating the same coefficients plus three
-wind components and the two current states.
+wind components and the two current states; each once compiled (numba, ``shipid[fast]``; a warm-up fit
+compiles first and is not timed) and once on the numpy path (``shipid._jit.disabled()``: the path every
+fit took before the models declared their equations to the kernel).
 
     python benchmarks/bench_environment.py            # 2 logs x 200 s at 1 Hz, 2 passes
+    (with an editable install elsewhere, run it as PYTHONPATH=. python benchmarks/... from the worktree)
     python benchmarks/bench_environment.py --seconds 600 --every 5
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import time
 import warnings
 
+from shipid import _jit
 from shipid.environment import with_environment
 from shipid.environment.synthetic import NOISE_STD, environment_log
 from shipid.identify import EKFIdentifier
@@ -47,15 +52,28 @@ def main(argv=None):
     n = sum(len(lg) for lg in logs) * 2  # samples filtered (2 passes)
     plain = get_model("lowspeed")
     cols = ["time", "x", "y", "psi", "u", "v", "r", "delta", "n"]
-    t_plain, _ = _time_fit(plain, [lg[cols] for lg in logs], HYD, a.substeps, {})
-    t_env, _ = _time_fit(truth, logs, HYD + WIND, a.substeps, truth.identifier_settings())
+    cases = {"lowspeed (no environment)": (plain, [lg[cols] for lg in logs], HYD, {}),
+             "lowspeed + wind + current": (truth, logs, HYD + WIND, truth.identifier_settings())}
+    paths = {"compiled": contextlib.nullcontext} if _jit.enabled() else {}
+    paths["numpy"] = _jit.disabled
+    times = {}
+    for path, ctx in paths.items():
+        for name, (model, lgs, est, extra) in cases.items():
+            with ctx():
+                if path == "compiled":  # compile (or load the numba cache) outside the timing
+                    _time_fit(model, lgs, est, a.substeps, extra)
+                times[path, name] = _time_fit(model, lgs, est, a.substeps, extra)[0]
     print(f"{a.logs} logs x {a.seconds:g} s, {n} filtered samples ({a.substeps} RK4 substeps each)")
-    print(f"{'model':42s} {'states':>6s} {'estimated':>9s} {'s total':>8s} {'ms/sample':>10s}")
-    print(f"{'lowspeed (no environment)':42s} {plain.nx:6d} {len(HYD):9d} {t_plain:8.2f} {1e3 * t_plain / n:10.3f}")
-    print(f"{'lowspeed + wind + current':42s} {truth.nx:6d} {len(HYD) + len(WIND):9d} {t_env:8.2f} "
-          f"{1e3 * t_env / n:10.3f}")
-    print(f"ratio (with / without environment): {t_env / t_plain:.2f}")
-
+    print(f"{'path':9s} {'model':30s} {'states':>6s} {'estimated':>9s} {'s total':>8s} {'ms/sample':>10s}")
+    for (path, name), t in times.items():
+        model, _, est, _ = cases[name]
+        print(f"{path:9s} {name:30s} {model.nx:6d} {len(est):9d} {t:8.2f} {1e3 * t / n:10.3f}")
+    for path in paths:
+        print(f"ratio {path} (with / without environment): "
+              f"{times[path, 'lowspeed + wind + current'] / times[path, 'lowspeed (no environment)']:.2f}")
+    if "compiled" in paths:
+        for name in cases:
+            print(f"speed-up compiled / numpy, {name}: {times['numpy', name] / times['compiled', name]:.1f}x")
 
 if __name__ == "__main__":
     main()

@@ -62,15 +62,23 @@ def _short_logs(tmp: Path) -> list[str]:
 
 def bench_campaign(n_fits: int, workers: int) -> None:
     import json
+    import pickle
 
-    from shipid.campaign import Engine, run_campaign
+    from shipid.campaign import WORKER_ENV, Engine, load_campaign, run_campaign
 
+    threads = {k: os.environ.get(k) for k in WORKER_ENV}
+    if any(v != "1" for v in threads.values()):
+        print(f"[2] note: this (serial) process runs with {threads}; the workers with {WORKER_ENV} -- "
+              "set them to 1 here too for a like-for-like ratio")
+    load0 = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
         logs = _short_logs(tmp)
         fits = [{"name": f"fit{i:02d}", "logs": [logs[i % 4], logs[(i + 1) % 4]], "passes": 2} for i in range(n_fits)]
         camp = tmp / "c.json"
         camp.write_text(json.dumps({"seed": 1, "fits": fits}))
+        # what travels to a worker per member: the member's settings and file paths, not the logs' arrays
+        payload = max(len(pickle.dumps(f)) for f in load_campaign(camp)["fits"])
         t0 = time.perf_counter()
         run_campaign(camp, tmp / "serial", engine=Engine(1, progress=False))
         t_serial = time.perf_counter() - t0
@@ -85,8 +93,9 @@ def bench_campaign(n_fits: int, workers: int) -> None:
                    json.loads((tmp / "dask" / f["name"] / "result.json").read_text())["coef"] for f in fits)
     print(f"[2] campaign of {n_fits} fits: serial {t_serial:.1f} s, {workers} Dask workers {t_dask:.1f} s "
           f"(+ {t_start:.1f} s cluster start) -> {t_serial / t_dask:.2f}x without, {t_serial / (t_dask + t_start):.2f}x "
-          f"with start-up (goal >= 1.7x); identical coefficients: {same}; load average {os.getloadavg()[0]:.1f} "
-          f"on {os.cpu_count()} CPUs")
+          f"with start-up (goal >= 1.7x); identical coefficients: {same}; load average {load0:.1f} before, "
+          f"{os.getloadavg()[0]:.1f} after (1-min, incl. this run) on {os.cpu_count()} CPUs; largest member "
+          f"payload {payload} bytes; {n_fits} members on {workers} one-thread workers")
 
 
 def bench_mcmc(steps: int) -> None:

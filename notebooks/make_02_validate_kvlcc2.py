@@ -48,7 +48,7 @@ print("MARIN data:", folder.resolve() if HAVE_DATA else "not found -- the rest o
 `shipid.identify.recipe.fit_logs` is what `shipid fit` runs: the ship length from the logs, the sampling
 step from the model's fastest time constant (here every 4th sample), the rudder neutral angle from the
 straight approaches, staged start values, the EKF, then the output-error refinement with the training
-runs' own tactical diameters and overshoots in the objective (each step is printed with its reason).
+runs' own tactical diameters and overshoots in the objective at weight 0.1 (each step is printed with its reason).
 `shipid.validation.validate` is what `shipid validate` runs: the replay and each model's closed-loop
 standard manoeuvre with the log's own rudder and check angles. The held-out zz±20 enter no fit."""),
     code("""if HAVE_DATA:

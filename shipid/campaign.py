@@ -16,7 +16,8 @@ run's numbers.  A member that raises is reported with its error
 (:class:`Outcome`, ``ok=False``) and the others complete.  Progress is shown
 with tqdm over completed members.
 
-A campaign file (JSON or YAML) lists fits, each with its own logs and settings::
+A campaign file (JSON or YAML) lists fits, each with its own logs and settings,
+and sweeps (the batched studies of ``shipid sweep`` and the glider launch sweep)::
 
     seed: 1                      # optional, default 0
     defaults: {model: kcs-response, passes: 2}   # optional, any fit key
@@ -26,10 +27,19 @@ A campaign file (JSON or YAML) lists fits, each with its own logs and settings::
         estimate: [b1, b2, b3, b4, c1, c2, c3]
         draws: 200               # optional: predicted manoeuvres with 95 % intervals
         manoeuvres: ["turning:35", "zigzag:10/10"]
+    sweeps:
+      - name: td_grid            # turning diameters over rudder x speed (shipid sweep)
+        model: kcs-response:synthetic-truth      # or a result JSON (relative to the file)
+        rudder: [10, 15, 25]
+        speeds: [1.7, 2.0]
+      - name: launches           # glider launch sweep (shipid.glider.sweep)
+        kind: glider
+        speed: [1, 2]
+        angle_deg: [30, 45]
 
 :func:`run_campaign` writes ``OUTDIR/<name>/result.json`` (and
-``predictions.json`` when ``draws`` > 0) per member and ``OUTDIR/campaign.json``
-with every member's status and error.
+``predictions.json`` when ``draws`` > 0) per fit, ``OUTDIR/<name>/sweep.csv`` per
+sweep and ``OUTDIR/campaign.json`` with every member's status and error.
 """
 from __future__ import annotations
 
@@ -45,8 +55,12 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-__all__ = ["Engine", "Outcome", "member_seeds", "load_campaign", "run_campaign", "run_fit_member", "FIT_KEYS",
-           "dask_available"]
+__all__ = ["Engine", "Outcome", "member_seeds", "load_campaign", "run_campaign", "run_fit_member", "run_sweep_member",
+           "run_member", "FIT_KEYS", "SWEEP_KEYS", "dask_available"]
+
+
+#: Environment of the embedded LocalCluster's worker processes (set before they import numpy/numba).
+WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1"}
 
 
 def dask_available() -> bool:
@@ -129,8 +143,12 @@ class Engine:
             except (OSError, TimeoutError) as exc:
                 raise ValueError(f"--scheduler {self.scheduler}: cannot connect ({exc}); check the address") from None
         else:
+            # one thread per worker process and one BLAS/OpenMP/numba thread inside it: W workers use W
+            # cores, never W x (threads of each library) (Dask's pre-spawn environment sets the BLAS ones
+            # already; numba's is added here)
             self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                         host="127.0.0.1", dashboard_address=None, silence_logs=logging.ERROR)
+                                         host="127.0.0.1", dashboard_address=None, silence_logs=logging.ERROR,
+                                         env=dict(WORKER_ENV))
             self._client = Client(self._cluster)
 
     def close(self):
@@ -191,7 +209,15 @@ FIT_KEYS: dict[str, tuple] = {
     "fixed": (list, dict), "passes": (int,), "tune_noise": (bool,), "refine": (bool,), "lpp": (int, float),
     "draws": (int,), "manoeuvres": (list,), "inflation": (int, float), "speed": (int, float), "seed": (int,),
 }
-_TOP_KEYS = {"seed": (int,), "defaults": (dict,), "fits": (list,), "description": (str,)}
+#: Keys of one sweep member and their types: ``kind`` "turning" (:func:`shipid.manoeuvres.turning_sweep`, the
+#: ``shipid sweep`` command) or "glider" (:func:`shipid.glider.sweep`, the launch factorial).
+SWEEP_KEYS: dict[str, dict[str, tuple]] = {
+    "turning": {"name": (str,), "kind": (str,), "model": (str,), "rudder": (list,), "speeds": (list,), "side": (str,),
+                "lpp": (int, float), "rudder_rate": (int, float), "method": (str,)},
+    "glider": {"name": (str,), "kind": (str,), "speed": (list,), "angle_deg": (list,), "fin_deg": (list,),
+               "cg_m": (list,), "t_max": (int, float), "dt": (int, float)},
+}
+_TOP_KEYS = {"seed": (int,), "defaults": (dict,), "fits": (list,), "sweeps": (list,), "description": (str,)}
 _NAME_RE = re.compile(r"^[A-Za-z0-9_.-]+$")
 
 
@@ -207,10 +233,12 @@ def _check_type(src, where, key, value, types):
 
 
 def load_campaign(path) -> dict:
-    """Read and validate a campaign file; returns ``{"seed", "fits": [resolved fit dicts], "path"}``.
+    """Read and validate a campaign file; returns ``{"seed", "fits": [...], "sweeps": [...], "path"}``
+    (resolved member dicts).
 
-    Unknown keys, wrong types, missing names/logs, duplicate names and missing log files are
-    one-line ValueErrors naming the file, the fit and the key.
+    Unknown keys, wrong types, missing names/logs, duplicate names (over fits and sweeps), missing
+    log or result files and bad sweep levels are one-line ValueErrors naming the file, the member
+    and the key.
     """
     p = Path(path)
     if not p.is_file():
@@ -231,20 +259,20 @@ def load_campaign(path) -> dict:
         except json.JSONDecodeError as exc:
             raise ValueError(f"{p}: not valid JSON ({exc})") from None
     if not isinstance(doc, dict):
-        raise ValueError(f"{p}: the campaign must be a mapping with a 'fits' list")
+        raise ValueError(f"{p}: the campaign must be a mapping with a 'fits' and/or a 'sweeps' list")
     for k, v in doc.items():
         if k not in _TOP_KEYS:
             raise ValueError(f"{p}: unknown top-level key '{k}'; allowed: {', '.join(_TOP_KEYS)}")
         _check_type(p, "", k, v, _TOP_KEYS[k])
-    if not doc.get("fits"):
-        raise ValueError(f"{p}: no fits; give a 'fits' list with at least one entry")
+    if not doc.get("fits") and not doc.get("sweeps"):
+        raise ValueError(f"{p}: no members; give a 'fits' or a 'sweeps' list with at least one entry")
     defaults = doc.get("defaults") or {}
     for k, v in defaults.items():
         if k not in FIT_KEYS or k == "name":
             raise ValueError(f"{p}: defaults: unknown key '{k}'; allowed: {', '.join(x for x in FIT_KEYS if x != 'name')}")
         _check_type(p, "defaults: ", k, v, FIT_KEYS[k])
     fits, names = [], set()
-    for i, f in enumerate(doc["fits"]):
+    for i, f in enumerate(doc.get("fits") or []):
         if not isinstance(f, dict):
             raise ValueError(f"{p}: fits[{i}] must be a mapping (name, logs, ...), got {f!r}")
         label = f"fits[{i}]" + (f" ('{f['name']}')" if isinstance(f.get("name"), str) else "")
@@ -284,7 +312,46 @@ def load_campaign(path) -> dict:
                 except ValueError as exc:
                     raise ValueError(f"{p}: {label}: {exc}") from None
         fits.append(spec)
-    return {"seed": int(doc.get("seed", 0)), "fits": fits, "path": str(p)}
+    sweeps = [_sweep_spec(p, i, w, names) for i, w in enumerate(doc.get("sweeps") or [])]
+    return {"seed": int(doc.get("seed", 0)), "fits": fits, "sweeps": sweeps, "path": str(p)}
+
+
+def _sweep_spec(p: Path, i: int, w, names: set) -> dict:
+    """One validated sweep member of campaign file ``p`` (``names``: member names so far, updated)."""
+    if not isinstance(w, dict):
+        raise ValueError(f"{p}: sweeps[{i}] must be a mapping (name, kind, levels ...), got {w!r}")
+    label = f"sweeps[{i}]" + (f" ('{w['name']}')" if isinstance(w.get("name"), str) else "")
+    kind = w.get("kind", "turning")
+    if kind not in SWEEP_KEYS:
+        raise ValueError(f"{p}: {label}: 'kind' must be one of {', '.join(SWEEP_KEYS)}, got {kind!r}")
+    keys = SWEEP_KEYS[kind]
+    for k, v in w.items():
+        if k not in keys:
+            raise ValueError(f"{p}: {label}: unknown key '{k}' for a {kind} sweep; allowed: {', '.join(keys)}")
+        _check_type(p, f"{label}: ", k, v, keys[k])
+    if "name" not in w:
+        raise ValueError(f"{p}: {label}: 'name' is required")
+    if not _NAME_RE.match(w["name"]) or w["name"] in names:
+        raise ValueError(f"{p}: {label}: name '{w['name']}' must be unique and use only letters, digits, '_', '.', '-'")
+    names.add(w["name"])
+    spec = {**w, "kind": kind}
+    for k, v in w.items():
+        if keys[k] == (list,):
+            if not v or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) for x in v):
+                raise ValueError(f"{p}: {label}: '{k}' must be a non-empty list of finite numbers, got {v!r}")
+            if k in ("rudder", "speeds") and min(v) <= 0:
+                raise ValueError(f"{p}: {label}: '{k}' values must be positive (use 'side' for port), got {v!r}")
+    if kind == "turning":
+        if "model" not in w:
+            raise ValueError(f"{p}: {label}: 'model' is required (a result JSON or name[:parameter-set])")
+        if w["model"].lower().endswith(".json"):
+            mp = (p.parent / w["model"]) if not Path(w["model"]).is_absolute() else Path(w["model"])
+            if not mp.is_file():
+                raise ValueError(f"{p}: {label}: model '{w['model']}' not found (paths are relative to the campaign file)")
+            spec["model"] = str(mp.resolve())
+        if spec.get("side", "starboard") not in ("starboard", "port", "both"):
+            raise ValueError(f"{p}: {label}: 'side' must be starboard, port or both, got {spec['side']!r}")
+    return spec
 
 
 def run_fit_member(spec: dict) -> dict:
@@ -327,11 +394,51 @@ def run_fit_member(spec: dict) -> dict:
     return out
 
 
-def run_campaign(campaign, outdir, *, engine: Engine | None = None, force: bool = False) -> dict:
-    """Run every fit of a campaign (file path or :func:`load_campaign` dict) and write the outputs.
+def run_sweep_member(spec: dict):
+    """One sweep member (runs on a worker): the whole sweep as one batch, as the serial commands run it.
 
-    Returns the summary written to ``OUTDIR/campaign.json``: per member ``name``, ``ok``, ``error``,
-    ``success`` (of the fit), ``seed`` and the files written.
+    ``kind`` "turning": :func:`shipid.manoeuvres.turning_sweep` of ``model`` (result JSON or
+    ``name[:set]``, Froude-scaled to ``lpp`` when given) over ``rudder`` [deg] x ``speeds`` [m/s]
+    (default: the design speed); "glider": :func:`shipid.glider.sweep` over the given factor levels
+    (the paper's where omitted).  Returns the sweep's table (DataFrame).
+    """
+    import math
+
+    if spec["kind"] == "glider":
+        from .glider import PAPER_SWEEP, sweep
+
+        levels = {k: spec.get(k, PAPER_SWEEP[k]) for k in PAPER_SWEEP}
+        res = sweep(**levels, dt=spec.get("dt"), t_max=float(spec.get("t_max", 60.0)), keep_trajectories=False)
+        return res.summary.reset_index(drop=True)
+    from .identify.result import model_from
+    from .manoeuvres import ship_info, turning_sweep
+
+    model = model_from(spec["model"])[0]
+    lpp = spec.get("lpp")
+    if lpp is not None and getattr(model, "lpp", None) not in (None, lpp) and hasattr(model, "scaled"):
+        model = model.scaled(float(lpp))
+    speeds = spec.get("speeds")
+    if speeds is None:
+        u0 = ship_info(model).get("design_speed")
+        if u0 is None:
+            raise ValueError(f"sweep '{spec['name']}': model '{model.name}' has no design speed; give 'speeds'")
+        speeds = [u0]
+    rate = math.radians(spec["rudder_rate"]) if spec.get("rudder_rate") is not None else None
+    return turning_sweep(model, spec.get("rudder", [10.0, 15.0, 25.0]), speeds, side=spec.get("side", "starboard"),
+                         rudder_rate=rate, lpp=lpp, method=spec.get("method", "rk4"))
+
+
+def run_member(spec: dict):
+    """A campaign member of either type (the function the engine maps)."""
+    return run_sweep_member(spec) if spec.get("_member") == "sweep" else run_fit_member(spec)
+
+
+def run_campaign(campaign, outdir, *, engine: Engine | None = None, force: bool = False) -> dict:
+    """Run every fit and sweep of a campaign (file path or :func:`load_campaign` dict) and write the outputs.
+
+    Fits and sweeps are members of one map over the engine (fits first, in file order).  Returns the
+    summary written to ``OUTDIR/campaign.json``: per member ``name``, ``type`` ("fit" or "sweep"),
+    ``ok``, ``error``, ``success`` (of the fit; of every row of a sweep), ``seed`` and the files written.
     """
     from ._io import atomic_write_text
 
@@ -340,14 +447,24 @@ def run_campaign(campaign, outdir, *, engine: Engine | None = None, force: bool 
     if out.exists() and any(out.iterdir()) and not force:
         raise ValueError(f"{out}: output folder exists and is not empty; choose a new one or pass --force")
     out.mkdir(parents=True, exist_ok=True)
-    seeds = member_seeds(camp["seed"], len(camp["fits"]))
-    specs = [{**f, "seed": int(f.get("seed", s))} for f, s in zip(camp["fits"], seeds)]
+    fits, sweeps = camp["fits"], camp.get("sweeps", [])
+    seeds = member_seeds(camp["seed"], len(fits) + len(sweeps))  # fits keep the seeds of a fits-only campaign
+    specs = [{**f, "seed": int(f.get("seed", s))} for f, s in zip(fits, seeds)]
+    specs += [{**w, "seed": s, "_member": "sweep"} for w, s in zip(sweeps, seeds[len(fits):])]
     eng = engine or Engine(1, progress=False)
-    outcomes = eng.map(run_fit_member, specs, desc="campaign fits")
+    outcomes = eng.map(run_member, specs, desc="campaign members")
     members = []
     for spec, o in zip(specs, outcomes):
-        rec = {"name": spec["name"], "ok": o.ok, "error": o.error, "seed": spec["seed"], "files": []}
-        if o.ok:
+        kind = spec.get("_member", "fit")
+        rec = {"name": spec["name"], "type": kind, "ok": o.ok, "error": o.error, "seed": spec["seed"], "files": []}
+        if o.ok and kind == "sweep":
+            d = out / spec["name"]
+            d.mkdir(exist_ok=True)
+            atomic_write_text(d / "sweep.csv", o.value.to_csv(index=False), force=True)
+            rec["files"].append(f"{spec['name']}/sweep.csv")
+            ok_col = "success" if "success" in o.value else "surfaced"  # turning rows / glider launches
+            rec["success"] = bool(o.value[ok_col].all())
+        elif o.ok:
             d = out / spec["name"]
             d.mkdir(exist_ok=True)
             atomic_write_text(d / "result.json", json.dumps(o.value["result"], indent=2, allow_nan=True) + "\n", force=True)

@@ -84,9 +84,10 @@ class SimulationResult:
     u : ndarray, shape (n_t, nu) or (B, n_t, nu)
     model : Model
     success : bool
-        False when the state became non-finite; ``x`` is NaN from there on.  In a batch (fixed-step
-        ``rk4``) the other members are integrated to the end; ``meta["failed"]`` lists the failed
-        members and ``meta["failed_at"]`` their failure times [s].
+        False when the state became non-finite; ``x`` is NaN from there on.  In a batch the other
+        members are integrated to the end (``rk4``: in the same run; open-loop ``dopri5``: a batch whose
+        shared-step run fails is integrated member by member, ``meta["per_member"]``);
+        ``meta["failed"]`` lists the failed members and ``meta["failed_at"]`` their failure times [s].
     message : str
     """
 
@@ -223,8 +224,14 @@ def simulate(
         U = np.broadcast_to(U, batch + (n_t, model.nu))
     law = controller if isinstance(controller, InputLaw) else None
     if method == "dopri5":
-        return _simulate_dopri5(model, x0, t, U, controller, law, p, rtol, 1e-3 * rtol if atol is None else atol,
-                                first_step, foh=input_hold == "foh" and U is not None)
+        atol = 1e-3 * rtol if atol is None else atol
+        foh = input_hold == "foh" and U is not None
+        res = _simulate_dopri5(model, x0, t, U, controller, law, p, rtol, atol, first_step, foh=foh)
+        if res.success or not batch or controller is not None:
+            return res
+        # the batch shares one adaptive step, so one non-finite (or stiffly diverging) member stops it:
+        # integrate the members one by one, finish those that can be finished and report the others
+        return _dopri5_members(model, x0, t, U, p, rtol, atol, first_step, foh)
     foh = input_hold == "foh" and U is not None
     n_int = interval_steps(t, substeps, h_max).tolist()
     if U is not None and controller is None and p.dtype.kind == "f" and (p.ndim == 1 or p.shape[:-1] == batch):
@@ -395,6 +402,35 @@ def _simulate_dopri5(model, x0, t, U, controller, law, p, rtol, atol, first_step
             last = controller(t[-1], x) if controller is not None else U[..., -1, :]
             Uout[..., -1, :] = np.broadcast_to(np.asarray(last, dtype=float), batch + (model.nu,))
     return SimulationResult(t=t, x=X, u=Uout, model=model, params=np.array(p), success=ok, message=msg, meta=stats)
+
+
+def _dopri5_members(model, x0, t, U, p, rtol, atol, first_step, foh):
+    """``dopri5`` on each member of an open-loop batch ``x0 (B, nx)`` separately (after the shared-step run
+    failed): the members that finish are kept, the others are NaN from their first non-finite sample on,
+    listed in ``meta["failed"]`` with ``meta["failed_at"]`` [s], as the ``rk4`` batch does."""
+    B = x0.shape[0]
+    X = np.full((B, t.size, model.nx), np.nan)
+    Uout = np.full((B, t.size, model.nu), np.nan)
+    failed_at = np.full(B, np.nan)
+    meta = {"method": "dopri5", "n_steps": 0, "n_rejected": 0, "n_fev": 0, "h_last": None, "per_member": True}
+    for b in range(B):
+        pb = p[b] if p.ndim == 2 else p
+        r = _simulate_dopri5(model, x0[b], t, U[b], None, None, pb, rtol, atol, first_step, foh=foh)
+        for k in ("n_steps", "n_rejected", "n_fev"):
+            meta[k] += r.meta[k]
+        X[b], Uout[b] = r.x, r.u
+        bad = ~np.all(np.isfinite(r.x), axis=-1)
+        if not r.success or bad.any():
+            k = int(np.flatnonzero(bad)[0]) if bad.any() else t.size - 1
+            failed_at[b] = t[k]
+            X[b, k:] = np.nan
+    meta["failed"] = [int(i) for i in np.flatnonzero(np.isfinite(failed_at))]
+    meta["failed_at"] = [float(v) for v in failed_at[meta["failed"]]]
+    ok = not meta["failed"]
+    msg = "integration finished" if ok else _failure_message(t, failed_at)
+    if not ok:
+        warnings.warn(msg, RuntimeWarning, stacklevel=3)
+    return SimulationResult(t=t, x=X, u=Uout, model=model, params=np.array(p), success=ok, message=msg, meta=meta)
 
 
 def _log_frame(log) -> pd.DataFrame:

@@ -49,6 +49,16 @@ def _fits(tmp_path):
     ([{"name": "a", "logs": [str(DATA / "kcs_zz_m10.csv")], "manoeuvres": ["circle:3"]}], {}, r"manoeuvre 'circle:3'"),
     ([{"name": "a", "logs": [str(DATA / "kcs_zz_m10.csv")]}] * 2, {}, r"must be unique"),
     ([{"name": "a", "logs": [str(DATA / "kcs_zz_m10.csv")]}], {"seeds": 1}, r"unknown top-level key 'seeds'"),
+    ([], {"sweeps": [{"name": "s", "model": "kcs-response", "rudder": [10, "x"]}]},
+     r"sweeps\[0\] \('s'\): 'rudder' must be a non-empty list of finite numbers"),
+    ([], {"sweeps": [{"name": "s", "model": "kcs-response", "rudder": [-10]}]}, r"'rudder' values must be positive"),
+    ([], {"sweeps": [{"name": "s", "kind": "glider", "rudder": [10]}]}, r"unknown key 'rudder' for a glider sweep"),
+    ([], {"sweeps": [{"name": "s", "kind": "circle"}]}, r"'kind' must be one of turning, glider"),
+    ([], {"sweeps": [{"name": "s", "rudder": [10]}]}, r"'model' is required"),
+    ([], {"sweeps": [{"name": "s", "model": "nofile.json"}]}, r"model 'nofile.json' not found"),
+    ([{"name": "a", "logs": [str(DATA / "kcs_zz_m10.csv")]}], {"sweeps": [{"name": "a", "model": "kcs-response"}]},
+     r"sweeps\[0\] \('a'\): name 'a' must be unique"),
+    ([], {}, r"no members"),
 ])
 def test_campaign_file_errors_are_one_line(tmp_path, fits, top, match):
     p = _campaign(tmp_path, fits, **top)
@@ -75,10 +85,33 @@ def test_member_seeds_are_reproducible():
     assert member_seeds(5, 3) == member_seeds(5, 3) and len(set(member_seeds(5, 3))) == 3
 
 
+#: Two small sweeps: a turning-diameter grid (``shipid sweep``) and a glider launch factorial.
+SWEEPS = [{"name": "td", "model": "kcs-response:synthetic-truth", "rudder": [35], "speeds": [1.5, 1.7]},
+          {"name": "launch", "kind": "glider", "speed": [1.0, 2.0], "angle_deg": [30, 45], "fin_deg": [0], "cg_m": [0]}]
+
+
+def test_sweeps_are_campaign_members_with_the_direct_results(tmp_path, capsys):
+    """A campaign's sweep members write the tables the direct batched calls give (to the last digit)."""
+    from shipid.glider import sweep
+    from shipid.manoeuvres import turning_sweep
+    from shipid.models import get_model
+
+    p = _campaign(tmp_path, [], sweeps=SWEEPS, seed=2)
+    out = tmp_path / "out"
+    assert main(["campaign", str(p), "-o", str(out), "--workers", "1", "--no-progress"]) == 0
+    assert "td: ok" in capsys.readouterr().out
+    summary = json.loads((out / "campaign.json").read_text())
+    assert [m["type"] for m in summary["members"]] == ["sweep", "sweep"] and summary["n_failed"] == 0
+    td = turning_sweep(get_model("kcs-response", "synthetic-truth"), [35], [1.5, 1.7])
+    assert (out / "td" / "sweep.csv").read_text() == td.to_csv(index=False)
+    gl = sweep([1.0, 2.0], [30, 45], [0], [0], keep_trajectories=False).summary.reset_index(drop=True)
+    assert (out / "launch" / "sweep.csv").read_text() == gl.to_csv(index=False)
+
+
 @pytest.mark.slow
 def test_serial_and_two_dask_workers_give_identical_results(tmp_path):
     pytest.importorskip("distributed")
-    p = _campaign(tmp_path, _fits(tmp_path), seed=7)
+    p = _campaign(tmp_path, _fits(tmp_path), seed=7, sweeps=SWEEPS)
     serial = run_campaign(p, tmp_path / "serial", engine=Engine(1, progress=False))
     with Engine(2, progress=False) as eng:
         dist = run_campaign(p, tmp_path / "dask", engine=eng)
@@ -94,6 +127,9 @@ def test_serial_and_two_dask_workers_give_identical_results(tmp_path):
     a = json.loads((tmp_path / "serial" / "tc" / "predictions.json").read_text())
     b = json.loads((tmp_path / "dask" / "tc" / "predictions.json").read_text())
     assert a == b and a["manoeuvres"]["turning_35_starboard"]["draws"]["n"] == 20
+    for name in ("td", "launch"):  # sweep members: byte-identical tables
+        assert (tmp_path / "serial" / name / "sweep.csv").read_bytes() == (tmp_path / "dask" / name / "sweep.csv").read_bytes()
+    assert [m["type"] for m in dist["members"]] == ["fit"] * 3 + ["sweep"] * 2
 
 
 def test_campaign_cli_serial(tmp_path, capsys):

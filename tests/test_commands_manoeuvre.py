@@ -64,8 +64,12 @@ def test_sweep_csv(tmp_path):
     out = tmp_path / "sweep.csv"
     assert main(["sweep", "mmg:kcs", "--rudder", "15,25", "--speed", "1.7,2.0", "-o", str(out)]) == 0
     df = pd.read_csv(out)
-    assert len(df) == 4 and set(df.columns) >= {"rudder_deg", "speed", "n", "tactical_diameter_L", "steady_diameter_L"}
-    assert (df.groupby("speed")["tactical_diameter_L"].apply(lambda s: s.iloc[0] > s.iloc[1])).all()
+    assert len(df) == 4 and set(df.columns) >= {"rudder_deg [deg]", "speed [m/s]", "n [rps]", "tactical_diameter_L [Lpp]",
+                                                "steady_diameter_L [Lpp]", "tactical_diameter [m]", "speed_loss [-]"}
+    assert (df.groupby("speed [m/s]")["tactical_diameter_L [Lpp]"].apply(lambda s: s.iloc[0] > s.iloc[1])).all()
+    # the two diameters agree: metres = Lpp units x the KCS model's Lpp
+    ratio = df["tactical_diameter [m]"] / df["tactical_diameter_L [Lpp]"]
+    assert ratio.min() == pytest.approx(ratio.max(), rel=1e-9)
     assert main(["sweep", "mmg:kcs", "--rudder", "a,b"]) == 2
 
 

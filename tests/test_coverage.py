@@ -23,6 +23,19 @@ def test_small_study_is_reproducible_and_counts():
     np.testing.assert_allclose(t["covered"].to_numpy(), (np.abs(z) <= 1.959964).sum(axis=0))
     with pytest.raises(ValueError, match="n_replicates must be >= 2"):
         coverage_study(n_replicates=1)
+    with pytest.raises(ValueError, match="refine must be None or 'output-error'"):
+        coverage_study(n_replicates=2, refine="mcmc")
+
+
+def test_output_error_refinement_column():
+    """refine="output-error": the same data sets (same seeds) refitted by output-error ML; its z-scores are its own."""
+    kw = dict(n_replicates=2, draws=0, seed=4, estimate=["c1", "c2", "c3"], n_passes=1)
+    e, o = coverage_study(**kw), coverage_study(refine="output-error", **kw)
+    assert set(o.table["method"]) == {"output-error"} and o.settings["refine"] == "output-error"
+    assert [r["seed"] for r in e.replicates] == [r["seed"] for r in o.replicates]
+    ce, co = np.array([r["coef"] for r in e.replicates]), np.array([r["coef"] for r in o.replicates])
+    assert not np.allclose(ce, co, rtol=1e-9, atol=0)  # a different estimator ...
+    np.testing.assert_allclose(ce, co, rtol=0.2)  # ... of the same coefficients
 
 
 @pytest.mark.slow

@@ -18,8 +18,10 @@ def test_launch_writes_summary_and_trajectory(tmp_path, capsys):
     assert doc["max_depth_m"] == pytest.approx(1.721, abs=0.005)
     assert doc["horizontal_m"] == pytest.approx(3.737, abs=0.005)
     assert doc["params"]["x_g"] == 0.01 and doc["model"] == "glider"
-    df = pd.read_csv(traj)
-    assert df["z"].iloc[-1] == 0.0 and df["z"].max() == pytest.approx(doc["max_depth_m"])
+    df = pd.read_csv(traj)  # units in the header (z and depth positive down)
+    assert list(df.columns) == ["time [s]", "x [m]", "z [m (down)]", "theta [rad]", "u [m/s]", "w [m/s]", "q [rad/s]",
+                                "depth [m (down)]"]
+    assert df["z [m (down)]"].iloc[-1] == 0.0 and df["z [m (down)]"].max() == pytest.approx(doc["max_depth_m"])
     assert "max depth 1.72" in capsys.readouterr().out
     # refuses to overwrite; --force overwrites
     assert main(["glider", "launch", "--speed", "5", "--angle", "45", "-o", str(out)]) == 2

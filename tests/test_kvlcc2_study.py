@@ -178,7 +178,7 @@ def test_cli_fit_carries_the_logs_particulars_through_refinement(tmp_path, capsy
 
 
 # ----------------------------------------------------------------------------- the CLI route (README)
-def _cli_fit_validate(tmp_path, model, params=None):
+def _cli_fit_validate(tmp_path, model, params=None, extra=()):
     """``shipid fit`` on tc+-35, zz+-10 with default settings, then ``shipid validate`` on zz+-20 and tc+-35 (the
     README's two commands);
     returns {run: {metric: error}} of the closed-loop standard manoeuvres (TD in %, overshoots in deg)
@@ -191,6 +191,7 @@ def _cli_fit_validate(tmp_path, model, params=None):
     args = ["fit", *[files[k] for k in ks.TRAIN], "--model", model, "-o", str(out), "--no-progress"]
     if params:
         args += ["--params", params]
+    args += list(extra)
     # 3: done, but the EKF stage is not consistent with its noise model -- on these measured runs it is
     # flagged (x innovations ~2x the model's, not white, ~12 % gated: model error), said on stderr and in
     # the result; the fit is still written and used
@@ -214,44 +215,54 @@ def _cli_fit_validate(tmp_path, model, params=None):
 
 @pytest.mark.slow
 def test_cli_mmg_default_recipe_on_the_holdout(tmp_path):
-    """README: ``shipid fit tc_35 tc_-35 zz_10 zz_-10 --model mmg --params kvlcc2 -o r.json`` then
-    ``shipid validate r.json ...``.  The recipe: every 4th sample (tau 13.7 s), delta0 +0.92 deg from the
-    straight approaches, EKF, output-error refinement (chosen by leave-one-run-out on the training runs).
-    Measured: TD +1.5 % / -8.3 %; held-out zz_20 +3.7 / +4.3 deg, zz_-20 +2.0 / +7.2 deg -- one of the six
-    goals (tc_35) met; zz_-20's first overshoot misses 2 deg by 0.03 deg."""
-    errs, res = _cli_fit_validate(tmp_path, "mmg", "kvlcc2")
+    """README: ``shipid fit tc_35 tc_-35 zz_10 zz_-10 --model mmg -o r.json`` then ``shipid validate r.json
+    zz_20 zz_-20 tc_35 tc_-35``.  The recipe: every 4th sample (tau 13.7 s), delta0 +0.92 deg from the
+    straight approaches, EKF, metric-augmented refinement at weight 0.1 (chosen by leave-one-run-out on the
+    training runs, docs/validation.md; the hold-out run once after the choice was committed).  Measured:
+    TD +4.7 % / -5.8 %; held-out zz_20 +2.07 / +2.77 deg, zz_-20 +1.22 / +4.70 deg -- three of the six
+    goals (tc_35, zz_20 second, zz_-20 first); zz_20's first overshoot misses 2 deg by 0.07 deg."""
+    errs, res = _cli_fit_validate(tmp_path, "mmg")
     steps = {s["step"]: s["value"] for s in res.settings["recipe"]}
     assert steps["sampling"] == 4 and steps["neutral rudder angle"] == pytest.approx(0.915, abs=0.01)
-    assert steps["refinement"] == "output-error" and res.method == "output-error" and res.success
-    assert abs(errs["tc_35"]["TD"]) < 5.0                                      # goal met
-    assert -10.0 < errs["tc_-35"]["TD"] < -7.0                                 # goal missed (-8.3 %)
-    assert 2.7 < errs["zz_20"]["overshoot1_deg"] < 4.7                         # missed (+3.7)
-    assert 3.4 < errs["zz_20"]["overshoot2_deg"] < 5.4                         # missed (+4.4)
-    assert 1.0 < errs["zz_-20"]["overshoot1_deg"] < 3.0                        # at the goal's edge (+2.03)
-    assert 6.4 < errs["zz_-20"]["overshoot2_deg"] < 8.4                        # missed (+7.4)
+    assert steps["refinement"] == "metrics" and res.method == "output-error" and res.success
+    assert "weight 0.1" in next(s["reason"] for s in res.settings["recipe"] if s["step"] == "metric residuals")
+    assert res.settings["metric_weight"] == 0.1
+    assert abs(errs["tc_35"]["TD"]) < 5.0                                      # goal met (+4.7 %)
+    assert -6.8 < errs["tc_-35"]["TD"] < -5.0                                  # goal missed (-5.8 %)
+    assert 1.5 < errs["zz_20"]["overshoot1_deg"] < 2.6                         # at the goal's edge (+2.07)
+    assert abs(errs["zz_20"]["overshoot2_deg"]) < 3.0                          # goal met (+2.77)
+    assert abs(errs["zz_-20"]["overshoot1_deg"]) < 2.0                         # goal met (+1.22)
+    assert 3.7 < errs["zz_-20"]["overshoot2_deg"] < 5.7                        # goal missed (+4.70)
 
 
 @pytest.mark.slow
 def test_cli_mmg_metric_refinement_on_the_holdout(tmp_path):
-    """The same with ``--refine metrics`` (the training runs' own metrics in the objective; not the default:
-    leave-one-run-out score 4.38 against output-error's 2.43).  Measured: both turns within 5 % (+4.6 %,
-    -4.9 %), zz_-20 first overshoot +1.5 deg, zz_20 second +2.5 deg: four of the six goals; zz_20 first
-    +2.6 deg and zz_-20 second +4.1 deg missed."""
-    from shipid.cli import main
+    """The same with ``--refine metrics --metric-weight 1`` (session 4's metric objective, the training metrics
+    at full weight; not the default: leave-one-run-out score 5.34 against 1.96 at weight 0.1).  Measured after
+    merging main at session 5: both turns within 5 % (+4.3 %, -4.7 %), zz_-20 first overshoot +1.3 deg: three
+    of the six goals; zz_20 +2.5 / +3.1 deg and zz_-20 second +5.3 deg missed (before that merge: four, zz_20
+    second +2.1 deg)."""
+    errs, res = _cli_fit_validate(tmp_path, "mmg", extra=["--refine", "metrics", "--metric-weight", "1"])
+    assert res.method == "output-error" and res.success and res.settings["metric_weight"] == 1.0
+    assert abs(errs["tc_35"]["TD"]) < 5.0 and abs(errs["tc_-35"]["TD"]) < 5.0  # goals met (+4.3 %, -4.7 %)
+    assert abs(errs["zz_-20"]["overshoot1_deg"]) < 2.0                         # goal met (+1.3)
+    assert 1.5 < errs["zz_20"]["overshoot1_deg"] < 3.5                         # missed (+2.5)
+    assert 2.5 < errs["zz_20"]["overshoot2_deg"] < 4.0                         # at the goal's edge (+3.1)
+    assert 4.3 < errs["zz_-20"]["overshoot2_deg"] < 6.3                        # missed (+5.3)
 
-    files = dict(zip(ks.RUNS, marin_files(tmp_path, ks.RUNS)))
-    out, val = tmp_path / "r.json", tmp_path / "v.json"
-    assert main(["fit", *[files[k] for k in ks.TRAIN], "--model", "mmg", "--params", "kvlcc2", "--refine", "metrics",
-                 "-o", str(out), "--no-progress"]) in (0, 3)  # 3: EKF stage flagged not consistent (see above)
-    assert main(["validate", str(out), files["zz_20"], files["zz_-20"], files["tc_35"], files["tc_-35"],
-                 "-o", str(val)]) == 0
-    v = {d["name"][18:-2]: d for d in json.loads(val.read_text())}
-    td = {k: 100 * (v[k]["standard"]["tactical_diameter_L"] / v[k]["measured"]["tactical_diameter_L"] - 1)
-          for k in ("tc_35", "tc_-35")}
-    o = {k: [v[k]["standard"][c] - v[k]["measured"][c] for c in ("overshoot1_deg", "overshoot2_deg")] for k in ks.TEST}
-    print(td, o)
-    assert abs(td["tc_35"]) < 5.0 and abs(td["tc_-35"]) < 5.0                  # goals met (+4.6 %, -4.9 %)
-    assert abs(o["zz_-20"][0]) < 2.0                                           # goal met (+1.5)
-    assert abs(o["zz_20"][1]) < 3.0                                            # goal met (+2.5)
-    assert 1.6 < o["zz_20"][0] < 3.6                                           # missed (+2.6)
-    assert 3.1 < o["zz_-20"][1] < 5.1                                          # missed (+4.1)
+
+@pytest.mark.slow
+def test_cli_response_nl_default_recipe_on_the_holdout(tmp_path):
+    """``shipid fit <tc+-35, zz+-10> --model response-nl -o r.json`` then ``shipid validate``: the default recipe
+    (every 3rd sample, staged start from a kcs-response seed fitted up to 10 deg drift, 26 terms, metrics at
+    weight 0.1).  Measured at session 5 (after merging main; the test takes ~3 min on the loaded machine): TD +4.7 % / -4.6 %,
+    zz_20 +0.71 / +1.89 deg, zz_-20 +3.65 / -1.50 deg -- five of the six goals; zz_-20's first overshoot
+    misses 2 deg.  (A report, not a choice: the model was not chosen by the hold-out.)"""
+    errs, res = _cli_fit_validate(tmp_path, "response-nl")
+    steps = {s["step"]: s["value"] for s in res.settings["recipe"]}
+    assert steps["refinement"] == "metrics" and res.method == "output-error" and res.success
+    assert abs(errs["tc_35"]["TD"]) < 5.0 and abs(errs["tc_-35"]["TD"]) < 5.0  # goals met (+4.7 %, -4.6 %)
+    assert abs(errs["zz_20"]["overshoot1_deg"]) < 2.0                          # goal met (+0.71)
+    assert abs(errs["zz_20"]["overshoot2_deg"]) < 3.0                          # goal met (+1.89)
+    assert 2.6 < errs["zz_-20"]["overshoot1_deg"] < 4.7                        # missed (+3.65)
+    assert abs(errs["zz_-20"]["overshoot2_deg"]) < 3.0                         # goal met (-1.50)

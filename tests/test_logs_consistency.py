@@ -65,7 +65,7 @@ def test_yaw_rate_sign_scale_bias(tmp_path):
     flipped = df.assign(r=-df.r)
     _error(_write(tmp_path, "sign.csv", flipped),
            r"`sign.csv`: yaw rate 'r' \(column 7\) has the opposite sign to dpsi/dt of 'psi' \(column 4\) "
-           r"\(rho = -(0.99\d|1.000), dpsi/dt = -(0.99\d|1) r\): negate r \(schema \"signs\": \{\"r\": -1\}\)")
+           r"\(rho = -(0.99\d|1.000), dpsi/dt = -(0.99\d|1) r\): negate r \(CLI: --sign r=-1; schema \"signs\": \{\"r\": -1\}\)")
     assert read_log(_write(tmp_path, "sign.csv", flipped), schema={"signs": {"r": -1}}).consistency.success
     log = _warns(_write(tmp_path, "scale.csv", df.assign(r=1.3 * df.r)),
                  r"`scale.csv`: dpsi/dt = 0.76\d x yaw rate 'r' .* a scale error of -23 %")

@@ -135,3 +135,24 @@ def test_simulate_batch_finishes_the_other_members():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert simulate(m, x0[[0, 2]], t, U).success
+
+
+@pytest.mark.parametrize("hold", ["zoh", "foh"])
+def test_dopri5_batch_finishes_the_other_members_and_reports_the_failed_one(hold):
+    m = get_model("lowspeed")
+    x0 = np.zeros((3, 6))
+    x0[:, 3] = [0.2, 0.2, 0.1]
+    x0[1, 3] = np.nan
+    t = np.arange(0.0, 3.0, 0.1)
+    U = np.column_stack([np.where(t < 1.5, 0.0, 0.3), np.full(t.size, 8.0)])
+    with pytest.warns(RuntimeWarning, match="1 of 3 batch member"):
+        r = simulate(m, x0, t, U, method="dopri5", input_hold=hold)
+    assert not r.success and r.meta["failed"] == [1] and r.meta["failed_at"] == [0.0] and r.meta["per_member"]
+    assert np.all(np.isfinite(r.x[[0, 2]])) and np.all(np.isnan(r.x[1]))
+    for b in (0, 2):
+        single = simulate(m, x0[b], t, U, method="dopri5", input_hold=hold)
+        np.testing.assert_allclose(r.x[b], single.x, rtol=1e-12, atol=1e-12)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ok = simulate(m, x0[[0, 2]], t, U, method="dopri5", input_hold=hold)
+    assert ok.success and "per_member" not in ok.meta

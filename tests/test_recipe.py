@@ -96,3 +96,62 @@ def test_recipe_steps_are_reported_and_switchable():
     assert res.model_options["lpp"] == pytest.approx(4.36) and res.method == "ekf"
     with pytest.raises(ValueError, match="refine='both'"):
         fit_logs(logs, "kcs-response", refine="both")
+
+
+def test_refine_fit_reuses_one_ekf_stage_and_weighs_the_metrics():
+    """refine_fit on one EKF stage (bundled KCS turning circle + zigzag, 4.36 m): the metric residuals at
+    weight 0 are the output-error refinement exactly; at weight 1 the training metrics move the fit and its
+    tactical-diameter error does not grow; the weight is reported in the steps; a bad weight is refused."""
+    from shipid.datasets import bundled_kcs_logs
+    from shipid.identify.recipe import fit_logs, metric_residuals, refine_fit
+    from shipid.logs import read_log
+
+    logs = [read_log(p) for p in bundled_kcs_logs()[1:3]]  # tc +35, zz -10
+    ekf = fit_logs(logs, "kcs-response", n_passes=1, refine=None)
+    kw = dict(max_nfev=4)
+    oe = refine_fit(ekf, logs, "output-error", **kw)
+    m0 = refine_fit(ekf, logs, "metrics", metric_weight=0.0, **kw)
+    m1 = refine_fit(ekf, logs, "metrics", metric_weight=1.0, **kw)
+    assert ekf.refiner is None and [s["step"] for s in ekf.steps][-1] == "refinement"  # the EKF stage untouched
+    np.testing.assert_array_equal(m0.refiner.coef_.to_numpy(), oe.refiner.coef_.to_numpy())
+    assert "weight 1" in m1.steps[-2]["reason"] and "weight 0" in m0.steps[-2]["reason"]
+    assert m1.result().settings["metric_weight"] == 1.0 and "metric_weight" not in oe.result().settings
+    f, used = metric_residuals(ekf.to_model(), logs)
+    assert len(used) == 2
+    P = np.stack([oe.to_model().params, m1.to_model().params])
+    e = np.abs(f(P))  # (2, 3): TD of the turn, overshoots of the zigzag, over their tolerances
+    assert not np.allclose(P[0], P[1])
+    assert np.sum(e[1] ** 2) <= np.sum(e[0] ** 2) + 1e-9  # the metrics enter the objective
+    with pytest.raises(ValueError, match="metric_weight"):
+        refine_fit(ekf, logs, "metrics", metric_weight=-1.0)
+    with pytest.raises(ValueError, match="mode="):
+        refine_fit(ekf, logs, "both")
+
+
+def test_leave_one_run_out_of_refinements_scores_each_variant_on_one_ekf_stage():
+    """shipid.studies.kvlcc2.leave_one_run_out_refinements on the bundled KCS logs (one fold: fit on the turn
+    and one zigzag, predict the other zigzag): one row per variant, a finite goal-normalised error; the
+    metric residuals at weight 0 score exactly as the output-error refinement (same EKF stage, same fit)."""
+    from shipid.datasets import bundled_kcs_logs
+    from shipid.logs import read_log
+    from shipid.studies import kvlcc2 as ks
+
+    runs = {p.stem: read_log(p) for p in bundled_kcs_logs()[1:]}  # tc +35, zz -10, zz +20 (rpm change)
+    variants = {"oe": {"mode": "output-error", "max_nfev": 3},
+                "m0": {"mode": "metrics", "metric_weight": 0.0, "max_nfev": 3}}
+    tab = ks.leave_one_run_out_refinements(runs, "kcs-response", variants=variants, train=tuple(runs),
+                                           folds=["kcs_zz_p20_rpm"])
+    assert list(tab["variant"]) == ["oe", "m0"] and set(tab["left_out"]) == {"kcs_zz_p20_rpm"}
+    assert np.all(np.isfinite(tab["error"])) and tab["error"].iloc[0] > 0
+    assert tab["error"].iloc[1] == tab["error"].iloc[0]
+
+
+def test_cli_metric_weight_is_checked(tmp_path, capsys):
+    """shipid fit --metric-weight -1: exit 2 with a one-line message naming the option (no fit run)."""
+    from shipid.cli import main
+    from shipid.datasets import bundled_kcs_logs
+
+    out = tmp_path / "r.json"
+    assert main(["fit", str(bundled_kcs_logs()[1]), "--metric-weight", "-1", "-o", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "--metric-weight -1" in err and "Traceback" not in err and not out.exists()

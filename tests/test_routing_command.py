@@ -15,8 +15,9 @@ def test_zermelo_paper(tmp_path, capsys):
     assert doc["time_h"] == pytest.approx(10.9157305, rel=1e-7)
     assert doc["solvers"]["transcription"]["time_h"] == pytest.approx(doc["solvers"]["pmp"]["time_h"], rel=1e-6)
     df = pd.read_csv(tmp_path / "z.csv")
-    assert list(df.columns) == ["t", "x", "y", "heading_deg", "course_deg"]
-    np.testing.assert_allclose(df[["x", "y"]].iloc[0], [3.66, -1.86], atol=1e-6)
+    # units in the header: the paper example is in nautical units (h, nm)
+    assert list(df.columns) == ["t [h]", "x [nm]", "y [nm]", "heading_deg [deg]", "course_deg [deg]"]
+    np.testing.assert_allclose(df[["x [nm]", "y [nm]"]].iloc[0], [3.66, -1.86], atol=1e-6)
     # never overwrite without --force
     before = out.read_text()
     assert main(["route", "zermelo-paper", "-o", str(out)]) == 2
@@ -37,6 +38,10 @@ def test_zermelo_json_problem_with_grid_csv(tmp_path):
     assert main(["route", str(tmp_path / "p.json"), "-o", str(tmp_path / "r.json")]) == 0
     doc = json.loads((tmp_path / "r.json").read_text())
     assert doc["time_h"] * 3600 == pytest.approx(500.0, rel=1e-7)  # |w| = 2 V: analytic 500 s
+    df = pd.read_csv(tmp_path / "r.csv")  # an SI problem: s and m in the header
+    assert list(df.columns)[:3] == ["t [s]", "x [m]", "y [m]"]
+    assert df["t [s]"].iloc[-1] == pytest.approx(500.0, rel=1e-6)
+    np.testing.assert_allclose(df[["x [m]", "y [m]"]].iloc[-1], [1000, 500], atol=1e-3)
 
 
 def test_pso_json_problem_with_model_vessel(tmp_path):
@@ -54,6 +59,7 @@ def test_pso_json_problem_with_model_vessel(tmp_path):
     assert doc["saving_vs_distance_optimal"] >= -1e-5  # up to the PSO tolerance (~1e-5 relative at 60 iterations)
     df = pd.read_csv(tmp_path / "r.csv")
     assert set(df.planner) == {"ocpso", "dopso", "eopso"}
+    assert {"x [m]", "y [m]"} <= set(df.columns)
 
 
 def test_pso_vessel_from_a_fit_result_json(tmp_path):
@@ -110,3 +116,15 @@ def test_missing_and_malformed_files(tmp_path, capsys):
     assert "not valid JSON" in capsys.readouterr().err
     assert main(["route", "zermelo-paper", "-o", str(tmp_path / "o.txt")]) == 2
     assert "must be a .json" in capsys.readouterr().err
+
+
+def test_route_progress_on_request_same_result_and_quiet_off_a_terminal(tmp_path, capsys):
+    args = ["route", "pso-paper", "--seed", "1"]
+    assert main([*args, "-o", str(tmp_path / "a.json")]) in (0, 1)
+    assert capsys.readouterr().err == ""  # stderr is not a terminal here: no progress by default
+    assert main([*args, "--progress", "-o", str(tmp_path / "b.json")]) in (0, 1)
+    assert "route (PSO iterations)" in capsys.readouterr().err
+    a, b = (json.loads((tmp_path / f"{k}.json").read_text()) for k in "ab")
+    assert a["energy_J"] == b["energy_J"]  # the progress callback draws no random numbers
+    assert main(["route", "zermelo-paper", "--progress", "-o", str(tmp_path / "z.json")]) == 0
+    assert "route (Zermelo solvers)" in capsys.readouterr().err

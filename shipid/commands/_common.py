@@ -62,6 +62,9 @@ def add_log_options(p) -> None:
     g.add_argument("--rudder-sign", type=int, choices=[1, -1], default=None, metavar="{1,-1}",
                    help="-1 when the file's positive rudder turns the ship to port (flipped to shipid's "
                         "starboard-positive convention; the marin schema already does this)")
+    g.add_argument("--sign", action="append", metavar="CH=-1",
+                   help="channels whose sign the file has opposite to shipid's, e.g. r=-1,v=-1 (negated on reading; "
+                        "the rudder takes --rudder-sign)")
     g.add_argument("--format", dest="fmt", choices=["auto", "csv", "marin"], default="auto",
                    help="file format (default: auto)")
     g.add_argument("--interpolate-inputs", action="store_true", help="fill gaps in delta/n by interpolation")
@@ -81,7 +84,14 @@ def read_logs(paths, args) -> list:
 
     if args.skip_rows is not None and args.skip_rows < 0:
         raise ValueError(f"--skip-rows {args.skip_rows}: give a number of lines >= 0")
-    kw = dict(units=parse_pairs(args.units, "--units") or None,
+    signs = parse_pairs(getattr(args, "sign", None), "--sign")
+    for k, v in signs.items():
+        if k == "delta":
+            raise ValueError("--sign delta: give the rudder's sign with --rudder-sign -1")
+        if v not in ("1", "+1", "-1"):
+            raise ValueError(f"--sign {k}={v}: give +1 or -1 (the channel is negated for -1), e.g. --sign r=-1,v=-1")
+        signs[k] = float(v)
+    kw = dict(units=parse_pairs(args.units, "--units") or None, signs=signs or None,
               columns=parse_pairs(args.columns, "--columns") or None,
               fmt=args.fmt, lpp=args.lpp, ship=args.ship, interpolate_inputs=args.interpolate_inputs,
               delimiter=args.delimiter, unit_checks=not args.no_unit_checks, marin_time=args.marin_time,
@@ -155,12 +165,14 @@ CHANNEL_UNITS = {"time": "s", "t": "s", "x": "m", "y": "m", "psi": "rad", "u": "
                  "p": "rad/s", "phi": "rad", "delta": "rad", "n": "rps", "T": "N", "phi_p": "rad"}
 
 
-def units_header(frame, model=None):
+def units_header(frame, model=None, units=None):
     """``frame`` with ``name [unit]`` column (and index) names where the unit is known
-    (the model's ``units`` first, then :data:`CHANNEL_UNITS`); other names unchanged."""
-    units = dict(CHANNEL_UNITS)
+    (``units`` first, then the model's ``units``, then :data:`CHANNEL_UNITS`); other names unchanged."""
+    table = dict(CHANNEL_UNITS)
     if model is not None:
-        units.update(getattr(model, "units", {}) or {})
+        table.update(getattr(model, "units", {}) or {})
+    table.update(units or {})
+    units = table
 
     def label(name):
         unit = units.get(str(name))

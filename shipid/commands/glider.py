@@ -5,7 +5,7 @@ import math
 
 from .._io import atomic_write_set, dumps_json
 
-from ._common import add_progress_option, check_output_path, progress_on
+from ._common import add_progress_option, check_output_path, progress_on, units_header
 
 
 def register(sub) -> None:
@@ -78,7 +78,8 @@ def _launch(args) -> int:
     out["params"]["x_g"] = float(args.cg)
     files = [(args.output, dumps_json(out))]
     if args.trajectory:
-        files.insert(0, (args.trajectory, res.to_pandas(0).to_csv(float_format="%.10g")))
+        traj = units_header(res.to_pandas(0), res.model, units={"depth": "m (down)"})
+        files.insert(0, (args.trajectory, traj.to_csv(float_format="%.10g")))
     atomic_write_set(files, force=args.force)  # trajectory and summary: both or neither
     print(f"max depth {out['max_depth_m']:.3f} m, horizontal {out['horizontal_m'] if out['horizontal_m'] is not None else float('nan'):.3f} m, "
           f"exit angle {out['exit_angle_deg'] if out['exit_angle_deg'] is not None else float('nan'):.1f} deg, "

@@ -36,11 +36,17 @@ def register(sub) -> None:
     p.add_argument("--refine", nargs="?", const="output-error", default="auto",
                    choices=("auto", "none", "output-error", "metrics"),
                    help="refinement after the EKF: 'output-error', 'metrics' (output error + the training runs' own "
-                        "standard-manoeuvre metrics), 'none'; default 'auto' = output-error when the logs hold turning "
+                        "standard-manoeuvre metrics), 'none'; default 'auto' = metrics when the logs hold turning "
                         "circles and zigzags, else none; a bare --refine means output-error")
+    p.add_argument("--metric-weight", type=float, default=None, metavar="W",
+                   help="weight of the metric residuals of the 'metrics' refinement (default 0.1, chosen by "
+                        "leave-one-run-out on the KVLCC2 training runs)")
     p.add_argument("--max-nfev", type=int, default=60, help="evaluation limit of the refinement (default 60)")
     p.add_argument("--dt", default="auto", metavar="auto|K",
                    help="use every K-th sample; default auto: >= 25 steps per fastest time constant of the model")
+    p.add_argument("--max-drift", default="auto", metavar="auto|DEG|none",
+                   help="models linear in v and r (kcs-response): use each log until its drift angle first exceeds "
+                        "DEG (default auto: 10 deg for such models, every sample for the others; none: every sample)")
     p.add_argument("--no-neutral", action="store_true",
                    help="do not take the rudder neutral angle (delta0) from the straight approaches of the logs")
     p.add_argument("--start", choices=("staged", "given"), default="staged",
@@ -59,6 +65,7 @@ def register(sub) -> None:
     d = sub.add_parser("demo", help="fit the bundled synthetic KCS logs and print the results")
     d.add_argument("-o", "--output-dir", default=None, help="new folder for the outputs (default: shipid-demo-<time>)")
     d.add_argument("--passes", type=int, default=2, help="EKF passes (default 2)")
+    add_progress_option(d)
     d.set_defaults(handler=_demo)
 
 
@@ -130,6 +137,20 @@ def _dt(args):
     return k
 
 
+def _max_drift(args):
+    text = str(args.max_drift).strip().lower()
+    if text in ("auto", "none"):
+        return None if text == "none" else "auto"
+    try:
+        deg = float(text)
+    except ValueError:
+        deg = float("nan")
+    if not 0 < deg < 90:
+        raise ValueError(f"--max-drift {args.max_drift}: give 'auto', 'none' or a drift angle in degrees between 0 "
+                         "and 90, e.g. --max-drift 10")
+    return deg
+
+
 def _lib_errors(call):
     """Run ``call()``; the library's advice re-worded for the CLI."""
     try:
@@ -158,6 +179,8 @@ def _fit(args) -> int:
     for k, v in (meas_std or {}).items():
         if not (np.isfinite(v) and v > 0):
             raise ValueError(f"--meas-std {k}={v}: give a positive standard deviation in SI units, e.g. psi=0.002")
+    if args.metric_weight is not None and not (np.isfinite(args.metric_weight) and args.metric_weight >= 0):
+        raise ValueError(f"--metric-weight {args.metric_weight}: give a finite weight >= 0 (default 0.1)")
     if args.max_nfev < 1:
         raise ValueError(f"--max-nfev must be >= 1, got {args.max_nfev}")
     logs = read_logs(args.logs, args)
@@ -179,8 +202,9 @@ def _fit(args) -> int:
     else:
         recipe = _lib_errors(lambda: fit_logs(
             logs, model, lpp=args.lpp, estimate=_names(args.estimate) or None, fixed=_fixed(args, model),
-            start=args.start, neutral=not args.no_neutral, dt=_dt(args),
-            refine=None if args.refine == "none" else args.refine, n_passes=args.passes, max_nfev=args.max_nfev,
+            start=args.start, neutral=not args.no_neutral, dt=_dt(args), max_drift_deg=_max_drift(args),
+            refine=None if args.refine == "none" else args.refine, metric_weight=args.metric_weight,
+            n_passes=args.passes, max_nfev=args.max_nfev,
             tune_noise=args.tune_noise, progress=progress_on(args), meas_std=meas_std, log=print))
         fit, ident = recipe, recipe.ekf
     result = fit.result()
@@ -264,7 +288,7 @@ def _demo(args) -> int:
     # start far from the truth: every coefficient off by a seeded random 30 %
     rng = np.random.default_rng(0)
     start = truth.with_params(truth.params * (1 + 0.3 * rng.standard_normal(truth.np)))
-    ident = EKFIdentifier(start, n_passes=args.passes, init="equation-error", progress=True).fit(logs)
+    ident = EKFIdentifier(start, n_passes=args.passes, init="equation-error", progress=progress_on(args)).fit(logs)
     result = ident.result()
     result.to_json(outdir / "result.json")
     _print_result(result)
@@ -331,7 +355,7 @@ def _demo_mmg(args, outdir: Path) -> None:
     train = [lg for lg in logs if lg not in held_out]
     print(f"\npart 2: kcs-response fitted to {len(train)} logs generated by the MMG model "
           f"(held out: {', '.join(lg.name for lg in held_out)})")
-    ident = EKFIdentifier(get_model("kcs-response"), n_passes=args.passes, progress=True).fit(train)
+    ident = EKFIdentifier(get_model("kcs-response"), n_passes=args.passes, progress=progress_on(args)).fit(train)
     res = ident.result()
     res.to_json(outdir / "mmg_result.json")
     _print_result(res)

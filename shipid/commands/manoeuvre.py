@@ -205,6 +205,12 @@ def _simulate(args) -> int:
     return 0
 
 
+#: Units of the ``sweep`` CSV columns (``_L``: lengths divided by Lpp; speed loss: 1 - U_steady / U_approach).
+SWEEP_UNITS = {"rudder_deg": "deg", "speed": "m/s", "n": "rps", "advance_L": "Lpp", "transfer_L": "Lpp",
+               "tactical_diameter_L": "Lpp", "steady_diameter_L": "Lpp", "tactical_diameter": "m",
+               "steady_diameter": "m", "speed_loss": "-"}
+
+
 def _sweep(args) -> int:
     from ..manoeuvres import ship_info, turning_sweep
 
@@ -223,7 +229,10 @@ def _sweep(args) -> int:
     rate = math.radians(args.rudder_rate) if args.rudder_rate is not None else None
     df = turning_sweep(model, rud, speeds, side=args.side, rudder_rate=rate, lpp=args.lpp,
                        method=args.method, rtol=_rtol(args))
-    _write_or_print(df.to_csv(index=False, float_format="%.10g"), args.output, args.force)
+    from ._common import units_header
+
+    table = units_header(df, units=SWEEP_UNITS)
+    _write_or_print(table.to_csv(index=False, float_format="%.10g"), args.output, args.force)
     if args.output:
         print(df[["rudder_deg", "speed", "n", "tactical_diameter_L", "steady_diameter_L"]].to_string(index=False))
     return 0 if bool(df["success"].all()) else 1

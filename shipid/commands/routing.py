@@ -12,7 +12,14 @@ import numpy as np
 
 from .._io import atomic_write_set, dumps_json
 
-from ._common import json_and_csv_outputs
+from ._common import add_progress_option, json_and_csv_outputs, progress_iter, progress_on, units_header
+
+#: Units of the route CSV columns, by the problem's unit system (``units`` of a Zermelo problem; PSO is SI).
+ROUTE_UNITS = {
+    "nautical": {"t": "h", "x": "nm", "y": "nm", "heading_deg": "deg", "course_deg": "deg"},
+    "si": {"t": "s", "x": "m", "y": "m", "heading_deg": "deg", "course_deg": "deg",
+           "lon": "deg", "lat": "deg"},
+}
 
 
 #: What ``route pso-paper`` prints under its numbers (docs/routing.md has the 64-case table).
@@ -36,6 +43,7 @@ def register(sub) -> None:
                    help="Zermelo solver (default: the problem's 'solver' or 'both')")
     p.add_argument("--kinematics", choices=["paper", "crab"], default=None,
                    help="PSO leg kinematics for pso-paper (default 'paper')")
+    add_progress_option(p)
     p.set_defaults(handler=_route)
 
 
@@ -58,9 +66,10 @@ def _route(args) -> int:
     return _pso(args, spec, base, out, csv)
 
 
-def _write(out, csv, doc, frame, force):
-    # the CSV and the JSON are published as a set (both or neither)
-    atomic_write_set([(csv, frame.to_csv(index=False, float_format="%.10g")), (out, dumps_json(doc))], force=force)
+def _write(out, csv, doc, frame, force, units="si"):
+    # the CSV (units in its header) and the JSON are published as a set (both or neither)
+    table = units_header(frame, units=ROUTE_UNITS[units])
+    atomic_write_set([(csv, table.to_csv(index=False, float_format="%.10g")), (out, dumps_json(doc))], force=force)
     print(f"wrote {out} and {csv}")
 
 
@@ -74,17 +83,19 @@ def _zermelo(args, spec, base, out, csv) -> int:
     solver = args.solver or spec.get("solver", "both")
     if solver not in ("pmp", "transcription", "both"):
         raise ValueError(f"{args.problem}: 'solver' must be pmp, transcription or both, got {solver!r}")
+    if solver in ("pmp", "both") and problem.field.time_dependent:
+        if solver == "pmp":
+            raise ValueError(f"{args.problem}: the current is time dependent; the PMP solver needs a steady one -- use --solver transcription")
+        solver = "transcription"
     results = {}
-    if solver in ("pmp", "both"):
-        if problem.field.time_dependent:
-            if solver == "pmp":
-                raise ValueError(f"{args.problem}: the current is time dependent; the PMP solver needs a steady one -- use --solver transcription")
-        else:
+    stages = ["pmp", "transcription"] if solver == "both" else [solver]
+    for stage in progress_iter(stages, args, desc="route (Zermelo solvers)"):
+        if stage == "pmp":
             results["pmp"] = solve_pmp(problem)
-    if solver in ("transcription", "both"):
-        guess = results.get("pmp")
-        results["transcription"] = solve_transcription(problem, n=int(spec.get("n", 40)),
-                                                       guess=guess if guess is not None and guess.reached else None)
+        else:
+            guess = results.get("pmp")
+            results["transcription"] = solve_transcription(problem, n=int(spec.get("n", 40)),
+                                                           guess=guess if guess is not None and guess.reached else None)
     best = min((r for r in results.values() if r.reached), key=lambda r: r.time, default=next(iter(results.values())))
     doc = {
         "problem": str(args.problem), "type": "zermelo", "units": units,
@@ -95,12 +106,13 @@ def _zermelo(args, spec, base, out, csv) -> int:
                         "message": r.message, "initial_course_deg": float(np.degrees(r.course[0]))}
                     for k, r in results.items()},
         "route_csv": csv.name,
-        "columns": "t, x (east), y (north), heading_deg (math, from east ccw), course_deg (nautical)",
+        "columns": ("t, x (east), y (north), heading_deg (math, from east ccw), course_deg (nautical); "
+                    + ("h, nm, nm, deg, deg" if units == "nautical" else "s, m, m, deg, deg")),
     }
     if spec.get("paper"):
         doc["note"] = ("seed 001 example in nm, kn, h; the paper's 10.93 h is 4(1+sqrt 3) = 10.928 h of the extremal "
                        "with the rounded angles u(0) = 345, u(tf) = 210 deg, which starts 0.004 nm from the printed A")
-    _write(out, csv, doc, best.to_pandas(), args.force)
+    _write(out, csv, doc, best.to_pandas(), args.force, "nautical" if units == "nautical" else "si")
     print(f"time {best.time * to_h:.6f} h ({best.method}); reached: {best.reached}")
     return 0 if best.reached else 1
 
@@ -124,7 +136,7 @@ def _pso(args, spec, base, out, csv) -> int:
         raise ValueError(f"--seed {args.seed}: give a whole number >= 0")
     seed = args.seed if args.seed is not None else settings.get("seed", 0)
     kw = {k: settings[k] for k in ("n_particles", "max_iter", "replan_times") if k in settings}
-    res = compare_planners(problem, rng=seed, **kw)
+    res = compare_planners(problem, rng=seed, progress=progress_on(args), **kw)
     oc, do, eo = res["ocpso"], res["dopso"], res["eopso"]
     rows = []
     for name, pts in (("ocpso", oc.points), ("dopso", do.points), ("eopso", eo.points)):

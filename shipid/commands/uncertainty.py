@@ -1,4 +1,4 @@
-"""``shipid sample`` (MCMC posterior of a fit) and ``shipid campaign`` (many fits on Dask), plus the
+"""``shipid sample`` (MCMC posterior of a fit) and ``shipid campaign`` (many fits and sweeps on Dask), plus the
 ``--draws`` helpers of ``shipid simulate`` / ``validate`` / ``report`` (the logic is in
 :mod:`shipid.uncertainty`)."""
 from __future__ import annotations
@@ -10,16 +10,29 @@ from pathlib import Path
 from ._common import add_log_options, read_logs
 
 
+def _command(sub, name, handler, help, description, *, positional, output_help, output_metavar=None,
+             force_help="overwrite an existing output"):
+    """A sub-command of this module: its positional arguments (``(name, metavar, help[, nargs])``),
+    the required ``-o/--output`` and ``--force``."""
+    p = sub.add_parser(name, help=help, description=description)
+    for dest, metavar, text, *nargs in positional:
+        p.add_argument(dest, metavar=metavar, help=text, **({"nargs": nargs[0]} if nargs else {}))
+    p.add_argument("-o", "--output", required=True, metavar=output_metavar, help=output_help)
+    p.add_argument("--force", action="store_true", help=force_help)
+    p.set_defaults(handler=handler)
+    return p
+
+
 def register(sub) -> None:
-    p = sub.add_parser("sample", help="sample the posterior of a fit's coefficients by MCMC (emcee) -> samples JSON",
-                       description="Sample the posterior of the estimated coefficients of RESULT.json over the "
-                                   "output-error likelihood of the logs (noise levels and prior widths from the fit), "
-                                   "started from the EKF posterior; reports acceptance, autocorrelation time, effective "
-                                   "sample size and split-R-hat, and exits 1 when the chain has not converged.")
-    p.add_argument("result", metavar="RESULT.json", help="fit result written by `shipid fit -o`")
-    p.add_argument("logs", nargs="+", metavar="LOG", help="trial logs of the likelihood (usually the fit's)")
-    p.add_argument("-o", "--output", required=True, help="samples JSON to write")
-    p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p = _command(sub, "sample", _sample,
+                 "sample the posterior of a fit's coefficients by MCMC (emcee) -> samples JSON",
+                 "Sample the posterior of the estimated coefficients of RESULT.json over the output-error likelihood "
+                 "of the logs (noise levels and prior widths from the fit), started from the EKF posterior; reports "
+                 "acceptance, autocorrelation time, effective sample size and split-R-hat, and exits 1 when the "
+                 "chain has not converged.",
+                 positional=[("result", "RESULT.json", "fit result written by `shipid fit -o`"),
+                             ("logs", "LOG", "trial logs of the likelihood (usually the fit's)", "+")],
+                 output_help="samples JSON to write")
     p.add_argument("--walkers", type=int, default=None, help="ensemble size (default max(4 x n_coef, 32))")
     p.add_argument("--steps", type=int, default=2000, help="steps per walker (default 2000)")
     p.add_argument("--burn", type=int, default=None, help="steps discarded (default steps/3)")
@@ -27,27 +40,31 @@ def register(sub) -> None:
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--channels", default=None, help="output-error channels, comma separated (default u,v,r)")
     p.add_argument("--no-vectorize", action="store_true", help="one simulation per walker (slow; for comparison)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _progress_option(p)
     add_log_options(p)
-    p.set_defaults(handler=_sample)
 
-    c = sub.add_parser("campaign", help="run the fits of a campaign file (JSON/YAML) on Dask workers",
-                       description="Run many fits, each with its own logs and settings, from a campaign file; "
-                                   "an embedded LocalCluster of --workers processes by default, an existing cluster "
-                                   "with --scheduler, serially with --workers 1.  Writes OUTDIR/<name>/result.json "
-                                   "(+ predictions.json with draws) and OUTDIR/campaign.json.")
-    c.add_argument("campaign", metavar="CAMPAIGN", help="campaign file (.json, .yaml)")
-    c.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="output folder (new or empty)")
+    c = _command(sub, "campaign", _campaign,
+                 "run the fits and sweeps of a campaign file (JSON/YAML) on Dask workers",
+                 "Run many fits, each with its own logs and settings, and sweeps (turning-diameter grids, glider "
+                 "launch factorials) from a campaign file; an embedded LocalCluster of --workers processes by "
+                 "default, an existing cluster with --scheduler, serially with --workers 1.  Writes "
+                 "OUTDIR/<name>/result.json (+ predictions.json with draws) per fit, OUTDIR/<name>/sweep.csv per "
+                 "sweep and OUTDIR/campaign.json.",
+                 positional=[("campaign", "CAMPAIGN", "campaign file (.json, .yaml)")],
+                 output_help="output folder (new or empty)", output_metavar="OUTDIR",
+                 force_help="write into a non-empty output folder")
     add_engine_options(c)
-    c.add_argument("--force", action="store_true", help="write into a non-empty output folder")
-    c.set_defaults(handler=_campaign)
+
+
+def _progress_option(p) -> None:
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def add_engine_options(p) -> None:
     p.add_argument("--workers", type=int, default=None,
                    help="worker processes of the embedded Dask LocalCluster (default: CPUs; 1 = serial)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS", help="existing Dask scheduler, e.g. tcp://host:8786")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _progress_option(p)
 
 
 def engine_from(args):
@@ -108,7 +125,8 @@ def _campaign(args) -> int:
     with engine_from(args) as eng:
         summary = run_campaign(camp, args.output, engine=eng, force=args.force)
     for m in summary["members"]:
-        state = ("ok" if m.get("success", True) else "fit did not converge") if m["ok"] else f"FAILED: {m['error']}"
+        bad = "fit did not converge" if m.get("type", "fit") == "fit" else "some runs of the sweep failed"
+        state = ("ok" if m.get("success", True) else bad) if m["ok"] else f"FAILED: {m['error']}"
         print(f"{m['name']}: {state}")
     print(f"{summary['n_members'] - summary['n_failed']}/{summary['n_members']} members completed "
           f"({summary['engine']}); wrote {Path(args.output) / 'campaign.json'}")

@@ -22,8 +22,11 @@ logged positions with a mean residual below 1 mm/s in every run), or ``"water"``
 from a log or a model basin).  With ``"ground"`` the relative velocity is ``(u, v) - R(psi)^T c`` and the
 time derivative of the rotated current term is added to ``u', v'``.
 
-Jacobians: complex step through the whole wrapper (the base equations, the wind and the current terms
-are all complex-step safe), exact to rounding.
+The equations are one scalar source, :mod:`shipid.environment._equations`, bound to the base model's
+own equations module: numpy arrays here, and compiled by numba (``shipid[fast]``) for batched right-hand
+sides and inside the EKF kernel (:mod:`shipid.identify._kernel`; the model declares the kernel protocol
+like ``mmg``).  Jacobians: complex step through the whole wrapper (base equations, wind and current terms),
+exact to rounding; compiled in the kernel.
 """
 from __future__ import annotations
 
@@ -31,8 +34,11 @@ from typing import Mapping
 
 import numpy as np
 
-from ..models.base import ComplexStepJacobians, Model
-from .wind import WIND_PARAM_NAMES, WindForce, _air_body
+from .._jit import compiled
+from ..models.base import ComplexStepJacobians, Model, batch_shape
+from ..models.mmg import DerivedConstants, ShipEquationsModel, components
+from . import _equations as _eqe
+from .wind import WIND_PARAM_NAMES, WindForce
 
 __all__ = ["EnvironmentModel", "with_environment", "CURRENT_KINDS", "WIND_INPUTS", "CURRENT_STATES"]
 
@@ -62,7 +68,7 @@ def with_environment(model: Model, *, wind=None, current: str | None = None, vel
                             current_walk=current_walk)
 
 
-class EnvironmentModel(ComplexStepJacobians, Model):
+class EnvironmentModel(DerivedConstants, ComplexStepJacobians, Model):
     """A ship model with wind inputs/parameters and current states (build with :func:`with_environment`).
 
     Parameters
@@ -86,8 +92,8 @@ class EnvironmentModel(ComplexStepJacobians, Model):
             from ..models import get_model
 
             base = get_model(base, base_params, **dict(base_options or {}))
-        if not isinstance(base, Model) or not hasattr(base, "mass_matrix"):
-            raise ValueError(f"with_environment: base must be a ship model with a mass matrix (mmg, lowspeed), got "
+        if not isinstance(base, ShipEquationsModel):
+            raise ValueError(f"with_environment: base must be a 3-DOF ship model with a mass matrix (mmg, lowspeed), got "
                              f"{getattr(base, 'name', type(base).__name__)!r}")
         if tuple(base.state_names[:6]) != ("x", "y", "psi", "u", "v", "r"):
             raise ValueError(f"with_environment: base model '{base.name}' must have states x, y, psi, u, v, r")
@@ -144,40 +150,52 @@ class EnvironmentModel(ComplexStepJacobians, Model):
         return self.base.mass_matrix(p[..., : self._nb])
 
     # ------------------------------------------------------------- equations
+    particulars = property(lambda self: self.base.particulars, doc="The base ship's particulars.")
+    #: The equation sets on the base model's equations (module-level cache; not stored: models pickle).
+    _sets = property(lambda self: _eqe.equation_sets(self.base._eqm))
+
+    def _kernel_constants(self) -> np.ndarray:
+        """``P`` of :func:`shipid.environment._equations.env_derived`: base particulars, the number of base
+        parameters, the flags (wind, current, ground velocities) and the wind force scales."""
+        scales = self.wind.scales() if self.wind is not None else (0.0, 0.0, 0.0)
+        return np.array(self.base._particulars_tuple() + (float(self._nb), float(self.wind is not None),
+                                                          float(bool(self.current)),
+                                                          float(self.velocities == "ground")) + tuple(scales))
+
+    def _derived(self, p) -> tuple:
+        return self._sets["numpy"]["env_derived"](p, tuple(self._kernel_constants().tolist()))
+
+    def _compiled(self):
+        return compiled(self._sets["real"], tag=self._sets["tag"])
+
     def _rhs(self, t, x, u, p):
-        nb, base = self._nb, self.base
-        psi, uu, v, r = x[..., 2], x[..., 3], x[..., 4], x[..., 5]
-        c, s = np.cos(psi), np.sin(psi)
-        if self.current:
-            cx, cy = x[..., 6], x[..., 7]
-            uc, vc = c * cx + s * cy, -s * cx + c * cy
-        else:
-            uc = vc = 0.0
-        if self.velocities == "ground":
-            ug, vg, ur, vr = uu, v, uu - uc, v - vc
-        else:
-            ug, vg, ur, vr = uu + uc, v + vc, uu, v
-        xr = np.stack(np.broadcast_arrays(x[..., 0], x[..., 1], psi, ur, vr, r), axis=-1)
-        ub = u[..., : base.nu]
-        f = base._rhs(t, xr, ub, p[..., :nb])
-        du, dv, dr = f[..., 3], f[..., 4], f[..., 5]
-        if self.wind is not None:
-            ax, ay = _air_body(u[..., base.nu], u[..., base.nu + 1], psi, ug, vg)
-            comp = [p[..., nb + i] for i in range(len(WIND_PARAM_NAMES))]
-            XA, YA, NA = self.wind.force_cs(-ax, -ay, comp)
-            M = base.mass_matrix(p[..., :nb])
-            Mx, My, B, C = M[..., 0, 0], M[..., 1, 1], M[..., 1, 2], M[..., 2, 2]
-            det = My * C - B * B
-            du = du + XA / Mx
-            dv = dv + (C * YA - B * NA) / det
-            dr = dr + (My * NA - B * YA) / det
-        if self.current and self.velocities == "ground":
-            du, dv = du + r * vc, dv - r * uc
-        out = [c * ug - s * vg, s * ug + c * vg, r, du, dv, dr]
+        real = x.dtype.kind == "f" and u.dtype.kind == "f" and p.dtype.kind == "f"
+        fast = self._compiled() if real else None
+        if fast is not None:  # numba: one compiled loop over the samples
+            lead = batch_shape(x, u, p)
+            X = np.broadcast_to(x, lead + (self.nx,)).reshape(-1, self.nx)
+            U = np.broadcast_to(u, lead + (self.nu,)).reshape(-1, self.nu)
+            return fast["env_rhs_rows"](X, U, self._constant_rows(p, lead)).reshape(lead + (self.nx,))
+        xc, uc = components(x), components(u)
+        zero = 0.0 * xc[0]
+        cx, cy = (xc[6], xc[7]) if self.current else (zero, zero)
+        nb = self.base.nu
+        ws, wd = (uc[nb], uc[nb + 1]) if self.wind is not None else (0.0, 0.0)
+        rates = self._sets["numpy" if real else "complex"]["env_rates"]
+        out = list(rates(xc[2], xc[3], xc[4], xc[5], cx, cy, uc[0], uc[1], ws, wd, self._derived_of(p, "arrays")))
         if self.current:
             out += [0.0 * cx, 0.0 * cy]
         shape = np.broadcast_shapes(*[np.shape(o) for o in out])
         return np.stack([np.broadcast_to(o, shape) for o in out], axis=-1)
+
+    # the compiled EKF kernel (shipid.identify._kernel) runs the same equations
+    @property
+    def _equations(self):
+        return self._sets["kernel"]
+
+    def _equations_namespace(self) -> dict:
+        cs = compiled(self._sets["cs"], self._sets["cmath"], tag=self._sets["tag"] + "__cs")
+        return {} if cs is None else {"env_cs_columns": cs["env_cs_columns"], "env_derived_cs": cs["env_derived"]}
 
     def __repr__(self) -> str:
         return (f"<EnvironmentModel '{self.base.name}' + wind={'fujiwara' if self.wind is not None else None}, "

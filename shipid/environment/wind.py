@@ -170,12 +170,14 @@ class WindForce:
         """Forces from the apparent wind vector written as ``(V cos gamma, V sin gamma)`` (no angle, no
         square root: smooth at V = 0 and complex-step safe).  ``comp`` is a sequence of the ten components
         in :data:`WIND_PARAM_NAMES` order (floats or arrays)."""
-        V2 = a_cos * a_cos + a_sin * a_sin
-        pos = np.real(V2) > 0
-        iV = np.where(pos, 1.0 / np.sqrt(np.where(pos, V2, 1.0)), 0.0)
-        CX, CY, CN = coefficients_cs(a_cos * iV, a_sin * iV, comp)
-        q = 0.5 * self.rho_air * V2
-        return q * self.A_T * CX, q * self.A_L * CY, q * self.A_L * self.lpp * CN
+        from ._equations import wind_force_numpy
+
+        return wind_force_numpy()(a_cos, a_sin, *self.scales(), *comp)
+
+    def scales(self) -> tuple:
+        """``(1/2 rho_air A_T, 1/2 rho_air A_L, 1/2 rho_air A_L L)``: the force scales per V^2."""
+        ra = 0.5 * self.rho_air
+        return ra * self.A_T, ra * self.A_L, ra * self.A_L * self.lpp
 
     def _comp(self, components):
         base = self.components()

@@ -78,4 +78,5 @@ def dive_log(
     channels = {k: df[k].to_numpy() + s * rng.standard_normal(n) for k, s in std.items()}
     channels["delta"] = np.full(n, np.deg2rad(fin_deg))
     label = name or f"launch {speed:g} m/s {angle_deg:g} deg fin {fin_deg:g} cg {cg_m:g}"
-    return TrialLog.from_arrays(df.index.to_numpy(), name=label, inputs=("delta",), **channels)
+    return TrialLog.from_arrays(df.index.to_numpy(), name=label, inputs=("delta",), consistency_checks=False,
+                               **channels)

@@ -15,6 +15,7 @@ complex-step) ``_jac_x``/``_jac_p`` to be cheap.
 """
 from __future__ import annotations
 
+import warnings
 from datetime import datetime, timezone
 
 import numpy as np
@@ -95,6 +96,9 @@ class OutputErrorRefiner:
             raise ValueError(f"input_hold must be 'foh' or 'zoh', got {self.input_hold!r}")
         model = self.model
         arrays, meas = prepare_logs(model, logs)
+        # time of each log's last measured sample (logs padded onto a common grid are NaN after it)
+        ends_of = [float(ar.t[np.flatnonzero(np.isfinite(ar.Y).any(axis=1))[-1]]) if np.isfinite(ar.Y).any()
+                   else float(ar.t[-1]) for ar in arrays]
         if self.log_weights is None:
             wlog = np.ones(len(arrays))
         else:
@@ -169,8 +173,17 @@ class OutputErrorRefiner:
                 Ug = np.stack([arrays[i].U for i in g])
                 Ug = np.broadcast_to(Ug, (B,) + Ug.shape).reshape((B * G,) + Ug.shape[1:])
                 Pg = np.repeat(P, G, axis=0)
-                with np.errstate(all="ignore"):
+                with np.errstate(all="ignore"), warnings.catch_warnings(record=True) as caught:
+                    warnings.simplefilter("always")
                     res = simulate(model, X0, t, Ug, params=Pg, substeps=self.substeps, input_hold=self.input_hold)
+                # a log padded to a longer one's grid (recipe.common_grid) may blow up after its own last
+                # sample, where nothing is fitted: warn only about failures inside a log's measured span
+                ends = np.tile([ends_of[i] for i in g], B)
+                failed = res.meta.get("failed", [])
+                past_end = bool(failed) and all(tf > ends[m] for m, tf in zip(failed, res.meta.get("failed_at", [])))
+                for w in caught:
+                    if not (past_end and "became non-finite" in str(w.message)):
+                        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
                 xs = res.x.reshape((B, G) + res.x.shape[1:])
                 for j, i in enumerate(g):
                     out[i] = xs[:, j][:, :, st_idx]

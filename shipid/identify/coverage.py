@@ -75,12 +75,21 @@ def _replicate(task: dict) -> dict:
         ident = EKFIdentifier(start, estimate=task["estimate"], n_passes=task["n_passes"],
                               **task["identifier_kwargs"]).fit(logs)
     res = ident.result()
-    names = list(res.cov.index)
-    out = {"seed": task["seed"], "success": bool(res.success), "names": names,
-           "coef": [res.coef[n] for n in names], "std": [res.coef_std[n] for n in names],
+    fit = res
+    if task["refine"] == "output-error":
+        # the output-error maximum-likelihood estimate started from the EKF: weights = the EKF's noise levels,
+        # exact RK4 sensitivities, Laplace covariance (J^T J)^-1 s^2
+        from .batch import OutputErrorRefiner
+
+        ref = OutputErrorRefiner(ident.to_model(), estimate=ident.estimated_, meas_std=ident.meas_std_.to_dict(),
+                                 jacobian="tangent", max_nfev=task["max_nfev"], input_hold=ident.input_hold)
+        fit = ref.fit(logs, start=ident).result()
+    names = list(fit.cov.index)
+    out = {"seed": task["seed"], "success": bool(fit.success), "names": names,
+           "coef": [fit.coef[n] for n in names], "std": [fit.coef_std[n] for n in names],
            "poorly_determined": list(res.diagnostics.get("poorly_determined", []))}
     if task["draws"] > 0:
-        pred = predict_manoeuvres(res, task["manoeuvres"], draws=task["draws"], seed=task["seed"] % (2**32),
+        pred = predict_manoeuvres(fit, task["manoeuvres"], draws=task["draws"], seed=task["seed"] % (2**32),
                                   zigzag_executes=3, inflation=task["inflation"])
         out["metrics"] = {f"{r.manoeuvre}:{r.metric}": [r.low, r.high, r.nominal] for r in pred.summary.itertuples()}
         out["n_failed_draws"] = {k: v["n_failed"] for k, v in pred.failures.items()}
@@ -142,7 +151,7 @@ def coverage_study(truth=None, recipes=None, *, n_replicates: int = 100, seed: i
                    estimate=None, n_passes: int = 2, perturb: float = 0.3, identifier_kwargs: dict | None = None,
                    draws: int = 100, manoeuvres=("turning:35", "zigzag:10/10"), inflation: float = 1.0,
                    mcmc_replicates: int = 0, mcmc_kwargs: dict | None = None, engine=None,
-                   level: float = 0.95) -> CoverageResult:
+                   level: float = 0.95, refine: str | None = None, max_nfev: int = 50) -> CoverageResult:
     """Replicate study of interval coverage (see the module docstring).
 
     Parameters
@@ -162,6 +171,14 @@ def coverage_study(truth=None, recipes=None, *, n_replicates: int = 100, seed: i
     mcmc_kwargs : dict  -- keyword arguments of :func:`sample_posterior` (steps, walkers, burn ...)
     engine : shipid.campaign.Engine, optional  -- default serial
     level : float  -- interval probability (0.95)
+    refine : {None, "output-error"}
+        None: the intervals of the EKF posterior (method "ekf" in the table).  "output-error": the EKF
+        fit is followed by the output-error maximum-likelihood fit of the same coefficients
+        (:class:`~shipid.identify.batch.OutputErrorRefiner`, weights = the EKF's noise levels, exact RK4
+        sensitivities, initial states from the EKF smoother, at most ``max_nfev`` evaluations) and its
+        Laplace covariance ``s^2 (J^T J)^-1`` gives the intervals (method "output-error").  The MCMC
+        column does not depend on it (the sampler starts from the EKF posterior).
+    max_nfev : int  -- evaluation limit of that refinement
 
     Returns
     -------
@@ -175,6 +192,9 @@ def coverage_study(truth=None, recipes=None, *, n_replicates: int = 100, seed: i
 
     if int(n_replicates) < 2:
         raise ValueError(f"n_replicates must be >= 2, got {n_replicates}")
+    if refine not in (None, "output-error"):
+        raise ValueError(f"refine must be None or 'output-error', got {refine!r}")
+    method = "ekf" if refine is None else "output-error"
     truth = get_model("kcs-response", "synthetic-truth") if truth is None else truth
     recipes = COVERAGE_RECIPES if recipes is None else tuple(recipes)
     z = float(abs(__import__("scipy.stats", fromlist=["norm"]).norm.ppf((1 - level) / 2)))
@@ -182,7 +202,8 @@ def coverage_study(truth=None, recipes=None, *, n_replicates: int = 100, seed: i
     tasks = [{"truth": truth, "recipes": recipes, "seed": s, "noise_std": dict(noise_std or KCS_NOISE_STD),
               "estimate": estimate, "n_passes": int(n_passes), "identifier_kwargs": dict(identifier_kwargs or {}),
               "perturb": float(perturb), "draws": int(draws), "manoeuvres": list(manoeuvres),
-              "inflation": float(inflation), "mcmc": i < int(mcmc_replicates), "mcmc_kwargs": dict(mcmc_kwargs or {})}
+              "inflation": float(inflation), "mcmc": i < int(mcmc_replicates), "mcmc_kwargs": dict(mcmc_kwargs or {}),
+              "refine": refine, "max_nfev": int(max_nfev)}
              for i, s in enumerate(seeds)]
     eng = engine or Engine(1, progress=False)
     outs = eng.map(_replicate, tasks, desc="coverage replicates")
@@ -205,11 +226,11 @@ def coverage_study(truth=None, recipes=None, *, n_replicates: int = 100, seed: i
     S = np.array([g["std"] for g in good]) * inflation
     Z = (C - tv) / S
     poor = {n: sum(n in g["poorly_determined"] for g in good) for n in names}
-    rows = [_row(n, "ekf", np.abs(Z[:, j]) <= z, Z[:, j], poor[n] <= len(good) / 2) for j, n in enumerate(names)]
+    rows = [_row(n, method, np.abs(Z[:, j]) <= z, Z[:, j], poor[n] <= len(good) / 2) for j, n in enumerate(names)]
     for key, tval in truth_metrics.items():
         iv = np.array([g["metrics"].get(key, [np.nan, np.nan])[:2] for g in good if "metrics" in g], dtype=float)
         if iv.size:
-            rows.append(_row(key, "ekf", (iv[:, 0] <= tval) & (tval <= iv[:, 1])))
+            rows.append(_row(key, method, (iv[:, 0] <= tval) & (tval <= iv[:, 1])))
     mc = [g["mcmc"] for g in good if "mcmc" in g]
     if mc:
         lo, hi = np.array([m["low"] for m in mc]), np.array([m["high"] for m in mc])
@@ -226,10 +247,14 @@ def coverage_study(truth=None, recipes=None, *, n_replicates: int = 100, seed: i
     msg = (f"{len(good)} replicates ({len(errors)} failed); " +
            ("every identifiable quantity covered 0.90-0.99" if off.empty else
             "outside 0.90-0.99: " + ", ".join(f"{r.quantity} [{r.method}] {r.coverage:.2f}" for r in off.itertuples())))
+    n_unsucc = sum(not g["success"] for g in good)
+    if n_unsucc:
+        msg += f"; {n_unsucc} fits reported success=False (their intervals are counted)"
     if mc:
         msg += f"; MCMC on {len(mc)} replicates ({sum(m['converged'] for m in mc)} converged)"
     settings = {"n_replicates": int(n_replicates), "seed": int(seed), "recipes": [r.name for r in recipes],
                 "draws": int(draws), "inflation": float(inflation), "perturb": float(perturb), "n_passes": int(n_passes),
                 "mcmc_replicates": int(mcmc_replicates), "mcmc_kwargs": dict(mcmc_kwargs or {}), "level": level,
+                "refine": refine, "max_nfev": int(max_nfev), "identifier_kwargs": dict(identifier_kwargs or {}),
                 "engine": eng.describe()}
     return CoverageResult(table, good, truth_metrics, len(errors), errors, ok, msg, settings)

@@ -284,7 +284,14 @@ def _check_yaw_rate(c: _Ctx) -> None:
     t_full = t[ok]
     ir_s = _cumint(t_full, r[ok])[::st]
     t, psi, r = t_full[::st], psi[ok][::st], r[ok]
-    if np.ptp(psi) < math.radians(5.0):
+    # the heading's change, not its noise: the range of its running mean over 1/50 of the samples (a noisy
+    # compass on a straight course has a range of many degrees and no turn to compare r with)
+    # (noise std from the sample-to-sample steps; the range of the mean of w noisy samples stays below 8 of
+    # its std), so the heading must change by 5 deg and by more than its noise allows
+    w = max(1, psi.size // 50)
+    psi_s = np.convolve(psi, np.ones(w) / w, mode="valid")
+    noise = 1.4826 * float(np.median(np.abs(np.diff(psi)))) / math.sqrt(2.0)
+    if np.ptp(psi_s) < max(math.radians(5.0), 8.0 * noise / math.sqrt(w)):
         c.add("info", "yaw_rate", ("r", "psi"), f"heading {c.col('psi')} changes by less than 5 deg: yaw rate "
               "not compared with dpsi/dt")
         return
@@ -299,7 +306,7 @@ def _check_yaw_rate(c: _Ctx) -> None:
     if e_fit <= _FIT_GOOD and k < -0.5:
         c.add("error", "yaw_rate", ("r", "psi"),
               f"{who} has the opposite sign to dpsi/dt of {c.col('psi')} (rho = {shown}, dpsi/dt = {k:.3g} r): "
-              "negate r (schema \"signs\": {\"r\": -1}) or the heading", **vals)
+              "negate r (CLI: --sign r=-1; schema \"signs\": {\"r\": -1}) or the heading", **vals)
         return
     if e_fit > _FIT_GOOD:
         # r does not explain the heading: which other column does?
@@ -493,11 +500,10 @@ def _sig_digits(f: np.ndarray) -> int:
     if f.size == 0:
         return 16
     ex = np.floor(np.log10(np.abs(f)))
-    for s in range(1, 16):
-        q = 10.0 ** (ex - (s - 1))
-        if np.all(np.abs(np.round(f / q) * q - f) <= 1e-9 * np.abs(f)):
-            return s
-    return 16
+    s = np.arange(1, 16)[:, None]
+    q = 10.0 ** (ex[None, :] - (s - 1))   # (15, n): the print step of each value at 1..15 digits, all at once
+    ok = np.all(np.abs(np.round(f / q) * q - f) <= 1e-9 * np.abs(f), axis=1)
+    return int(np.argmax(ok)) + 1 if ok.any() else 16
 
 
 def _check_position_freeze(c: _Ctx) -> None:

@@ -7,7 +7,8 @@ from typing import Mapping, Sequence
 
 from ._text import _check_path, _decode
 from .marin import _looks_marin, _read_marin
-from .schema import PRESETS, Schema, apply_conventions, check_frame, check_rudder_sign, load_schema, merged
+from .schema import (PRESETS, Schema, apply_conventions, check_frame, check_rudder_sign, check_signs, load_schema,
+                     merged)
 from .ship import ShipParticulars, _as_ship, _bundled_ship, read_ship
 from .shipid_csv import _read_csv
 from .trial_log import LogError, TrialLog, _finish
@@ -32,6 +33,7 @@ def read_log(
     schema: "str | os.PathLike | Schema | Mapping | None" = None,
     velocity_frame: str | None = None,
     rudder_sign: float | None = None,
+    signs: Mapping[str, float] | None = None,
     skip_rows: int | None = None,
     header: bool | None = None,
     consistency_checks: bool = True,
@@ -94,6 +96,10 @@ def read_log(
     rudder_sign : {+1, -1}, optional
         Multiplies the file's rudder angle to give shipid's convention
         (positive delta turns to starboard).  Default: the schema's.
+    signs : dict, optional
+        Channel -> +1 or -1: channels whose sign the file has opposite to shipid's (e.g.
+        ``{"r": -1, "v": -1}`` for a port-positive yaw rate and sway), merged into the schema's
+        ``signs``; the rudder takes ``rudder_sign``.  CLI: ``--sign r=-1,v=-1``.
     skip_rows : int, optional
         Lines to skip before the header (or before the data without one).
     header : bool, optional
@@ -134,6 +140,8 @@ def read_log(
         check_frame(velocity_frame)
     if rudder_sign is not None:
         check_rudder_sign(rudder_sign)
+    if signs is not None:
+        signs = check_signs(signs)
     if schema is not None:
         sch = load_schema(schema)
     elif fmt == "marin" or (fmt == "auto" and _looks_marin(text)):
@@ -141,7 +149,8 @@ def read_log(
     else:
         sch = PRESETS["shipid"]
     sch = merged(sch, fmt=None if fmt == "auto" else fmt, columns=columns, units=units, delimiter=delimiter,
-                 velocity_frame=velocity_frame, rudder_sign=rudder_sign, skip_rows=skip_rows, header=header)
+                 velocity_frame=velocity_frame, rudder_sign=rudder_sign, signs=signs, skip_rows=skip_rows,
+                 header=header)
     ship_obj = _as_ship(ship, None)
     if sch.fmt == "marin":
         if columns:
@@ -153,6 +162,10 @@ def read_log(
                                                         skip_rows=sch.skip_rows, header=sch.header)
         if ship_obj is None and isinstance(meta.get("ship"), Mapping):
             ship_obj = ShipParticulars.from_dict(meta["ship"], source=f"`{p.name}` shipid-ship line")
+    unknown = sorted(set(signs or ()) - set(ch))
+    if unknown:
+        raise LogError(f"`{p.name}`: signs for {unknown}, but the log has no such channel; its channels are "
+                       f"{sorted(c for c in ch if c != 'time')}", path=p, column=unknown[0])
     apply_conventions(ch, units_in, notes, sch, where)
     if ship_obj is None and sch.ship is not None:
         ship_obj = _schema_ship(sch.ship)
@@ -179,8 +192,9 @@ def _schema_ship(spec: str) -> ShipParticulars:
     return read_ship(spec)
 
 
-def _run_consistency(log: TrialLog) -> None:
-    """Check the channels; errors raise LogError (all named, first in full), warnings warn."""
+def _run_consistency(log: TrialLog, opt_out: str = "or --no-consistency-checks") -> None:
+    """Check the channels; errors raise LogError (all named, first in full, then ``opt_out``: how to
+    skip the checks), warnings warn."""
     import warnings
 
     from .consistency import check_consistency
@@ -193,5 +207,5 @@ def _run_consistency(log: TrialLog) -> None:
         more = len(res.errors) - 1
         tail = f" (and {more} more consistency error(s))" if more else ""
         e = res.errors[0]
-        raise LogError(e.message + tail + "; or --no-consistency-checks",
+        raise LogError(e.message + tail + "; " + opt_out,
                        path=log.path, column=e.channels[0] if e.channels else None)

@@ -170,6 +170,21 @@ def check_rudder_sign(sign, what: str = "rudder_sign") -> float:
     return float(sign)
 
 
+def check_signs(signs, what: str = "signs") -> dict:
+    """``{channel: +1 or -1}`` as floats; ValueError naming the channel and the value otherwise (the rudder
+    has its own ``rudder_sign``; time has no sign)."""
+    if not isinstance(signs, Mapping):
+        raise ValueError(f"{what} must be a mapping channel -> +1 or -1, e.g. {{'r': -1}}; got {type(signs).__name__}")
+    out = {}
+    for ch, sg in signs.items():
+        if ch == "delta":
+            raise ValueError(f"{what}['delta']: give the rudder's sign as rudder_sign=-1 (CLI: --rudder-sign -1)")
+        if ch == "time":
+            raise ValueError(f"{what}['time']: time cannot be negated; give signs for measured channels, e.g. r=-1")
+        out[ch] = check_rudder_sign(sg, f"{what}['{ch}']")
+    return out
+
+
 _ESSO_CONVENTIONS = (
     "Esso Osaka FRT-DS-ESSO conventions as checked against the motion in all 33 files: u_velo, vm_velo are "
     "body-axis (midship) velocities (they match the heading-rotated derivative of x, y with correlation "
@@ -248,7 +263,7 @@ def merged(schema: Schema, **overrides) -> Schema:
     for k, v in overrides.items():
         if v is None:
             continue
-        if k in ("columns", "units"):
+        if k in ("columns", "units", "signs"):
             v = {**getattr(schema, k), **v}
         kw[k] = v
     return replace(schema, **kw) if kw else schema

@@ -174,6 +174,7 @@ class TrialLog:
         required: Sequence[str] = (),
         min_samples: int = 2,
         unit_checks: bool = True,
+        consistency_checks: bool = True,
         **channels,
     ) -> "TrialLog":
         """Build a log from arrays, with the same validation as :func:`read_log`.
@@ -197,6 +198,10 @@ class TrialLog:
             Fewest samples accepted.
         unit_checks : bool
             Run the "looks like degrees" heuristics (see docs/logs.md).
+        consistency_checks : bool
+            Run :func:`shipid.logs.check_consistency` as :func:`read_log` does (an error raises
+            LogError, a warning is a ``UserWarning``; the result is ``log.consistency``).  False for
+            arrays already checked (e.g. a checked log resampled) or made by a model.
         **channels : array_like, shape (n,)
             One array per channel.  Known ship channels (x, y, psi, u, v, r,
             delta, n, phi, p, ...) get the plausibility checks; any other name
@@ -214,9 +219,14 @@ class TrialLog:
             arrays[k] = a
         units = dict(units or {})
         t, arrays, units_in = _convert_units({"time": t, **arrays}, units, {}, where)
-        return _finish(t, arrays, where=where, name=name, ship=_as_ship(ship, None), path=None, sha256=None,
-                       inputs=inputs, interpolate_inputs=interpolate_inputs, required=required,
-                       min_samples=min_samples, unit_checks=unit_checks, units_in=units_in, notes=[], fmt="arrays")
+        log = _finish(t, arrays, where=where, name=name, ship=_as_ship(ship, None), path=None, sha256=None,
+                      inputs=inputs, interpolate_inputs=interpolate_inputs, required=required,
+                      min_samples=min_samples, unit_checks=unit_checks, units_in=units_in, notes=[], fmt="arrays")
+        if consistency_checks:
+            from .reader import _run_consistency
+
+            _run_consistency(log, opt_out="pass consistency_checks=False")
+        return log
 
     # --- access --------------------------------------------------------------------
     @property

@@ -10,16 +10,26 @@ EXECUTE_THRESHOLD_DEG = 0.5
 
 
 def detect_execute(t, delta, threshold_deg: float = EXECUTE_THRESHOLD_DEG) -> tuple[int, float]:
-    """Index and time of the rudder execute: first sample with ``|delta - delta[0]| > threshold``.
+    """Index and time of the rudder execute.
+
+    The index ``i`` is the first sample with ``|delta - delta[0]| > threshold``; the time is when the
+    rudder left its approach angle ``delta[0]``, with the rudder taken as linear between samples (as the
+    identifier's default first-order hold): the line through samples ``i - 1`` and ``i`` crosses
+    ``delta[0]`` at ``t[i - 1] + (t[i] - t[i - 1]) |delta[i-1] - delta[0]| / |delta[i] - delta[i-1]|``,
+    so ``t[i - 1] <= time <= t[i]``.  (Taking ``t[i]`` itself put the execute up to one sample late on
+    a log of a continuously moving rudder: 0.1 s, i.e. 0.04 L of advance, on the bundled 4.36 m logs.)
 
     ``delta`` in radians.  Raises ValueError when the rudder never moves.
     """
     delta = np.asarray(delta, dtype=float)
+    t = np.asarray(t, dtype=float)
     moved = np.abs(delta - delta[0]) > math.radians(threshold_deg)
     if not moved.any():
         raise ValueError(f"no rudder execute found: |delta - delta[0]| never exceeds {threshold_deg} deg")
     i = int(np.argmax(moved))
-    return i, float(np.asarray(t)[i])
+    step = abs(delta[i] - delta[i - 1])
+    frac = min(abs(delta[i - 1] - delta[0]) / step, 1.0)  # step > 0: sample i moved past the threshold, i - 1 did not
+    return i, float(t[i - 1] + frac * (t[i] - t[i - 1]))
 
 
 def _crossing_rows(t, h, level, start, valid):

@@ -113,7 +113,7 @@ def turning_metrics(t, x, y, psi, u, delta, *, lpp: float, v=None, execute_time:
 def _turning_rows(t, x, y, psi, U, delta, lpp, ie, te, reference, n_valid) -> list[TurningMetrics]:
     """:func:`turning_metrics` of B runs on one time grid at once (the one copy of the definitions).
 
-    ``x, y, psi, U, delta`` (B, n); ``ie, te`` (B,) execute index and time (``t[ie - 1] < te <= t[ie]``);
+    ``x, y, psi, U, delta`` (B, n); ``ie, te`` (B,) execute index and time (``t[ie - 1] <= te <= t[ie]``);
     row ``b`` uses its first ``n_valid[b]`` samples (a simulation that failed later).
     """
     B, n = x.shape

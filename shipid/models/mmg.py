@@ -89,7 +89,8 @@ from .._jit import compiled, rebind
 from . import _mmg_equations as _eq
 from .base import Model, batch_shape
 
-__all__ = ["MMGModel", "MMGParticulars", "MMG_PARAM_NAMES", "eq4_mass_matrix"]
+__all__ = ["MMGModel", "MMGParticulars", "MMG_PARAM_NAMES", "eq4_mass_matrix", "ShipEquationsModel", "DerivedConstants",
+           "resolve_particulars", "components"]
 
 #: Non-dimensional (prime-system) parameters, in order.
 MMG_PARAM_NAMES = _eq.PARAM_NAMES
@@ -221,7 +222,7 @@ def _no_default(f) -> bool:
     return f.default is dataclasses.MISSING
 
 
-def _components(a):
+def components(a):
     """View of ``a (..., k)`` with the component axis first (cheap for 1-D and 2-D arrays)."""
     return a.T if a.ndim <= 2 else np.moveaxis(a, -1, 0)
 
@@ -232,54 +233,91 @@ _EQ_NUMPY = rebind(_eq.FUNCTIONS, _eq.NUMPY)
 _EQ_COMPLEX = rebind(_eq.FUNCTIONS, _eq.COMPLEX_STEP)
 
 
-class MMGModel(Model):
-    """MMG standard manoeuvring model (Yasukawa & Yoshimura 2015), 3 DOF at midship.
+def resolve_particulars(model: Model, params, particulars, lpp: float | None) -> MMGParticulars:
+    """The particulars of a ship model built with ``params``/``particulars``/``lpp`` (the rules of
+    :class:`MMGModel` and :class:`~shipid.models.lowspeed.LowSpeedModel`): ``particulars`` given as
+    :class:`MMGParticulars`, a mapping, or the name of a parameter set of ``model`` (whose ``extra``
+    holds them); by default those of the named ``params`` set or of the model's default set; rescaled
+    (Froude) to ``lpp`` when given."""
+    if particulars is None:
+        particulars = params if isinstance(params, str) else model.default_parameter_set
+    if isinstance(particulars, str):
+        extra = model.parameter_set(particulars).extra
+        if "particulars" not in extra:
+            raise ValueError(f"parameter set '{particulars}' of model '{model.name}' has no 'particulars'")
+        particulars = MMGParticulars.from_mapping(extra["particulars"])
+    elif isinstance(particulars, Mapping):
+        particulars = MMGParticulars.from_mapping(particulars)
+    elif not isinstance(particulars, MMGParticulars):
+        raise ValueError(f"particulars must be MMGParticulars, a mapping or a parameter-set name, got "
+                         f"{type(particulars).__name__}")
+    return particulars.scaled(lpp) if lpp is not None else particulars
 
-    Parameters
-    ----------
-    params : mapping, array, str or None
-        Non-dimensional coefficients (see :data:`MMG_PARAM_NAMES`); a string
-        names a shipped parameter set (``"kvlcc2"`` -- the default -- or
-        ``"kcs"``), whose particulars are then used too.
-    particulars : MMGParticulars, mapping or str, optional
-        The ship's particulars, or the name of a parameter set to take them
-        from.  Defaults to the particulars of the named/default set.
-    lpp : float, optional
-        Rescale the particulars (Froude, geometric similarity) to this
-        length [m]; e.g. ``MMGModel("kvlcc2", lpp=320.0)`` is the full-scale
-        KVLCC2 with the L7 model's coefficients.
 
-    Attributes
-    ----------
-    particulars : MMGParticulars
-    lpp, rudder_rate, design_speed : float
-        Shortcuts used by :mod:`shipid.manoeuvres`.
+class DerivedConstants:
+    """Mixin: the constants of a model's equations (its ``_derived(p)``) cached by parameter value and
+    ``self.particulars`` (used by :class:`ShipEquationsModel` and :class:`shipid.environment.EnvironmentModel`)."""
+
+    def _derived_of(self, p, form: str = "floats"):
+        """:meth:`_derived` with a cache for real 1-D parameter arrays (keyed by value and particulars).
+
+        ``form``: ``"floats"`` (a tuple of Python floats), ``"arrays"`` (a tuple of 0-d float arrays:
+        numpy multiplies those by arrays faster than Python floats), ``"vector"`` (one float array,
+        for the compiled equations) or ``"rows"`` (the same as a (1, nc) array).  Other ``p``
+        (batched, complex) gives a tuple of arrays.
+        """
+        if isinstance(p, np.ndarray) and p.ndim == 1 and p.dtype.kind == "f":
+            def build():
+                val = self._derived(p.tolist())
+                vec = np.array(val, dtype=float)
+                return {"floats": val, "arrays": tuple(np.array(v) for v in val), "vector": vec, "rows": vec[None]}
+
+            return self._cached("_derived_cache", p.tobytes(), 64, build)[form]
+        return self._derived(p if isinstance(p, (list, tuple)) else components(p))
+
+    def _cached(self, store: str, key: bytes, limit: int, build):
+        """``build()`` cached under ``key`` in this model's dict ``store`` (at most ``limit`` entries;
+        entries made with other particulars are rebuilt)."""
+        cache = self.__dict__.setdefault(store, {})
+        hit = cache.get(key)
+        if hit is None or hit[0] is not self.particulars:
+            if len(cache) > limit:
+                cache.clear()
+            hit = cache[key] = (self.particulars, build())
+        return hit[1]
+
+    def _constant_rows(self, p, lead) -> np.ndarray:
+        """The constants of :meth:`_derived` for real parameters ``p`` broadcast to the batch ``lead``:
+        (1, nc) when shared (1-D ``p``), else (N, nc), one row per sample (cached by value)."""
+        if p.ndim == 1:
+            return self._derived_of(p, "rows")
+        P = np.broadcast_to(p, lead + p.shape[-1:]).reshape(-1, p.shape[-1])
+
+        def build():
+            return np.ascontiguousarray(np.stack(np.broadcast_arrays(*self._derived(P.T)), axis=-1), dtype=float)
+
+        return self._cached("_rows_cache", P.tobytes(), 16, build)
+
+
+class ShipEquationsModel(DerivedConstants, Model):
+    """Base of the 3-DOF ship models whose equations are one scalar source (:mod:`._mmg_equations`,
+    :mod:`._lowspeed_equations`) run on floats, numpy arrays, complex steps and, with numba, compiled.
+
+    A subclass sets ``_eqm`` (the equations module: ``derived``, ``forces``, ``rates``, ``FORCE_KEYS``,
+    ``FUNCTIONS`` with ``rhs_one``/``rhs_rows``, ``FUNCTIONS_CS`` with ``jacobians``, ``CMATH``,
+    ``KERNEL``), ``_eq_numpy``/``_eq_complex`` (that module rebound on numpy's functions) and ``_jit_tag``
+    (the numba cache tag of its compiled sets).  The particulars (:class:`MMGParticulars`) fix the
+    scale; the parameters are non-dimensional.
     """
 
-    name = "mmg"
-    state_names = ("x", "y", "psi", "u", "v", "r")
-    input_names = ("delta", "n")
-    param_names = MMG_PARAM_NAMES
-    units = {"x": "m", "y": "m", "psi": "rad", "u": "m/s", "v": "m/s", "r": "rad/s", "delta": "rad", "n": "rps",
-             **{k: "-" for k in MMG_PARAM_NAMES}, "f_alpha": "1/rad", "delta0": "rad"}
-    default_parameter_set = "kvlcc2"
+    _eqm = _eq
+    _eq_numpy = _EQ_NUMPY
+    _eq_complex = _EQ_COMPLEX
+    _jit_tag = ""
 
     def __init__(self, params=None, *, particulars=None, lpp: float | None = None):
         super().__init__(params)
-        if particulars is None:
-            particulars = params if isinstance(params, str) else self.default_parameter_set
-        if isinstance(particulars, str):
-            extra = self.parameter_set(particulars).extra
-            if "particulars" not in extra:
-                raise ValueError(f"parameter set '{particulars}' of model 'mmg' has no 'particulars'")
-            particulars = MMGParticulars.from_mapping(extra["particulars"])
-        elif isinstance(particulars, Mapping):
-            particulars = MMGParticulars.from_mapping(particulars)
-        elif not isinstance(particulars, MMGParticulars):
-            raise ValueError(f"particulars must be MMGParticulars, a mapping or a parameter-set name, got {type(particulars).__name__}")
-        if lpp is not None:
-            particulars = particulars.scaled(lpp)
-        self.particulars = particulars
+        self.particulars = resolve_particulars(self, params, particulars, lpp)
         self._idx = {k: i for i, k in enumerate(self.param_names)}
 
     # ----------------------------------------------------------- conveniences
@@ -299,10 +337,10 @@ class MMGModel(Model):
         return self.particulars.design_speed
 
     def options(self) -> dict:
-        """The particulars travel with fit results (``get_model("mmg", coef, **options)``)."""
+        """The particulars travel with fit results (``get_model(name, coef, **options)``)."""
         return {"particulars": self.particulars.to_dict()}
 
-    def scaled(self, lpp_new: float) -> "MMGModel":
+    def scaled(self, lpp_new: float):
         """The same (non-dimensional) model for the geometrically similar ship of length ``lpp_new``.
 
         Under Froude scaling (speeds x sqrt(lambda), time x sqrt(lambda),
@@ -313,120 +351,48 @@ class MMGModel(Model):
         new.particulars = self.particulars.scaled(lpp_new)
         return new
 
-    def mass_properties(self) -> dict:
-        """Dimensional mass, inertia and added masses [kg, kg m^2] with the current parameters."""
-        P = self.particulars
-        m = P.rho * P.displacement
-        q2 = 0.5 * P.rho * P.lpp**2 * P.draught
-        q4 = 0.5 * P.rho * P.lpp**4 * P.draught
-        p = self.params
-        return {"m": m, "I_zG": m * (P.kzz * P.lpp) ** 2, "m_x": p[self._idx["mx"]] * q2,
-                "m_y": p[self._idx["my"]] * q2, "J_z": p[self._idx["Jz"]] * q4,
-                "m_prime": m / q2, "x_G": P.x_G}
-
     def mass_matrix(self, params=None) -> np.ndarray:
         """Mass matrix of eq. (4), ``(..., 3, 3)`` (:func:`eq4_mass_matrix`) for ``params`` (default own;
         complex parameters are kept, for complex-step Jacobians of models that add external forces)."""
         p = self.params if params is None else np.asarray(params)
         return eq4_mass_matrix(self.particulars, p[..., self._idx["mx"]], p[..., self._idx["my"]], p[..., self._idx["Jz"]])
 
-    def to_dimensional(self, speed: float | None = None) -> dict:
-        """Dimensional hull derivatives at speed ``speed`` [m/s] (default design speed).
-
-        Returns a dict of SI derivatives in the usual convention: e.g.
-        ``Yv`` [N s/m] = Y'_v 1/2 rho L d U, ``Nr`` [N m s] = N'_r 1/2 rho L^4 d U / L ...
-        (force derivative with respect to the velocity it multiplies, at U).
-        Non-linear terms are the corresponding coefficients of the
-        dimensional polynomial, e.g. ``Yvvv`` [N s^3/m^3] = Y'_vvv 1/2 rho L d / U.
-        Also the mass properties of :meth:`mass_properties`.
-        """
-        P = self.particulars
-        U = float(self.design_speed if speed is None else speed)
-        L, d, rho = P.lpp, P.draught, P.rho
-        out = {}
-        for k in MMG_PARAM_NAMES[:17]:
-            c = self.params[self._idx[k]]
-            if k == "R0":
-                out["R0"] = c * 0.5 * rho * L * d * U**2
-                continue
-            nv, nr = k[1:].count("v"), k[1:].count("r")
-            base = 0.5 * rho * L * d * (L if k[0] == "N" else 1.0)
-            # F = base U^2 v'^nv r'^nr = base U^(2-nv-nr) L^nr v^nv r^nr
-            out[k] = c * base * U ** (2 - nv - nr) * L**nr
-        out.update(self.mass_properties())
-        return out
-
     # -------------------------------------------------------------- equations
     def _particulars_tuple(self) -> tuple:
-        """The particulars in the order :func:`shipid.models._mmg_equations.derived` reads them."""
+        """The particulars in the order the equations' ``derived`` reads them."""
         P = self.particulars
         return (P.lpp, P.draught, P.rho, P.D_p, P.H_R, P.A_R, P.x_R, P.displacement, P.x_G, P.kzz)
 
     def _derived(self, p) -> tuple:
         """Constants of the equations for one parameter set (floats, or arrays for batched/complex ``p``):
-        :func:`shipid.models._mmg_equations.derived` with this ship's particulars.  ``p`` is a sequence
-        of the 39 parameters in :data:`MMG_PARAM_NAMES` order (floats or arrays)."""
-        return _eq.derived(p, self._particulars_tuple())
-
-    def _derived_of(self, p, form: str = "floats"):
-        """:meth:`_derived` with a cache for real 1-D parameter arrays (keyed by value and particulars).
-
-        ``form``: ``"floats"`` (a tuple of Python floats), ``"arrays"`` (a tuple of 0-d float arrays:
-        numpy multiplies those by arrays faster than Python floats), ``"vector"`` (one float array,
-        for the compiled equations) or ``"rows"`` (the same as a (1, nc) array).  Other ``p``
-        (batched, complex) gives a tuple of arrays.
-        """
-        if isinstance(p, np.ndarray) and p.ndim == 1 and p.dtype.kind == "f":
-            def build():
-                val = self._derived(p.tolist())
-                vec = np.array(val, dtype=float)
-                return {"floats": val, "arrays": tuple(np.array(v) for v in val), "vector": vec, "rows": vec[None]}
-
-            return self._cached("_derived_cache", p.tobytes(), 64, build)[form]
-        return self._derived(p if isinstance(p, (list, tuple)) else _components(p))
-
-    def _cached(self, store: str, key: bytes, limit: int, build):
-        """``build()`` cached under ``key`` in this model's dict ``store`` (at most ``limit`` entries;
-        entries made with other particulars are rebuilt)."""
-        cache = self.__dict__.setdefault(store, {})
-        hit = cache.get(key)
-        if hit is None or hit[0] is not self.particulars:
-            if len(cache) > limit:
-                cache.clear()
-            hit = cache[key] = (self.particulars, build())
-        return hit[1]
+        the equations' ``derived`` with this ship's particulars.  ``p`` is a sequence of the parameters
+        in ``param_names`` order (floats or arrays)."""
+        return self._eqm.derived(p, self._particulars_tuple())
 
     def _forces(self, x, u, p) -> dict:
         """Forces/moments at midship and intermediate quantities (numpy; complex-step safe).
 
         Shapes: leading axes of ``x (..., 6)``, ``u (..., 2)``, ``p (..., np)`` broadcast.  Returns a
-        dict keyed by ``_mmg_equations.FORCE_KEYS``: X_H, Y_H, N_H, X_P, X_R, Y_R, N_R, F_N, T, w_P, u_R, v_R,
-        alpha_R, beta, U.
+        dict keyed by the equations' ``FORCE_KEYS``.
         """
         cplx = any(np.iscomplexobj(a) for a in (x, u, p))
-        x, u = _components(x), _components(u)
-        forces = (_EQ_COMPLEX if cplx else _EQ_NUMPY)["forces"]
-        return dict(zip(_eq.FORCE_KEYS, forces(x[3], x[4], x[5], u[0], u[1], self._derived_of(p, "arrays"))))
+        x, u = components(x), components(u)
+        forces = (self._eq_complex if cplx else self._eq_numpy)["forces"]
+        return dict(zip(self._eqm.FORCE_KEYS, forces(x[3], x[4], x[5], u[0], u[1], self._derived_of(p, "arrays"))))
 
     def forces(self, x, u, params=None) -> dict:
         """Public view of :meth:`_forces` (forces [N], moments [N m], speeds [m/s], angles [rad])."""
         return self._forces(np.asarray(x, dtype=float), np.asarray(u, dtype=float), self._p(params))
 
-    def _constant_rows(self, p, lead) -> np.ndarray:
-        """The constants of :meth:`_derived` for real parameters ``p`` broadcast to the batch ``lead``:
-        (1, nc) when shared (1-D ``p``), else (N, nc), one row per sample (cached by value)."""
-        if p.ndim == 1:
-            return self._derived_of(p, "rows")
-        P = np.broadcast_to(p, lead + p.shape[-1:]).reshape(-1, p.shape[-1])
-
-        def build():
-            return np.ascontiguousarray(np.stack(np.broadcast_arrays(*self._derived(P.T)), axis=-1), dtype=float)
-
-        return self._cached("_rows_cache", P.tobytes(), 16, build)
+    def _compiled(self, cs: bool = False):
+        """The compiled equations (real set, or the complex-step set), or None without numba."""
+        if cs:
+            return compiled(self._eqm.FUNCTIONS_CS, self._eqm.CMATH, tag=self._jit_tag + "__cs")
+        return compiled(self._eqm.FUNCTIONS, tag=self._jit_tag)
 
     def _rhs(self, t, x, u, p):
         real = x.dtype.kind == "f" and u.dtype.kind == "f" and p.dtype.kind == "f"
-        fast = compiled(_eq.FUNCTIONS) if real else None
+        fast = self._compiled() if real else None
         if fast is not None:  # numba: one compiled loop over the samples
             if x.ndim == 1 and u.ndim == 1 and p.ndim == 1:
                 return fast["rhs_one"](x, u, self._derived_of(p, "vector"))
@@ -435,9 +401,9 @@ class MMGModel(Model):
             U = np.broadcast_to(u, lead + (2,)).reshape(-1, 2)
             return fast["rhs_rows"](X, U, self._constant_rows(p, lead)).reshape(lead + (6,))
         if real and x.ndim == 1 and u.ndim == 1 and p.ndim == 1:  # one sample: Python floats
-            return np.array(_eq.rates(*x[2:].tolist(), *u.tolist(), self._derived_of(p)))
-        rates = (_EQ_NUMPY if real else _EQ_COMPLEX)["rates"]
-        xc, uc = _components(x), _components(u)
+            return np.array(self._eqm.rates(*x[2:].tolist(), *u.tolist(), self._derived_of(p)))
+        rates = (self._eq_numpy if real else self._eq_complex)["rates"]
+        xc, uc = components(x), components(u)
         out = rates(xc[2], xc[3], xc[4], xc[5], uc[0], uc[1], self._derived_of(p, "arrays"))
         try:
             return np.stack(out, axis=-1)
@@ -449,7 +415,7 @@ class MMGModel(Model):
         """``f(t, x, u)`` for fixed parameters; with numba, the compiled kernels with the constants
         folded once (no per-call parameter handling), for one sample or an (N, 6) batch with shared
         or per-member parameters."""
-        fast = compiled(_eq.FUNCTIONS) if (p.dtype.kind == "f" and p.ndim in (1, 2)) else None
+        fast = self._compiled() if (p.dtype.kind == "f" and p.ndim in (1, 2)) else None
         if fast is None:
             return super()._rhs_bound(p)
         one, rows, rhs = fast["rhs_one"], fast["rhs_rows"], self._rhs
@@ -483,7 +449,7 @@ class MMGModel(Model):
     def _jacobian(self, t, x, u, p, which: int):
         """Complex-step Jacobian (exact to rounding): compiled when numba is enabled, else numpy."""
         real = x.dtype.kind == "f" and u.dtype.kind == "f" and p.dtype.kind == "f"
-        fast = compiled(_eq.FUNCTIONS_CS, _eq.CMATH, tag="__cs") if real else None
+        fast = self._compiled(cs=True) if real else None
         if fast is None:
             return self._cstep(t, x, u, p, "xup"[which])
         lead = batch_shape(x, u, p)
@@ -503,15 +469,85 @@ class MMGModel(Model):
     def _jac_p(self, t, x, u, p):
         return self._jacobian(t, x, u, p, 2)
 
-    # the compiled EKF kernel (shipid.identify._kernel) uses the same equations
-    _equations = _eq.KERNEL
-
+    # the compiled EKF kernel (shipid.identify._kernel) uses the same equations (subclasses set
+    # ``_equations = <equations module>.KERNEL``)
     def _equations_namespace(self) -> dict:
-        cs = compiled(_eq.FUNCTIONS_CS, _eq.CMATH, tag="__cs")
+        cs = self._compiled(cs=True)
         return {} if cs is None else {"cs_columns": cs["cs_columns"], "derived_cs": cs["derived"]}
 
     def _kernel_constants(self) -> np.ndarray:
         return np.array(self._particulars_tuple())
+
+
+class MMGModel(ShipEquationsModel):
+    """MMG standard manoeuvring model (Yasukawa & Yoshimura 2015), 3 DOF at midship.
+
+    Parameters
+    ----------
+    params : mapping, array, str or None
+        Non-dimensional coefficients (see :data:`MMG_PARAM_NAMES`); a string
+        names a shipped parameter set (``"kvlcc2"`` -- the default -- or
+        ``"kcs"``), whose particulars are then used too.
+    particulars : MMGParticulars, mapping or str, optional
+        The ship's particulars, or the name of a parameter set to take them
+        from.  Defaults to the particulars of the named/default set.
+    lpp : float, optional
+        Rescale the particulars (Froude, geometric similarity) to this
+        length [m]; e.g. ``MMGModel("kvlcc2", lpp=320.0)`` is the full-scale
+        KVLCC2 with the L7 model's coefficients.
+
+    Attributes
+    ----------
+    particulars : MMGParticulars
+    lpp, rudder_rate, design_speed : float
+        Shortcuts used by :mod:`shipid.manoeuvres`.
+    """
+
+    name = "mmg"
+    state_names = ("x", "y", "psi", "u", "v", "r")
+    input_names = ("delta", "n")
+    param_names = MMG_PARAM_NAMES
+    units = {"x": "m", "y": "m", "psi": "rad", "u": "m/s", "v": "m/s", "r": "rad/s", "delta": "rad", "n": "rps",
+             **{k: "-" for k in MMG_PARAM_NAMES}, "f_alpha": "1/rad", "delta0": "rad"}
+    default_parameter_set = "kvlcc2"
+    _equations = _eq.KERNEL
+
+    def mass_properties(self) -> dict:
+        """Dimensional mass, inertia and added masses [kg, kg m^2] with the current parameters."""
+        P = self.particulars
+        m = P.rho * P.displacement
+        q2 = 0.5 * P.rho * P.lpp**2 * P.draught
+        q4 = 0.5 * P.rho * P.lpp**4 * P.draught
+        p = self.params
+        return {"m": m, "I_zG": m * (P.kzz * P.lpp) ** 2, "m_x": p[self._idx["mx"]] * q2,
+                "m_y": p[self._idx["my"]] * q2, "J_z": p[self._idx["Jz"]] * q4,
+                "m_prime": m / q2, "x_G": P.x_G}
+
+    def to_dimensional(self, speed: float | None = None) -> dict:
+        """Dimensional hull derivatives at speed ``speed`` [m/s] (default design speed).
+
+        Returns a dict of SI derivatives in the usual convention: e.g.
+        ``Yv`` [N s/m] = Y'_v 1/2 rho L d U, ``Nr`` [N m s] = N'_r 1/2 rho L^4 d U / L ...
+        (force derivative with respect to the velocity it multiplies, at U).
+        Non-linear terms are the corresponding coefficients of the
+        dimensional polynomial, e.g. ``Yvvv`` [N s^3/m^3] = Y'_vvv 1/2 rho L d / U.
+        Also the mass properties of :meth:`mass_properties`.
+        """
+        P = self.particulars
+        U = float(self.design_speed if speed is None else speed)
+        L, d, rho = P.lpp, P.draught, P.rho
+        out = {}
+        for k in MMG_PARAM_NAMES[:17]:
+            c = self.params[self._idx[k]]
+            if k == "R0":
+                out["R0"] = c * 0.5 * rho * L * d * U**2
+                continue
+            nv, nr = k[1:].count("v"), k[1:].count("r")
+            base = 0.5 * rho * L * d * (L if k[0] == "N" else 1.0)
+            # F = base U^2 v'^nv r'^nr = base U^(2-nv-nr) L^nr v^nv r^nr
+            out[k] = c * base * U ** (2 - nv - nr) * L**nr
+        out.update(self.mass_properties())
+        return out
 
     @classmethod
     def sample_point(cls, rng, batch=()):

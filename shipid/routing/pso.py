@@ -352,7 +352,7 @@ def pso(cost: Callable[[np.ndarray], np.ndarray], lb, ub, *, n_particles: int = 
         n_swarms: int = 1, inertia: tuple[float, float] = (0.7298, 0.4), c1: float = 1.5, c2: float = 1.5,
         vmax: float = 0.2, rng: np.random.Generator | int | None = None, init: np.ndarray | None = None,
         feasible: Callable[[np.ndarray], np.ndarray] | None = None, f_tol: float = 0.0, patience: int = 0,
-        max_init_tries: int = 200) -> PSOResult:
+        max_init_tries: int = 200, callback: Callable[[int, float], None] | None = None) -> PSOResult:
     """Global-best particle swarm minimisation of a vectorised ``cost(X (B, D)) -> (B,)``.
 
     ``n_swarms`` independent swarms (each with its own global best and,
@@ -391,6 +391,8 @@ def pso(cost: Callable[[np.ndarray], np.ndarray], lb, ub, *, n_particles: int = 
     f_tol, patience : float, int
         Stop when the best cost improved by less than ``f_tol`` (relative)
         over ``patience`` iterations (``patience=0``: run ``max_iter``).
+    callback : callable, optional
+        ``callback(iteration, best_cost)`` after every iteration (progress display; its return value is ignored).
     """
     rng = np.random.default_rng(rng)
     S, Pn = int(n_swarms), int(n_particles)
@@ -443,6 +445,8 @@ def pso(cost: Callable[[np.ndarray], np.ndarray], lb, ub, *, n_particles: int = 
         better = f < pf
         pbest[better], pf[better] = X[better], f[better]
         gbest, gf = bests()
+        if callback is not None:
+            callback(it, float(np.min(gf)))
         hist.append(float(np.min(gf)))
         if patience and it > patience and np.isfinite(hist[-1]):
             old = hist[-1 - patience]
@@ -556,22 +560,25 @@ def stratified_init(problem: USVProblem, cost: "PathCost", n_particles: int, rng
 
 
 def plan(problem: USVProblem, objective: str = "energy", *, rng=None, t_env: float = 0.0, n_particles: int = 25,
-         max_iter: int = 120, patience: int = 0, f_tol: float = 0.0, stratify: bool = True) -> PlanResult:
+         max_iter: int = 120, patience: int = 0, f_tol: float = 0.0, stratify: bool = True,
+         callback=None) -> PlanResult:
     """Plan with the fields frozen at ``t_env``: DOPSO (``objective="distance"``) or EOPSO (``"energy"``).
 
     With ``stratify`` (default) one swarm of ``n_particles`` searches each
     left/right class of passing the obstacles (``2^m`` swarms for ``m``
     dimension circles, fewer when a class is infeasible), each in its own
     box; otherwise one swarm searches the whole box from a uniform random
-    start, as in the paper.
+    start, as in the paper.  ``callback(iteration, best_cost)`` is passed to :func:`pso`.
     """
     rng = np.random.default_rng(rng)
     cost = PathCost(problem, objective, t_env=t_env)
-    res = _run_pso(problem, cost, rng, n_particles, max_iter, stratify, patience=patience, f_tol=f_tol)
+    res = _run_pso(problem, cost, rng, n_particles, max_iter, stratify, patience=patience, f_tol=f_tol,
+                   callback=callback)
     return _plan_result(problem, cost, res, objective, t_env)
 
 
-def _run_pso(problem, cost, rng, n_particles, max_iter, stratify, *, start=None, patience=0, f_tol=0.0):
+def _run_pso(problem, cost, rng, n_particles, max_iter, stratify, *, start=None, patience=0, f_tol=0.0,
+             callback=None):
     strat = stratified_init(problem, cost, n_particles, rng) if stratify else None
     if strat is None:
         lb = np.full(cost.n_free, -problem.angle_bound)
@@ -581,7 +588,7 @@ def _run_pso(problem, cost, rng, n_particles, max_iter, stratify, *, start=None,
         init, lb, ub = strat
         n_sw = lb.shape[0]
     res = pso(cost, lb, ub, rng=rng, n_particles=n_particles, n_swarms=n_sw, max_iter=max_iter, init=init,
-              feasible=cost.feasible, patience=patience, f_tol=f_tol)
+              feasible=cost.feasible, patience=patience, f_tol=f_tol, callback=callback)
     if start is not None:  # never return something worse than the incumbent
         f0 = float(cost(start[None])[0])
         if f0 <= res.fun:
@@ -768,7 +775,7 @@ class OCPSOResult:
 
 
 def plan_ocpso(problem: USVProblem, *, replan_times: Sequence[float] | None = None, rng=None,
-               n_particles: int = 25, max_iter: int = 120, stratify: bool = True) -> OCPSOResult:
+               n_particles: int = 25, max_iter: int = 120, stratify: bool = True, callback=None) -> OCPSOResult:
     """OCPSO: EOPSO at the start, then replanning whenever the measured environment changes.
 
     At each replanning time the boat's position, its target waypoint ``P_i``
@@ -784,12 +791,14 @@ def plan_ocpso(problem: USVProblem, *, replan_times: Sequence[float] | None = No
     replan_times : sequence of float, optional
         Times [s] at which the environment is re-measured; default the
         breakpoints of the current and wind fields.
+    callback : callable, optional
+        ``callback(iteration, best_cost)``, passed to every :func:`pso` run (the first plan and each replanning).
     """
     rng = np.random.default_rng(rng)
     if replan_times is None:
         replan_times = sorted(set(problem.current.breakpoints) | set(problem.wind.breakpoints))
     first = plan(problem, "energy", rng=rng, t_env=0.0, n_particles=n_particles, max_iter=max_iter,
-                 stratify=stratify)
+                 stratify=stratify, callback=callback)
     rho = first.rho.copy()
     events = []
     for te in replan_times:
@@ -808,7 +817,7 @@ def plan_ocpso(problem: USVProblem, *, replan_times: Sequence[float] | None = No
         ev = {"time": float(te), "x": float(Q[0]), "y": float(Q[1]), "target_waypoint": int(target),
               "energy_spent_J": spent, "old_predicted_total_J": spent + old_rem, "replanned": False}
         if free.size:
-            res = _run_pso(problem, cost, rng, n_particles, max_iter, stratify, start=rho[free])
+            res = _run_pso(problem, cost, rng, n_particles, max_iter, stratify, start=rho[free], callback=callback)
             ev["new_predicted_total_J"] = spent + float(res.fun)
             if res.fun < old_rem * (1 - 1e-9):
                 rho = rho.copy()
@@ -912,10 +921,12 @@ def paper_scenario(*, time_scale: float = 0.1, kinematics: str = "paper",
 
 
 def compare_planners(problem: USVProblem, *, rng=0, n_particles: int = 25, max_iter: int = 120,
-                     replan_times: Sequence[float] | None = None) -> dict:
+                     replan_times: Sequence[float] | None = None, progress: bool = False) -> dict:
     """DOPSO (sailed through the time-varying fields), EOPSO at t = 0 and OCPSO; the paper's comparison.
 
     ``replan_times`` [s] are passed to :func:`plan_ocpso` (default: the fields' breakpoints).
+    ``progress`` shows a bar (tqdm, on stderr) over the PSO iterations of the three planners; its total
+    counts one run per replanning time, of which OCPSO may skip some (the boat already arrived).
     Returns a dict with the three paths, their voyages and
     ``saving_vs_distance_optimal = 1 - W_OCPSO / W_DOPSO`` (both sailed).
     """
@@ -923,9 +934,24 @@ def compare_planners(problem: USVProblem, *, rng=0, n_particles: int = 25, max_i
 
     check_pso_size(int(n_particles), int(max_iter), len(problem.obstacles), "compare_planners")
     rng = np.random.default_rng(rng)
-    do = plan_dopso(problem, rng=rng, n_particles=n_particles, max_iter=max_iter)
-    eo = plan_eopso(problem, rng=rng, n_particles=n_particles, max_iter=max_iter)
-    oc = plan_ocpso(problem, rng=rng, n_particles=n_particles, max_iter=max_iter, replan_times=replan_times)
+    bar, callback = None, None
+    if progress:
+        from tqdm.auto import tqdm
+
+        n_replan = len(replan_times if replan_times is not None else
+                       set(problem.current.breakpoints) | set(problem.wind.breakpoints))
+        bar = tqdm(total=int(max_iter) * (3 + n_replan), desc="route (PSO iterations)", leave=False)
+
+        def callback(it, best):
+            bar.update(1)
+    try:
+        do = plan_dopso(problem, rng=rng, n_particles=n_particles, max_iter=max_iter, callback=callback)
+        eo = plan_eopso(problem, rng=rng, n_particles=n_particles, max_iter=max_iter, callback=callback)
+        oc = plan_ocpso(problem, rng=rng, n_particles=n_particles, max_iter=max_iter, replan_times=replan_times,
+                        callback=callback)
+    finally:
+        if bar is not None:
+            bar.close()
     vd, ve = sail(problem, do.points), sail(problem, eo.points)
     ok = vd.arrived and oc.voyage.arrived
     return {"dopso": do, "eopso": eo, "ocpso": oc, "dopso_voyage": vd, "eopso_voyage": ve,

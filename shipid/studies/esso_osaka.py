@@ -112,13 +112,13 @@ class EssoStudy:
         return h.pivot(index="model", columns="run_type", values="position_error_median_m")
 
 
-def _fit(model, frames, estimate, substeps):
+def _fit(model, frames, estimate, substeps, input_hold="foh", gate=5.0):
     from ..identify import EKFIdentifier
 
     extra = model.identifier_settings() if hasattr(model, "identifier_settings") else {}
     pstd = dict(PROCESS_STD, **extra.pop("process_std", {}))
     ident = EKFIdentifier(model, estimate=list(estimate), init="model", meas_std=MEAS_STD, process_std=pstd,
-                          n_passes=2, substeps=substeps, input_hold="zoh", gate=None, **extra)
+                          n_passes=2, substeps=substeps, input_hold=input_hold, gate=gate, **extra)
     t0 = time.time()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
@@ -163,18 +163,44 @@ def _turning_rows(lg, models, every) -> list[dict]:
     return out
 
 
-def run_study(data_dir=DATA_DIR, *, folds: int = 3, fit_every: int = 20, eval_every: int = 2,
+#: Calm-water models fitted besides ``lowspeed`` (name -> (model factory, estimated coefficients)):
+#: the KVLCC2 MMG set Froude-scaled to 3 m as the prior of an ``mmg`` fit.
+CALM_WATER = {"mmg": ("mmg kvlcc2 prior, fitted", ("R0", "Yv", "Yr", "Nv", "Nr", "Yvvv", "Nrrr", "tP", "f_alpha"))}
+
+
+def assign_folds(runs, folds) -> dict:
+    """Run name -> fold.  ``folds="loro"`` (or the number of runs): leave-one-run-out; an integer k: the
+    runs dealt round-robin into k folds in file order, run type after run type (so every type is spread
+    over the folds)."""
+    k = len(runs) if folds in ("loro", None) else int(folds)
+    if not 2 <= k <= len(runs):
+        raise ValueError(f"folds must be 'loro' or an integer from 2 to the number of runs ({len(runs)}), got {folds!r}")
+    return {lg.name: j % k for j, lg in enumerate(runs)}
+
+
+def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_every: int = 2,
               horizons=(10.0, 30.0, 60.0), start_every: float = 5.0, types=RUN_TYPES, max_runs: int | None = None,
-              progress: bool = True) -> EssoStudy:
+              by_type: bool = True, calm_water=("mmg",), input_hold: str = "foh", gate: float | None = 5.0,
+              current: str = "constant", estimate=ESTIMATE, estimate_wind=ESTIMATE_WIND, substeps: int = 2,
+              fixed: bool = True, turning: bool = True, progress: bool = True) -> EssoStudy:
     """Fit and cross-validate on the Esso Osaka runs (see the module docstring for every choice).
 
     Parameters
     ----------
-    folds : int
-        Runs are dealt round-robin (in file order within each run type) into this many folds; each fold
-        is predicted by models fitted on the others.  ``folds`` = number of runs is leave-one-run-out.
+    folds : "loro" or int
+        Cross-validation by run (:func:`assign_folds`): each fold is predicted by models fitted on the
+        other folds only.
     fit_every, eval_every : int
         Decimation of the 10 Hz logs for fitting and for the horizon predictions.
+    by_type : bool
+        Also fit per run type (training runs of the held-out run's type only), besides the fit on all types.
+    calm_water : sequence of str
+        Calm-water models of :data:`CALM_WATER` fitted on all types too.
+    input_hold, gate : EKF input hold and innovation gate (the identifier's defaults: ``"foh"``, 5).
+    current : {"constant", "random-walk"}
+        Current of the environment-aware fits (per run; reset at each run).
+    fixed : bool
+        Score the models that are not fitted (dead reckoning, KVLCC2 scaled, the prior).
     max_runs : int, optional
         At most this many runs per type (the fast mode of the tests and the notebook).
     """
@@ -183,24 +209,51 @@ def run_study(data_dir=DATA_DIR, *, folds: int = 3, fit_every: int = 20, eval_ev
     from ..validation_horizon import dead_reckoning, horizon_prediction
 
     runs = load_runs(data_dir, types, max_runs)
-    fold_of = {}
-    for kind in types:
-        for i, lg in enumerate([r for r in runs if r.run_type == kind]):
-            fold_of[lg.name] = i % folds
+    fold_of = assign_folds(runs, folds)
+    n_folds = max(fold_of.values()) + 1
     prior = get_model("lowspeed")
-    env0 = with_environment(prior, wind="esso-osaka-3m", current="constant")
-    fixed_models = {"dead reckoning": dead_reckoning(), "mmg kvlcc2 (Froude-scaled, no fit)":
-                    get_model("mmg", "kvlcc2", lpp=prior.lpp), "lowspeed prior (no fit)": prior,
+    env0 = with_environment(prior, wind="esso-osaka-3m", current=current)
+    kvlcc2 = get_model("mmg", "kvlcc2", lpp=prior.lpp)
+    fixed_models = {"dead reckoning": dead_reckoning(), "mmg kvlcc2 (Froude-scaled, no fit)": kvlcc2,
+                    "lowspeed prior (no fit)": prior,
                     "lowspeed prior + Fujiwara wind (no fit)": with_environment(prior, wind="esso-osaka-3m")}
-    rows, coefs, currents, fits, models, turning = [], [], [], {}, {}, []
+    if not fixed:
+        fixed_models = {"dead reckoning": fixed_models["dead reckoning"]}
+    rows, coefs, currents, fits, models, turning_rows = [], [], [], {}, {}, []
     errs: dict = {}
+    hold = dict(input_hold=input_hold, gate=gate)
 
     def record(model_name, lg, model, initial=None):
         r = horizon_prediction(model, _frame(lg, eval_every), horizons=horizons, start_every=start_every,
                                initial=initial, name=lg.name)
         errs.setdefault((model_name, lg.run_type), []).append(r)
 
-    it = range(folds)
+    def strip_wind(frames):
+        return [f.drop(columns=[c for c in f.columns if c.startswith("wind")]) for f in frames]
+
+    def fit_pair(train, k, tag):
+        """The plain and the environment-aware lowspeed fits on ``train``; their models and mean current."""
+        frames = [_frame(lg, fit_every) for lg in train]
+        plain, sec0 = _fit(prior, strip_wind(frames), estimate, substeps, **hold)
+        env, sec1 = _fit(env0, frames, tuple(estimate) + tuple(estimate_wind), substeps, **hold)
+        fits.setdefault(k, {})[f"lowspeed{tag}"] = {"success": plain.success_, "message": plain.message_,
+                                                    "seconds": sec0}
+        fits[k][f"lowspeed + wind + current{tag}"] = {"success": env.success_, "message": env.message_,
+                                                      "seconds": sec1}
+        s = env.summary()
+        for name in s.index:
+            coefs.append({"fold": k, "fit": tag.strip(" ()") or "all types", "parameter": name,
+                          "value": s.loc[name, "value"], "std": s.loc[name, "std"]})
+        cc = []
+        for st, f in zip(env.states_, frames):
+            row = {"fold": k, "fit": tag.strip(" ()") or "all types", "run": f.attrs["name"],
+                   "cx": st.cx.iloc[0], "cx_std": st.cx_std.iloc[0], "cy": st.cy.iloc[0], "cy_std": st.cy_std.iloc[0]}
+            currents.append(row)
+            cc.append((row["cx"], row["cy"]))
+        c_mean = np.mean(cc, axis=0) if cc else (0.0, 0.0)
+        return plain.to_model(), env.to_model(), {"cx": float(c_mean[0]), "cy": float(c_mean[1])}
+
+    it = range(n_folds)
     if progress:
         from tqdm.auto import tqdm
 
@@ -210,36 +263,38 @@ def run_study(data_dir=DATA_DIR, *, folds: int = 3, fit_every: int = 20, eval_ev
         test = [lg for lg in runs if fold_of[lg.name] == k]
         if not test:
             continue
+        if not train:
+            raise ValueError("run_study: a fold has no training runs; use folds >= 2 and at least two runs")
         for lg in test:
             for nm, m in fixed_models.items():
                 record(nm, lg, m)
-        if not train:
-            raise ValueError("run_study: a fold has no training runs; use folds >= 2 and at least two runs")
-        frames = [_frame(lg, fit_every) for lg in train]
-        subst = 2
-        plain, sec0 = _fit(prior, [f.drop(columns=[c for c in f.columns if c.startswith("wind")]) for f in frames],
-                           ESTIMATE, subst)
-        env, sec1 = _fit(env0, frames, ESTIMATE + ESTIMATE_WIND, subst)
-        fits[k] = {"lowspeed fitted": {"success": plain.success_, "message": plain.message_, "seconds": sec0},
-                   "lowspeed + wind + current fitted": {"success": env.success_, "message": env.message_,
-                                                        "seconds": sec1}}
-        s = env.summary()
-        for name in s.index:
-            coefs.append({"fold": k, "parameter": name, "value": s.loc[name, "value"], "std": s.loc[name, "std"]})
-        cc = []
-        for st, f in zip(env.states_, frames):
-            row = {"fold": k, "run": f.attrs["name"], "cx": st.cx.iloc[0], "cx_std": st.cx_std.iloc[0],
-                   "cy": st.cy.iloc[0], "cy_std": st.cy_std.iloc[0]}
-            currents.append(row)
-            cc.append((row["cx"], row["cy"]))
-        c_mean = np.mean(cc, axis=0) if cc else (0.0, 0.0)
-        m_plain, m_env = plain.to_model(), env.to_model()
+        m_plain, m_env, c_mean = fit_pair(train, k, "")
         models[k] = {"lowspeed fitted (no environment)": m_plain, "lowspeed + wind + current fitted": m_env}
+        frames = [_frame(lg, fit_every) for lg in train]
+        for cw in calm_water:
+            label, est = CALM_WATER[cw]
+            ident, sec = _fit(kvlcc2, strip_wind(frames), est, substeps, **hold)
+            fits[k][label] = {"success": ident.success_, "message": ident.message_, "seconds": sec}
+            models[k][label] = ident.to_model()
         for lg in test:
-            record("lowspeed fitted (no environment)", lg, m_plain)
-            record("lowspeed + wind + current fitted", lg, m_env, initial={"cx": c_mean[0], "cy": c_mean[1]})
-            if lg.run_type == "turning":
-                turning.extend(_turning_rows(lg, {**fixed_models, **models[k]}, eval_every))
+            for nm, m in models[k].items():
+                record(nm, lg, m, initial=c_mean if "current" in nm else None)
+        if by_type:
+            for kind in sorted({lg.run_type for lg in test}):
+                same = [lg for lg in train if lg.run_type == kind]
+                if not same:
+                    continue
+                tp, te, tc = fit_pair(same, k, f" ({kind})")
+                models[k][f"lowspeed fitted by type ({kind})"] = tp
+                models[k][f"lowspeed + wind + current fitted by type ({kind})"] = te
+                for lg in [t for t in test if t.run_type == kind]:
+                    record("lowspeed fitted by type (no environment)", lg, tp)
+                    record("lowspeed + wind + current fitted by type", lg, te, initial=tc)
+        if turning:
+            for lg in test:
+                if lg.run_type == "turning":
+                    mk = {nm: m for nm, m in models[k].items() if "by type" not in nm or "turning" in nm}
+                    turning_rows.extend(_turning_rows(lg, {**fixed_models, **mk}, eval_every))
     for (model_name, kind), results in errs.items():
         for j, H in enumerate(results[0].horizons):
             pe = np.concatenate([r.position_error[:, j] for r in results])
@@ -251,21 +306,53 @@ def run_study(data_dir=DATA_DIR, *, folds: int = 3, fit_every: int = 20, eval_ev
                          "position_error_p90_m": float(np.percentile(pe[ok], 90)) if ok.any() else np.nan,
                          "heading_error_median_deg": float(np.median(he[ok])) if ok.any() else np.nan})
     return EssoStudy(horizon=pd.DataFrame(rows), coefficients=pd.DataFrame(coefs), currents=pd.DataFrame(currents),
-                     turning=pd.DataFrame(turning), fits=fits, models=models,
-                     settings={"folds": folds, "fit_every": fit_every, "eval_every": eval_every,
-                               "start_every": start_every, "runs": [lg.name for lg in runs],
-                               "fold_of": fold_of})
+                     turning=pd.DataFrame(turning_rows), fits=fits, models=models,
+                     settings={"folds": folds, "n_folds": n_folds, "fit_every": fit_every, "eval_every": eval_every,
+                               "start_every": start_every, "runs": [lg.name for lg in runs], "fold_of": fold_of,
+                               "input_hold": input_hold, "gate": gate, "current": current,
+                               "estimate": list(estimate), "estimate_wind": list(estimate_wind)})
 
 
-if __name__ == "__main__":  # pragma: no cover - the full study (slow): python -m shipid.studies.esso_osaka
+def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shipid.studies.esso_osaka
+    import argparse
+    import pickle
+
+    ap = argparse.ArgumentParser(description="Esso Osaka cross-validated study")
+    ap.add_argument("--folds", default="loro")
+    ap.add_argument("--input-hold", default="foh")
+    ap.add_argument("--gate", default="5")
+    ap.add_argument("--current", default="constant")
+    ap.add_argument("--fit-every", type=int, default=20)
+    ap.add_argument("--estimate", default=",".join(ESTIMATE))
+    ap.add_argument("--no-by-type", action="store_true")
+    ap.add_argument("--no-calm-water", action="store_true")
+    ap.add_argument("--no-turning", action="store_true")
+    ap.add_argument("--save", help="pickle the EssoStudy here")
+    a = ap.parse_args(argv)
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    res = run_study()
-    with pd.option_context("display.width", 160, "display.float_format", "{:.3f}".format):
+    t0 = time.time()
+    res = run_study(folds=a.folds if a.folds == "loro" else int(a.folds), input_hold=a.input_hold,
+                    gate=None if a.gate.lower() == "none" else float(a.gate), current=a.current,
+                    fit_every=a.fit_every, estimate=tuple(a.estimate.split(",")), by_type=not a.no_by_type,
+                    calm_water=() if a.no_calm_water else ("mmg",), turning=not a.no_turning, progress=False)
+    print(f"settings: {res.settings | {'runs': len(res.settings['runs']), 'fold_of': '...'}}; {time.time() - t0:.0f} s")
+    with pd.option_context("display.width", 200, "display.max_rows", 500, "display.float_format", "{:.3f}".format):
         for H in (10.0, 30.0, 60.0):
             print(f"median position error after {H:g} s [m]")
             print(res.table(H).to_string())
         print(res.horizon.to_string())
-        print(res.coefficients.pivot(index="parameter", columns="fold", values="value").to_string())
-        print(res.currents.to_string())
-        print(res.turning.to_string())
-        print(res.fits)
+        if len(res.coefficients):
+            c = res.coefficients[res.coefficients.fit == "all types"]
+            print(c.groupby("parameter")[["value", "std"]].agg(["median", "min", "max"]).to_string())
+        if len(res.currents):
+            print(res.currents[["cx", "cy"]].describe().to_string())
+        if len(res.turning):
+            print(res.turning.groupby("model")[["steady_diameter_L", "steady_speed", "time_360_s"]].median().to_string())
+        print({k: {m: (v["success"], round(v["seconds"], 1)) for m, v in f.items()} for k, f in res.fits.items()})
+    if a.save:
+        with open(a.save, "wb") as fh:
+            pickle.dump(res, fh)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    _main()

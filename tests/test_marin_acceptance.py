@@ -1,0 +1,142 @@
+"""Issue 11 acceptance: ``shipid fit`` on the raw MARIN KVLCC2 runs with nothing but ``--lpp 320``.
+
+The four training runs (tc+-35, zz+-10; the zz+-20 hold-outs are never read here) as the files are, through
+the CLI exactly as a user types it: the fit never diverges, exits 0 (consistent) or 3 (the consistency
+verdict: measured data have physics and sensors the models lack), never 1 (a refinement stopped on its
+evaluation limit) or 4, and its damping derivatives have their physical signs -- ``mmg``: Yv, Nv, Nr < 0;
+the response models: b1, c2 < 0 and c3 > 0 (the rudder's yaw moment with shipid's starboard-positive
+rudder).  Also the recipe's linear-range step that makes ``kcs-response`` right (its root cause).
+"""
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from shipid.cli import main
+
+MARIN = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "kvlcc2_marin"
+TRAIN = ("tc_35", "tc_-35", "zz_10", "zz_-10")
+needs_marin = pytest.mark.skipif(not MARIN.is_dir(), reason=f"MARIN KVLCC2 data not found at {MARIN}")
+
+
+def _files():
+    return [str(MARIN / f"MARIN_FREE_KVLCC2_{k}_m.dat") for k in TRAIN]
+
+
+def _fit(tmp_path, *model_args):
+    out = tmp_path / "fit.json"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        rc = main(["fit", *_files(), *model_args, "--lpp", "320", "-o", str(out)])
+    # the refinement replays the logs on one grid, padded to the longest: a short log's replay may run away
+    # after its own last sample, where nothing is fitted -- that is no reason to alarm the user
+    blown = [str(w.message) for w in caught if "became non-finite" in str(w.message)]
+    assert not blown, blown
+    return rc, json.loads(out.read_text())
+
+
+@pytest.mark.slow
+@needs_marin
+@pytest.mark.parametrize("model_args, negative, positive", [
+    (("--model", "kcs-response"), ("b1", "c2"), ("c3",)),
+    (("--model", "response-nl"), ("b1", "c2"), ("c3",)),
+    (("--model", "mmg", "--params", "kvlcc2"), ("Yv", "Nv", "Nr"), ()),
+], ids=["kcs-response", "response-nl", "mmg"])
+def test_raw_marin_fit_with_only_lpp_has_physical_damping_signs(tmp_path, model_args, negative, positive):
+    rc, res = _fit(tmp_path, *model_args)
+    assert rc in (0, 3), (rc, res["message"])
+    assert res["success"] is True, res["message"]
+    coef, std = res["coef"], res["coef_std"]
+    for k in negative:
+        assert coef[k] < 0, (k, coef[k], std[k])
+    for k in positive:
+        assert coef[k] > 0, (k, coef[k], std[k])
+    cons = res["diagnostics"]["consistency"]   # the EKF stage's verdict, which the exit status reports
+    assert cons["consistent"] is (rc == 0) and cons.get("stage", "ekf") == "ekf"
+    if res["settings"].get("ekf_stage"):
+        assert res["settings"]["ekf_stage"]["success"] is True
+
+
+@needs_marin
+def test_linear_range_cuts_the_turning_circles_at_10_deg_of_drift():
+    """The recipe's step 2b: kcs-response (linear in v, r) uses each run until its drift angle first exceeds
+    10 deg -- the turning circles' first minute, the 10/10 zigzags whole (they stay below 9 deg); response-nl
+    and mmg (cross-flow terms) use every sample."""
+    from shipid.identify.recipe import LINEAR_DRIFT_DEG, linear_sway_yaw, linear_window
+    from shipid.logs import read_log
+    from shipid.models import get_model
+
+    assert linear_sway_yaw(get_model("kcs-response", lpp=320))
+    assert not linear_sway_yaw(get_model("response-nl", lpp=320))
+    assert not linear_sway_yaw(get_model("mmg", "kvlcc2"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        logs = {k: read_log(MARIN / f"MARIN_FREE_KVLCC2_{k}_m.dat") for k in TRAIN}
+    cut = {k: linear_window(lg) for k, lg in logs.items()}
+    for k in ("zz_10", "zz_-10"):
+        assert cut[k] is logs[k]
+    for k in ("tc_35", "tc_-35"):
+        lg = cut[k]
+        beta = np.degrees(np.arctan2(np.abs(lg["v"]), lg["u"]))
+        assert beta.max() <= LINEAR_DRIFT_DEG and 40.0 < lg.time[-1] < 80.0, (k, lg.time[-1])
+        full = logs[k]
+        nxt = len(lg)
+        assert np.degrees(np.arctan2(abs(full["v"][nxt]), full["u"][nxt])) > LINEAR_DRIFT_DEG
+        assert "linear range" in lg.notes[-1]
+
+
+def test_linear_window_and_max_drift_option_errors(tmp_path, capsys):
+    from shipid.identify.recipe import fit_logs
+    from shipid.logs import TrialLog
+
+    t = np.arange(50.0)
+    lg = TrialLog.from_arrays(t, name="s", u=np.full(50, 2.0), v=np.zeros(50), r=np.zeros(50), psi=np.zeros(50),
+                              x=2.0 * t, y=np.zeros(50), delta=np.zeros(50), n=np.ones(50))
+    with pytest.raises(ValueError, match=r"max_drift_deg=95: give 'auto', None or an angle in degrees"):
+        fit_logs([lg], "kcs-response", lpp=4.36, max_drift_deg=95)
+    p = tmp_path / "s.csv"
+    lg.to_csv(p)
+    rc = main(["fit", str(p), "--lpp", "4.36", "--max-drift", "abc", "-o", str(tmp_path / "r.json")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--max-drift abc: give 'auto', 'none' or a drift angle in degrees between 0 and 90" in err
+    assert "Traceback" not in err
+
+
+def test_linear_range_leaves_out_logs_that_start_beyond_it():
+    """A log that starts at 15 deg of drift has no linear range: left out and said; when every log is like
+    that, a clear error names the way out."""
+    from shipid.identify.recipe import fit_logs
+    from shipid.logs import TrialLog
+
+    t = np.arange(200) * 0.1
+    drifting = TrialLog.from_arrays(t, name="drifting", u=np.full(200, 1.0), v=np.full(200, -0.27),
+                                    r=np.full(200, 0.0), psi=np.zeros(200), x=t.copy(), y=-0.27 * t,
+                                    delta=np.zeros(200), n=np.full(200, 10.0), consistency_checks=False)
+    with pytest.raises(ValueError, match=r"no log stays below 10 deg of drift for 20 samples from its start: "
+                                         r"kcs-response is linear in v and r .* \(--max-drift none\)"):
+        fit_logs([drifting], "kcs-response", lpp=4.36)
+    from shipid.datasets import bundled_kcs_logs
+    from shipid.logs import read_log
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        zz = read_log(next(p for p in bundled_kcs_logs() if "zz_m10" in str(p)))
+        fit = fit_logs([zz, drifting], "kcs-response", lpp=4.36, n_passes=1, refine=None)
+    step = next(s for s in fit.steps if s["step"] == "linear range")
+    assert "left out (fewer than 20 samples below it from the start): drifting" in step["reason"]
+    assert [lg.name for lg in fit.logs] == [zz.name]
+
+
+@pytest.mark.slow
+@needs_marin
+def test_output_error_refinement_of_padded_short_logs_does_not_warn(tmp_path):
+    """The linear-range step cuts the turns to about a minute; on the refinement's common grid they are padded
+    to the zigzags' length and their replay (35 deg held) ran away after their own end, which printed
+    'state became non-finite in 2 of 4 batch member(s)' on every such fit (output-error refinement).  Nothing is
+    fitted there: :func:`_fit` asserts no such warning."""
+    rc, res = _fit(tmp_path, "--model", "kcs-response", "--refine", "output-error")
+    assert rc in (0, 3) and res["success"] is True
