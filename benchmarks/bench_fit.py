@@ -35,8 +35,8 @@ FITS = {"mmg": ("mmg", []),
 
 
 def run_fit(label: str, files, jit: bool, out: Path):
-    """(CPU s, wall s, result dict) of one ``shipid fit`` child process (exit 1, a diverged filter, is a
-    result too: its ``success`` is false)."""
+    """(CPU s, wall s, result dict) of one ``shipid fit`` child process (exit 1, a diverged filter, and
+    exit 3, a fit the consistency verdict flags, are results too: the JSON is written)."""
     model, options = FITS[label]
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "SHIPID_JIT": "1" if jit else "0",
            "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
@@ -47,7 +47,7 @@ def run_fit(label: str, files, jit: bool, out: Path):
     proc = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=ROOT)
     wall = time.perf_counter() - w0
     r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    if proc.returncode not in (0, 1) or not out.exists():
+    if proc.returncode not in (0, 1, 3) or not out.exists():
         raise RuntimeError(f"shipid fit --model {model} failed ({proc.returncode}): {proc.stderr.strip()[-500:]}")
     cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
     return cpu, wall, json.loads(out.read_text())

@@ -38,7 +38,6 @@ __all__ = ["filter_functions", "run_compiled", "smooth_compiled", "replay_compil
 #: Transition methods of the kernel (codes of ``EKFProblem.method``).
 METHODS = {"rk4": 0, "rk4-exact": 1, "euler": 2}
 
-_LOG2PI = math.log(2.0 * math.pi)
 
 
 # ------------------------------------------------------------------ small dense helpers (compiled)
@@ -237,8 +236,8 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
     e = np.empty(nm)
     a = np.empty(nm)
     dz = np.empty(nz)
-    z_fin[b] = z
-    P_fin[b] = P
+    zg = z0[b].copy()  # the last good posterior (before any update: the initial condition)
+    Pg = P0[b].copy()
     if store:
         z_prior[b, 0] = z
         P_prior[b, 0] = P
@@ -376,12 +375,12 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
                     z_prior[b, k + 1:] = np.nan
                     P_prior[b, k + 1:] = np.nan
                     Fs[b, k:] = np.nan
+                z_fin[b] = zg
+                P_fin[b] = Pg
                 return
         if store:
             z_post[b, k] = z
             P_post[b, k] = P
-        z_fin[b] = z
-        P_fin[b] = P
         if k == N - 1:
             break
         # ---- predict to sample k+1 (nothing is integrated into a reset sample)
@@ -434,8 +433,11 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
                     Fs[b, k, i, j] = Ftop[i, j] if i < nx else (1.0 if i == j else 0.0)
             z_prior[b, k + 1] = zn
             P_prior[b, k + 1] = Pn
-        z[:] = zn
-        P[:, :] = Pn
+        # the posterior becomes the last good one, the prediction the state: buffers rotate, nothing is copied
+        zg, z, zn = z, zn, zg
+        Pg, P, Pn = P, Pn, Pg
+    z_fin[b] = z
+    P_fin[b] = P
     if store:
         for i in range(nz):
             for j in range(nz):
@@ -572,7 +574,7 @@ def rts_member(zf, Pf, zp, Pp, F, zs, Ps):
                 for j in range(nz):
                     Gt[i, j] = Gt[i, j] / lii
         else:  # not positive definite (singular prediction covariance): pseudo-inverse
-            Gt[:, :] = np.dot(np.linalg.pinv(np.ascontiguousarray(Ppk)), np.ascontiguousarray(Gt))
+            Gt[:, :] = np.dot(np.linalg.pinv(Ppk.astype(np.float64)), Gt.copy())
         for i in range(nz):
             d[i] = zs[k + 1, i] - zp[k + 1, i]
             dzs[i] = 0.0
@@ -658,10 +660,10 @@ _cache: dict = {}
 FASTMATH = {"reassoc", "contract"}
 
 
-def run_compiled(prob, store: bool, nis_limit: float):
+def run_compiled(prob, store: bool, nis_limit: float, store_dtype=np.float64):
     """:func:`shipid.identify.ekf.run_ekf` on the compiled kernel, or ``None`` when it is not available
     (numba off, the model has no compiled equations, or a method the kernel does not implement)."""
-    from .ekf import INPUT_HOLDS, EKFOutput, interval_steps
+    from .ekf import INPUT_HOLDS, _divergence_message, _output, interval_steps
 
     if prob.method not in METHODS:
         return None
@@ -693,7 +695,7 @@ def run_compiled(prob, store: bool, nis_limit: float):
     nan = lambda *shape: np.full(shape, np.nan)  # noqa: E731
     if store:  # every entry is written by the kernel (np.empty: the pages are touched once)
         z_post, z_prior = np.empty((B, N, nz)), np.empty((B, N, nz))
-        P_post, P_prior, Fs = np.empty((B, N, nz, nz)), np.empty((B, N, nz, nz)), np.empty((B, N, nz, nz))
+        P_post, P_prior, Fs = (np.empty((B, N, nz, nz), dtype=store_dtype) for _ in range(3))
     else:
         z_post = z_prior = np.empty((1, 1, nz))
         P_post = P_prior = Fs = np.empty((1, 1, nz, nz))
@@ -713,21 +715,9 @@ def run_compiled(prob, store: bool, nis_limit: float):
         z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated, div, div_at, d2_at)
     message = ["ok"] * B
     for b in np.flatnonzero(div):
-        k = int(div_at[b])
-        tk = t[b, k]
-        message[b] = (f"filter diverged at sample {k} (t = {tk:.4g} s): normalised innovation {d2_at[b]:.3g}"
-                      if np.isfinite(d2_at[b])
-                      else f"filter diverged at sample {k} (t = {tk:.4g} s): non-finite state or covariance")
-    cnt = (np.isfinite(innov) & ~gated).sum(axis=2)
-    loglik = -0.5 * np.where(cnt > 0, nis + logdet + cnt * _LOG2PI, 0.0).sum(axis=1)
-    loglik = np.where(div, -np.inf, loglik)
-    return EKFOutput(
-        z_post=z_post if store else None, P_post=P_post if store else None,
-        z_prior=z_prior if store else None, P_prior=P_prior if store else None,
-        F=Fs if store else None, z_final=z_fin, P_final=P_fin, innov=innov, S_diag=S_diag,
-        loglik=loglik, nis=nis, diverged=div, diverged_at=div_at, message=message,
-        gated=gated, n_gated=gated.sum(axis=1),
-    )
+        message[b] = _divergence_message(int(div_at[b]), t[b, div_at[b]], d2_at[b])
+    return _output((z_post, P_post, z_prior, P_prior, Fs) if store else None, z_fin, P_fin, innov, S_diag, nis,
+                   logdet, gated, div, div_at, message)
 
 
 def replay_compiled(model, x0, t, U, p, nsteps, foh: bool):
@@ -756,6 +746,7 @@ def smooth_compiled(out):
     if fns is None:
         return None
     c = lambda a: np.ascontiguousarray(a, dtype=float)  # noqa: E731
-    zs, Ps = np.empty_like(out.z_post), np.empty_like(out.P_post)
-    fns["rts_batch"](c(out.z_post), c(out.P_post), c(out.z_prior), c(out.P_prior), c(out.F), zs, Ps)
+    cs = lambda a: np.ascontiguousarray(a, dtype=np.float32 if a.dtype == np.float32 else float)  # noqa: E731
+    zs, Ps = np.empty(out.z_post.shape), np.empty(out.P_post.shape)
+    fns["rts_batch"](c(out.z_post), cs(out.P_post), c(out.z_prior), cs(out.P_prior), cs(out.F), zs, Ps)
     return zs, Ps

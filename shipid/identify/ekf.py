@@ -144,6 +144,26 @@ class EKFOutput:
     n_gated: np.ndarray
 
 
+def _divergence_message(k: int, tk: float, d2: float) -> str:
+    """The message of a member that diverged at sample ``k`` (time ``tk``) with normalised innovation ``d2``."""
+    if np.isfinite(d2):
+        return f"filter diverged at sample {k} (t = {tk:.4g} s): normalised innovation {d2:.3g}"
+    return f"filter diverged at sample {k} (t = {tk:.4g} s): non-finite state or covariance"
+
+
+def _output(stored, z_final, P_final, innov, S_diag, nis, logdet, gated, diverged, diverged_at, message) -> EKFOutput:
+    """The :class:`EKFOutput` of a run (both paths): ``stored`` is ``(z_post, P_post, z_prior, P_prior, F)``
+    or None (``store=False``); the innovation log-likelihood is summed over the samples with accepted
+    measurements from the per-sample ``nis`` and ``logdet`` (``log det S``), ``-inf`` for a diverged member."""
+    cnt = (np.isfinite(innov) & ~gated).sum(axis=2)
+    loglik = -0.5 * np.where(cnt > 0, nis + logdet + cnt * _LOG2PI, 0.0).sum(axis=1)
+    loglik = np.where(diverged, -np.inf, loglik)
+    z_post, P_post, z_prior, P_prior, F = (None,) * 5 if stored is None else stored
+    return EKFOutput(z_post=z_post, P_post=P_post, z_prior=z_prior, P_prior=P_prior, F=F, z_final=z_final,
+                     P_final=P_final, innov=innov, S_diag=S_diag, loglik=loglik, nis=nis, diverged=diverged,
+                     diverged_at=diverged_at, message=message, gated=gated, n_gated=gated.sum(axis=1))
+
+
 def _index_or_slice(idx, n: int):
     """``idx`` as a basic slice when it is a contiguous run of ``range(n)`` (indexing then gives a view)."""
     idx = np.asarray(idx, dtype=np.intp)
@@ -203,7 +223,7 @@ def _cross_interval(step, model, t0, x, u0, u1, p, h, n, scale, est, all_est):
     return x, Fx, Fp
 
 
-def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKFOutput:
+def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6, store_dtype: str = "auto") -> EKFOutput:
     """Run the augmented-state EKF over a batch.
 
     Parameters
@@ -216,6 +236,12 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKF
         A normalised innovation squared above this (or a non-finite or
         non-positive covariance) marks the member as diverged at that sample;
         it is then stopped (see below) and reported, never silently NaN.
+    store_dtype : {"auto", "float64", "float32"}
+        Type of the stored covariances and transitions (``P_post``, ``P_prior``, ``F``; the means stay
+        float64, the filter computes in float64 either way).  float32 needs 20 instead of 32 bytes per
+        ``nz^2`` and sample (with the smoother's output) at the price of rounding what the smoother
+        reads (:mod:`shipid.identify._memory`).  ``"auto"``: float64, or float32 with a warning when
+        float64 would exceed the memory limit.
 
     Returns
     -------
@@ -264,8 +290,9 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKF
     ``A - (A H^T - K R) K^T`` with ``A = P - K H P`` -- the same product,
     associated differently, without forming ``I - K H``.
     """
-    _memory.check(*prob.shape[:2], prob.shape[2] + prob.shape[3], prob.shape[4], store)  # refuse what cannot fit
-    fast = _kernel.run_compiled(prob, store, nis_limit)  # the compiled kernel (same semantics), when available
+    # refuse what cannot fit (or store in float32 where only that fits)
+    sdt = _memory.check(*prob.shape[:2], prob.shape[2] + prob.shape[3], prob.shape[4], store, store_dtype)
+    fast = _kernel.run_compiled(prob, store, nis_limit, sdt)  # the compiled kernel (same semantics), when available
     if fast is not None:
         return fast
     model = prob.model
@@ -323,15 +350,16 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKF
     p = prob.p_base.copy()
     if store:
         z_post = np.empty((B, N, nz))
-        P_post = np.empty((B, N, nz, nz))
+        P_post = np.empty((B, N, nz, nz), dtype=sdt)
         z_prior = np.empty((B, N, nz))
-        P_prior = np.empty((B, N, nz, nz))
-        Fs = np.zeros((B, N, nz, nz))
+        P_prior = np.empty((B, N, nz, nz), dtype=sdt)
+        Fs = np.zeros((B, N, nz, nz), dtype=sdt)
         Fs[:, :, nx:, nx:] = np.eye(ne)
         z_prior[:, 0], P_prior[:, 0] = z, P
-    else:
+    if not store or sdt is not np.float64:  # the transition is computed in float64 (then stored rounded)
         Fbuf = np.zeros((B, nz, nz))
         Fbuf[:, nx:, nx:] = np.eye(ne)
+    F_in_store = store and sdt is np.float64
     innov = np.full((B, N, nm), np.nan)
     S_diag = np.full((B, N, nm), np.nan)
     nis = np.full((B, N), np.nan)
@@ -408,12 +436,7 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKF
                     for b in np.flatnonzero(bad):
                         diverged[b] = True
                         diverged_at[b] = k
-                        tk = t_all[b, k]
-                        message[b] = (
-                            f"filter diverged at sample {k} (t = {tk:.4g} s): normalised innovation {d2[b]:.3g}"
-                            if np.isfinite(d2[b])
-                            else f"filter diverged at sample {k} (t = {tk:.4g} s): non-finite state or covariance"
-                        )
+                        message[b] = _divergence_message(k, t_all[b, k], d2[b])
                     # the member stops: keep its last good posterior
                     z[bad] = z_good[bad]
                     P[bad] = P_good[bad]
@@ -429,7 +452,7 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKF
             k_end = k + 1
             break
         # ---- predict to sample k+1 (RK4 map of the model, its tangent as the transition)
-        F = Fs[:, k] if store else Fbuf
+        F = Fs[:, k] if F_in_store else Fbuf
         zn = z.copy()
         Qk = Qd[:, k]
         rs = prob.reset[:, k + 1] if reset_k[k + 1] else None
@@ -477,6 +500,8 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKF
             zn[diverged], Pn[diverged] = z[diverged], P[diverged]
             if store:
                 F[diverged] = np.nan
+        if store and not F_in_store:
+            Fs[:, k] = F
         z, P = zn, Pn
         if store:
             z_prior[:, k + 1], P_prior[:, k + 1] = z, P
@@ -492,17 +517,8 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6) -> EKF
         if any_div:
             for b in np.flatnonzero(diverged):
                 Fs[b, diverged_at[b]:] = np.nan
-    # innovation log-likelihood, summed over the samples that had accepted measurements
-    cnt = (np.isfinite(innov) & ~gated).sum(axis=2)
-    loglik = -0.5 * np.where(cnt > 0, nis + logdet_k + cnt * _LOG2PI, 0.0).sum(axis=1)
-    loglik = np.where(diverged, -np.inf, loglik)
-    return EKFOutput(
-        z_post=z_post if store else None, P_post=P_post if store else None,
-        z_prior=z_prior if store else None, P_prior=P_prior if store else None,
-        F=Fs if store else None, z_final=z_good, P_final=P_good, innov=innov, S_diag=S_diag,
-        loglik=loglik, nis=nis, diverged=diverged, diverged_at=diverged_at, message=message,
-        gated=gated, n_gated=gated.sum(axis=1),
-    )
+    return _output((z_post, P_post, z_prior, P_prior, Fs) if store else None, z_good, P_good, innov, S_diag, nis,
+                   logdet_k, gated, diverged, diverged_at, message)
 
 
 def rts_smooth(out: EKFOutput, chunk: int = 256) -> tuple[np.ndarray, np.ndarray]:
@@ -528,18 +544,20 @@ def rts_smooth(out: EKFOutput, chunk: int = 256) -> tuple[np.ndarray, np.ndarray
     zf, Pf, zp, Pp, F = out.z_post, out.P_post, out.z_prior, out.P_prior, out.F
     B, N, nz = zf.shape
     zs = np.empty_like(zf)
-    Ps = np.empty_like(Pf)
+    Ps = np.empty(Pf.shape)
     zs[:, -1], Ps[:, -1] = zf[:, -1], Pf[:, -1]
     hi = N - 1  # samples lo..hi-1 are smoothed from hi..lo+1
     while hi > 0:
         lo = max(0, hi - chunk)
         # G^T = Pp^-1 F Pf  (Pp and Pf symmetric), for samples lo..hi-1 at once
-        Gt_all = _psd_solve(Pp[:, lo + 1:hi + 1], F[:, lo:hi] @ Pf[:, lo:hi])
+        Pf_c = Pf[:, lo:hi + 1].astype(float, copy=False)  # float64 (a copy of a float32-stored chunk)
+        Pp_c = Pp[:, lo:hi + 1].astype(float, copy=False)
+        Gt_all = _psd_solve(Pp_c[:, 1:], F[:, lo:hi].astype(float, copy=False) @ Pf_c[:, :-1])
         G_all = Gt_all.swapaxes(-1, -2)
         for k in range(hi - 1, lo - 1, -1):
             G, Gt = G_all[:, k - lo], Gt_all[:, k - lo]
             zs[:, k] = zf[:, k] + (G @ (zs[:, k + 1] - zp[:, k + 1])[:, :, None])[:, :, 0]
-            D = Pf[:, k] + G @ (Ps[:, k + 1] - Pp[:, k + 1]) @ Gt
+            D = Pf_c[:, k - lo] + G @ (Ps[:, k + 1] - Pp_c[:, k + 1 - lo]) @ Gt
             Ps[:, k] = 0.5 * (D + D.transpose(0, 2, 1))
         hi = lo
     return zs, Ps

@@ -154,17 +154,20 @@ def equation_error_fit(
         reg = (theta - p0[est_idx]) / prior_std * regularisation * np.sqrt(T.size)
         return np.concatenate([r, reg])
 
-    def jac(theta):
-        p = p0.copy()
-        p[est_idx] = theta
-        Jpp = model.jac_p(T, X, U, p)[:, use][:, :, est_idx]  # (n, nuse, ne)
-        J = -(Jpp * w[None, :, None]).reshape(-1, est_idx.size)
+    def jac(theta, Jp_est=None):
+        if Jp_est is None:
+            p = p0.copy()
+            p[est_idx] = theta
+            Jp_est = model.jac_p(T, X, U, p)[:, :, est_idx]
+        J = -(Jp_est[:, use] * w[None, :, None]).reshape(-1, est_idx.size)  # (n * nuse, ne)
         return np.vstack([J, np.diag(regularisation * np.sqrt(T.size) / prior_std)])
 
     th0 = p0[est_idx]
     r0 = resid(th0)
     cost0 = 0.5 * float(np.sum(r0**2))
-    J0 = jac(th0) if linear in ("auto", True) else None
+    # the parameter Jacobian at the start values was computed above (Jall): not again (for mmg it is a
+    # complex-step Jacobian over every point and parameter, the cost of this start)
+    J0 = jac(th0, Jall)
     if linear is True or (linear == "auto" and _is_linear(resid, J0, th0, prior_std, r0)):
         # residuals linear in theta (e.g. the response models): one regularised linear least-squares
         # solve gives the minimum the iterative solver converges to
@@ -173,7 +176,7 @@ def equation_error_fit(
         fun = resid(x)
         sol_x, sol_cost, sol_fun, J = x, 0.5 * float(np.sum(fun**2)), fun, J0
     else:
-        jac0 = (lambda th: J0 if J0 is not None and np.array_equal(th, th0) else jac(th))  # noqa: E731
+        jac0 = (lambda th: J0 if np.array_equal(th, th0) else jac(th))  # noqa: E731
         sol = least_squares(resid, th0, jac=jac0, x_scale=prior_std, method="trf", max_nfev=max_nfev)
         sol_x, sol_cost, sol_fun, J = sol.x, sol.cost, sol.fun, sol.jac
     if not (np.all(np.isfinite(sol_x)) and np.isfinite(sol_cost) and sol_cost <= cost0):
