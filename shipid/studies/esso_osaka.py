@@ -111,6 +111,38 @@ class EssoStudy:
         h = self.horizon[self.horizon.seconds == seconds]
         return h.pivot(index="model", columns="run_type", values="position_error_median_m")
 
+    def goals(self, env: str = "lowspeed + wind + current fitted",
+              plain: str = "lowspeed fitted (no environment)") -> pd.DataFrame:
+        """The issue's goals per run type and horizon: the environment-aware model's median error and its
+        ratios to dead reckoning (goal <= 0.5), to the KVLCC2 set Froude-scaled (<= 0.7) and to the same
+        model fitted without environment terms (<= 0.75, 30 s), and its blow-ups."""
+        rows = []
+        h = self.horizon.set_index(["model", "run_type", "seconds"])
+        for (kind, sec), g in self.horizon.groupby(["run_type", "seconds"]):
+            e = h.loc[(env, kind, sec)]
+            val = e.position_error_median_m
+            ref = lambda m: h.loc[(m, kind, sec)].position_error_median_m if (m, kind, sec) in h.index else np.nan  # noqa: E731
+            rows.append({"run_type": kind, "seconds": sec, "median_m": val,
+                         "vs_dead_reckoning": val / ref("dead reckoning"),
+                         "vs_kvlcc2_scaled": val / ref("mmg kvlcc2 (Froude-scaled, no fit)"),
+                         "vs_no_environment": val / ref(plain), "n_blowups": int(e.n_blowups)})
+        return pd.DataFrame(rows)
+
+    def markdown(self, seconds=(10.0, 30.0, 60.0)) -> str:
+        """Tables of median (p90) position errors [m] per model and run type, one per horizon."""
+        out = []
+        types = [t for t in RUN_TYPES if t in set(self.horizon.run_type)]
+        for sec in seconds:
+            h = self.horizon[self.horizon.seconds == sec].set_index(["model", "run_type"])
+            out.append(f"after {sec:g} s: median (p90) [m]\n\n| model | " + " | ".join(types) + " |\n|---|"
+                       + "---|" * len(types))
+            for m in dict.fromkeys(self.horizon.model):
+                cells = [f"{h.loc[(m, t)].position_error_median_m:.3f} ({h.loc[(m, t)].position_error_p90_m:.2f})"
+                         if (m, t) in h.index else "" for t in types]
+                out.append(f"| {m} | " + " | ".join(cells) + " |")
+            out.append("")
+        return "\n".join(out)
+
 
 def _fit(model, frames, estimate, substeps, input_hold="foh", gate=5.0):
     from ..identify import EKFIdentifier
@@ -349,6 +381,8 @@ def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shi
         if len(res.turning):
             print(res.turning.groupby("model")[["steady_diameter_L", "steady_speed", "time_360_s"]].median().to_string())
         print({k: {m: (v["success"], round(v["seconds"], 1)) for m, v in f.items()} for k, f in res.fits.items()})
+        print(res.goals().to_string())
+        print(res.markdown())
     if a.save:
         with open(a.save, "wb") as fh:
             pickle.dump(res, fh)
