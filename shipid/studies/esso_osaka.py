@@ -214,7 +214,7 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
               horizons=(10.0, 30.0, 60.0), start_every: float = 5.0, types=RUN_TYPES, max_runs: int | None = None,
               by_type: bool = True, calm_water=("mmg",), input_hold: str = "foh", gate: float | None = 5.0,
               current: str = "constant", estimate=ESTIMATE, estimate_wind=ESTIMATE_WIND, substeps: int = 2,
-              fixed: bool = True, turning: bool = True, progress: bool = True) -> EssoStudy:
+              fixed: bool = True, turning: bool = True, all_types: bool = True, progress: bool = True) -> EssoStudy:
     """Fit and cross-validate on the Esso Osaka runs (see the module docstring for every choice).
 
     Parameters
@@ -233,6 +233,8 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
         Current of the environment-aware fits (per run; reset at each run).
     fixed : bool
         Score the models that are not fitted (dead reckoning, KVLCC2 scaled, the prior).
+    all_types : bool
+        Fit on all run types (with ``False`` only the per-type fits, e.g. to run them on other folds).
     max_runs : int, optional
         At most this many runs per type (the fast mode of the tests and the notebook).
     """
@@ -300,10 +302,13 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
         for lg in test:
             for nm, m in fixed_models.items():
                 record(nm, lg, m)
-        m_plain, m_env, c_mean = fit_pair(train, k, "")
-        models[k] = {"lowspeed fitted (no environment)": m_plain, "lowspeed + wind + current fitted": m_env}
+        models[k] = {}
+        c_mean = None
+        if all_types:
+            m_plain, m_env, c_mean = fit_pair(train, k, "")
+            models[k] = {"lowspeed fitted (no environment)": m_plain, "lowspeed + wind + current fitted": m_env}
         frames = [_frame(lg, fit_every) for lg in train]
-        for cw in calm_water:
+        for cw in (calm_water if all_types else ()):
             label, est = CALM_WATER[cw]
             ident, sec = _fit(kvlcc2, strip_wind(frames), est, substeps, **hold)
             fits[k][label] = {"success": ident.success_, "message": ident.message_, "seconds": sec}
@@ -359,6 +364,8 @@ def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shi
     ap.add_argument("--no-by-type", action="store_true")
     ap.add_argument("--no-calm-water", action="store_true")
     ap.add_argument("--no-turning", action="store_true")
+    ap.add_argument("--no-all-types", action="store_true", help="only the per-type fits")
+    ap.add_argument("--no-fixed", action="store_true", help="score dead reckoning only of the unfitted models")
     ap.add_argument("--save", help="pickle the EssoStudy here")
     a = ap.parse_args(argv)
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -366,7 +373,8 @@ def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shi
     res = run_study(folds=a.folds if a.folds == "loro" else int(a.folds), input_hold=a.input_hold,
                     gate=None if a.gate.lower() == "none" else float(a.gate), current=a.current,
                     fit_every=a.fit_every, estimate=tuple(a.estimate.split(",")), by_type=not a.no_by_type,
-                    calm_water=() if a.no_calm_water else ("mmg",), turning=not a.no_turning, progress=False)
+                    calm_water=() if a.no_calm_water else ("mmg",), turning=not a.no_turning,
+                    all_types=not a.no_all_types, fixed=not a.no_fixed, progress=False)
     print(f"settings: {res.settings | {'runs': len(res.settings['runs']), 'fold_of': '...'}}; {time.time() - t0:.0f} s")
     with pd.option_context("display.width", 200, "display.max_rows", 500, "display.float_format", "{:.3f}".format):
         for H in (10.0, 30.0, 60.0):
@@ -381,7 +389,8 @@ def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shi
         if len(res.turning):
             print(res.turning.groupby("model")[["steady_diameter_L", "steady_speed", "time_360_s"]].median().to_string())
         print({k: {m: (v["success"], round(v["seconds"], 1)) for m, v in f.items()} for k, f in res.fits.items()})
-        print(res.goals().to_string())
+        if not a.no_all_types:
+            print(res.goals().to_string())
         print(res.markdown())
     if a.save:
         with open(a.save, "wb") as fh:
