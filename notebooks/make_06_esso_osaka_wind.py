@@ -56,7 +56,7 @@ if HAVE_DATA:
     md("## 3. Fit with and without wind + current, predict held-out runs"),
     code("""if HAVE_DATA:
     # fast mode: two random runs, two folds, no per-type or calm-water fits; full: the documented 8-fold study
-    kw = (dict(types=("random",), max_runs=2, folds=2, fit_every=100, eval_every=5, by_type=False, calm_water=(),
+    kw = (dict(types=("random",), max_runs=2, folds=2, fit_every=20, eval_every=5, by_type=False, calm_water=(),
                turning=False) if FAST else dict(folds=8, fit_every=20))
     res = es.run_study(folder, progress=False, **kw)
     for H in (10.0, 30.0, 60.0):
