@@ -4,8 +4,8 @@ A thin user of the public API: logs read with the ``esso-frt`` schema, models bu
 :func:`shipid.models.get_model` and :func:`shipid.environment.with_environment`, fitted with
 :class:`shipid.identify.EKFIdentifier`, judged by :func:`shipid.validation_horizon.horizon_prediction`
 (open-loop prediction from the measured state every 5 s).  The runs are split by run into ``folds``
-(leave-one-run-out when ``folds`` equals the number of runs): every model that is fitted is fitted on the
-other folds only, so every error reported is on runs the fit has not seen.
+(:func:`assign_folds`; ``"loro"``: leave-one-run-out): every model that is fitted is fitted on the other
+folds only, so every error reported is on runs the fit has not seen.
 
 Choices (made once, before looking at any held-out error, and the same for every model):
 
@@ -21,8 +21,11 @@ Choices (made once, before looking at any held-out error, and the same for every
   lift) and, with wind, :data:`ESTIMATE_WIND`; prior = ``esso-osaka-prior`` with 100 % prior std;
 * current: constant per run (reset at each run), estimated with prior std 0.05 m/s; in prediction the
   held-out run starts with the training runs' mean current;
-* EKF inputs held over each interval (``input_hold="zoh"``, the hold the predictions use) and no
-  innovation gating (``gate=None``): the settings the documented run was made with.
+* EKF inputs: the identifier's defaults, first-order hold and a 5-sigma innovation gate -- chosen by 8-fold
+  cross-validation against the held inputs without gating the study used before (docs/environment.md);
+  a constant current per run was preferred to a random walk by the same cross-validation;
+* fits on all run types and by run type (``by_type``); which to use for a run type is a cross-validated
+  choice reported in docs/environment.md, not made here.
 """
 from __future__ import annotations
 
