@@ -226,9 +226,14 @@ def simulate(
     if method == "dopri5":
         atol = 1e-3 * rtol if atol is None else atol
         foh = input_hold == "foh" and U is not None
-        res = _simulate_dopri5(model, x0, t, U, controller, law, p, rtol, atol, first_step, foh=foh)
-        if res.success or not batch or controller is not None:
-            return res
+        start_ok = bool(np.all(np.isfinite(x0)))
+        if start_ok or controller is not None:  # (a non-finite start would give a non-finite first step)
+            res = _simulate_dopri5(model, x0, t, U, controller, law, p, rtol, atol, first_step, foh=foh)
+            if res.success or not batch or controller is not None:
+                return res
+        elif not batch:
+            return _dopri5_members(model, x0[None], t, None if U is None else U[None], p, rtol, atol, first_step,
+                                   foh, single=True)
         # the batch shares one adaptive step, so one non-finite (or stiffly diverging) member stops it:
         # integrate the members one by one, finish those that can be finished and report the others
         return _dopri5_members(model, x0, t, U, p, rtol, atol, first_step, foh)
@@ -404,7 +409,7 @@ def _simulate_dopri5(model, x0, t, U, controller, law, p, rtol, atol, first_step
     return SimulationResult(t=t, x=X, u=Uout, model=model, params=np.array(p), success=ok, message=msg, meta=stats)
 
 
-def _dopri5_members(model, x0, t, U, p, rtol, atol, first_step, foh):
+def _dopri5_members(model, x0, t, U, p, rtol, atol, first_step, foh, single: bool = False):
     """``dopri5`` on each member of an open-loop batch ``x0 (B, nx)`` separately (after the shared-step run
     failed): the members that finish are kept, the others are NaN from their first non-finite sample on,
     listed in ``meta["failed"]`` with ``meta["failed_at"]`` [s], as the ``rk4`` batch does."""
@@ -414,6 +419,9 @@ def _dopri5_members(model, x0, t, U, p, rtol, atol, first_step, foh):
     failed_at = np.full(B, np.nan)
     meta = {"method": "dopri5", "n_steps": 0, "n_rejected": 0, "n_fev": 0, "h_last": None, "per_member": True}
     for b in range(B):
+        if not np.all(np.isfinite(x0[b])):  # nothing to integrate: failed at the start
+            failed_at[b] = t[0]
+            continue
         pb = p[b] if p.ndim == 2 else p
         r = _simulate_dopri5(model, x0[b], t, U[b], None, None, pb, rtol, atol, first_step, foh=foh)
         for k in ("n_steps", "n_rejected", "n_fev"):
@@ -427,9 +435,12 @@ def _dopri5_members(model, x0, t, U, p, rtol, atol, first_step, foh):
     meta["failed"] = [int(i) for i in np.flatnonzero(np.isfinite(failed_at))]
     meta["failed_at"] = [float(v) for v in failed_at[meta["failed"]]]
     ok = not meta["failed"]
-    msg = "integration finished" if ok else _failure_message(t, failed_at)
+    msg = "integration finished" if ok else _failure_message(t, failed_at[0] if single else failed_at)
     if not ok:
         warnings.warn(msg, RuntimeWarning, stacklevel=3)
+    if single:
+        X, Uout = X[0], Uout[0]
+        meta = {k: v for k, v in meta.items() if k not in ("failed", "failed_at", "per_member")}
     return SimulationResult(t=t, x=X, u=Uout, model=model, params=np.array(p), success=ok, message=msg, meta=meta)
 
 

@@ -50,9 +50,11 @@ def test_study_fast_mode():
     """Two random runs, two folds (about 30 s on a free core; more on a loaded machine)."""
     from shipid.studies.esso_osaka import run_study
 
-    res = run_study(types=("random",), max_runs=2, folds=2, fit_every=50, progress=False)
+    # fit_every=20 (2 s), as the study: at 5 s (50) the FOH fit of one fold diverges
+    res = run_study(types=("random",), max_runs=2, folds=2, fit_every=20, calm_water=(), progress=False)
     h = res.horizon
-    assert set(h.model) >= {"dead reckoning", "lowspeed fitted (no environment)", "lowspeed + wind + current fitted"}
+    assert set(h.model) >= {"dead reckoning", "lowspeed fitted (no environment)", "lowspeed + wind + current fitted",
+                            "lowspeed + wind + current fitted by type"}
     assert (h.n_starts > 0).all()
     assert all(f["success"] for fold in res.fits.values() for f in fold.values())
     t10 = res.table(10.0)

@@ -137,18 +137,26 @@ def test_simulate_batch_finishes_the_other_members():
         assert simulate(m, x0[[0, 2]], t, U).success
 
 
-@pytest.mark.parametrize("hold", ["zoh", "foh"])
-def test_dopri5_batch_finishes_the_other_members_and_reports_the_failed_one(hold):
+@pytest.mark.parametrize("hold, case", [("zoh", "nan-start"), ("foh", "nan-start"), ("zoh", "unstable"),
+                                        ("foh", "unstable")])
+def test_dopri5_batch_finishes_the_other_members_and_reports_the_failed_one(hold, case):
+    """A member that starts non-finite, or whose (absurd, Nr = +1e4) parameters make it overflow: the
+    others finish with the values of their own runs, the failed one is reported."""
     m = get_model("lowspeed")
     x0 = np.zeros((3, 6))
-    x0[:, 3] = [0.2, 0.2, 0.1]
-    x0[1, 3] = np.nan
+    x0[:, 3], x0[:, 5] = [0.2, 0.2, 0.1], 0.01
+    P = np.repeat(m.params[None], 3, axis=0)
+    if case == "nan-start":
+        x0[1, 3] = np.nan
+    else:
+        P[1, m.param_index("Nr")] = 1e4
     t = np.arange(0.0, 3.0, 0.1)
     U = np.column_stack([np.where(t < 1.5, 0.0, 0.3), np.full(t.size, 8.0)])
     with pytest.warns(RuntimeWarning, match="1 of 3 batch member"):
-        r = simulate(m, x0, t, U, method="dopri5", input_hold=hold)
-    assert not r.success and r.meta["failed"] == [1] and r.meta["failed_at"] == [0.0] and r.meta["per_member"]
-    assert np.all(np.isfinite(r.x[[0, 2]])) and np.all(np.isnan(r.x[1]))
+        r = simulate(m, x0, t, U, method="dopri5", input_hold=hold, params=P)
+    assert not r.success and r.meta["failed"] == [1] and r.meta["per_member"]
+    k = int(np.searchsorted(t, r.meta["failed_at"][0]))
+    assert np.all(np.isfinite(r.x[[0, 2]])) and np.all(np.isnan(r.x[1, k:]))
     for b in (0, 2):
         single = simulate(m, x0[b], t, U, method="dopri5", input_hold=hold)
         np.testing.assert_allclose(r.x[b], single.x, rtol=1e-12, atol=1e-12)
@@ -156,3 +164,25 @@ def test_dopri5_batch_finishes_the_other_members_and_reports_the_failed_one(hold
         warnings.simplefilter("error")
         ok = simulate(m, x0[[0, 2]], t, U, method="dopri5", input_hold=hold)
     assert ok.success and "per_member" not in ok.meta
+    with pytest.warns(RuntimeWarning, match="non-finite"):
+        one = simulate(m, x0[1] if case == "nan-start" else x0[0] * np.nan, t, U, method="dopri5", input_hold=hold)
+    assert not one.success and one.x.shape == (t.size, 6)
+
+
+def test_response_nl_damping_keeps_its_sign_astern():
+    """The guard against the low-speed blow-ups: the speed-proportional damping of response-nl uses |u|
+    (and its surge term a8 u|n|), so sway/yaw/surge damping is the same going astern or with the propeller
+    astern; an astern run of the default set scaled to 3 m stays finite (it reached 1e87 m/s with u, n)."""
+    m = get_model("response-nl", lpp=3.0)
+    x = np.array([0.0, 0.0, 0.0, 0.3, 0.05, 0.02])
+    xa = x * [1, 1, 1, -1, 1, 1]
+    J, Ja, Jn = m.jac_x(0, x, [0.1, 8.0]), m.jac_x(0, xa, [0.1, 8.0]), m.jac_x(0, x, [0.1, -8.0])
+    assert J[4, 4] == pytest.approx(Ja[4, 4], rel=1e-12) and J[5, 5] == pytest.approx(Ja[5, 5], rel=1e-12)
+    assert J[3, 3] == pytest.approx(Jn[3, 3], rel=1e-12)
+    for xx, uu in ((xa, [0.1, -8.0]), (x, [0.1, -8.0])):  # analytic Jacobians still match finite differences
+        fd = Model._fd(m, 0.0, xx, np.array(uu), m.params, "x")
+        np.testing.assert_allclose(m.jac_x(0, xx, uu), fd, rtol=1e-6, atol=1e-8)
+    t = np.arange(0.0, 120.0, 0.2)
+    U = np.column_stack([np.full(t.size, 0.35), np.full(t.size, -10.0)])
+    r = simulate(m, [0.0, 0.0, 0.0, 0.1, 0.0, 0.0], t, U)
+    assert r.success and np.all(np.abs(r.x[:, 3:]) < 2.0)

@@ -39,6 +39,11 @@ def absf(z):
     return abs(z)
 
 
+def sgn_nn(z):
+    """+1 for z >= 0, -1 for z < 0 (the derivative of |z|, taken as +1 at 0)."""
+    return 1.0 if z >= 0 else -1.0
+
+
 # ------------------------------------------------------------------ kcs-response (16 parameters)
 def kcs_rates(psi, uu, v, r, d, n, p):
     """``(x', y', psi', u', v', r')`` of the seed-002 response model (SPEC.md eq. (3))."""
@@ -85,11 +90,14 @@ def kcs_jac_u(psi, uu, v, r, d, n, p):
 # order: a1..a9 b1..b4 c1..c3 (the seed's), b5..b9 c4..c9, b0 c0; ``uf`` is the floor of u in 1/u.
 def nl_regressors(uu, v, r, d, n, uf):
     """Regressors of the u, v and r equations: 9 + 10 + 10 values (order of ``response_nl._U/_V/_R_IDX``)."""
-    q = inv_floor(uu, uf)
+    # the added damping scales with the speed |u| (hull forces ~ U v, U r and L v^2 r/U): with u itself
+    # it would turn into anti-damping going astern, where the predictions blew up (docs/environment.md)
+    au = absf(uu)
+    q = inv_floor(au, uf)
     vav, rar, vvr, vrr, nn = v * absf(v), r * absf(r), v * v * r * q, v * r * r * q, n * n
-    return (uu, v * v, r * r, d * d, v * r, v * d, r * d, uu * n, n * absf(n),
-            v, r, d, uu * r, uu * v, vav, rar, vvr, vrr, nn,
-            v, r, d, uu * v, uu * r, vav, rar, vvr, vrr, nn)
+    return (uu, v * v, r * r, d * d, v * r, v * d, r * d, uu * absf(n), n * absf(n),
+            v, r, d, uu * r, au * v, vav, rar, vvr, vrr, nn,
+            v, r, d, au * v, au * r, vav, rar, vvr, vrr, nn)
 
 
 def nl_rates(psi, uu, v, r, d, n, p, uf):
@@ -124,21 +132,22 @@ def nl_jac_x(psi, uu, v, r, d, n, p, uf):
     """Non-zero entries of d rates / d x at :data:`NL_JX_POS`."""
     (a1, a2, a3, a4, a5, a6, a7, a8, a9, b1, b2, b3, b4, c1, c2, c3,
      b5, b6, b7, b8, b9, c4, c5, c6, c7, c8, c9, b0, c0) = p[:29]
-    q = inv_floor(uu, uf)
-    dq = dinv_floor(uu, uf)
+    au, su = absf(uu), sgn_nn(uu)
+    q = inv_floor(au, uf)
+    dq = dinv_floor(au, uf) * su
     j0, j1, j2, j3, j4, j5, j6 = planar_jac_cs(uu, v, cos(psi), sin(psi))
     vvr, vrr = v * v * r, v * r * r
     av, ar = 2.0 * absf(v), 2.0 * absf(r)
     return (j0, j1, j2, j3, j4, j5, j6,
-            a1 + a8 * n, 2.0 * a2 * v + a5 * r + a6 * d, 2.0 * a3 * r + a5 * v + a7 * d,
+            a1 + a8 * absf(n), 2.0 * a2 * v + a5 * r + a6 * d, 2.0 * a3 * r + a5 * v + a7 * d,
             # sway: coefficients of v, r, u r, u v, v|v|, r|r|, v^2 r/u, v r^2/u = b1 b2 b4 b5 b6 b7 b8 b9
-            b4 * r + b5 * v + (b8 * vvr + b9 * vrr) * dq,
-            b1 + b5 * uu + b6 * av + (2.0 * b8 * v * r + b9 * r * r) * q,
+            b4 * r + b5 * v * su + (b8 * vvr + b9 * vrr) * dq,
+            b1 + b5 * au + b6 * av + (2.0 * b8 * v * r + b9 * r * r) * q,
             b2 + b4 * uu + b7 * ar + (b8 * v * v + 2.0 * b9 * v * r) * q,
             # yaw: c1 c2 c5 c4 c6 c7 c8 c9
-            c5 * r + c4 * v + (c8 * vvr + c9 * vrr) * dq,
-            c1 + c4 * uu + c6 * av + (2.0 * c8 * v * r + c9 * r * r) * q,
-            c2 + c5 * uu + c7 * ar + (c8 * v * v + 2.0 * c9 * v * r) * q)
+            (c5 * r + c4 * v) * su + (c8 * vvr + c9 * vrr) * dq,
+            c1 + c4 * au + c6 * av + (2.0 * c8 * v * r + c9 * r * r) * q,
+            c2 + c5 * au + c7 * ar + (c8 * v * v + 2.0 * c9 * v * r) * q)
 
 
 NL_JU_POS = ((3, 0), (3, 1), (4, 0), (5, 0), (4, 1), (5, 1))
@@ -148,7 +157,8 @@ def nl_jac_u(psi, uu, v, r, d, n, p, uf):
     """Non-zero entries of d rates / d u at :data:`NL_JU_POS`."""
     (a1, a2, a3, a4, a5, a6, a7, a8, a9, b1, b2, b3, b4, c1, c2, c3,
      b5, b6, b7, b8, b9, c4, c5, c6, c7, c8, c9, b0, c0) = p[:29]
-    return (2.0 * a4 * d + a6 * v + a7 * r, a8 * uu + 2.0 * a9 * absf(n), b3, c3, 2.0 * b0 * n, 2.0 * c0 * n)
+    return (2.0 * a4 * d + a6 * v + a7 * r, a8 * uu * sgn_nn(n) + 2.0 * a9 * absf(n), b3, c3, 2.0 * b0 * n,
+            2.0 * c0 * n)
 
 
 # ------------------------------------------------------------------ matrices from entries
@@ -177,12 +187,12 @@ def fill_numpy(shape, pos, vals) -> np.ndarray:
 
 
 #: Globals of the batched numpy backend (real arrays).
-NUMPY = {"cos": np.cos, "sin": np.sin, "absf": np.abs,
+NUMPY = {"cos": np.cos, "sin": np.sin, "absf": np.abs, "sgn_nn": lambda z: np.where(z < 0, -1.0, 1.0),
          "inv_floor": lambda uu, floor: 1.0 / np.maximum(uu, floor),
          "dinv_floor": lambda uu, floor: np.where(uu > floor, -1.0 / (uu * uu), 0.0)}
 
 #: The functions of this module in dependency order (what :func:`shipid._jit.rebind` rebinds).
-FUNCTIONS = {"inv_floor": inv_floor, "dinv_floor": dinv_floor, "absf": absf, "planar_rates_cs": planar_rates_cs,
+FUNCTIONS = {"inv_floor": inv_floor, "dinv_floor": dinv_floor, "absf": absf, "sgn_nn": sgn_nn, "planar_rates_cs": planar_rates_cs,
              "planar_jac_cs": planar_jac_cs, "kcs_rates": kcs_rates, "kcs_jac_x": kcs_jac_x,
              "kcs_jac_p": kcs_jac_p, "kcs_jac_u": kcs_jac_u, "nl_regressors": nl_regressors, "nl_rates": nl_rates,
              "nl_jac_p": nl_jac_p, "nl_jac_x": nl_jac_x, "nl_jac_u": nl_jac_u, "fill": fill}

@@ -6,15 +6,21 @@ does not scale with speed, so a model fitted to zigzags turns far too
 tightly or too widely).  This model keeps the 16 seed terms unchanged (same
 names, same meaning as ``kcs-response``) and adds, in sway and yaw,
 
-* speed-proportional linear damping ``u v`` (sway, yaw) and ``u r`` (yaw):
+* speed-proportional linear damping ``|u| v`` (sway, yaw) and ``|u| r`` (yaw):
   hull forces are ``1/2 rho L d U^2 f(v', r')`` with ``v' = v/U``,
   ``r' = r L/U``, so the linear terms are ``U v`` and ``U r``; the seed has
-  only ``b4 u r`` in sway;
+  only ``b4 u r`` in sway.  The speed is ``|u|`` (U ~ |u|), not ``u``: with
+  ``u`` the damping turns into anti-damping going astern, which made
+  open-loop predictions of the low-speed Esso Osaka runs blow up (317 of
+  2515 starts, 99 % of them after u < 0; docs/environment.md); for u >= 0
+  nothing changes; for the same reason the surge term ``a8 u n`` of the seed
+  is ``a8 u |n|`` here (a propeller turning astern must not feed the surge
+  speed); for n >= 0 it is the seed's term;
 * second-order modulus damping ``v|v|`` and ``r|r|`` (cross-flow drag; from
   ``U^2 v'|v'| = v|v|`` these need no speed factor);
-* third-order cross terms ``v^2 r / u`` and ``v r^2 / u`` (from
-  ``U^2 v'^2 r' = L v^2 r / U``, with U ~ u for the small drift of a ship in
-  service; ``u`` is floored at ``u_floor`` = 0.05 m/s to keep the terms finite);
+* third-order cross terms ``v^2 r / |u|`` and ``v r^2 / |u|`` (from
+  ``U^2 v'^2 r' = L v^2 r / U``, with U ~ |u| for the small drift of a ship in
+  service; ``|u|`` is floored at ``u_floor`` = 0.05 m/s to keep the terms finite);
 * a propeller-induced side force and yaw moment ``b0 n^2``, ``c0 n^2``: a
   single-screw ship is not port/starboard symmetric (the rotating propeller
   and its slipstream load the hull and the rudder asymmetrically, so the
@@ -29,11 +35,11 @@ names, same meaning as ``kcs-response``) and adds, in sway and yaw,
 
 Equations (states ``x, y, psi, u, v, r``; inputs ``delta`` [rad], ``n`` [rps])::
 
-    du/dt = a1 u + a2 v^2 + a3 r^2 + a4 delta^2 + a5 v r + a6 v delta + a7 r delta + a8 u n + a9 n|n|
+    du/dt = a1 u + a2 v^2 + a3 r^2 + a4 delta^2 + a5 v r + a6 v delta + a7 r delta + a8 u |n| + a9 n|n|
     dv/dt = b1 v + b2 r + b3 delta + b4 u r
-            + b5 u v + b6 v|v| + b7 r|r| + b8 v^2 r/u + b9 v r^2/u + b0 n^2
+            + b5 |u| v + b6 v|v| + b7 r|r| + b8 v^2 r/|u| + b9 v r^2/|u| + b0 n^2
     dr/dt = c1 v + c2 r + c3 delta
-            + c4 u v + c5 u r + c6 v|v| + c7 r|r| + c8 v^2 r/u + c9 v r^2/u + c0 n^2
+            + c4 |u| v + c5 |u| r + c6 v|v| + c7 r|r| + c8 v^2 r/|u| + c9 v r^2/|u| + c0 n^2
 
 plus the kinematics of ``kcs-response``.  Linear in the 29 parameters, so
 ``jac_p`` is the regressor matrix and an equation-error fit is a linear least
@@ -64,11 +70,11 @@ ASYM_NAMES = ("b0", "c0")
 #: Regressor of each coefficient (for tables and identifiability messages).
 RESPONSE_NL_REGRESSORS = {
     "a1": "u", "a2": "v^2", "a3": "r^2", "a4": "delta^2", "a5": "v*r", "a6": "v*delta", "a7": "r*delta",
-    "a8": "u*n", "a9": "n|n|",
-    "b1": "v", "b2": "r", "b3": "delta", "b4": "u*r", "b5": "u*v", "b6": "v|v|", "b7": "r|r|",
-    "b8": "v^2 r/u", "b9": "v r^2/u",
-    "c1": "v", "c2": "r", "c3": "delta", "c4": "u*v", "c5": "u*r", "c6": "v|v|", "c7": "r|r|",
-    "c8": "v^2 r/u", "c9": "v r^2/u", "b0": "n^2", "c0": "n^2",
+    "a8": "u*|n|", "a9": "n|n|",
+    "b1": "v", "b2": "r", "b3": "delta", "b4": "u*r", "b5": "|u|*v", "b6": "v|v|", "b7": "r|r|",
+    "b8": "v^2 r/|u|", "b9": "v r^2/|u|",
+    "c1": "v", "c2": "r", "c3": "delta", "c4": "|u|*v", "c5": "|u|*r", "c6": "v|v|", "c7": "r|r|",
+    "c8": "v^2 r/|u|", "c9": "v r^2/|u|", "b0": "n^2", "c0": "n^2",
 }
 #: SI dimension of each coefficient as exponents (metre, second); rps counts as 1/s.  The prime
 #: (Froude non-dimensional) value is ``c' = c / (L^a (L/g)^(b/2))`` for ``c`` in m^a s^b, so under
