@@ -353,7 +353,8 @@ def dopri5(f: Callable, t0: float, x0, t_end: float, t_eval=None, *, rtol: float
         sc = atol + rtol * np.maximum(ax, ax_new)
         err = err_norm((hs * E).dot(Kf) if flat else (hs * E).dot(Kf).reshape(shape), sc)
         if not math.isfinite(err):
-            if hs < 1e-12 * max(1.0, abs(t)):
+            # a non-finite start, input or step (NaN h never shrinks below the floor) ends here too
+            if not (hs >= 1e-12 * max(1.0, abs(t))) or n_steps + n_rej > max_steps:
                 ok, msg = False, f"state became non-finite at t = {t:.6g} s; the model or its parameters are unstable here"
                 break
             h = 0.1 * hs

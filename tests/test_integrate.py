@@ -92,6 +92,16 @@ def test_blow_up_reports_failure():
     assert np.isnan(r.x[-1, 0]) and r.t_final < 1.0 + 1e-6
 
 
+def test_non_finite_start_or_right_hand_side_fails_instead_of_hanging():
+    """A NaN start made the first step size NaN, which never shrank below the step floor: an endless loop."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        r = dopri5(lambda t, x: -x, 0.0, np.array([np.nan]), 1.0, np.linspace(0, 1, 3))
+        assert not r.success and "non-finite" in r.message
+        r = dopri5(lambda t, x: x * np.nan, 0.0, np.ones(2), 1.0, np.linspace(0, 1, 3), h0=0.1)
+        assert not r.success and "non-finite" in r.message
+
+
 def test_bad_arguments():
     with pytest.raises(ValueError, match="t_end"):
         dopri5(_osc, 1.0, X0, 0.0)
