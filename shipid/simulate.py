@@ -239,9 +239,10 @@ def simulate(
         return _dopri5_members(model, x0, t, U, p, rtol, atol, first_step, foh)
     foh = input_hold == "foh" and U is not None
     n_int = interval_steps(t, substeps, h_max).tolist()
-    if U is not None and controller is None and p.dtype.kind == "f" and (p.ndim == 1 or p.shape[:-1] == batch):
+    if (U is not None and controller is None and model.nu > 0 and p.dtype.kind == "f"
+            and (p.ndim == 1 or p.shape[:-1] == batch)):
         # sampled inputs: the same RK4 map on the model's compiled equations (issue 15), when available
-        from .identify._kernel import replay_compiled
+        from ._kernel import replay_compiled
 
         Xc = replay_compiled(model, x0.reshape(-1, model.nx), t, U.reshape(-1, n_t, model.nu), p, n_int, foh)
         if Xc is not None:

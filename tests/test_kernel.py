@@ -1,4 +1,4 @@
-"""The compiled EKF kernel (shipid.identify._kernel) against the numpy path of run_ekf / rts_smooth.
+"""The compiled EKF kernel (shipid._kernel) against the numpy path of run_ekf / rts_smooth.
 
 Every model with compiled equations, with resets (two logs), partial and whole-sample gaps, an
 irregular sampling gap, a batch of members with different noise, sub-steps, every transition method,
@@ -18,7 +18,8 @@ import shipid
 from shipid import _jit
 from shipid.datasets import bundled_kcs_logs
 from shipid.identify import EKFIdentifier, rts_smooth, run_ekf
-from shipid.identify import _kernel
+from shipid import _kernel
+from shipid.identify.ekf import _run_compiled
 from shipid.models import get_model
 
 pytestmark = pytest.mark.skipif(not _jit.enabled(), reason="numba not installed (extra 'fast') or SHIPID_JIT=0: "
@@ -38,7 +39,7 @@ def _close(a, b, name):
 
 
 def _compare(prob, nis_limit=1e6):
-    assert _kernel.run_compiled(prob, True, nis_limit) is not None, "the compiled path did not run"
+    assert _run_compiled(prob, True, nis_limit) is not None, "the compiled path did not run"
     fast = run_ekf(prob, store=True, nis_limit=nis_limit)
     fast_nostore = run_ekf(prob, store=False, nis_limit=nis_limit)
     with _jit.disabled():

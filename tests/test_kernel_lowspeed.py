@@ -12,7 +12,7 @@ from shipid import _jit
 from shipid.environment import with_environment
 from shipid.environment.synthetic import NOISE_STD, environment_log
 from shipid.identify import EKFIdentifier
-from shipid.identify import _kernel
+from shipid import _kernel
 from shipid.models import get_model
 
 import test_kernel  # noqa: E402  (tests/ is on sys.path under pytest)

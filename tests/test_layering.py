@@ -51,6 +51,16 @@ def test_models_import_nothing_above_them():
     assert not bad, "shipid/models/ must not import the layers above it:\n" + "\n".join(bad)
 
 
+def test_the_integration_floor_imports_no_identifier():
+    """``integrate``, ``simulate`` and the compiled numerics (``_kernel``, ``_jit``) sit below the identifier
+    (its refinement, consistency replay and compiled filter use them): they import none of the layers above."""
+    above = set(FORBIDDEN) - {"simulate"}
+    files = [PKG / f for f in ("integrate.py", "simulate.py", "_kernel.py", "_jit.py")]
+    bad = [f"{f.relative_to(PKG.parent)}:{line} imports {name}" for f in files for line, name in _imports(f)
+           if name.split(".")[0] == "shipid" and len(name.split(".")) > 1 and name.split(".")[1] in above]
+    assert not bad, "the integration floor must not import the layers above it:\n" + "\n".join(bad)
+
+
 @pytest.mark.parametrize("source, expected", [
     ("from ..simulate import simulate\n", {"shipid.simulate"}),
     ("def f():\n    from ..identify.batch import OutputErrorRefiner\n", {"shipid.identify"}),

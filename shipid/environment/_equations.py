@@ -183,7 +183,7 @@ _SETS: dict = {}
 def equation_sets(base_eqm) -> dict:
     """The wrapper's function sets on the base equations module ``base_eqm`` (cached per module):
     ``"numpy"``, ``"complex"`` (numpy arrays, real / complex step), ``"kernel"`` (the kernel protocol,
-    for :mod:`shipid.identify._kernel`), ``"real"``, ``"cs"`` (function dicts for :func:`shipid._jit.compiled`,
+    for :mod:`shipid._kernel`), ``"real"``, ``"cs"`` (function dicts for :func:`shipid._jit.compiled`,
     with their namespaces ``"cmath"``) and ``"tag"`` (numba cache tag)."""
     from .._jit import rebind
 

@@ -24,7 +24,7 @@ time derivative of the rotated current term is added to ``u', v'``.
 
 The equations are one scalar source, :mod:`shipid.environment._equations`, bound to the base model's
 own equations module: numpy arrays here, and compiled by numba (``shipid[fast]``) for batched right-hand
-sides and inside the EKF kernel (:mod:`shipid.identify._kernel`; the model declares the kernel protocol
+sides and inside the EKF kernel (:mod:`shipid._kernel`; the model declares the kernel protocol
 like ``mmg``).  Jacobians: complex step through the whole wrapper (base equations, wind and current terms),
 exact to rounding; compiled in the kernel.
 """
@@ -188,7 +188,7 @@ class EnvironmentModel(DerivedConstants, ComplexStepJacobians, Model):
         shape = np.broadcast_shapes(*[np.shape(o) for o in out])
         return np.stack([np.broadcast_to(o, shape) for o in out], axis=-1)
 
-    # the compiled EKF kernel (shipid.identify._kernel) runs the same equations
+    # the compiled EKF kernel (shipid._kernel) runs the same equations
     @property
     def _equations(self):
         return self._sets["kernel"]

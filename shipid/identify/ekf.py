@@ -28,7 +28,8 @@ from scipy.linalg.lapack import dpotrs as _potrs
 
 from ..integrate import STEP_TANGENTS, hold_steps, interval_steps
 from ..models.base import Model
-from . import _kernel, _memory
+from .. import _jit, _kernel
+from . import _memory
 
 __all__ = ["EKFProblem", "EKFOutput", "run_ekf", "rts_smooth", "interval_steps", "INPUT_HOLDS"]
 
@@ -292,7 +293,7 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6, store_
     """
     # refuse what cannot fit (or store in float32 where only that fits)
     sdt = _memory.check(*prob.shape[:2], prob.shape[2] + prob.shape[3], prob.shape[4], store, store_dtype)
-    fast = _kernel.run_compiled(prob, store, nis_limit, sdt)  # the compiled kernel (same semantics), when available
+    fast = _run_compiled(prob, store, nis_limit, sdt)  # the compiled kernel (same semantics), when available
     if fast is not None:
         return fast
     model = prob.model
@@ -538,7 +539,7 @@ def rts_smooth(out: EKFOutput, chunk: int = 256) -> tuple[np.ndarray, np.ndarray
     """
     if out.z_post is None:
         raise ValueError("rts_smooth needs an EKF run with store=True")
-    fast = _kernel.smooth_compiled(out)  # compiled backward recursion, when available
+    fast = _smooth_compiled(out)  # compiled backward recursion, when available
     if fast is not None:
         return fast
     zf, Pf, zp, Pp, F = out.z_post, out.P_post, out.z_prior, out.P_prior, out.F
@@ -573,3 +574,74 @@ def _psd_solve(A: np.ndarray, Bm: np.ndarray) -> np.ndarray:
         return np.linalg.solve(A, Bm)
     except np.linalg.LinAlgError:
         return np.linalg.pinv(A, hermitian=True) @ Bm
+
+
+def _run_compiled(prob, store: bool, nis_limit: float, store_dtype=np.float64):
+    """:func:`run_ekf` on the compiled kernel (:mod:`shipid._kernel`), or ``None`` when it is not available
+    (numba off, the model has no compiled equations, or a method the kernel does not implement)."""
+    if prob.method not in _kernel.METHODS:
+        return None
+    if prob.input_hold not in INPUT_HOLDS:
+        raise ValueError(f"input_hold must be one of {INPUT_HOLDS}, got {prob.input_hold!r}")
+    if prob.gate is not None and not float(prob.gate) > 0:
+        raise ValueError(f"gate must be positive or None, got {prob.gate}")
+    fns = _kernel.filter_functions(prob.model)
+    if fns is None:
+        return None
+    B, N, nx, ne, nm = prob.shape
+    nz = nx + ne
+    f64 = lambda a: np.ascontiguousarray(a, dtype=float)  # noqa: E731
+    t = f64(prob.t)
+    Y = f64(prob.Y)
+    fin = np.isfinite(Y)
+    reset = np.ascontiguousarray(prob.reset, dtype=np.bool_)
+    dt = np.diff(t, axis=1)
+    # the numpy path adds one Q (that of the first interval) when the sampling is uniform and no member
+    # resets at k+1; the interval's own Q otherwise
+    uniform = N > 1 and bool(np.all(np.abs(dt - dt[:, :1]) <= 1e-9 * np.abs(dt[:, :1])))
+    dtq = dt.copy()
+    if uniform:
+        keep = ~reset[:, 1:].any(axis=0)
+        dtq[:, keep] = dt[:, :1]
+    nsteps = interval_steps(t, int(prob.substeps), prob.h_max)
+    if N == 1:
+        dtq, nsteps = np.zeros((B, 1)), np.ones((B, 1), dtype=np.int64)
+    nan = lambda *shape: np.full(shape, np.nan)  # noqa: E731
+    if store:  # every entry is written by the kernel (np.empty: the pages are touched once)
+        z_post, z_prior = np.empty((B, N, nz)), np.empty((B, N, nz))
+        P_post, P_prior, Fs = (np.empty((B, N, nz, nz), dtype=store_dtype) for _ in range(3))
+    else:
+        z_post = z_prior = np.empty((1, 1, nz))
+        P_post = P_prior = Fs = np.empty((1, 1, nz, nz))
+    z_fin, P_fin = np.empty((B, nz)), np.empty((B, nz, nz))
+    innov, S_diag, nis, logdet = nan(B, N, nm), nan(B, N, nm), nan(B, N), nan(B, N)
+    gated = np.zeros((B, N, nm), dtype=np.bool_)
+    div = np.zeros(B, dtype=np.bool_)
+    div_at = np.full(B, -1, dtype=np.int64)
+    d2_at = np.full(B, np.nan)
+    fns["ekf_batch"](
+        t, f64(prob.U), Y, fin, fin.any(axis=(0, 2)), reset, f64(prob.x_reset), f64(prob.P_reset), f64(prob.q), dtq,
+        nsteps, f64(prob.R), f64(prob.z0), f64(prob.P0), f64(prob.p_base),
+        np.ascontiguousarray(prob.est_idx, dtype=np.int64), f64(prob.scale),
+        np.ascontiguousarray(prob.meas_idx, dtype=np.int64), f64(prob.model._kernel_constants()), nx,
+        _kernel.METHODS[prob.method], prob.input_hold == "foh", -1.0 if prob.gate is None else float(prob.gate),
+        int(prob.gate_run), float(nis_limit), bool(store),
+        z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated, div, div_at, d2_at)
+    message = ["ok"] * B
+    for b in np.flatnonzero(div):
+        message[b] = _divergence_message(int(div_at[b]), t[b, div_at[b]], d2_at[b])
+    return _output((z_post, P_post, z_prior, P_prior, Fs) if store else None, z_fin, P_fin, innov, S_diag, nis,
+                   logdet, gated, div, div_at, message)
+
+
+
+def _smooth_compiled(out):
+    """:func:`rts_smooth` compiled (:mod:`shipid._kernel`), or ``None`` when compilation is off."""
+    fns = _jit.compiled(_kernel.SMOOTHER, fastmath=_kernel.FASTMATH)
+    if fns is None:
+        return None
+    c = lambda a: np.ascontiguousarray(a, dtype=float)  # noqa: E731
+    cs = lambda a: np.ascontiguousarray(a, dtype=np.float32 if a.dtype == np.float32 else float)  # noqa: E731
+    zs, Ps = np.empty(out.z_post.shape), np.empty(out.P_post.shape)
+    fns["rts_batch"](c(out.z_post), cs(out.P_post), c(out.z_prior), cs(out.P_prior), cs(out.F), zs, Ps)
+    return zs, Ps

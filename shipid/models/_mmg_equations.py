@@ -279,7 +279,7 @@ COMPLEX_STEP = {**_NUMPY_BASE, "sign": lambda z: np.sign(np.real(z)),
 
 
 # ------------------------------------------------------------------ the EKF kernel's protocol
-# (see shipid.models._response_equations and shipid.identify._kernel): constants once per step,
+# (see shipid.models._response_equations and shipid._kernel): constants once per step,
 # the rates of one sample, and the complex-step Jacobians of one sample (``cs_columns`` and
 # ``derived_cs`` are the complex-step set's compiled functions, given as globals by the model).
 #: Complex step of the compiled Jacobians (as ``MMGModel._H_CS``).

@@ -3,7 +3,7 @@
 Written on Python floats with :mod:`math` functions as this module's globals
 (like :mod:`shipid.models._mmg_equations`); :func:`shipid._jit.rebind` runs
 the same code objects on numpy arrays (the models' batched paths) and, with
-numba installed, compiled (the EKF kernel :mod:`shipid.identify._kernel`).
+numba installed, compiled (the EKF kernel :mod:`shipid._kernel`).
 See :mod:`shipid.models.response` (seed 002, SPEC.md eq. (3)) and
 :mod:`shipid.models.response_nl` for the equations and their symbols.
 
@@ -199,7 +199,7 @@ FUNCTIONS = {"inv_floor": inv_floor, "dinv_floor": dinv_floor, "absf": absf, "sg
 
 
 # ------------------------------------------------------------------ the EKF kernel's protocol
-# Every equations module offers three functions of one sample for shipid.identify._kernel:
+# Every equations module offers three functions of one sample for shipid._kernel:
 #   k_consts(p, P) -> c       constants of one parameter set (1-D float array), once per step
 #   k_rhs(t, x, u, c, out)    out[:] = dx/dt
 #   k_jac(t, x, u, p, P, c, cols, Jx, Jp)   Jacobians d/dx (nx, nx) and d/dp (nx, np); only the

@@ -261,7 +261,7 @@ class Model:
         rhs = self._rhs
         return lambda t, x, u: rhs(t, x, u, p)
 
-    #: The model's equations for the compiled EKF kernel (:mod:`shipid.identify._kernel`): functions
+    #: The model's equations for the compiled EKF kernel (:mod:`shipid._kernel`): functions
     #: (name -> function, dependency order, rebound by :func:`shipid._jit.rebind`) including the
     #: kernel protocol ``k_consts``, ``k_rhs``, ``k_jac`` (see :mod:`shipid.models._response_equations`).
     #: ``None``: no compiled path (the EKF uses numpy and says so once).

@@ -48,7 +48,7 @@ added masses as in ``mmg``; the model is Froude-scalable (``lpp=``, :meth:`LowSp
 
 The equations are one scalar source, :mod:`shipid.models._lowspeed_equations`, run on Python floats,
 on numpy arrays (real and complex), and compiled by numba when installed (``shipid[fast]``), also inside
-the EKF kernel (:mod:`shipid.identify._kernel`).  Jacobians: complex step through that source (compiled,
+the EKF kernel (:mod:`shipid._kernel`).  Jacobians: complex step through that source (compiled,
 or vectorised numpy), exact to rounding.
 """
 from __future__ import annotations

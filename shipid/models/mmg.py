@@ -469,7 +469,7 @@ class ShipEquationsModel(DerivedConstants, Model):
     def _jac_p(self, t, x, u, p):
         return self._jacobian(t, x, u, p, 2)
 
-    # the compiled EKF kernel (shipid.identify._kernel) uses the same equations (subclasses set
+    # the compiled EKF kernel (shipid._kernel) uses the same equations (subclasses set
     # ``_equations = <equations module>.KERNEL``)
     def _equations_namespace(self) -> dict:
         cs = self._compiled(cs=True)

@@ -136,6 +136,6 @@ class KCSResponseModel(FroudeScaled, Model):
     def _jac_u(self, t, x, u, p):
         return self._jacobian(x, u, p, "u", 2)
 
-    # the compiled EKF kernel (shipid.identify._kernel) uses the same equations
+    # the compiled EKF kernel (shipid._kernel) uses the same equations
     _equations = _req.KERNEL_KCS
 

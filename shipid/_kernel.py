@@ -1,6 +1,9 @@
-"""The compiled EKF: filter step, RK4 map with its tangent, and the RTS smoother (numba, ``shipid[fast]``).
+"""Compiled numerics (numba, ``shipid[fast]``): the RK4 map with its tangent, the EKF filter step, the
+RTS smoother's recursion and the open-loop RK4 replay, compiled together with a model's equations.
 
-The same algorithm as :func:`shipid.identify.ekf.run_ekf` and
+It sits below both users, :mod:`shipid.identify.ekf` (the filter and smoother drivers
+``_run_compiled``/``_smooth_compiled``) and :mod:`shipid.simulate` (open-loop replay with sampled
+inputs), and imports neither.  The same algorithm as :func:`shipid.identify.ekf.run_ekf` and
 :func:`~shipid.identify.ekf.rts_smooth` (which dispatch here), written per
 batch member as loops over samples so that numba compiles it together with
 the model's equations.  The model's equations are not copied: a model
@@ -31,9 +34,9 @@ import warnings
 
 import numpy as np
 
-from .. import _jit
+from . import _jit
 
-__all__ = ["filter_functions", "run_compiled", "smooth_compiled", "replay_compiled", "METHODS"]
+__all__ = ["filter_functions", "replay_compiled", "METHODS", "SMOOTHER", "FASTMATH"]
 
 #: Transition methods of the kernel (codes of ``EKFProblem.method``).
 METHODS = {"rk4": 0, "rk4-exact": 1, "euler": 2}
@@ -198,7 +201,7 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
                meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store,
                z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated,
                div, div_at, d2_at):
-    """The filter over the samples of batch member ``b`` (arrays as in :func:`run_compiled`; what a
+    """The filter over the samples of batch member ``b`` (arrays as in :func:`shipid.identify.ekf._run_compiled`; what a
     diverged member does not compute is set NaN)."""
     N = t.shape[1]
     nz = z0.shape[1]
@@ -660,66 +663,6 @@ _cache: dict = {}
 FASTMATH = {"reassoc", "contract"}
 
 
-def run_compiled(prob, store: bool, nis_limit: float, store_dtype=np.float64):
-    """:func:`shipid.identify.ekf.run_ekf` on the compiled kernel, or ``None`` when it is not available
-    (numba off, the model has no compiled equations, or a method the kernel does not implement)."""
-    from .ekf import INPUT_HOLDS, _divergence_message, _output, interval_steps
-
-    if prob.method not in METHODS:
-        return None
-    if prob.input_hold not in INPUT_HOLDS:
-        raise ValueError(f"input_hold must be one of {INPUT_HOLDS}, got {prob.input_hold!r}")
-    if prob.gate is not None and not float(prob.gate) > 0:
-        raise ValueError(f"gate must be positive or None, got {prob.gate}")
-    fns = filter_functions(prob.model)
-    if fns is None:
-        return None
-    B, N, nx, ne, nm = prob.shape
-    nz = nx + ne
-    f64 = lambda a: np.ascontiguousarray(a, dtype=float)  # noqa: E731
-    t = f64(prob.t)
-    Y = f64(prob.Y)
-    fin = np.isfinite(Y)
-    reset = np.ascontiguousarray(prob.reset, dtype=np.bool_)
-    dt = np.diff(t, axis=1)
-    # the numpy path adds one Q (that of the first interval) when the sampling is uniform and no member
-    # resets at k+1; the interval's own Q otherwise
-    uniform = N > 1 and bool(np.all(np.abs(dt - dt[:, :1]) <= 1e-9 * np.abs(dt[:, :1])))
-    dtq = dt.copy()
-    if uniform:
-        keep = ~reset[:, 1:].any(axis=0)
-        dtq[:, keep] = dt[:, :1]
-    nsteps = interval_steps(t, int(prob.substeps), prob.h_max)
-    if N == 1:
-        dtq, nsteps = np.zeros((B, 1)), np.ones((B, 1), dtype=np.int64)
-    nan = lambda *shape: np.full(shape, np.nan)  # noqa: E731
-    if store:  # every entry is written by the kernel (np.empty: the pages are touched once)
-        z_post, z_prior = np.empty((B, N, nz)), np.empty((B, N, nz))
-        P_post, P_prior, Fs = (np.empty((B, N, nz, nz), dtype=store_dtype) for _ in range(3))
-    else:
-        z_post = z_prior = np.empty((1, 1, nz))
-        P_post = P_prior = Fs = np.empty((1, 1, nz, nz))
-    z_fin, P_fin = np.empty((B, nz)), np.empty((B, nz, nz))
-    innov, S_diag, nis, logdet = nan(B, N, nm), nan(B, N, nm), nan(B, N), nan(B, N)
-    gated = np.zeros((B, N, nm), dtype=np.bool_)
-    div = np.zeros(B, dtype=np.bool_)
-    div_at = np.full(B, -1, dtype=np.int64)
-    d2_at = np.full(B, np.nan)
-    fns["ekf_batch"](
-        t, f64(prob.U), Y, fin, fin.any(axis=(0, 2)), reset, f64(prob.x_reset), f64(prob.P_reset), f64(prob.q), dtq,
-        nsteps, f64(prob.R), f64(prob.z0), f64(prob.P0), f64(prob.p_base),
-        np.ascontiguousarray(prob.est_idx, dtype=np.int64), f64(prob.scale),
-        np.ascontiguousarray(prob.meas_idx, dtype=np.int64), f64(prob.model._kernel_constants()), nx,
-        METHODS[prob.method], prob.input_hold == "foh", -1.0 if prob.gate is None else float(prob.gate),
-        int(prob.gate_run), float(nis_limit), bool(store),
-        z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated, div, div_at, d2_at)
-    message = ["ok"] * B
-    for b in np.flatnonzero(div):
-        message[b] = _divergence_message(int(div_at[b]), t[b, div_at[b]], d2_at[b])
-    return _output((z_post, P_post, z_prior, P_prior, Fs) if store else None, z_fin, P_fin, innov, S_diag, nis,
-                   logdet, gated, div, div_at, message)
-
-
 def replay_compiled(model, x0, t, U, p, nsteps, foh: bool):
     """Open-loop RK4 of ``model`` on the compiled equations (what :func:`shipid.simulate.simulate` does
     with sampled inputs and ``method="rk4"``), or ``None`` when compilation is off, the model declares
@@ -738,15 +681,3 @@ def replay_compiled(model, x0, t, U, p, nsteps, foh: bool):
     bad = fns["rk4_replay"](f64(t), f64(U), x0, f64(np.atleast_2d(p)), f64(model._kernel_constants()),
                             np.ascontiguousarray(nsteps, dtype=np.int64), bool(foh), X)
     return None if bad else X
-
-
-def smooth_compiled(out):
-    """:func:`shipid.identify.ekf.rts_smooth` compiled, or ``None`` when compilation is off."""
-    fns = _jit.compiled(SMOOTHER, fastmath=FASTMATH)
-    if fns is None:
-        return None
-    c = lambda a: np.ascontiguousarray(a, dtype=float)  # noqa: E731
-    cs = lambda a: np.ascontiguousarray(a, dtype=np.float32 if a.dtype == np.float32 else float)  # noqa: E731
-    zs, Ps = np.empty(out.z_post.shape), np.empty(out.P_post.shape)
-    fns["rts_batch"](c(out.z_post), cs(out.P_post), c(out.z_prior), cs(out.P_prior), cs(out.F), zs, Ps)
-    return zs, Ps
