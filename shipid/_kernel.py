@@ -44,6 +44,23 @@ METHODS = {"rk4": 0, "rk4-exact": 1, "euler": 2}
 
 
 # ------------------------------------------------------------------ small dense helpers (compiled)
+def cholesky(A, n, L):
+    """Lower Cholesky factor of ``A[:n, :n]`` into ``L[:n, :n]``; False when ``A`` is not positive
+    definite or not finite (the filter's innovation covariance and the smoother's prediction covariance)."""
+    for i in range(n):
+        for j in range(i + 1):
+            s = A[i, j]
+            for m in range(j):
+                s -= L[i, m] * L[j, m]
+            if i == j:
+                if not s > 0.0:
+                    return False
+                L[i, i] = math.sqrt(s)
+            else:
+                L[i, j] = s / L[j, j]
+    return True
+
+
 def mat_mul(A, B, out):
     """``out = A @ B`` (small matrices; loops)."""
     n, m = A.shape
@@ -280,21 +297,7 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
                         S0[a_, c_] = PH[c_, meas_idx[sel[a_]]]  # H P H^T
                         S[a_, c_] = S0[a_, c_]
                     S[a_, a_] += R[b, sel[a_]]
-                # Cholesky S = L L^T (fails: not positive definite or not finite)
-                for i in range(cnt):
-                    for j in range(i + 1):
-                        s = S[i, j]
-                        for m in range(j):
-                            s -= L[i, m] * L[j, m]
-                        if i == j:
-                            if not s > 0.0:
-                                ok = False
-                                break
-                            L[i, i] = math.sqrt(s)
-                        else:
-                            L[i, j] = s / L[j, j]
-                    if not ok:
-                        break
+                ok = cholesky(S, cnt, L)  # S = L L^T (False: not positive definite or not finite)
                 if ok:
                     # [K^T, a] = S^-1 [H P, e]: forward then backward substitution, a row (nz long) at a time
                     for i in range(cnt):
@@ -515,7 +518,7 @@ def rk4_replay(t, U, x0, p, Pk, nsteps, foh, X):
     return bad
 
 
-FILTER = {"mat_mul": mat_mul, "tangent": tangent, "_work": _work, "cross_interval": cross_interval,
+FILTER = {"cholesky": cholesky, "mat_mul": mat_mul, "tangent": tangent, "_work": _work, "cross_interval": cross_interval,
           "ekf_member": ekf_member, "ekf_batch": ekf_batch, "rk4_replay": rk4_replay}
 
 
@@ -544,21 +547,7 @@ def rts_member(zf, Pf, zp, Pp, F, zs, Ps):
                 if f != 0.0:
                     for j in range(nz):
                         Gt[i, j] += f * Pfk[m, j]
-        ok = True
-        for i in range(nz):  # Pp = L L^T
-            for j in range(i + 1):
-                s = Ppk[i, j]
-                for m in range(j):
-                    s -= L[i, m] * L[j, m]
-                if i == j:
-                    if not s > 0.0:
-                        ok = False
-                        break
-                    L[i, i] = math.sqrt(s)
-                else:
-                    L[i, j] = s / L[j, j]
-            if not ok:
-                break
+        ok = cholesky(Ppk, nz, L)  # Pp = L L^T
         if ok:  # Gt = Pp^-1 F Pf: forward and backward substitution a row at a time
             for i in range(nz):
                 for m in range(i):
@@ -616,7 +605,7 @@ def rts_batch(zf, Pf, zp, Pp, F, zs, Ps):
             Ps[b] = np.nan
 
 
-SMOOTHER = {"rts_member": rts_member, "rts_batch": rts_batch}
+SMOOTHER = {"cholesky": cholesky, "rts_member": rts_member, "rts_batch": rts_batch}
 
 
 # ------------------------------------------------------------------ Python side
