@@ -16,6 +16,11 @@ import argparse
 import time
 import warnings
 
+import sys as _sys
+from pathlib import Path as _Path
+
+_sys.path.insert(0, str(_Path(__file__).resolve().parents[1]))  # measure this checkout, not an installed copy
+
 from shipid.control import bang_bang_straight, paper_problem, solve_direct, solve_indirect
 from shipid.control.ipopt import have_casadi
 from shipid.models import get_model

@@ -28,6 +28,11 @@ from pathlib import Path
 
 import numpy as np
 
+import sys as _sys
+from pathlib import Path as _Path
+
+_sys.path.insert(0, str(_Path(__file__).resolve().parents[1]))  # measure this checkout, not an installed copy
+
 from shipid import _jit
 from shipid.identify import EKFIdentifier, run_ekf
 from shipid.integrate import rk4_step_taylor_tangent

@@ -19,6 +19,11 @@ import contextlib
 import time
 import warnings
 
+import sys as _sys
+from pathlib import Path as _Path
+
+_sys.path.insert(0, str(_Path(__file__).resolve().parents[1]))  # measure this checkout, not an installed copy
+
 from shipid import _jit
 from shipid.environment import with_environment
 from shipid.environment.synthetic import NOISE_STD, environment_log

@@ -19,6 +19,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+import sys as _sys
+from pathlib import Path as _Path
+
+_sys.path.insert(0, str(_Path(__file__).resolve().parents[1]))  # measure this checkout, not an installed copy
+
 from shipid import TrialLog, read_log
 
 MARIN = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "kvlcc2_marin"
