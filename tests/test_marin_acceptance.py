@@ -107,8 +107,9 @@ def test_linear_window_and_max_drift_option_errors(tmp_path, capsys):
 
 
 def test_linear_range_leaves_out_logs_that_start_beyond_it():
-    """A log that starts at 15 deg of drift has no linear range: left out and said; when every log is like
-    that, a clear error names the way out."""
+    """A log that starts at 15 deg of drift has no linear range: left out and said.  When every log is like
+    that, the default fits every sample with a warning that the model is used beyond its range (so that a
+    default fit still runs, e.g. on the low-speed Esso Osaka runs); an explicit --max-drift refuses."""
     from shipid.identify.recipe import fit_logs
     from shipid.logs import TrialLog
 
@@ -118,7 +119,13 @@ def test_linear_range_leaves_out_logs_that_start_beyond_it():
                                     delta=np.zeros(200), n=np.full(200, 10.0), consistency_checks=False)
     with pytest.raises(ValueError, match=r"no log stays below 10 deg of drift for 20 samples from its start: "
                                          r"kcs-response is linear in v and r .* \(--max-drift none\)"):
-        fit_logs([drifting], "kcs-response", lpp=4.36)
+        fit_logs([drifting], "kcs-response", lpp=4.36, max_drift_deg=10)
+    with pytest.warns(UserWarning, match=r"no log stays below 10 deg of drift for 20 samples from its start; "
+                                         r"fitting kcs-response to every sample, beyond its linear range"):
+        fit = fit_logs([drifting], "kcs-response", lpp=4.36, n_passes=1, refine=None)
+    step = next(s for s in fit.steps if s["step"] == "linear range")
+    assert step["value"] is None and "every sample used (beyond the linear range, warned)" in step["reason"]
+    assert [len(lg) for lg in fit.logs] == [200]
     from shipid.datasets import bundled_kcs_logs
     from shipid.logs import read_log
 
@@ -140,3 +147,23 @@ def test_output_error_refinement_of_padded_short_logs_does_not_warn(tmp_path):
     fitted there: :func:`_fit` asserts no such warning."""
     rc, res = _fit(tmp_path, "--model", "kcs-response", "--refine", "output-error")
     assert rc in (0, 3) and res["success"] is True
+
+
+def test_linear_window_ignores_the_drift_angle_near_rest():
+    """A log that starts from rest (the Esso Osaka runs do) has |v| ~ u ~ noise there, so atan2(|v|, u) is
+    meaningless: those samples neither cut the window nor count; the drift at speed still does."""
+    from shipid.identify.recipe import DRIFT_SPEED_FRACTION, linear_window
+    from shipid.logs import TrialLog
+
+    rng = np.random.default_rng(3)
+    t = np.arange(400) * 0.1
+    u = np.minimum(t / 10.0, 1.0) * 0.5 + rng.normal(0, 0.003, t.size)  # accelerates from rest to 0.5 m/s
+    v = rng.normal(0, 0.003, t.size)
+    v[300:] = 0.2  # then 22 deg of drift at speed
+    lg = TrialLog.from_arrays(t, name="from-rest", u=u, v=v, r=np.zeros_like(t), psi=np.zeros_like(t),
+                              delta=np.zeros_like(t), n=np.full(t.size, 5.0), consistency_checks=False)
+    beta = np.degrees(np.arctan2(np.abs(v), u))
+    assert beta[:5].max() > 10  # the raw drift angle at rest would have cut the log at once
+    cut = linear_window(lg)
+    assert len(cut) == 300 and "drift angle" in cut.notes[-1]
+    assert DRIFT_SPEED_FRACTION == 0.25

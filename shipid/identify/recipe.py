@@ -68,6 +68,11 @@ REFINE_MODES = ("output-error", "metrics")
 #: drag grows with v|v|).  Taken as that usual value, not tuned: 6 and 10 deg were both tried on the KVLCC2
 #: training runs (tc+-35, zz+-10) and give the same (physical) yaw signs; the hold-out runs were not used.
 LINEAR_DRIFT_DEG = 10.0
+#: Samples slower than this fraction of a log's 90th-percentile speed are not tested against
+#: :data:`LINEAR_DRIFT_DEG` (the drift angle is undefined near rest).  A round value, not tuned: the
+#: MARIN runs never come below it (their linear windows are unchanged); it keeps logs that start from
+#: rest from being cut at their first sample.
+DRIFT_SPEED_FRACTION = 0.25
 #: Fewest samples a log keeps in the linear range to be fitted at all (fewer: the log is left out, and said).
 MIN_WINDOW_SAMPLES = 20
 #: Default multiplier of the metric residuals in ``refine="metrics"`` (:func:`refine_fit`): 0.1, chosen by
@@ -256,13 +261,20 @@ def linear_sway_yaw(model) -> bool:
 def linear_window(log, max_drift_deg: float = LINEAR_DRIFT_DEG):
     """The log up to (not including) the first sample whose drift angle ``atan2(|v|, u)`` exceeds
     ``max_drift_deg``; the whole log when it never does.  Keeps name, ship and provenance; a note says
-    what was left out."""
+    what was left out.
+
+    Near rest the drift angle is undefined (a log that starts from rest, as the Esso Osaka runs do, has
+    |v| ~ u ~ noise there), so samples slower than :data:`DRIFT_SPEED_FRACTION` of the log's 90th-percentile
+    speed are not tested: they neither cut the log nor count as drift."""
     from ..logs import TrialLog
 
     if "v" not in log.channels:
         return log
-    beta = np.degrees(np.arctan2(np.abs(np.asarray(log["v"], dtype=float)), np.asarray(log["u"], dtype=float)))
-    out = np.flatnonzero(np.isfinite(beta) & (beta > max_drift_deg))
+    u, v = np.asarray(log["u"], dtype=float), np.asarray(log["v"], dtype=float)
+    beta = np.degrees(np.arctan2(np.abs(v), u))
+    speed = np.hypot(u, v)
+    fast = speed >= DRIFT_SPEED_FRACTION * np.nanpercentile(speed, 90) if np.isfinite(speed).any() else speed > 0
+    out = np.flatnonzero(np.isfinite(beta) & fast & (beta > max_drift_deg))
     if not out.size:
         return log
     end = int(out[0])
@@ -492,16 +504,28 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
         windows = [linear_window(lg, drift) for lg in used]
         short = [lg.name for lg in windows if len(lg) < MIN_WINDOW_SAMPLES]
         if len(short) == len(windows):
-            raise ValueError(f"no log stays below {drift:g} deg of drift for {MIN_WINDOW_SAMPLES} samples from its "
-                             f"start: {name} is linear in v and r and holds for small drift only; fit a model with "
-                             "non-linear terms (response-nl, mmg) or pass max_drift_deg=None (--max-drift none)")
+            msg = (f"no log stays below {drift:g} deg of drift for {MIN_WINDOW_SAMPLES} samples from its start: "
+                   f"{name} is linear in v and r and holds for small drift only; fit a model with non-linear "
+                   "terms (response-nl, mmg, lowspeed) or pass max_drift_deg=None (--max-drift none)")
+            if max_drift_deg != "auto":
+                raise ValueError(msg)
+            # the default: fit every sample rather than refuse, and say that the model is used beyond its range
+            warnings.warn(msg.split(": ", 1)[0] + f"; fitting {name} to every sample, beyond its linear range "
+                          "(its coefficients absorb the large-drift motion; a model with non-linear terms fits "
+                          "these logs better)", UserWarning, stacklevel=2)
+            step("linear range", None, why_drift + f"; but no log stays below {drift:g} deg for "
+                 f"{MIN_WINDOW_SAMPLES} samples: every sample used (beyond the linear range, warned)")
+            drift = None
+    if drift is not None:
         used = [lg for lg in windows if len(lg) >= MIN_WINDOW_SAMPLES]
         kept = ", ".join(f"{lg.name} {lg.time[-1] - lg.time[0]:.4g} s" for lg in used)
         why_drift += f"; each log until its drift angle first exceeds {drift:g} deg ({kept})"
         if short:
             why_drift += (f"; left out (fewer than {MIN_WINDOW_SAMPLES} samples below it from the start): "
                           + ", ".join(short))
-    step("linear range", drift, why_drift)
+        step("linear range", drift, why_drift)
+    elif max_drift_deg != "auto" or not linear_sway_yaw(m0):
+        step("linear range", drift, why_drift)
     # estimated / fixed
     est = list(estimate) if estimate is not None else DEFAULT_ESTIMATE.get(name)
     fix: dict = {}
@@ -542,6 +566,7 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
         # the seed is linear in v and r: fitted on the linear range (step 2b) unless that is switched off
         seed_drift = LINEAR_DRIFT_DEG if max_drift_deg == "auto" else drift
         seed_logs = [linear_window(lg, seed_drift) for lg in used] if seed_drift is not None else used
+        seed_logs = [lg for lg in seed_logs if len(lg) >= MIN_WINDOW_SAMPLES] or used  # none in range: all
         seed = EKFIdentifier(seed_model, fixed=seed_fix or None, n_passes=n_passes, progress=progress,
                              meas_std=meas_std, **(ekf_options or {})).fit(seed_logs)
         vals = {k2: float(seed.coef_.get(k2, 0.0)) for k2 in m0.param_names}
