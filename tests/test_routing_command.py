@@ -87,7 +87,7 @@ def test_pso_paper(tmp_path):
     for key in ("energy_J", "distance_m", "saving_vs_distance_optimal"):
         assert np.isfinite(doc[key])
     assert doc["saving_vs_distance_optimal"] == pytest.approx(1 - doc["energy_J"] / doc["dopso"]["energy_J"])
-    assert "lon" in pd.read_csv(tmp_path / "p.csv").columns
+    assert {"lon [deg]", "lat [deg]"} <= set(pd.read_csv(tmp_path / "p.csv").columns)
 
 
 @pytest.mark.parametrize("spec, match", [
