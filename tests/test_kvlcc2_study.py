@@ -257,12 +257,18 @@ def test_cli_response_nl_default_recipe_on_the_holdout(tmp_path):
     (every 3rd sample, staged start from a kcs-response seed fitted up to 10 deg drift, 26 terms, metrics at
     weight 0.1).  Measured at session 5 (after merging main; the test takes ~3 min on the loaded machine): TD +4.7 % / -4.6 %,
     zz_20 +0.71 / +1.89 deg, zz_-20 +3.65 / -1.50 deg -- five of the six goals; zz_-20's first overshoot
-    misses 2 deg.  (A report, not a choice: the model was not chosen by the hold-out.)"""
+    misses 2 deg.  (A report, not a choice: the model was not chosen by the hold-out.)
+
+    The 26-term fit is ill-conditioned on these runs (condition number of the scaled covariance ~1e291): the
+    same code gives different optima with one or two BLAS threads.  One thread (as above): five of six; two
+    threads (CI's slow suite): TD +3.81 % / -5.46 %, zz_20 +1.32 / +2.03 deg, zz_-20 +4.26 / -1.33 deg, four of
+    six.  The bands below hold both; tc_-35's diameter is within 5 % in one and not in the other."""
     errs, res = _cli_fit_validate(tmp_path, "response-nl")
     steps = {s["step"]: s["value"] for s in res.settings["recipe"]}
     assert steps["refinement"] == "metrics" and res.method == "output-error" and res.success
-    assert abs(errs["tc_35"]["TD"]) < 5.0 and abs(errs["tc_-35"]["TD"]) < 5.0  # goals met (+4.7 %, -4.6 %)
-    assert abs(errs["zz_20"]["overshoot1_deg"]) < 2.0                          # goal met (+0.71)
-    assert abs(errs["zz_20"]["overshoot2_deg"]) < 3.0                          # goal met (+1.89)
-    assert 2.6 < errs["zz_-20"]["overshoot1_deg"] < 4.7                        # missed (+3.65)
-    assert abs(errs["zz_-20"]["overshoot2_deg"]) < 3.0                         # goal met (-1.50)
+    assert abs(errs["tc_35"]["TD"]) < 5.0                                      # goal met (+4.7 % / +3.8 %)
+    assert abs(errs["tc_-35"]["TD"]) < 6.0                                     # -4.6 % / -5.5 %: met in one build
+    assert abs(errs["zz_20"]["overshoot1_deg"]) < 2.0                          # goal met (+0.71 / +1.32)
+    assert abs(errs["zz_20"]["overshoot2_deg"]) < 3.0                          # goal met (+1.89 / +2.03)
+    assert 2.6 < errs["zz_-20"]["overshoot1_deg"] < 4.7                        # missed (+3.65 / +4.26)
+    assert abs(errs["zz_-20"]["overshoot2_deg"]) < 3.0                         # goal met (-1.50 / -1.33)
