@@ -73,6 +73,24 @@ def mat_mul(A, B, out):
             out[i, j] = s
 
 
+def rk4_rest(t, x, um, ub, c, h, k1, k2, k3, k4, xs, xn):
+    """The classical RK4 step from ``x`` given its first stage ``k1 = rhs(t, x, ua)``: stages 2-4 (inputs
+    ``um`` at the middle, ``ub`` at the end) into ``k2..k4`` and the new state into ``xn`` (may be ``x``).
+    The one RK4 step of the filter's Taylor-tangent method and of the open-loop replay."""
+    nx = x.shape[0]
+    for i in range(nx):
+        xs[i] = x[i] + h / 2 * k1[i]
+    k_rhs(t + h / 2, xs, um, c, k2)
+    for i in range(nx):
+        xs[i] = x[i] + h / 2 * k2[i]
+    k_rhs(t + h / 2, xs, um, c, k3)
+    for i in range(nx):
+        xs[i] = x[i] + h * k3[i]
+    k_rhs(t + h, xs, ub, c, k4)
+    for i in range(nx):
+        xn[i] = x[i] + h / 6 * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i])
+
+
 def tangent(method, t, x, ua, um, ub, p, P, c, cols, h, scale, xn, Fx, Fp, w):
     """One step of the discrete map and its tangent: ``xn``, ``Fx (nx, nx)``, ``Fp (nx, ne)`` (the
     parameter columns ``cols``, multiplied by ``scale``).  ``method``: 0 RK4 with the second-order
@@ -97,17 +115,7 @@ def tangent(method, t, x, ua, um, ub, p, P, c, cols, h, scale, xn, Fx, Fp, w):
                 Fp[i, j] = h * Be[i, j] * scale[j]
         return
     if method == 0:
-        for i in range(nx):
-            xs[i] = x[i] + h / 2 * k1[i]
-        k_rhs(t + h / 2, xs, um, c, k2)
-        for i in range(nx):
-            xs[i] = x[i] + h / 2 * k2[i]
-        k_rhs(t + h / 2, xs, um, c, k3)
-        for i in range(nx):
-            xs[i] = x[i] + h * k3[i]
-        k_rhs(t + h, xs, ub, c, k4)
-        for i in range(nx):
-            xn[i] = x[i] + h / 6 * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i])
+        rk4_rest(t, x, um, ub, c, h, k1, k2, k3, k4, xs, xn)
         # half = I + h A / 2; Fx = I + h A half; Fp = h half B
         for i in range(nx):
             for j in range(nx):
@@ -496,17 +504,7 @@ def rk4_replay(t, U, x0, p, Pk, nsteps, foh, X):
                     um[j] = 0.5 * (ua[j] + ub[j]) if foh else ua[j]
                 ti = t[k] + i * h if i else t[k]
                 k_rhs(ti, x, ua, c, k1)
-                for m in range(nx):
-                    xs[m] = x[m] + h / 2 * k1[m]
-                k_rhs(ti + h / 2, xs, um, c, k2)
-                for m in range(nx):
-                    xs[m] = x[m] + h / 2 * k2[m]
-                k_rhs(ti + h / 2, xs, um, c, k3)
-                for m in range(nx):
-                    xs[m] = x[m] + h * k3[m]
-                k_rhs(ti + h, xs, ub, c, k4)
-                for m in range(nx):
-                    x[m] = x[m] + h / 6 * (k1[m] + 2 * k2[m] + 2 * k3[m] + k4[m])
+                rk4_rest(ti, x, um, ub, c, h, k1, k2, k3, k4, xs, x)  # in place: x[m] is read before written
                 ua[:] = ub
             for m in range(nx):
                 if not math.isfinite(x[m]):
@@ -518,7 +516,7 @@ def rk4_replay(t, U, x0, p, Pk, nsteps, foh, X):
     return bad
 
 
-FILTER = {"cholesky": cholesky, "mat_mul": mat_mul, "tangent": tangent, "_work": _work, "cross_interval": cross_interval,
+FILTER = {"cholesky": cholesky, "mat_mul": mat_mul, "rk4_rest": rk4_rest, "tangent": tangent, "_work": _work, "cross_interval": cross_interval,
           "ekf_member": ekf_member, "ekf_batch": ekf_batch, "rk4_replay": rk4_replay}
 
 

@@ -57,7 +57,7 @@ import numpy as np
 
 from .._jit import rebind
 from . import _lowspeed_equations as _eq
-from .mmg import ShipEquationsModel
+from .mmg import SHIP_CHANNEL_UNITS, ShipEquationsModel
 
 __all__ = ["LowSpeedModel", "LOWSPEED_PARAM_NAMES"]
 
@@ -79,11 +79,8 @@ class LowSpeedModel(ShipEquationsModel):
     """
 
     name = "lowspeed"
-    state_names = ("x", "y", "psi", "u", "v", "r")
-    input_names = ("delta", "n")
     param_names = LOWSPEED_PARAM_NAMES
-    units = {"x": "m", "y": "m", "psi": "rad", "u": "m/s", "v": "m/s", "r": "rad/s", "delta": "rad", "n": "rps",
-             **{k: "-" for k in LOWSPEED_PARAM_NAMES}, "f_alpha": "1/rad"}
+    units = {**SHIP_CHANNEL_UNITS, **{k: "-" for k in LOWSPEED_PARAM_NAMES}, "f_alpha": "1/rad"}
     default_parameter_set = "esso-osaka-prior"
 
     _eqm = _eq

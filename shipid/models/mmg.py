@@ -299,6 +299,11 @@ class DerivedConstants:
         return self._cached("_rows_cache", P.tobytes(), 16, build)
 
 
+#: Units of the states and inputs of the 3-DOF ship models (:class:`ShipEquationsModel`).
+SHIP_CHANNEL_UNITS = {"x": "m", "y": "m", "psi": "rad", "u": "m/s", "v": "m/s", "r": "rad/s", "delta": "rad",
+                      "n": "rps"}
+
+
 class ShipEquationsModel(DerivedConstants, Model):
     """Base of the 3-DOF ship models whose equations are one scalar source (:mod:`._mmg_equations`,
     :mod:`._lowspeed_equations`) run on floats, numpy arrays, complex steps and, with numba, compiled.
@@ -310,6 +315,8 @@ class ShipEquationsModel(DerivedConstants, Model):
     scale; the parameters are non-dimensional.
     """
 
+    state_names = ("x", "y", "psi", "u", "v", "r")
+    input_names = ("delta", "n")
     _eqm = _eq
     _eq_numpy = _EQ_NUMPY
     _eq_complex = _EQ_COMPLEX
@@ -504,11 +511,8 @@ class MMGModel(ShipEquationsModel):
     """
 
     name = "mmg"
-    state_names = ("x", "y", "psi", "u", "v", "r")
-    input_names = ("delta", "n")
     param_names = MMG_PARAM_NAMES
-    units = {"x": "m", "y": "m", "psi": "rad", "u": "m/s", "v": "m/s", "r": "rad/s", "delta": "rad", "n": "rps",
-             **{k: "-" for k in MMG_PARAM_NAMES}, "f_alpha": "1/rad", "delta0": "rad"}
+    units = {**SHIP_CHANNEL_UNITS, **{k: "-" for k in MMG_PARAM_NAMES}, "f_alpha": "1/rad", "delta0": "rad"}
     default_parameter_set = "kvlcc2"
     _equations = _eq.KERNEL
 
