@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from shipid.identify.coverage import coverage_study, wilson_interval
+from shipid.identify.coverage import COVERAGE_RECIPES, coverage_study, wilson_interval
 
 
 def test_wilson_interval_known_values():
@@ -64,3 +64,58 @@ def test_output_error_intervals_are_calibrated():
     assert r.n_failed == 0 and (t["n"] == 100).all() and len(t) == 16 and set(t["method"]) == {"output-error"}
     assert (t["coverage"] >= 0.90).all(), t["coverage"].to_dict()
     assert t["z_std"].between(0.8, 1.25).all() and (t["z_mean"].abs() <= 0.4).all(), t[["z_mean", "z_std"]].to_dict()
+
+
+def test_refiner_estimates_initial_states_and_marginalises_them(kcs_truth):
+    """estimate_x0: initial u, v, r of each log are nuisance parameters of the output-error fit.  From a wrong
+    initial state they are recovered within their reported sigma-scale; the coefficients' covariance is the
+    marginal one, never narrower than with the initial states held (Loewner order); the exact tangent and the
+    forward-difference Jacobian give the same fit."""
+    from shipid.identify.batch import OutputErrorRefiner
+    from shipid.synthetic import KCS_NOISE_STD, make_trial
+
+    rng = np.random.default_rng(11)
+    pairs = [make_trial(kcs_truth, r, rng) for r in COVERAGE_RECIPES]
+    logs = [p[0] for p in pairs]
+    x_true = [p[1][list(kcs_truth.state_names)].to_numpy()[0] for p in pairs]
+    wrong = [x + np.array([0, 0, 0, 0.02, -0.01, 0.003]) for x in x_true]  # 2-4 sigma of the sensors off
+    kw = dict(estimate=["a1", "b1", "b2", "c1", "c2", "c3"], jacobian="tangent", max_nfev=30,
+              meas_std={k: v for k, v in KCS_NOISE_STD.items() if k in ("u", "v", "r")})
+    held = OutputErrorRefiner(kcs_truth, **kw).fit(logs, x0=wrong)
+    free = OutputErrorRefiner(kcs_truth, estimate_x0=True, **kw).fit(logs, x0=wrong)
+    fd = OutputErrorRefiner(kcs_truth, estimate_x0=True, **{**kw, "jacobian": "fd"}).fit(logs, x0=wrong)
+    assert free.success_ and list(free.x0_std_.columns) == ["u", "v", "r"]
+    for i, xt in enumerate(x_true):
+        err = free.x0_.loc[i, ["u", "v", "r"]].to_numpy() - xt[3:]
+        assert np.all(np.abs(err) <= 4 * free.x0_std_.loc[i].to_numpy()), (err, free.x0_std_)
+    assert free.cost_ < held.cost_  # the held wrong state cannot be fitted away
+    np.testing.assert_allclose(fd.coef_.to_numpy(), free.coef_.to_numpy(), rtol=1e-6, atol=1e-9)
+    # marginal >= conditional: with the held state at the free fit's optimum the difference is PSD
+    cond = OutputErrorRefiner(free.to_model(), **kw).fit(logs, x0=[free.x0_.loc[i].to_numpy() for i in range(2)])
+    d = np.linalg.eigvalsh(free.cov_.to_numpy() - cond.cov_.to_numpy())
+    assert d.min() >= -1e-6 * np.abs(d).max() and d.max() > 0
+    assert free.result().settings["estimate_x0"] == ["u", "v", "r"]
+    assert held.result().settings["estimate_x0"] == []
+
+
+def test_checkpoint_resume_gives_the_uninterrupted_table(tmp_path):
+    """A study written to a checkpoint file, interrupted and resumed, tabulates exactly as one run;
+    run=False tabulates what is there."""
+    import json
+
+    kw = dict(n_replicates=3, draws=0, seed=4, estimate=["c1", "c2", "c3"], n_passes=1)
+    ref = coverage_study(**kw)
+    ck = tmp_path / "ck.jsonl"
+    full = coverage_study(checkpoint=ck, **kw)
+    assert full.table.equals(ref.table) and len(ck.read_text().splitlines()) == 3
+    lines = ck.read_text().splitlines()
+    ck.write_text("\n".join(lines[:1]) + "\n" + lines[1][:40])  # one done, one torn line
+    part = coverage_study(checkpoint=ck, run=False, **kw)
+    assert part.settings["n_done"] == 1 and (part.table["n"] == 1).all()
+    again = coverage_study(checkpoint=ck, **kw)  # runs the two missing replicates only
+    assert again.table.equals(ref.table)
+    assert sum(1 for ln in ck.read_text().splitlines() if ln.endswith("}") and "key" in json.loads(ln)) == 3
+    other = coverage_study(checkpoint=ck, run=False, **{**kw, "seed": 5})  # other settings: nothing done
+    with pytest.raises(ValueError, match="run=False tabulates a checkpoint"):
+        coverage_study(run=False, **kw)
+    assert other.settings["n_done"] == 0
