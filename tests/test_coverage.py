@@ -119,3 +119,34 @@ def test_checkpoint_resume_gives_the_uninterrupted_table(tmp_path):
     with pytest.raises(ValueError, match="run=False tabulates a checkpoint"):
         coverage_study(run=False, **kw)
     assert other.settings["n_done"] == 0
+
+
+#: The MCMC column's settings (docs/uncertainty.md sect. 3): the three yaw coefficients, the initial states
+#: sampled, the independence sampler after a 300-step DE burn-in.
+MCMC_KW = dict(steps=1000, burn=300, moves="independence", sample_x0=True)
+
+
+@pytest.mark.slow
+def test_mcmc_column_machinery():
+    """The MCMC column on 3 replicates (about 1 CPU-minute): every chain passes the unchanged convergence rules,
+    the table has an "mcmc" row per coefficient and predicted metric over the 3 replicates, and each MCMC
+    posterior agrees with the output-error fit that marginalises the same initial states (the Laplace
+    approximation of the same likelihood, up to the weak prior): std within 15 %, means within 0.3 sigma, and the
+    95 % intervals of the predicted tactical diameter of similar width (ratio 0.75-1.33).  The coverage itself is
+    the 100-replicate study of the docs, not asserted here."""
+    r = coverage_study(n_replicates=3, draws=100, seed=2026, estimate=["c1", "c2", "c3"], refine="output-error",
+                       mcmc_replicates=3, mcmc_kwargs=MCMC_KW)
+    assert r.n_failed == 0 and "MCMC on 3 replicates (3 converged)" in r.message, r.message
+    t = r.table
+    mc = t[t["method"] == "mcmc"].set_index("quantity")
+    assert list(mc.index[:3]) == ["c1", "c2", "c3"] and len(mc) == 5 and (mc["n"] == 3).all()
+    assert set(t["method"]) == {"output-error", "mcmc"}
+    td = "turning_35_starboard:tactical_diameter_L"
+    for g in r.replicates:
+        m = g["mcmc"]
+        assert m["converged"] and m["rhat_max"] < 1.01 and m["ess_min"] >= 400, m["message"]
+        sd, osd = np.array(m["std"]), np.array(g["std"])
+        np.testing.assert_allclose(sd, osd, rtol=0.15)
+        np.testing.assert_array_less(np.abs(np.array(m["mean"]) - np.array(g["coef"])) / osd, 0.3)
+        w_mc, w_oe = np.diff(m["metrics"][td]), np.diff(g["metrics"][td][:2])
+        assert 0.75 <= w_mc[0] / w_oe[0] <= 1.33, (w_mc, w_oe)

@@ -83,7 +83,11 @@ def _replicate(task: dict) -> dict:
         # exact RK4 sensitivities, Laplace covariance (J^T J)^-1 s^2
         from .batch import OutputErrorRefiner
 
+        # the channels of the MCMC likelihood (measured u, v, r): with a few yaw coefficients estimated, u and v
+        # still carry information on them through the coupling
+        chans = [c for c in ("u", "v", "r") if c in ident.meas_std_.index]
         ref = OutputErrorRefiner(ident.to_model(), estimate=ident.estimated_, meas_std=ident.meas_std_.to_dict(),
+                                 channels=chans or None,
                                  jacobian="tangent", max_nfev=task["max_nfev"], input_hold=ident.input_hold,
                                  estimate_x0=task.get("estimate_x0", True))
         fit = ref.fit(logs, start=ident).result()
