@@ -64,6 +64,33 @@ def test_output_error_intervals_are_calibrated():
     assert r.n_failed == 0 and (t["n"] == 100).all() and len(t) == 16 and set(t["method"]) == {"output-error"}
     assert (t["coverage"] >= 0.90).all(), t["coverage"].to_dict()
     assert t["z_std"].between(0.8, 1.25).all() and (t["z_mean"].abs() <= 0.4).all(), t[["z_mean", "z_std"]].to_dict()
+    # the joint covariance along the direction the predicted tactical diameter depends on: its linearised
+    # standardised error (gradient at the truth by central differences) over the 100 fits.  Measured: z spread
+    # 1.01, coverage 0.94; with the initial states held at the smoother's (estimate_x0=False) 1.28 and 0.88.
+    from shipid.manoeuvres import ship_info, turning_circle
+    from shipid.models import get_model
+
+    truth = get_model("kcs-response", "synthetic-truth")
+    names = r.replicates[0]["names"]
+    idx = np.array([truth.param_index(n) for n in names])
+
+    def td(P):
+        run = turning_circle(truth, 35.0, side="starboard", params=P,
+                             speed=np.full(len(P), ship_info(truth)["design_speed"]))
+        return np.array([m.tactical_diameter_L for m in run.metrics])
+
+    h = 1e-3 * np.abs(truth.params[idx])
+    P = np.repeat(truth.params[None], 2 * idx.size, axis=0)
+    P[np.arange(idx.size) * 2, idx] += h
+    P[np.arange(idx.size) * 2 + 1, idx] -= h
+    T = td(P).reshape(-1, 2)
+    g = (T[:, 0] - T[:, 1]) / (2 * h)
+    C = np.array([g_["coef"] for g_ in r.replicates])
+    Pf = np.repeat(truth.params[None], len(C), axis=0)
+    Pf[:, idx] = C
+    sig = np.array([np.sqrt(g @ np.array(rep["cov"]) @ g) for rep in r.replicates])
+    z = (td(Pf) - td(truth.params[None])[0]) / sig
+    assert 0.8 <= z.std(ddof=1) <= 1.25 and abs(z.mean()) <= 0.4 and np.mean(np.abs(z) <= 1.96) >= 0.90, z
 
 
 def test_refiner_estimates_initial_states_and_marginalises_them(kcs_truth):

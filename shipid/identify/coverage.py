@@ -94,6 +94,7 @@ def _replicate(task: dict) -> dict:
     names = list(fit.cov.index)
     out = {"seed": task["seed"], "success": bool(fit.success), "names": names,
            "coef": [fit.coef[n] for n in names], "std": [fit.coef_std[n] for n in names],
+           "cov": fit.cov.loc[names, names].to_numpy().tolist(),
            "poorly_determined": list(res.diagnostics.get("poorly_determined", []))}
     if task["draws"] > 0:
         pred = predict_manoeuvres(fit, task["manoeuvres"], draws=task["draws"], seed=task["seed"] % (2**32),
