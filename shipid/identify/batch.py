@@ -231,7 +231,8 @@ class OutputErrorRefiner:
                         u1 = Ug[:, k + 1] if self.input_hold == "foh" else None
                         for m, (ua, ub) in enumerate(hold_steps(Ug[:, k], u1, self.substeps)):
                             x, Fx, Fp = rk4_step_tangent(model, t[k] + m * h, x, ua, p, h, ub)
-                            S = Fx @ S + np.concatenate([Fp, np.zeros((len(g), model.nx, nk))], axis=2)
+                            S = Fx @ S
+                            S[:, :, :model.np] += Fp
                         J[:, k + 1] = S[:, st_idx][:, :, cols]
                 J[:, 0, :, ne:] = np.eye(model.nx)[st_idx][:, x0_idx]
                 J = J * np.concatenate([scale, x0_scale]) / sig[ch_idx][:, None]
