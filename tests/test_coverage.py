@@ -54,11 +54,12 @@ def test_coverage_of_100_replicates():
 
 @pytest.mark.slow
 def test_output_error_intervals_are_calibrated():
-    """The output-error ML fit started from the EKF (refine="output-error") on the same 100 data sets (about 3
-    CPU-minutes; coefficients only -- docs/uncertainty.md has the predicted metrics of this study).  Calibrated
-    means neither conservative nor over-confident: every coverage >= 0.90 and every coefficient's standardised
-    errors spread 0.8-1.25 (their sampling spread with 100 replicates is about +-0.07; the EKF posterior's
-    0.43-0.71 fails this) with |mean z| <= 0.4.  Measured: coverage 0.92-0.99, z spread 0.90-1.14, |mean z| <= 0.18."""
+    """The output-error ML fit started from the EKF (refine="output-error", initial states estimated with the
+    coefficients) on the same 100 data sets (about 3 CPU-minutes; the draws-based metric intervals are in
+    docs/uncertainty.md).  Calibrated means neither conservative nor over-confident: every coverage >= 0.90 and
+    every coefficient's standardised errors spread 0.8-1.25 (their sampling spread with 100 replicates is about
+    +-0.07; the EKF posterior's 0.43-0.71 fails this) with |mean z| <= 0.4, and the same for the linearised
+    predicted tactical diameter.  Measured: coverage 0.92-0.99, z spread 0.90-1.13, |mean z| <= 0.18."""
     r = coverage_study(n_replicates=100, draws=0, seed=2026, refine="output-error")
     t = r.table.set_index("quantity")
     assert r.n_failed == 0 and (t["n"] == 100).all() and len(t) == 16 and set(t["method"]) == {"output-error"}

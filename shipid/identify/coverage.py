@@ -11,6 +11,11 @@ the 2.5-97.5 % interval of :func:`shipid.uncertainty.predict_manoeuvres`
 contains the truth model's value, and optionally (``mcmc_replicates``) the same
 for the MCMC posterior of :func:`shipid.identify.sample_posterior`.
 
+``refine="output-error"`` tables the output-error fit that also estimates each log's initial u, v, r
+(``estimate_x0``); the MCMC column (docs/uncertainty.md sect. 3) samples the 3 yaw coefficients and
+the initial states (``mcmc_kwargs=dict(steps=1000, burn=300, moves="independence", sample_x0=True)``);
+``checkpoint=`` makes a long study resumable.
+
 With ``n`` replicates a true coverage of 0.95 is observed between about
 0.95 -+ 1.96 sqrt(0.95 * 0.05 / n) (0.91-0.99 for n = 100); the table gives the
 Wilson score interval of each observed fraction.  The replicates are
