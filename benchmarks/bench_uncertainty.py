@@ -6,6 +6,9 @@
    (goal >= 1.7x on 2 free cores; the cluster start-up is reported separately).
 3. MCMC effective samples per second: emcee with vectorised walkers (one batched simulation per half
    ensemble) against emcee calling the likelihood once per walker, same chain settings.
+4. The MCMC column's problem (docs/uncertainty.md sect. 3: c1-c3 and six initial states, two 40 s logs):
+   one batched likelihood call on the compiled replay against the numpy one, and effective samples per
+   CPU-second of ``moves="independence"`` against ``moves="de"`` (same steps, same start).
 
 Run: ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_uncertainty.py [--draws 500] [--fits 16] [--steps 300]``.
 The numbers depend on the load of the machine: state it with the result.
@@ -13,6 +16,7 @@ The numbers depend on the load of the machine: state it with the result.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 import tempfile
@@ -125,13 +129,56 @@ def bench_mcmc(steps: int) -> None:
           f"{v[0]:.1f} vs {n[0]:.1f} ESS/s = {v[0] / n[0]:.1f}x")
 
 
+def bench_mcmc_study(steps: int) -> None:
+    from shipid import _jit
+    from shipid._kernel import filter_functions
+    from shipid.identify import EKFIdentifier
+    from shipid.identify.coverage import COVERAGE_RECIPES
+    from shipid.identify.posterior import OutputErrorLikelihood, sample_posterior
+    from shipid.models import get_model
+    from shipid.synthetic import KCS_NOISE_STD, make_trial
+
+    m = get_model("kcs-response", "synthetic-truth")
+    rng = np.random.default_rng(2026)
+    logs = [make_trial(m, r, rng, KCS_NOISE_STD)[0] for r in COVERAGE_RECIPES]
+    est = ["c1", "c2", "c3"]
+    res = EKFIdentifier(m, estimate=est, n_passes=2).fit(logs).result()
+    like = OutputErrorLikelihood(m, logs, est, meas_std=res.settings["meas_std"], x0_states=True)
+    th = np.hstack([[res.coef[n] for n in est], np.zeros(like.n_x0)]) + 1e-5 * np.random.default_rng(0).standard_normal((36, 9))
+    per = {}
+    for mode in ("compiled", "numpy"):
+        with (_jit.disabled() if mode == "numpy" else contextlib.nullcontext()):
+            like(th)
+            t0, n = time.process_time(), 0
+            while time.process_time() - t0 < 2.0:
+                like(th)
+                n += 1
+            per[mode] = (time.process_time() - t0) / n
+    print(f"[4] likelihood of 36 walkers x 2 logs x 401 samples: compiled replay {per['compiled'] * 1e3:.1f} ms "
+          f"(kernel available: {filter_functions(m, notice=False) is not None}), numpy {per['numpy'] * 1e3:.1f} ms "
+          f"= {per['numpy'] / per['compiled']:.1f}x")
+    out = {}
+    for mv in ("independence", "de"):
+        t0 = time.process_time()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            s = sample_posterior(res, logs, walkers=36, steps=steps, burn=300, seed=3, moves=mv, sample_x0=True)
+        cpu = time.process_time() - t0
+        d = s.diagnostics
+        out[mv] = d["ess_min"] / cpu
+        print(f"[4] {mv:12s} {steps} steps (300 burn-in): {cpu:.1f} CPU-s, tau_max {d['tau_max']:.1f}, ESS_min "
+              f"{d['ess_min']:.0f}, split-R-hat {d['rhat_max']:.4f}, converged {s.converged} -> {out[mv]:.1f} ESS/CPU-s")
+    print(f"[4] independence / de: {out['independence'] / out['de']:.1f}x ESS per CPU-second")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--draws", type=int, default=500)
     ap.add_argument("--fits", type=int, default=16)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--steps", type=int, default=300)
-    ap.add_argument("--only", choices=("draws", "campaign", "mcmc"), default=None)
+    ap.add_argument("--only", choices=("draws", "campaign", "mcmc", "mcmc-study"), default=None)
+    ap.add_argument("--study-steps", type=int, default=1000)
     a = ap.parse_args()
     if a.only in (None, "draws"):
         bench_draws(a.draws)
@@ -139,6 +186,8 @@ def main() -> None:
         bench_campaign(a.fits, a.workers)
     if a.only in (None, "mcmc"):
         bench_mcmc(a.steps)
+    if a.only in (None, "mcmc-study"):
+        bench_mcmc_study(a.study_steps)
 
 
 if __name__ == "__main__":

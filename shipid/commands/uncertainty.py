@@ -40,6 +40,11 @@ def register(sub) -> None:
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--channels", default=None, help="output-error channels, comma separated (default u,v,r)")
     p.add_argument("--no-vectorize", action="store_true", help="one simulation per walker (slow; for comparison)")
+    p.add_argument("--moves", choices=("de", "stretch", "independence"), default="de",
+                   help="proposal: differential evolution (default), stretch, or DE burn-in then independence "
+                        "Metropolis-Hastings from a Student-t fitted to it (docs/uncertainty.md)")
+    p.add_argument("--sample-x0", action="store_true",
+                   help="also sample each log's initial u, v, r (nuisance parameters; the exact posterior)")
     _progress_option(p)
     add_log_options(p)
 
@@ -103,7 +108,8 @@ def _sample(args) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         s = sample_posterior(args.result, logs, walkers=args.walkers, steps=args.steps, burn=args.burn, thin=args.thin,
-                             seed=args.seed, vectorize=not args.no_vectorize, channels=chans,
+                             seed=args.seed, vectorize=not args.no_vectorize, channels=chans, moves=args.moves,
+                             sample_x0=args.sample_x0,
                              progress=progress_on(args))
     s.to_json(out, force=args.force)
     import pandas as pd

@@ -69,11 +69,17 @@ class OutputErrorRefiner:
         simulate them as one batch), e.g. a prior or the errors of closed-loop manoeuvre
         metrics against measured ones, already divided by their tolerances.
         Differentiated by forward differences; non-finite values count as 1e6.
+    estimate_x0 : bool or sequence of str
+        Estimate each log's initial state of these states (True: the fitted channels, e.g. u, v, r)
+        jointly with the coefficients, as nuisance parameters (default False: held at the start's
+        smoothed states or ``x0``).  The coefficients' covariance is then the coefficient block of the
+        joint inverse ``s^2 (J^T J)^-1``, i.e. marginalised over the initial states (a fixed, estimated
+        initial state makes it too tight; docs/uncertainty.md sect. 3).  ``x0_`` / ``x0_std_`` hold them.
     """
 
     def __init__(self, model: Model, *, estimate=None, channels=None, meas_std=None, max_nfev: int = 30,
                  substeps: int = 1, jacobian: str = "fd", log_weights=None,
-                 extra_residuals=None, input_hold: str = "foh"):
+                 extra_residuals=None, input_hold: str = "foh", estimate_x0=False):
         self.model = model
         self.estimate = estimate
         self.channels = channels
@@ -84,6 +90,7 @@ class OutputErrorRefiner:
         self.log_weights = log_weights
         self.extra_residuals = extra_residuals
         self.input_hold = input_hold
+        self.estimate_x0 = estimate_x0
 
     def fit(self, logs, start=None, x0=None) -> "OutputErrorRefiner":
         """Refine on ``logs``; ``start`` may be a fitted :class:`EKFIdentifier` whose
@@ -123,6 +130,12 @@ class OutputErrorRefiner:
             raise ValueError("no measured channel depends on the estimated parameters; nothing to fit")
         ch_idx = [meas.index(c) for c in chans]
         st_idx = [model.state_index(c) for c in chans]
+        ex0 = self.estimate_x0
+        x0_names = (list(chans) if ex0 is True else [] if ex0 is False or ex0 is None else list(ex0))
+        x0_idx = np.array([model.state_index(c) for c in x0_names], dtype=int)
+        nk, ne = x0_idx.size, est_idx.size
+        # initial-state offsets are scaled by the state's noise level (else by 1)
+        x0_scale = np.array([sig[meas.index(c)] if c in meas else 1.0 for c in x0_names])
         x0s = []
         given_x0 = x0
         if given_x0 is not None and len(given_x0) != len(arrays):
@@ -157,10 +170,17 @@ class OutputErrorRefiner:
                 groups.append([i])
 
         def params_of(theta_batch):
-            """Full parameter vectors (B, np) for scaled estimates (B, ne)."""
+            """Full parameter vectors (B, np) for scaled estimates (B, ne[ + n_logs nk])."""
             P = np.broadcast_to(p0, (theta_batch.shape[0], model.np)).copy()
-            P[:, est_idx] = theta_batch * scale
+            P[:, est_idx] = theta_batch[:, :ne] * scale
             return P
+
+        def x0_of(theta_batch, i):
+            """Initial states (B, nx) of log ``i``."""
+            X = np.broadcast_to(x0s[i], (theta_batch.shape[0], model.nx)).copy()
+            if nk:
+                X[:, x0_idx] += theta_batch[:, ne + i * nk: ne + (i + 1) * nk] * x0_scale
+            return X
 
         def simulate_all(theta_batch):
             """theta_batch (B, ne) scaled -> list of (B, N, nchan) simulated channels."""
@@ -169,7 +189,7 @@ class OutputErrorRefiner:
             out: list = [None] * len(arrays)
             for g in groups:
                 t, G = arrays[g[0]].t, len(g)
-                X0 = np.broadcast_to(np.stack([x0s[i] for i in g]), (B, G, model.nx)).reshape(B * G, model.nx)
+                X0 = np.stack([x0_of(theta_batch, i) for i in g], axis=1).reshape(B * G, model.nx)
                 Ug = np.stack([arrays[i].U for i in g])
                 Ug = np.broadcast_to(Ug, (B,) + Ug.shape).reshape((B * G,) + Ug.shape[1:])
                 Pg = np.repeat(P, G, axis=0)
@@ -194,25 +214,33 @@ class OutputErrorRefiner:
             from ..integrate import hold_steps, rk4_step_tangent
 
             p = p0.copy()
-            p[est_idx] = th * scale
+            p[est_idx] = th[:ne] * scale
             blocks: list = [None] * len(arrays)
             for g in groups:
                 t = arrays[g[0]].t
-                x = np.stack([x0s[i] for i in g])
+                x = np.stack([x0_of(th[None], i)[0] for i in g])
                 Ug = np.stack([arrays[i].U for i in g])
-                S = np.zeros((len(g), model.nx, model.np))
-                J = np.zeros((len(g), t.size, len(st_idx), est_idx.size))
+                # parameter sensitivities, then those to the estimated initial states (identity at t0)
+                S = np.concatenate([np.zeros((len(g), model.nx, model.np)),
+                                    np.broadcast_to(np.eye(model.nx)[:, x0_idx], (len(g), model.nx, nk))], axis=2)
+                cols = np.concatenate([est_idx, model.np + np.arange(nk)])
+                J = np.zeros((len(g), t.size, len(st_idx), cols.size))
                 with np.errstate(all="ignore"):
                     for k in range(t.size - 1):
                         h = (t[k + 1] - t[k]) / self.substeps
                         u1 = Ug[:, k + 1] if self.input_hold == "foh" else None
                         for m, (ua, ub) in enumerate(hold_steps(Ug[:, k], u1, self.substeps)):
                             x, Fx, Fp = rk4_step_tangent(model, t[k] + m * h, x, ua, p, h, ub)
-                            S = Fx @ S + Fp
-                        J[:, k + 1] = S[:, st_idx][:, :, est_idx]
-                J = J * scale / sig[ch_idx][:, None]
+                            S = Fx @ S
+                            S[:, :, :model.np] += Fp
+                        J[:, k + 1] = S[:, st_idx][:, :, cols]
+                J[:, 0, :, ne:] = np.eye(model.nx)[st_idx][:, x0_idx]
+                J = J * np.concatenate([scale, x0_scale]) / sig[ch_idx][:, None]
                 for j, i in enumerate(g):
-                    blocks[i] = rw[i] * np.where(masks[i][:, :, None], J[j], 0.0).reshape(-1, est_idx.size)
+                    Ji = np.zeros((t.size, len(st_idx), ne + len(arrays) * nk))
+                    Ji[:, :, :ne] = J[j][:, :, :ne]
+                    Ji[:, :, ne + i * nk: ne + (i + 1) * nk] = J[j][:, :, ne:]
+                    blocks[i] = rw[i] * np.where(masks[i][:, :, None], Ji, 0.0).reshape(-1, Ji.shape[-1])
             Jt = np.concatenate(blocks, axis=0)
             return np.where(np.isfinite(Jt), Jt, 0.0)
 
@@ -251,14 +279,19 @@ class OutputErrorRefiner:
             R = residual_batch(batch)
             return ((R[1:] - R[0]) / h).T
 
-        th0 = p0[est_idx] / scale
+        th0 = np.concatenate([p0[est_idx] / scale, np.zeros(len(arrays) * nk)])
         sol = least_squares(fun, th0, jac=jac, method="trf", max_nfev=self.max_nfev, x_scale=1.0)
         J = sol.jac
         n_obs = int(sum(m.sum() for m, w in zip(masks, wlog) if w > 0))
         dof = max(n_obs - th0.size, 1)
         s2 = float(np.sum(sol.fun**2) / dof)
-        cov_s = np.linalg.pinv(J.T @ J) * s2 if np.all(np.isfinite(J)) else np.full((th0.size, th0.size), np.nan)
-        theta = sol.x * scale
+        cov_all = np.linalg.pinv(J.T @ J) * s2 if np.all(np.isfinite(J)) else np.full((th0.size, th0.size), np.nan)
+        cov_s = cov_all[:ne, :ne]  # with estimated initial states: marginal over them (Laplace)
+        theta = sol.x[:ne] * scale
+        x0_fit = [x0_of(sol.x[None], i)[0] for i in range(len(arrays))]
+        x0_sd = np.sqrt(np.clip(np.diag(cov_all)[ne:], 0, None)).reshape(len(arrays), nk) * x0_scale
+        self.x0_ = pd.DataFrame(x0_fit, columns=list(model.state_names))
+        self.x0_std_ = pd.DataFrame(x0_sd, columns=x0_names)
         cov = cov_s * np.outer(scale, scale)
         coef = p0.copy()
         coef[est_idx] = theta
@@ -315,6 +348,7 @@ class OutputErrorRefiner:
             inputs=_inputs(self.logs_), method="output-error",
             settings={"estimated": self.estimated_, "channels": self.channels_, "max_nfev": self.max_nfev,
                       "input_hold": self.input_hold,
+                      "estimate_x0": list(self.x0_std_.columns),
                       "log_weights": None if self.log_weights is None else [float(w) for w in self.log_weights],
                       "extra_residuals": self.extra_residuals is not None},
             loglik=None, success=self.success_, message=self.message_, versions=software_versions(),

@@ -11,6 +11,11 @@ the 2.5-97.5 % interval of :func:`shipid.uncertainty.predict_manoeuvres`
 contains the truth model's value, and optionally (``mcmc_replicates``) the same
 for the MCMC posterior of :func:`shipid.identify.sample_posterior`.
 
+``refine="output-error"`` tables the output-error fit that also estimates each log's initial u, v, r
+(``estimate_x0``); the MCMC column (docs/uncertainty.md sect. 3) samples the 3 yaw coefficients and
+the initial states (``mcmc_kwargs=dict(steps=1000, burn=300, moves="independence", sample_x0=True)``);
+``checkpoint=`` makes a long study resumable.
+
 With ``n`` replicates a true coverage of 0.95 is observed between about
 0.95 -+ 1.96 sqrt(0.95 * 0.05 / n) (0.91-0.99 for n = 100); the table gives the
 Wilson score interval of each observed fraction.  The replicates are
@@ -20,6 +25,7 @@ seeds spawned from ``seed``: the numbers do not depend on the engine.
 from __future__ import annotations
 
 import math
+import time
 import warnings
 from dataclasses import dataclass, field
 
@@ -60,6 +66,7 @@ def _replicate(task: dict) -> dict:
     from .identifier import EKFIdentifier
     from .posterior import sample_posterior
 
+    cpu0 = time.process_time()
     truth = task["truth"]
     rng = np.random.default_rng(task["seed"])
     logs = [make_trial(truth, r, rng, task["noise_std"])[0] for r in task["recipes"]]
@@ -81,12 +88,18 @@ def _replicate(task: dict) -> dict:
         # exact RK4 sensitivities, Laplace covariance (J^T J)^-1 s^2
         from .batch import OutputErrorRefiner
 
+        # the channels of the MCMC likelihood (measured u, v, r): with a few yaw coefficients estimated, u and v
+        # still carry information on them through the coupling
+        chans = [c for c in ("u", "v", "r") if c in ident.meas_std_.index]
         ref = OutputErrorRefiner(ident.to_model(), estimate=ident.estimated_, meas_std=ident.meas_std_.to_dict(),
-                                 jacobian="tangent", max_nfev=task["max_nfev"], input_hold=ident.input_hold)
+                                 channels=chans or None,
+                                 jacobian="tangent", max_nfev=task["max_nfev"], input_hold=ident.input_hold,
+                                 estimate_x0=task.get("estimate_x0", True))
         fit = ref.fit(logs, start=ident).result()
     names = list(fit.cov.index)
     out = {"seed": task["seed"], "success": bool(fit.success), "names": names,
            "coef": [fit.coef[n] for n in names], "std": [fit.coef_std[n] for n in names],
+           "cov": fit.cov.loc[names, names].to_numpy().tolist(),
            "poorly_determined": list(res.diagnostics.get("poorly_determined", []))}
     if task["draws"] > 0:
         pred = predict_manoeuvres(fit, task["manoeuvres"], draws=task["draws"], seed=task["seed"] % (2**32),
@@ -97,12 +110,62 @@ def _replicate(task: dict) -> dict:
         s = sample_posterior(res, logs, seed=task["seed"] % (2**31), **task["mcmc_kwargs"])
         lo, hi = np.quantile(s.samples, [0.025, 0.975], axis=0)
         out["mcmc"] = {"low": lo.tolist(), "high": hi.tolist(), "converged": bool(s.converged),
-                       "rhat_max": s.diagnostics["rhat_max"], "ess_min": s.diagnostics["ess_min"]}
+                       "mean": s.samples.mean(axis=0).tolist(), "std": s.samples.std(axis=0, ddof=1).tolist(),
+                       "rhat_max": s.diagnostics["rhat_max"], "ess_min": s.diagnostics["ess_min"],
+                       "tau_max": s.diagnostics["tau_max"], "acceptance": s.diagnostics["acceptance_mean"],
+                       "n_likelihood_calls": s.diagnostics["n_likelihood_calls"], "message": s.message}
         if task["draws"] > 0:
             pm = predict_manoeuvres(res, task["manoeuvres"], draws=task["draws"], seed=task["seed"] % (2**32),
                                     samples=s, zigzag_executes=3)
             out["mcmc"]["metrics"] = {f"{r.manoeuvre}:{r.metric}": [r.low, r.high] for r in pm.summary.itertuples()}
+    out["cpu_s"] = time.process_time() - cpu0
+    if task.get("checkpoint"):
+        _append_line(task["checkpoint"], {"key": task["key"], **out})
     return out
+
+
+def _append_line(path, doc: dict) -> None:
+    """Append one JSON line (one ``write`` of a line opened with O_APPEND: whole lines from several workers)."""
+    import json
+    import os
+
+    line = (json.dumps(doc, allow_nan=True, default=lambda o: o.item() if hasattr(o, "item") else str(o))
+            + "\n").encode()
+    fd = os.open(path, os.O_RDWR | os.O_APPEND | os.O_CREAT, 0o644)
+    try:
+        size = os.fstat(fd).st_size
+        if size and os.pread(fd, 1, size - 1) != b"\n":  # a line torn by an interrupted run: end it
+            line = b"\n" + line
+        os.write(fd, line)
+    finally:
+        os.close(fd)
+
+
+def _read_checkpoint(path) -> dict:
+    """Replicate outcomes already in a checkpoint file, by key (a truncated last line is ignored)."""
+    import json
+    from pathlib import Path
+
+    done = {}
+    p = Path(path)
+    if p.is_file():
+        for line in p.read_text(encoding="utf-8").splitlines():
+            try:
+                d = json.loads(line)
+            except json.JSONDecodeError:
+                continue
+            if isinstance(d, dict) and "key" in d:
+                done[d.pop("key")] = d
+    return done
+
+
+@dataclass
+class _Done:
+    """A replicate read back from a checkpoint file."""
+
+    value: dict
+    ok: bool = True
+    error: str | None = None
 
 
 @dataclass
@@ -151,7 +214,8 @@ def coverage_study(truth=None, recipes=None, *, n_replicates: int = 100, seed: i
                    estimate=None, n_passes: int = 2, perturb: float = 0.3, identifier_kwargs: dict | None = None,
                    draws: int = 100, manoeuvres=("turning:35", "zigzag:10/10"), inflation: float = 1.0,
                    mcmc_replicates: int = 0, mcmc_kwargs: dict | None = None, engine=None,
-                   level: float = 0.95, refine: str | None = None, max_nfev: int = 50) -> CoverageResult:
+                   level: float = 0.95, refine: str | None = None, max_nfev: int = 50,
+                   estimate_x0: bool = True, checkpoint=None, run: bool = True) -> CoverageResult:
     """Replicate study of interval coverage (see the module docstring).
 
     Parameters
@@ -175,10 +239,22 @@ def coverage_study(truth=None, recipes=None, *, n_replicates: int = 100, seed: i
         None: the intervals of the EKF posterior (method "ekf" in the table).  "output-error": the EKF
         fit is followed by the output-error maximum-likelihood fit of the same coefficients
         (:class:`~shipid.identify.batch.OutputErrorRefiner`, weights = the EKF's noise levels, exact RK4
-        sensitivities, initial states from the EKF smoother, at most ``max_nfev`` evaluations) and its
-        Laplace covariance ``s^2 (J^T J)^-1`` gives the intervals (method "output-error").  The MCMC
+        sensitivities, initial states from the EKF smoother and, with ``estimate_x0``, estimated with the
+        coefficients, at most ``max_nfev`` evaluations) and its Laplace covariance ``s^2 (J^T J)^-1``
+        gives the intervals (method "output-error").  The MCMC
         column does not depend on it (the sampler starts from the EKF posterior).
     max_nfev : int  -- evaluation limit of that refinement
+    checkpoint : path, optional
+        JSON-lines file: every finished replicate is appended to it, and replicates already in it (same
+        seed and settings) are not run again -- a long study (the MCMC column) can be stopped and resumed.
+    run : bool
+        False: run nothing, tabulate the replicates found in ``checkpoint`` (``n`` may then be below
+        ``n_replicates``; ``settings["n_done"]`` says how many).
+    estimate_x0 : bool
+        The output-error fit also estimates each log's initial u, v, r (nuisance parameters; the
+        coefficients' covariance is marginal over them).  False holds them at the EKF smoother's
+        values, as before session 6: the joint covariance is then too tight (the predicted tactical
+        diameter covered 0.85 of 100 replicates, docs/uncertainty.md sect. 3).
 
     Returns
     -------
@@ -199,16 +275,37 @@ def coverage_study(truth=None, recipes=None, *, n_replicates: int = 100, seed: i
     recipes = COVERAGE_RECIPES if recipes is None else tuple(recipes)
     z = float(abs(__import__("scipy.stats", fromlist=["norm"]).norm.ppf((1 - level) / 2)))
     seeds = member_seeds(seed, n_replicates)
+    if not run and checkpoint is None:
+        raise ValueError("run=False tabulates a checkpoint file: give checkpoint=")
     tasks = [{"truth": truth, "recipes": recipes, "seed": s, "noise_std": dict(noise_std or KCS_NOISE_STD),
               "estimate": estimate, "n_passes": int(n_passes), "identifier_kwargs": dict(identifier_kwargs or {}),
               "perturb": float(perturb), "draws": int(draws), "manoeuvres": list(manoeuvres),
               "inflation": float(inflation), "mcmc": i < int(mcmc_replicates), "mcmc_kwargs": dict(mcmc_kwargs or {}),
-              "refine": refine, "max_nfev": int(max_nfev)}
+              "refine": refine, "max_nfev": int(max_nfev), "estimate_x0": bool(estimate_x0)}
              for i, s in enumerate(seeds)]
     eng = engine or Engine(1, progress=False)
-    outs = eng.map(_replicate, tasks, desc="coverage replicates")
+    if checkpoint is not None:
+        import hashlib
+        import pickle
+
+        for t in tasks:  # the key: the replicate's seed and every setting it depends on
+            t["key"] = hashlib.sha256(pickle.dumps({k: v for k, v in t.items() if k != "truth"}) +
+                                      truth.params.tobytes() + truth.name.encode()).hexdigest()[:24]
+            t["checkpoint"] = str(checkpoint)
+        done = _read_checkpoint(checkpoint)
+        todo = [t for t in tasks if t["key"] not in done] if run else []
+        new = {t["key"]: o for t, o in zip(todo, eng.map(_replicate, todo, desc="coverage replicates"))}
+        done = _read_checkpoint(checkpoint)
+        outs = [new[t["key"]] if t["key"] in new else _Done(done[t["key"]]) for t in tasks
+                if t["key"] in new or t["key"] in done]
+    else:
+        outs = eng.map(_replicate, tasks, desc="coverage replicates")
     good = [o.value for o in outs if o.ok]
     errors = [o.error for o in outs if not o.ok]
+    if not good and not errors and not run:
+        return CoverageResult(pd.DataFrame(columns=["quantity", "method", "n", "covered", "coverage"]), [], {}, 0, [],
+                              False, "no replicate of these settings in the checkpoint yet",
+                              {"n_replicates": int(n_replicates), "n_done": 0, "checkpoint": str(checkpoint)})
     if not good:
         raise ValueError(f"every replicate failed; first error: {errors[0] if errors else '?'}")
     # truth values of the tabled metrics
@@ -234,8 +331,10 @@ def coverage_study(truth=None, recipes=None, *, n_replicates: int = 100, seed: i
     mc = [g["mcmc"] for g in good if "mcmc" in g]
     if mc:
         lo, hi = np.array([m["low"] for m in mc]), np.array([m["high"] for m in mc])
+        zm = (np.array([m["mean"] for m in mc]) - tv) / np.array([m["std"] for m in mc]) if "mean" in mc[0] else None
         for j, n in enumerate(names):
-            rows.append(_row(n, "mcmc", (lo[:, j] <= tv[j]) & (tv[j] <= hi[:, j]), None, poor[n] <= len(good) / 2))
+            rows.append(_row(n, "mcmc", (lo[:, j] <= tv[j]) & (tv[j] <= hi[:, j]), None if zm is None else zm[:, j],
+                             poor[n] <= len(good) / 2))
         for key, tval in truth_metrics.items():
             iv = np.array([m["metrics"][key] for m in mc if "metrics" in m and key in m["metrics"]], dtype=float)
             if iv.size:
@@ -255,6 +354,8 @@ def coverage_study(truth=None, recipes=None, *, n_replicates: int = 100, seed: i
     settings = {"n_replicates": int(n_replicates), "seed": int(seed), "recipes": [r.name for r in recipes],
                 "draws": int(draws), "inflation": float(inflation), "perturb": float(perturb), "n_passes": int(n_passes),
                 "mcmc_replicates": int(mcmc_replicates), "mcmc_kwargs": dict(mcmc_kwargs or {}), "level": level,
-                "refine": refine, "max_nfev": int(max_nfev), "identifier_kwargs": dict(identifier_kwargs or {}),
-                "engine": eng.describe()}
+                "refine": refine, "max_nfev": int(max_nfev), "estimate_x0": bool(estimate_x0),
+                "identifier_kwargs": dict(identifier_kwargs or {}),
+                "engine": eng.describe(), "n_done": len(good) + len(errors),
+                "cpu_s_per_replicate": float(np.mean([g["cpu_s"] for g in good if "cpu_s" in g] or [math.nan]))}
     return CoverageResult(table, good, truth_metrics, len(errors), errors, ok, msg, settings)

@@ -54,6 +54,30 @@ __all__ = ["sample_posterior", "PosteriorSamples", "load_samples", "split_rhat",
 #: fraction in [0.1, 0.9] (outside it the stretch move is not exploring).
 CONVERGENCE = {"rhat_max": 1.01, "ess_min": 400.0, "tau_factor": 50.0, "acceptance": (0.1, 0.9)}
 
+#: Independence proposal of ``moves="independence"``: multivariate Student-t with ``df`` degrees of freedom
+#: (tails heavier than a near-Gaussian posterior's, so the importance ratio stays bounded) and scale matrix
+#: ``scale**2`` times the covariance of the burn-in's second half (wider than the target, for the same reason).
+INDEPENDENCE_T = {"df": 10.0, "scale": 1.2}
+
+
+def _independence_move(emcee, mean: np.ndarray, cov: np.ndarray):
+    """emcee move proposing every walker from one fixed multivariate t (mean, INDEPENDENCE_T scale**2 cov)."""
+    df, d = INDEPENDENCE_T["df"], mean.size
+    L = np.linalg.cholesky(INDEPENDENCE_T["scale"] ** 2 * cov + 1e-300 * np.eye(d))
+    Li = np.linalg.inv(L)
+
+    def logq(x):
+        z = (x - mean) @ Li.T
+        return -0.5 * (df + d) * np.log1p(np.sum(z * z, axis=1) / df)
+
+    def propose(coords, random):
+        n = coords.shape[0]
+        z = random.standard_normal((n, d)) / np.sqrt(random.chisquare(df, n) / df)[:, None]
+        q = mean + z @ L.T
+        return q, logq(coords) - logq(q)
+
+    return emcee.moves.MHMove(propose, ndim=d)
+
 
 # ----------------------------------------------------------------------------- diagnostics
 def _rhat_classic(chains: np.ndarray) -> np.ndarray:
@@ -128,10 +152,16 @@ class OutputErrorLikelihood:
     substeps : int  -- RK4 steps per sample
     input_hold : {"foh", "zoh"}  -- inputs between samples (:func:`shipid.simulate.simulate`); default "foh",
         the identifier's default, so that the likelihood treats the inputs as the fit did
+    x0_states : sequence of str or True, optional
+        States whose initial value in every log is a further (nuisance) parameter: ``theta`` then has
+        ``len(names) + n_logs * len(x0_states)`` columns (True: the ``channels``), the coefficients followed by, per log, the
+        offsets of these initial states from ``x0`` (the mean of the first five samples), with a flat
+        prior.  Default: none (the initial states are held at ``x0``, which the coefficients' posterior
+        then does not account for).
     """
 
     def __init__(self, model, logs, names, *, meas_std=None, channels=None, prior_mean=None, prior_std=None,
-                 substeps: int = 1, input_hold: str = "foh"):
+                 substeps: int = 1, input_hold: str = "foh", x0_states=None):
         from .data import noise_std_from_data, prepare_logs
 
         self.model = model
@@ -163,6 +193,9 @@ class OutputErrorLikelihood:
                 if np.isfinite(col).any():
                     x0[model.state_index(s)] = np.nanmean(col)
             self.x0.append(x0)
+        self.x0_states = list(self.channels) if x0_states is True else list(x0_states or [])
+        self.x0_idx = np.array([model.state_index(c) for c in self.x0_states], dtype=int)
+        self.n_x0 = len(arrays) * self.x0_idx.size
         self.prior_mean = None if prior_mean is None else np.asarray(prior_mean, dtype=float)
         self.prior_std = None if prior_std is None else np.asarray(prior_std, dtype=float)
         self.substeps = int(substeps)
@@ -185,8 +218,9 @@ class OutputErrorLikelihood:
             t = arrays[0].t[0] + h * np.arange(n)
             U = np.stack([np.vstack([a.U, np.repeat(a.U[-1:], n - a.t.size, axis=0)]) for a in arrays])
             Y = np.stack([np.vstack([y, np.full((n - y.shape[0], y.shape[1]), np.nan)]) for y in self.Y])
-            return [(t, U, Y, np.isfinite(Y), np.stack(self.x0))]
-        return [(a.t, a.U[None], y[None], m[None], x0[None]) for a, y, m, x0 in zip(arrays, self.Y, self.masks, self.x0)]
+            return [(t, U, Y, np.isfinite(Y), np.stack(self.x0), np.arange(len(arrays)))]
+        return [(a.t, a.U[None], y[None], m[None], x0[None], np.array([i]))
+                for i, (a, y, m, x0) in enumerate(zip(arrays, self.Y, self.masks, self.x0))]
 
     def __call__(self, theta):
         """Log-posterior (up to a constant) of ``theta (B, n_names)`` -> (B,), or of one vector -> float."""
@@ -196,16 +230,23 @@ class OutputErrorLikelihood:
         single = th.ndim == 1
         th = np.atleast_2d(th)
         B = th.shape[0]
+        k, nk = self.idx.size, self.x0_idx.size
+        if th.shape[1] != k + self.n_x0:
+            raise ValueError(f"theta must have {k + self.n_x0} columns (coefficients, then initial-state offsets), got {th.shape[1]}")
         P = np.broadcast_to(self.base, (B, self.model.np)).copy()
-        P[:, self.idx] = th
+        P[:, self.idx] = th[:, :k]
         lp = np.zeros(B)
         if self.prior_std is not None:
-            lp -= 0.5 * np.sum(((th - self.prior_mean) / self.prior_std) ** 2, axis=1)
+            lp -= 0.5 * np.sum(((th[:, :k] - self.prior_mean) / self.prior_std) ** 2, axis=1)
         self.n_calls += 1
         nx = self.model.nx
-        for t, U, Y, m, x0 in self.groups:
+        for t, U, Y, m, x0, which in self.groups:
             G = U.shape[0]
-            X0 = np.broadcast_to(x0, (B, G, nx)).reshape(B * G, nx)
+            X0 = np.broadcast_to(x0, (B, G, nx)).copy()
+            if nk:
+                off = th[:, k:].reshape(B, -1, nk)[:, which]
+                X0[:, :, self.x0_idx] += off
+            X0 = X0.reshape(B * G, nx)
             Ub = np.broadcast_to(U, (B,) + U.shape).reshape((B * G,) + U.shape[1:])
             with warnings.catch_warnings(), np.errstate(all="ignore"):
                 warnings.simplefilter("ignore", RuntimeWarning)
@@ -363,7 +404,8 @@ def chain_diagnostics(chain: np.ndarray, acceptance: np.ndarray, names, n_total_
 def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2000, burn: int | None = None,
                      thin: int = 1, seed=0, vectorize: bool = True, channels=None, substeps: int = 1,
                      start_scale: float = 1.0, use_prior: bool = True, moves: str = "de",
-                     input_hold: str | None = None, progress: bool = False) -> PosteriorSamples:
+                     input_hold: str | None = None, sample_x0: bool = False,
+                     progress: bool = False) -> PosteriorSamples:
     """Sample the posterior of a fit's estimated coefficients with emcee (optional extra ``mcmc``).
 
     Parameters
@@ -383,13 +425,27 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
     substeps : int  -- RK4 steps per log sample
     start_scale : float  -- spread of the start relative to the EKF posterior
     use_prior : bool  -- include the result's prior (Gaussian, see module docstring)
-    moves : {"de", "stretch"}
+    moves : {"de", "stretch", "independence"}
         emcee proposal: "de" (default) the mixture 0.8 differential evolution + 0.2 DE snooker
         (ter Braak 2006; ter Braak & Vrugt 2008), which decorrelates faster than "stretch", the
         Goodman & Weare (2010) move, on these near-Gaussian, strongly correlated posteriors
-        (benchmarks/bench_uncertainty.py measures both)
+        (benchmarks/bench_uncertainty.py measures both).  "independence": the ``burn`` steps run the
+        "de" mixture; then the proposal is frozen to a multivariate Student-t (:data:`INDEPENDENCE_T`)
+        fitted to the walkers of the burn's second half, and the kept steps are independence
+        Metropolis-Hastings (Tierney 1994, *Ann. Statist.* 22(4), 1701-1728): every walker is its own
+        Markov chain, all walkers are proposed and evaluated in one batched call per step, and on a
+        near-Gaussian posterior tau is a few steps instead of tens.  The proposal is fixed before the
+        kept part starts, so the kept chain is a plain Metropolis-Hastings chain with the exact target;
+        the same convergence checks apply (a poor proposal shows as low acceptance and long tau).
     input_hold : {"foh", "zoh"}, optional  -- inputs between samples; default the fit's
         (``result.settings["input_hold"]`` when recorded, else "foh", the identifier's default)
+    sample_x0 : bool
+        Also sample each log's initial values of the likelihood's channels (e.g. u, v, r) as nuisance
+        parameters (flat prior, walkers started within ``sigma / sqrt(5)`` of the mean of the first five
+        samples); the returned samples are the coefficients' marginal.  Default False: the initial
+        states are held at that mean, and the coefficients' posterior is conditional on them (too narrow
+        along the directions the initial states move; docs/uncertainty.md sect. 3).  The convergence
+        checks cover every sampled dimension.
     progress : bool  -- emcee's tqdm progress bar
 
     Returns
@@ -407,15 +463,11 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
     names = list(res.cov.index)
     if not names:
         raise ValueError("result has no estimated coefficients (empty covariance): nothing to sample")
-    k = len(names)
+    k0 = len(names)
     steps, thin = int(steps), int(thin)
     burn = steps // 3 if burn is None else int(burn)
     if steps < 10 or thin < 1 or not 0 <= burn < steps:
         raise ValueError(f"need steps >= 10, thin >= 1 and 0 <= burn < steps; got steps={steps}, burn={burn}, thin={thin}")
-    nw = int(walkers) if walkers is not None else max(4 * k, 32)
-    nw += nw % 2
-    if nw < 2 * k:
-        raise ValueError(f"walkers={nw}: emcee needs at least 2 x {k} coefficients = {2 * k} walkers")
     mu = np.array([res.coef[n] for n in names], dtype=float)
     cov = res.cov.loc[names, names].to_numpy(dtype=float)
     meas_std = (res.settings or {}).get("meas_std") or None
@@ -426,10 +478,22 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
     like = OutputErrorLikelihood(model, logs, names, meas_std=meas_std, channels=channels,
                                  prior_mean=mu if prior_std is not None else None, prior_std=prior_std,
                                  substeps=substeps,
-                                 input_hold=input_hold or (res.settings or {}).get("input_hold") or "foh")
+                                 input_hold=input_hold or (res.settings or {}).get("input_hold") or "foh",
+                                 x0_states=True if sample_x0 else None)
+    x0_names = [f"{c}0[{i}]" for i in range(len(like.arrays)) for c in like.x0_states]
+    all_names = names + x0_names
+    k = len(all_names)
+    nw = int(walkers) if walkers is not None else max(4 * k, 32)
+    nw += nw % 2
+    if nw < 2 * k:
+        raise ValueError(f"walkers={nw}: emcee needs at least 2 x {k} sampled dimensions = {2 * k} walkers")
     rng = np.random.default_rng(seed)
     w, V = np.linalg.eigh(0.5 * (cov + cov.T))
     A = V * np.sqrt(np.clip(w, 0, None))
+    # the initial-state offsets start within the standard error of the mean of the first five samples
+    x0_sd = np.tile(like.sig[[like.channels.index(c) for c in like.x0_states]] / np.sqrt(5.0), len(like.arrays))
+    A = np.block([[A, np.zeros((k0, k - k0))], [np.zeros((k - k0, k0)), np.diag(x0_sd)]])
+    mu = np.concatenate([mu, np.zeros(k - k0)])
     p0 = mu + start_scale * rng.standard_normal((nw, k)) @ A.T
     lp0 = like(p0)
     for _ in range(20):  # re-draw walkers that start where the simulation fails
@@ -442,14 +506,25 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
         raise ValueError("the EKF posterior gives non-finite likelihoods for some walkers after 20 re-draws; "
                          "check the fit (success, covariance) and the logs")
     fn = like if vectorize else (lambda th: like(th))
-    if moves not in ("de", "stretch"):
-        raise ValueError(f"moves={moves!r}: use 'de' or 'stretch'")
-    mv = [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)] if moves == "de" else emcee.moves.StretchMove()
+    if moves not in ("de", "stretch", "independence"):
+        raise ValueError(f"moves={moves!r}: use 'de', 'stretch' or 'independence'")
+    if moves == "independence" and burn < 20:
+        raise ValueError(f"moves='independence' fits its proposal to the burn-in: need burn >= 20, got {burn}")
+    mv = emcee.moves.StretchMove() if moves == "stretch" else [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
     sampler = emcee.EnsembleSampler(nw, k, fn, vectorize=vectorize, moves=mv)
     sampler._random = np.random.mtrand.RandomState(int(rng.integers(2**31 - 1)))  # emcee's own stream, seeded
-    sampler.run_mcmc(emcee.State(p0, log_prob=lp0), steps, progress=progress)  # start values evaluated once
-    chain = sampler.get_chain(discard=burn, thin=thin)
-    diag = chain_diagnostics(chain, sampler.acceptance_fraction, names, steps)
+    if moves == "independence":
+        state = sampler.run_mcmc(emcee.State(p0, log_prob=lp0), burn, progress=progress)
+        pts = sampler.get_chain(discard=burn // 2).reshape(-1, k)
+        kept = emcee.EnsembleSampler(nw, k, fn, vectorize=vectorize,
+                                     moves=_independence_move(emcee, pts.mean(axis=0), np.cov(pts, rowvar=False)))
+        kept._random = sampler._random
+        kept.run_mcmc(state, steps - burn, progress=progress)
+        chain, acceptance = kept.get_chain(thin=thin), kept.acceptance_fraction
+    else:
+        sampler.run_mcmc(emcee.State(p0, log_prob=lp0), steps, progress=progress)  # start values evaluated once
+        chain, acceptance = sampler.get_chain(discard=burn, thin=thin), sampler.acceptance_fraction
+    diag = chain_diagnostics(chain, acceptance, all_names, steps)
     diag["n_simulations"] = int(like.n_sims)
     diag["n_likelihood_calls"] = int(like.n_calls)
     ok = all(diag["checks"].values())
@@ -459,13 +534,13 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
         warnings.warn(f"sample_posterior: {msg}", RuntimeWarning, stacklevel=2)
     settings = {"walkers": nw, "steps": steps, "moves": moves, "burn": burn, "thin": thin, "seed": seed if isinstance(seed, int) else None,
                 "vectorize": bool(vectorize), "channels": like.channels, "substeps": int(substeps),
-                "input_hold": like.input_hold,
+                "input_hold": like.input_hold, "sample_x0": bool(sample_x0), "x0_sampled": x0_names,
                 "meas_std": dict(zip(like.channels, map(float, like.sig))), "start_scale": float(start_scale),
                 "prior": ({"kind": "gaussian", "mean": "fit estimate", "std": dict(zip(names, map(float, prior_std)))}
                           if prior_std is not None else {"kind": "flat"}),
                 "likelihood": "output error, independent Gaussian residuals", "n_obs": like.n_obs,
                 "logs": [a.meta for a in like.arrays], "result_method": res.method,
                 "coef": {kk: float(v) for kk, v in res.coef.items()}}
-    return PosteriorSamples(model=res.model, names=names, samples=chain.reshape(-1, k), diagnostics=diag,
-                            converged=ok, message=msg, settings=settings, chain=chain,
+    return PosteriorSamples(model=res.model, names=names, samples=chain[..., :k0].reshape(-1, k0), diagnostics=diag,
+                            converged=ok, message=msg, settings=settings, chain=chain[..., :k0],
                             created=datetime.now(timezone.utc).isoformat(timespec="seconds"))
