@@ -440,3 +440,20 @@ def test_a_persistent_jump_is_accepted_after_gate_run_rejections(kcs_truth, kcs_
     g = out.gated[0, :, ix]
     assert g[150:154].all() and not g[154]  # four rejections, then accepted
     assert not g[:150].any() and not out.diverged[0]
+
+
+def test_the_noise_check_pass_is_the_first_pass_and_is_not_run_twice(kcs_truth, kcs_logs, monkeypatch):
+    """The noise adaptation's first filter pass solves pass 1's problem; when it raises no channel's noise it is
+    pass 1 (one filter run for a one-pass fit), and the fit equals the one without the adaptation."""
+    import shipid.identify.identifier as ident_mod
+
+    calls = []
+    real = ident_mod.run_ekf
+    monkeypatch.setattr(ident_mod, "run_ekf", lambda prob, **k: calls.append(k) or real(prob, **k))
+    log = kcs_logs["kcs_zz_m10"][0]
+    fit = EKFIdentifier(kcs_truth, n_passes=1, init="model").fit(log)
+    assert (fit.noise_["innovation_factor"] == 1.0).all()
+    assert calls == [{"store": True}]
+    ref = EKFIdentifier(kcs_truth, n_passes=1, init="model", adapt_noise=False).fit(log)
+    np.testing.assert_array_equal(fit.coef_.to_numpy(), ref.coef_.to_numpy())
+    np.testing.assert_array_equal(fit.coef_std_.to_numpy(), ref.coef_std_.to_numpy())

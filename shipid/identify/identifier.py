@@ -326,10 +326,12 @@ class EKFIdentifier:
 
         # noise levels raised where the first-pass innovations are wider than predicted
         factors = np.ones(len(meas))
+        first = None  # a stored first pass that equals pass 1's filter (same problem): not run twice
         if self.adapt_noise:
             free = np.array([m not in given_sig for m in meas])
             for _ in range(3):
-                out0 = run_ekf(self._problem(theta0 / scale), store=False)
+                first = out0 = None  # (released before the next run: two stored runs need not fit at once)
+                out0 = run_ekf(self._problem(theta0 / scale), store=not self.tune_noise)
                 e, S = out0.innov[0], out0.S_diag[0]
                 f = np.ones(len(meas))
                 for j in np.flatnonzero(free):
@@ -339,6 +341,7 @@ class EKFIdentifier:
                         f[j] = spread / np.sqrt(np.median(S[ok, j]))
                 f = np.where(f > 1.5, f, 1.0)
                 if np.all(f == 1.0):
+                    first = None if self.tune_noise else out0
                     break
                 sig = sig * f
                 factors *= f
@@ -364,7 +367,8 @@ class EKFIdentifier:
         self.pass_messages_ = []
         for k in passes:
             prob = self._problem(theta_s, q_mult, r_mult)
-            out = run_ekf(prob, store=True)
+            out = first if k == 0 and first is not None else run_ekf(prob, store=True)
+            first = None
             if out.diverged[0]:  # the kernel stopped at the divergence sample; smoothing it cannot help
                 self.pass_messages_.append(f"pass {k + 1}: {out.message[0]} (filter stopped there, smoother skipped)")
                 break
