@@ -2,6 +2,7 @@
 filterpy, the RTS smoother against filterpy's linear smoother, diagnostics, results."""
 from __future__ import annotations
 
+import contextlib
 import json
 from dataclasses import replace
 
@@ -9,7 +10,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from shipid import _jit
 from shipid.identify import EKFIdentifier, NotFittedError, load_result, rts_smooth, run_ekf
+from shipid.identify.ekf import bf_smooth
 from shipid.integrate import rk4_step_taylor_tangent
 from shipid.models.base import Model
 from shipid.simulate import replay, replay_errors
@@ -194,6 +197,14 @@ def test_rts_smoother_matches_filterpy_linear_smoother():
     xs, Pss, _, _ = kf.rts_smoother(means, covs)
     np.testing.assert_allclose(xs[:, :, 0], zs[0], rtol=1e-8, atol=1e-10)
     np.testing.assert_allclose(Pss, Ps[0], rtol=1e-8, atol=1e-12)
+    # the adjoint (Bryson-Frazier) form the identifier uses: the same smoothed means, state variances, and
+    # the whole covariance at sample 0 (both paths)
+    for compiled in (True, False):
+        with (contextlib.nullcontext() if compiled else _jit.disabled()):
+            zb, var_x, Ps0 = bf_smooth(out, prob.R, prob.meas_idx, 2)
+        np.testing.assert_allclose(zb[0], xs[:, :, 0], rtol=1e-8, atol=1e-10)
+        np.testing.assert_allclose(var_x[0], np.diagonal(Pss[:, :2, :2], axis1=1, axis2=2), rtol=1e-8, atol=1e-12)
+        np.testing.assert_allclose(Ps0[0], Pss[0], rtol=1e-8, atol=1e-12)
 
 
 def _stacked(prob, B, **override):
