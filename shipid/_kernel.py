@@ -223,7 +223,7 @@ def cross_interval(method, t0, x, u0, u1, foh, n, p, P, c, cols, h, scale, xn, F
 
 
 def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, R, z0, P0, p_base, est_idx, scale,
-               meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store,
+               meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store, compact,
                z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated,
                div, div_at, d2_at):
     """The filter over the samples of batch member ``b`` (arrays as in :func:`shipid.identify.ekf._run_compiled`; what a
@@ -268,7 +268,11 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
     Pg = P0[b].copy()
     if store:
         z_prior[b, 0] = z
-        P_prior[b, 0] = P
+        if compact:  # the rows at the measured states, the ship rows of F (ekf.run_ekf's ``compact``)
+            for c_ in range(nm):
+                P_prior[b, 0, c_] = P[meas_idx[c_]]
+        else:
+            P_prior[b, 0] = P
     for k in range(N):
         # ---- update with the measurements of sample k (gated channels count as missing)
         if gate > 0 and reset[b, k]:
@@ -442,28 +446,35 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
                 for j in range(nx):
                     Pn[i, j] += P_reset[b, i, j]
         if store:
-            for i in range(nz):
+            for i in range(nx):
                 for j in range(nz):
-                    Fs[b, k, i, j] = Ftop[i, j] if i < nx else (1.0 if i == j else 0.0)
+                    Fs[b, k, i, j] = Ftop[i, j]
             z_prior[b, k + 1] = zn
-            P_prior[b, k + 1] = Pn
+            if compact:
+                for c_ in range(nm):
+                    P_prior[b, k + 1, c_] = Pn[meas_idx[c_]]
+            else:
+                for i in range(nx, nz):
+                    for j in range(nz):
+                        Fs[b, k, i, j] = 1.0 if i == j else 0.0
+                P_prior[b, k + 1] = Pn
         # the posterior becomes the last good one, the prediction the state: buffers rotate, nothing is copied
         zg, z, zn = z, zn, zg
         Pg, P, Pn = P, Pn, Pg
     z_fin[b] = z
     P_fin[b] = P
     if store:
-        for i in range(nz):
+        for i in range(Fs.shape[2]):
             for j in range(nz):
                 Fs[b, N - 1, i, j] = 1.0 if i == j else 0.0
 
 
 def ekf_batch(t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, R, z0, P0, p_base, est_idx, scale,
-              meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store,
+              meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store, compact,
               z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated, div, div_at, d2_at):
     for b in range(t.shape[0]):
         ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, R, z0, P0, p_base, est_idx, scale,
-                   meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store,
+                   meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store, compact,
                    z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated,
                    div, div_at, d2_at)
 
@@ -603,7 +614,7 @@ def rts_batch(zf, Pf, zp, Pp, F, zs, Ps):
             Ps[b] = np.nan
 
 
-def bf_member(zf, Pf, Pp, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps0):
+def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps0):
     """Bryson-Frazier (adjoint) form of the same smoother for one member, without inverting ``Pp`` and
     without the full smoothed covariance at every sample: the adjoint ``lam`` (nz) and ``Lam`` (nz, nz)
     run backwards, ``zs_k = zf_k + Pf_k lam_k`` and ``Ps_k = Pf_k - Pf_k Lam_k Pf_k``, of which the
@@ -611,8 +622,10 @@ def bf_member(zf, Pf, Pp, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps0):
     sample 0.  Through the update at sample k (accepted channels ``acc[k]``; gain
     ``K = Pp H^T S^-1``, ``S = H Pp H^T + R``, recomputed as the filter computed it):
     ``lam~ = lam + H^T (S^-1 e - K^T lam)``, ``Lam~ = (I - K H)^T Lam (I - K H) + H^T S^-1 H``; through
-    the transition from k-1: ``lam = F^T lam~``, ``Lam = F^T Lam~ F`` (symmetrised), with the
-    transition's parameter rows the identity (the random walks; a reset's ship rows are zero)."""
+    the transition from k-1: ``lam = F^T lam~``, ``Lam = F^T Lam~ F`` (its lower triangle, mirrored), with the
+    transition's parameter rows the identity (the random walks; a reset's ship rows are zero).  Only
+    the ship rows of ``F`` and the rows ``pp_rows`` of ``Pp`` (those at the measured states, channel
+    ``j`` in row ``pp_rows[j]``) are read, so the compact storage of the filter serves."""
     N, nz = zf.shape
     nm = meas_idx.shape[0]
     lam = np.zeros(nz)
@@ -626,7 +639,8 @@ def bf_member(zf, Pf, Pp, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps0):
     Si = np.empty((nm, nm))
     e = np.empty(nm)
     a = np.empty(nm)
-    LK = np.empty((nz, nm))
+    LKt = np.empty((nm, nz))
+    KLK = np.empty((nm, nm))
     for k in range(N - 1, -1, -1):
         Pfk = Pf[k]
         for i in range(nz):  # smoothed mean
@@ -671,7 +685,7 @@ def bf_member(zf, Pf, Pp, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps0):
                 cnt += 1
         if cnt > 0:
             for c_ in range(cnt):
-                r_ = meas_idx[sel[c_]]
+                r_ = pp_rows[sel[c_]]
                 e[c_] = innov[k, sel[c_]]
                 for i in range(nz):
                     Kt[c_, i] = Ppk[r_, i]
@@ -711,33 +725,36 @@ def bf_member(zf, Pf, Pp, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps0):
                     Kt[i, j] = Kt[i, j] / lii
                 for j in range(cnt):
                     Si[i, j] = Si[i, j] / lii
-            for i in range(nz):  # LK = Lam K
-                for c_ in range(cnt):
-                    LK[i, c_] = 0.0
+            for c_ in range(cnt):  # LKt = (Lam K)^T = K^T Lam (Lam symmetric), a row of Lam at a time
+                for i in range(nz):
+                    LKt[c_, i] = 0.0
                 for j in range(nz):
-                    lij = Lam[i, j]
-                    for c_ in range(cnt):
-                        LK[i, c_] += lij * Kt[c_, j]
-            for c_ in range(cnt):  # lam += H^T (a - K^T lam); then Lam -= H^T LK^T + LK H
+                    kcj = Kt[c_, j]
+                    for i in range(nz):
+                        LKt[c_, i] += kcj * Lam[j, i]
+            for c_ in range(cnt):  # lam += H^T (a - K^T lam)
                 s = 0.0
                 for j in range(nz):
                     s += Kt[c_, j] * lam[j]
                 row[c_] = a[c_] - s
-            for c_ in range(cnt):
-                lam[meas_idx[sel[c_]]] += row[c_]
-            for c_ in range(cnt):
-                r_ = meas_idx[sel[c_]]
-                for i in range(nz):
-                    Lam[i, r_] -= LK[i, c_]
-                for i in range(nz):
-                    Lam[r_, i] -= LK[i, c_]
-            for c_ in range(cnt):  # + H^T (K^T Lam K + S^-1) H
-                r_ = meas_idx[sel[c_]]
+            for c_ in range(cnt):  # H^T (K^T Lam K + S^-1) H, before Lam changes
                 for d_ in range(cnt):
                     s = Si[c_, d_]
                     for j in range(nz):
-                        s += Kt[c_, j] * LK[j, d_]
-                    Lam[r_, meas_idx[sel[d_]]] += s
+                        s += Kt[c_, j] * LKt[d_, j]
+                    KLK[c_, d_] = s
+            for c_ in range(cnt):
+                lam[meas_idx[sel[c_]]] += row[c_]
+            for c_ in range(cnt):  # Lam -= H^T LK^T + LK H
+                r_ = meas_idx[sel[c_]]
+                for i in range(nz):
+                    Lam[r_, i] -= LKt[c_, i]
+                for i in range(nz):
+                    Lam[i, r_] -= LKt[c_, i]
+            for c_ in range(cnt):
+                r_ = meas_idx[sel[c_]]
+                for d_ in range(cnt):
+                    Lam[r_, meas_idx[sel[d_]]] += KLK[c_, d_]
         # ---- back through the transition from k-1 (F's parameter rows are the identity)
         Fk = F[k - 1]
         for j in range(nz):
@@ -756,25 +773,21 @@ def bf_member(zf, Pf, Pp, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps0):
                 lim = Lam[i, m]
                 for j in range(nz):
                     A[i, j] += lim * Fk[m, j]
-        for i in range(nz):  # Lam = F^T A
-            for j in range(nz):
+        for i in range(nz):  # Lam = F^T A: its lower triangle (a symmetric product), mirrored
+            for j in range(i + 1):
                 Lam[i, j] = A[i, j] if i >= nx else 0.0
-        for m in range(nx):
-            for i in range(nz):
+            for m in range(nx):
                 f = Fk[m, i]
-                for j in range(nz):
+                for j in range(i + 1):
                     Lam[i, j] += f * A[m, j]
-        for i in range(nz):
             for j in range(i):
-                v = 0.5 * (Lam[i, j] + Lam[j, i])
-                Lam[i, j] = v
-                Lam[j, i] = v
+                Lam[j, i] = Lam[i, j]
 
 
-def bf_batch(zf, Pf, Pp, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps0):
+def bf_batch(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps0):
     for b in range(zf.shape[0]):
         if np.isfinite(zf[b, -1]).all():
-            bf_member(zf[b], Pf[b], Pp[b], F[b], innov[b], acc[b], R[b], meas_idx, nx, zs[b], var_x[b], Ps0[b])
+            bf_member(zf[b], Pf[b], Pp[b], pp_rows, F[b], innov[b], acc[b], R[b], meas_idx, nx, zs[b], var_x[b], Ps0[b])
         else:  # a member that stopped at its divergence: nothing to smooth
             zs[b] = np.nan
             var_x[b] = np.nan

@@ -93,7 +93,8 @@ def test_same_filtered_states_and_covariances_as_filterpy(kcs_truth, kcs_logs):
     noisy.loc[40:45, ["x", "y", "psi", "u", "v", "r"]] = np.nan  # whole-sample gaps: filterpy update(None)
     ident = EKFIdentifier(kcs_truth, n_passes=1, init="model", estimate=["b1", "c2", "c3", "a9"], gate=None)
     ident.fit(noisy)
-    prob, out = ident.problem_, ident.output_
+    prob = ident.problem_
+    out = run_ekf(prob)  # the full storage (the identifier keeps the compact one its smoother reads)
     model = kcs_truth
     nx, ne, nm = model.nx, len(prob.est_idx), len(prob.meas_idx)
     nz = nx + ne
@@ -169,7 +170,8 @@ def test_rts_smoother_matches_filterpy_linear_smoother():
     ident = EKFIdentifier(m, n_passes=1, init="model", method="rk4-exact", prior={"theta": 0.1},
                           meas_std={"p": 0.05, "q": 0.05}, process_std={"p": 1e-3, "q": 1e-3})
     ident.fit(frame)
-    prob, out = ident.problem_, ident.output_
+    prob = ident.problem_
+    out = run_ekf(prob)  # the full storage (the identifier keeps the compact one its smoother reads)
     zs, Ps = rts_smooth(out)
 
     # the same problem as a linear KF: the RK4 map of the augmented linear system
@@ -464,7 +466,7 @@ def test_the_noise_check_pass_is_the_first_pass_and_is_not_run_twice(kcs_truth, 
     log = kcs_logs["kcs_zz_m10"][0]
     fit = EKFIdentifier(kcs_truth, n_passes=1, init="model").fit(log)
     assert (fit.noise_["innovation_factor"] == 1.0).all()
-    assert calls == [{"store": True}]
+    assert calls == [{"store": True, "compact": True}]
     ref = EKFIdentifier(kcs_truth, n_passes=1, init="model", adapt_noise=False).fit(log)
     np.testing.assert_array_equal(fit.coef_.to_numpy(), ref.coef_.to_numpy())
     np.testing.assert_array_equal(fit.coef_std_.to_numpy(), ref.coef_std_.to_numpy())

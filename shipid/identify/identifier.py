@@ -330,8 +330,9 @@ class EKFIdentifier:
         if self.adapt_noise:
             free = np.array([m not in given_sig for m in meas])
             for _ in range(3):
-                first = out0 = None  # (released before the next run: two stored runs need not fit at once)
-                out0 = run_ekf(self._problem(theta0 / scale), store=not self.tune_noise)
+                first = out0 = prob0 = None  # (released first: two stored runs need not fit at once)
+                prob0 = self._problem(theta0 / scale)
+                out0 = run_ekf(prob0, store=not self.tune_noise, compact=True)
                 e, S = out0.innov[0], out0.S_diag[0]
                 f = np.ones(len(meas))
                 for j in np.flatnonzero(free):
@@ -341,7 +342,7 @@ class EKFIdentifier:
                         f[j] = spread / np.sqrt(np.median(S[ok, j]))
                 f = np.where(f > 1.5, f, 1.0)
                 if np.all(f == 1.0):
-                    first = None if self.tune_noise else out0
+                    first = None if self.tune_noise else (prob0, out0)
                     break
                 sig = sig * f
                 factors *= f
@@ -366,8 +367,11 @@ class EKFIdentifier:
         good = None  # (prob, out, zs, var_x, Ps0) of the last pass that did not diverge
         self.pass_messages_ = []
         for k in passes:
-            prob = self._problem(theta_s, q_mult, r_mult)
-            out = first if k == 0 and first is not None else run_ekf(prob, store=True)
+            if k == 0 and first is not None:
+                prob, out = first
+            else:
+                prob = self._problem(theta_s, q_mult, r_mult)
+                out = run_ekf(prob, store=True, compact=True)
             first = None
             if out.diverged[0]:  # the kernel stopped at the divergence sample; smoothing it cannot help
                 self.pass_messages_.append(f"pass {k + 1}: {out.message[0]} (filter stopped there, smoother skipped)")
@@ -539,7 +543,7 @@ class EKFIdentifier:
         sample: that is taken as it is (exact, where a smoother's backward differences against a wide
         prior lose digits)."""
         nx = self.model.nx
-        if out.P_post.dtype == np.float64:
+        if out.compact or out.P_post.dtype == np.float64:
             zs, var_x, Ps0 = bf_smooth(out, prob.R, prob.meas_idx, nx)
         else:
             zs, Ps = rts_smooth(out)
