@@ -605,16 +605,13 @@ class EKFIdentifier:
             sl = slice(start, start + n)
             X = zs[0, sl, :nx]
             SD = np.sqrt(np.clip(var_x[0, sl], 0, None))
-            df = pd.DataFrame(X, columns=list(model.state_names))
-            for i, nme in enumerate(model.state_names):
-                df[f"{nme}_std"] = SD[:, i]
-            df.insert(0, "time", a.t)
+            # each table built at once (column by column, pandas copies its block at every insertion)
+            names = list(model.state_names)
+            df = pd.DataFrame(np.column_stack([a.t, X, SD]), columns=["time", *names, *(f"{m}_std" for m in names)])
             df.attrs["name"] = a.name
             self.states_.append(df)
-            inn = pd.DataFrame(out.innov[0, sl], columns=s["meas"])
-            for j, nme in enumerate(s["meas"]):
-                inn[f"{nme}_S"] = out.S_diag[0, sl, j]
-            inn.insert(0, "time", a.t)
+            inn = pd.DataFrame(np.column_stack([a.t, out.innov[0, sl], out.S_diag[0, sl]]),
+                               columns=["time", *s["meas"], *(f"{m}_S" for m in s["meas"])])
             inn.attrs["name"] = a.name
             self.innovations_.append(inn)
             start += n
