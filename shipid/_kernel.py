@@ -223,7 +223,7 @@ def cross_interval(method, t0, x, u0, u1, foh, n, p, P, c, cols, h, scale, xn, F
 
 
 def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, R, z0, P0, p_base, est_idx, scale,
-               meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store,
+               meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store, compact,
                z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated,
                div, div_at, d2_at):
     """The filter over the samples of batch member ``b`` (arrays as in :func:`shipid.identify.ekf._run_compiled`; what a
@@ -268,7 +268,11 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
     Pg = P0[b].copy()
     if store:
         z_prior[b, 0] = z
-        P_prior[b, 0] = P
+        if compact:  # the rows at the measured states, the ship rows of F (ekf.run_ekf's ``compact``)
+            for c_ in range(nm):
+                P_prior[b, 0, c_] = P[meas_idx[c_]]
+        else:
+            P_prior[b, 0] = P
     for k in range(N):
         # ---- update with the measurements of sample k (gated channels count as missing)
         if gate > 0 and reset[b, k]:
@@ -442,28 +446,35 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
                 for j in range(nx):
                     Pn[i, j] += P_reset[b, i, j]
         if store:
-            for i in range(nz):
+            for i in range(nx):
                 for j in range(nz):
-                    Fs[b, k, i, j] = Ftop[i, j] if i < nx else (1.0 if i == j else 0.0)
+                    Fs[b, k, i, j] = Ftop[i, j]
             z_prior[b, k + 1] = zn
-            P_prior[b, k + 1] = Pn
+            if compact:
+                for c_ in range(nm):
+                    P_prior[b, k + 1, c_] = Pn[meas_idx[c_]]
+            else:
+                for i in range(nx, nz):
+                    for j in range(nz):
+                        Fs[b, k, i, j] = 1.0 if i == j else 0.0
+                P_prior[b, k + 1] = Pn
         # the posterior becomes the last good one, the prediction the state: buffers rotate, nothing is copied
         zg, z, zn = z, zn, zg
         Pg, P, Pn = P, Pn, Pg
     z_fin[b] = z
     P_fin[b] = P
     if store:
-        for i in range(nz):
+        for i in range(Fs.shape[2]):
             for j in range(nz):
                 Fs[b, N - 1, i, j] = 1.0 if i == j else 0.0
 
 
 def ekf_batch(t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, R, z0, P0, p_base, est_idx, scale,
-              meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store,
+              meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store, compact,
               z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated, div, div_at, d2_at):
     for b in range(t.shape[0]):
         ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, R, z0, P0, p_base, est_idx, scale,
-                   meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store,
+                   meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store, compact,
                    z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated,
                    div, div_at, d2_at)
 
@@ -603,7 +614,188 @@ def rts_batch(zf, Pf, zp, Pp, F, zs, Ps):
             Ps[b] = np.nan
 
 
-SMOOTHER = {"cholesky": cholesky, "rts_member": rts_member, "rts_batch": rts_batch}
+def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps0):
+    """Bryson-Frazier (adjoint) form of the same smoother for one member, without inverting ``Pp`` and
+    without the full smoothed covariance at every sample: the adjoint ``lam`` (nz) and ``Lam`` (nz, nz)
+    run backwards, ``zs_k = zf_k + Pf_k lam_k`` and ``Ps_k = Pf_k - Pf_k Lam_k Pf_k``, of which the
+    ship-state variances ``var_x (N, nx)`` are kept at every sample and the whole matrix ``Ps0`` at
+    sample 0.  Through the update at sample k (accepted channels ``acc[k]``; gain
+    ``K = Pp H^T S^-1``, ``S = H Pp H^T + R``, recomputed as the filter computed it):
+    ``lam~ = lam + H^T (S^-1 e - K^T lam)``, ``Lam~ = (I - K H)^T Lam (I - K H) + H^T S^-1 H``; through
+    the transition from k-1: ``lam = F^T lam~``, ``Lam = F^T Lam~ F`` (its lower triangle, mirrored), with the
+    transition's parameter rows the identity (the random walks; a reset's ship rows are zero).  Only
+    the ship rows of ``F`` and the rows ``pp_rows`` of ``Pp`` (those at the measured states, channel
+    ``j`` in row ``pp_rows[j]``) are read, so the compact storage of the filter serves."""
+    N, nz = zf.shape
+    nm = meas_idx.shape[0]
+    lam = np.zeros(nz)
+    Lam = np.zeros((nz, nz))
+    A = np.empty((nz, nz))
+    row = np.empty(nz)
+    sel = np.empty(nm, dtype=np.int64)
+    S = np.empty((nm, nm))
+    L = np.empty((nm, nm))
+    Kt = np.empty((nm, nz))
+    Si = np.empty((nm, nm))
+    e = np.empty(nm)
+    a = np.empty(nm)
+    LKt = np.empty((nm, nz))
+    KLK = np.empty((nm, nm))
+    for k in range(N - 1, -1, -1):
+        Pfk = Pf[k]
+        for i in range(nz):  # smoothed mean
+            s = 0.0
+            for j in range(nz):
+                s += Pfk[i, j] * lam[j]
+            zs[k, i] = zf[k, i] + s
+        for i in range(nx):  # ship-state variances: Pf_ii - (Pf_i Lam) . Pf_i
+            for j in range(nz):
+                row[j] = 0.0
+            for m in range(nz):
+                f = Pfk[i, m]
+                for j in range(nz):
+                    row[j] += f * Lam[m, j]
+            s = 0.0
+            for j in range(nz):
+                s += row[j] * Pfk[i, j]
+            var_x[k, i] = Pfk[i, i] - s
+        if k == 0:
+            for i in range(nz):  # A = Lam Pf, then Ps0 = Pf - Pf A (lower triangle, mirrored)
+                for j in range(nz):
+                    A[i, j] = 0.0
+                for m in range(nz):
+                    f = Lam[i, m]
+                    for j in range(nz):
+                        A[i, j] += f * Pfk[m, j]
+            for i in range(nz):
+                for j in range(i + 1):
+                    s = 0.0
+                    for m in range(nz):
+                        s += Pfk[i, m] * A[m, j]
+                    v = Pfk[i, j] - s
+                    Ps0[i, j] = v
+                    Ps0[j, i] = v
+            break
+        # ---- back through the update at sample k
+        Ppk = Pp[k]
+        cnt = 0
+        for j in range(nm):
+            if acc[k, j]:
+                sel[cnt] = j
+                cnt += 1
+        if cnt > 0:
+            for c_ in range(cnt):
+                r_ = pp_rows[sel[c_]]
+                e[c_] = innov[k, sel[c_]]
+                for i in range(nz):
+                    Kt[c_, i] = Ppk[r_, i]
+                for d_ in range(cnt):
+                    S[c_, d_] = Ppk[r_, meas_idx[sel[d_]]]
+                    Si[c_, d_] = 1.0 if c_ == d_ else 0.0
+                S[c_, c_] += R[sel[c_]]
+            cholesky(S, cnt, L)  # positive definite: the filter factorised the same S at this sample
+            # [K^T, a, S^-1] = S^-1 [H Pp, e, I]: forward then backward substitution
+            for i in range(cnt):
+                s = e[i]
+                for m in range(i):
+                    lim = L[i, m]
+                    s -= lim * a[m]
+                    for j in range(nz):
+                        Kt[i, j] -= lim * Kt[m, j]
+                    for j in range(cnt):
+                        Si[i, j] -= lim * Si[m, j]
+                lii = L[i, i]
+                a[i] = s / lii
+                for j in range(nz):
+                    Kt[i, j] = Kt[i, j] / lii
+                for j in range(cnt):
+                    Si[i, j] = Si[i, j] / lii
+            for i in range(cnt - 1, -1, -1):
+                s = a[i]
+                for m in range(i + 1, cnt):
+                    lmi = L[m, i]
+                    s -= lmi * a[m]
+                    for j in range(nz):
+                        Kt[i, j] -= lmi * Kt[m, j]
+                    for j in range(cnt):
+                        Si[i, j] -= lmi * Si[m, j]
+                lii = L[i, i]
+                a[i] = s / lii
+                for j in range(nz):
+                    Kt[i, j] = Kt[i, j] / lii
+                for j in range(cnt):
+                    Si[i, j] = Si[i, j] / lii
+            for c_ in range(cnt):  # LKt = (Lam K)^T = K^T Lam (Lam symmetric), a row of Lam at a time
+                for i in range(nz):
+                    LKt[c_, i] = 0.0
+                for j in range(nz):
+                    kcj = Kt[c_, j]
+                    for i in range(nz):
+                        LKt[c_, i] += kcj * Lam[j, i]
+            for c_ in range(cnt):  # lam += H^T (a - K^T lam)
+                s = 0.0
+                for j in range(nz):
+                    s += Kt[c_, j] * lam[j]
+                row[c_] = a[c_] - s
+            for c_ in range(cnt):  # H^T (K^T Lam K + S^-1) H, before Lam changes
+                for d_ in range(cnt):
+                    s = Si[c_, d_]
+                    for j in range(nz):
+                        s += Kt[c_, j] * LKt[d_, j]
+                    KLK[c_, d_] = s
+            for c_ in range(cnt):
+                lam[meas_idx[sel[c_]]] += row[c_]
+            for c_ in range(cnt):  # Lam -= H^T LK^T + LK H
+                r_ = meas_idx[sel[c_]]
+                for i in range(nz):
+                    Lam[r_, i] -= LKt[c_, i]
+                for i in range(nz):
+                    Lam[i, r_] -= LKt[c_, i]
+            for c_ in range(cnt):
+                r_ = meas_idx[sel[c_]]
+                for d_ in range(cnt):
+                    Lam[r_, meas_idx[sel[d_]]] += KLK[c_, d_]
+        # ---- back through the transition from k-1 (F's parameter rows are the identity)
+        Fk = F[k - 1]
+        for j in range(nz):
+            s = lam[j] if j >= nx else 0.0
+            for m in range(nx):
+                s += Fk[m, j] * lam[m]
+            row[j] = s
+        for j in range(nz):
+            lam[j] = row[j]
+        for i in range(nz):  # A = Lam F
+            for j in range(nx):
+                A[i, j] = 0.0
+            for j in range(nx, nz):
+                A[i, j] = Lam[i, j]
+            for m in range(nx):
+                lim = Lam[i, m]
+                for j in range(nz):
+                    A[i, j] += lim * Fk[m, j]
+        for i in range(nz):  # Lam = F^T A: its lower triangle (a symmetric product), mirrored
+            for j in range(i + 1):
+                Lam[i, j] = A[i, j] if i >= nx else 0.0
+            for m in range(nx):
+                f = Fk[m, i]
+                for j in range(i + 1):
+                    Lam[i, j] += f * A[m, j]
+            for j in range(i):
+                Lam[j, i] = Lam[i, j]
+
+
+def bf_batch(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps0):
+    for b in range(zf.shape[0]):
+        if np.isfinite(zf[b, -1]).all():
+            bf_member(zf[b], Pf[b], Pp[b], pp_rows, F[b], innov[b], acc[b], R[b], meas_idx, nx, zs[b], var_x[b], Ps0[b])
+        else:  # a member that stopped at its divergence: nothing to smooth
+            zs[b] = np.nan
+            var_x[b] = np.nan
+            Ps0[b] = np.nan
+
+
+SMOOTHER = {"cholesky": cholesky, "rts_member": rts_member, "rts_batch": rts_batch, "bf_member": bf_member,
+            "bf_batch": bf_batch}
 
 
 # ------------------------------------------------------------------ Python side

@@ -2,6 +2,7 @@
 filterpy, the RTS smoother against filterpy's linear smoother, diagnostics, results."""
 from __future__ import annotations
 
+import contextlib
 import json
 from dataclasses import replace
 
@@ -9,7 +10,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from shipid import _jit
 from shipid.identify import EKFIdentifier, NotFittedError, load_result, rts_smooth, run_ekf
+from shipid.identify.ekf import bf_smooth
 from shipid.integrate import rk4_step_taylor_tangent
 from shipid.models.base import Model
 from shipid.simulate import replay, replay_errors
@@ -90,7 +93,8 @@ def test_same_filtered_states_and_covariances_as_filterpy(kcs_truth, kcs_logs):
     noisy.loc[40:45, ["x", "y", "psi", "u", "v", "r"]] = np.nan  # whole-sample gaps: filterpy update(None)
     ident = EKFIdentifier(kcs_truth, n_passes=1, init="model", estimate=["b1", "c2", "c3", "a9"], gate=None)
     ident.fit(noisy)
-    prob, out = ident.problem_, ident.output_
+    prob = ident.problem_
+    out = run_ekf(prob)  # the full storage (the identifier keeps the compact one its smoother reads)
     model = kcs_truth
     nx, ne, nm = model.nx, len(prob.est_idx), len(prob.meas_idx)
     nz = nx + ne
@@ -166,7 +170,8 @@ def test_rts_smoother_matches_filterpy_linear_smoother():
     ident = EKFIdentifier(m, n_passes=1, init="model", method="rk4-exact", prior={"theta": 0.1},
                           meas_std={"p": 0.05, "q": 0.05}, process_std={"p": 1e-3, "q": 1e-3})
     ident.fit(frame)
-    prob, out = ident.problem_, ident.output_
+    prob = ident.problem_
+    out = run_ekf(prob)  # the full storage (the identifier keeps the compact one its smoother reads)
     zs, Ps = rts_smooth(out)
 
     # the same problem as a linear KF: the RK4 map of the augmented linear system
@@ -194,6 +199,14 @@ def test_rts_smoother_matches_filterpy_linear_smoother():
     xs, Pss, _, _ = kf.rts_smoother(means, covs)
     np.testing.assert_allclose(xs[:, :, 0], zs[0], rtol=1e-8, atol=1e-10)
     np.testing.assert_allclose(Pss, Ps[0], rtol=1e-8, atol=1e-12)
+    # the adjoint (Bryson-Frazier) form the identifier uses: the same smoothed means, state variances, and
+    # the whole covariance at sample 0 (both paths)
+    for compiled in (True, False):
+        with (contextlib.nullcontext() if compiled else _jit.disabled()):
+            zb, var_x, Ps0 = bf_smooth(out, prob.R, prob.meas_idx, 2)
+        np.testing.assert_allclose(zb[0], xs[:, :, 0], rtol=1e-8, atol=1e-10)
+        np.testing.assert_allclose(var_x[0], np.diagonal(Pss[:, :2, :2], axis1=1, axis2=2), rtol=1e-8, atol=1e-12)
+        np.testing.assert_allclose(Ps0[0], Pss[0], rtol=1e-8, atol=1e-12)
 
 
 def _stacked(prob, B, **override):
@@ -440,3 +453,20 @@ def test_a_persistent_jump_is_accepted_after_gate_run_rejections(kcs_truth, kcs_
     g = out.gated[0, :, ix]
     assert g[150:154].all() and not g[154]  # four rejections, then accepted
     assert not g[:150].any() and not out.diverged[0]
+
+
+def test_the_noise_check_pass_is_the_first_pass_and_is_not_run_twice(kcs_truth, kcs_logs, monkeypatch):
+    """The noise adaptation's first filter pass solves pass 1's problem; when it raises no channel's noise it is
+    pass 1 (one filter run for a one-pass fit), and the fit equals the one without the adaptation."""
+    import shipid.identify.identifier as ident_mod
+
+    calls = []
+    real = ident_mod.run_ekf
+    monkeypatch.setattr(ident_mod, "run_ekf", lambda prob, **k: calls.append(k) or real(prob, **k))
+    log = kcs_logs["kcs_zz_m10"][0]
+    fit = EKFIdentifier(kcs_truth, n_passes=1, init="model").fit(log)
+    assert (fit.noise_["innovation_factor"] == 1.0).all()
+    assert calls == [{"store": True, "compact": True}]
+    ref = EKFIdentifier(kcs_truth, n_passes=1, init="model", adapt_noise=False).fit(log)
+    np.testing.assert_array_equal(fit.coef_.to_numpy(), ref.coef_.to_numpy())
+    np.testing.assert_array_equal(fit.coef_std_.to_numpy(), ref.coef_std_.to_numpy())

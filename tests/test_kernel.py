@@ -19,7 +19,7 @@ from shipid import _jit
 from shipid.datasets import bundled_kcs_logs
 from shipid.identify import EKFIdentifier, rts_smooth, run_ekf
 from shipid import _kernel
-from shipid.identify.ekf import _run_compiled
+from shipid.identify.ekf import _run_compiled, bf_smooth
 from shipid.models import get_model
 
 pytestmark = pytest.mark.skipif(not _jit.enabled(), reason="numba not installed (extra 'fast') or SHIPID_JIT=0: "
@@ -54,6 +54,35 @@ def _compare(prob, nis_limit=1e6):
     zs, Ps = rts_smooth(fast)
     _close(zs, zs0, "smoothed means")
     _close(Ps, Ps0, "smoothed covariances")
+    # the adjoint form of the smoother (what the identifier reports): compiled = numpy, and = the RTS form
+    nx = prob.model.nx
+    bf = bf_smooth(fast, prob.R, prob.meas_idx, nx)
+    with _jit.disabled():
+        bf0 = bf_smooth(slow, prob.R, prob.meas_idx, nx)
+    rts = (zs, np.diagonal(Ps[..., :nx, :nx], axis1=2, axis2=3), Ps[:, 0])
+    # the compact storage (what that smoother reads): the same rows of P_prior and F, the same smoothing
+    small = run_ekf(prob, store=True, nis_limit=nis_limit, compact=True)
+    with _jit.disabled():
+        small0 = run_ekf(prob, store=True, nis_limit=nis_limit, compact=True)
+    assert small.compact and small0.compact
+    mi = np.asarray(prob.meas_idx)
+    for out_ in (small, small0):
+        _close(out_.P_prior, slow.P_prior[:, :, mi], "compact P_prior")
+        _close(out_.F, slow.F[:, :, :nx], "compact F")
+        for f in ("z_post", "P_post", "z_prior", "innov", "loglik"):
+            _close(getattr(out_, f), getattr(slow, f), f + " (compact)")
+    bf_small = bf_smooth(small, prob.R, prob.meas_idx, nx)
+    with _jit.disabled():
+        bf_small0 = bf_smooth(small0, prob.R, prob.meas_idx, nx)
+    for name, a, b, c, d, e in zip(("means", "state variances", "covariance at sample 0"), bf, bf0, rts, bf_small,
+                                   bf_small0):
+        _close(a, b, "adjoint-form smoothed " + name)
+        _close(d, b, "adjoint-form smoothed " + name + " (compact storage)")
+        _close(e, b, "adjoint-form smoothed " + name + " (compact storage, numpy)")
+        ok = np.isfinite(c)
+        # the two forms differ in rounding only; the differences against a wide prior lose a few digits
+        np.testing.assert_allclose(a[ok], c[ok], rtol=1e-7, atol=1e-9 * np.abs(c[ok]).max(),
+                                   err_msg="adjoint vs RTS form: " + name)
     return fast
 
 

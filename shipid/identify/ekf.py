@@ -31,7 +31,7 @@ from ..models.base import Model
 from .. import _jit, _kernel
 from . import _memory
 
-__all__ = ["EKFProblem", "EKFOutput", "run_ekf", "rts_smooth", "interval_steps", "INPUT_HOLDS"]
+__all__ = ["EKFProblem", "EKFOutput", "run_ekf", "rts_smooth", "bf_smooth", "interval_steps", "INPUT_HOLDS"]
 
 _LOG2PI = np.log(2.0 * np.pi)
 
@@ -119,7 +119,9 @@ class EKFOutput:
     the innovation log-likelihood (``-inf`` for a diverged member),
     ``diverged`` (B,) bool and ``diverged_at`` (B,) sample index (-1 if not),
     ``message`` per member, ``gated`` (B, N, nm) bool the measurements rejected by
-    the innovation gate and ``n_gated`` (B, nm) their count per channel.
+    the innovation gate and ``n_gated`` (B, nm) their count per channel.  ``compact``:
+    ``P_prior`` holds only its rows at the measured states (B, N, nm, nz) and ``F``
+    its ship-state rows (B, N, nx, nz) (``run_ekf(compact=True)``).
 
     A member that diverged at sample ``kd`` was not computed further: its
     ``z_post/P_post/F`` from ``kd`` on and ``z_prior/P_prior/innov/S_diag/nis`` after
@@ -143,6 +145,7 @@ class EKFOutput:
     message: list
     gated: np.ndarray
     n_gated: np.ndarray
+    compact: bool = False
 
 
 def _divergence_message(k: int, tk: float, d2: float) -> str:
@@ -152,7 +155,8 @@ def _divergence_message(k: int, tk: float, d2: float) -> str:
     return f"filter diverged at sample {k} (t = {tk:.4g} s): non-finite state or covariance"
 
 
-def _output(stored, z_final, P_final, innov, S_diag, nis, logdet, gated, diverged, diverged_at, message) -> EKFOutput:
+def _output(stored, z_final, P_final, innov, S_diag, nis, logdet, gated, diverged, diverged_at, message,
+            compact=False) -> EKFOutput:
     """The :class:`EKFOutput` of a run (both paths): ``stored`` is ``(z_post, P_post, z_prior, P_prior, F)``
     or None (``store=False``); the innovation log-likelihood is summed over the samples with accepted
     measurements from the per-sample ``nis`` and ``logdet`` (``log det S``), ``-inf`` for a diverged member."""
@@ -162,7 +166,8 @@ def _output(stored, z_final, P_final, innov, S_diag, nis, logdet, gated, diverge
     z_post, P_post, z_prior, P_prior, F = (None,) * 5 if stored is None else stored
     return EKFOutput(z_post=z_post, P_post=P_post, z_prior=z_prior, P_prior=P_prior, F=F, z_final=z_final,
                      P_final=P_final, innov=innov, S_diag=S_diag, loglik=loglik, nis=nis, diverged=diverged,
-                     diverged_at=diverged_at, message=message, gated=gated, n_gated=gated.sum(axis=1))
+                     diverged_at=diverged_at, message=message, gated=gated, n_gated=gated.sum(axis=1),
+                     compact=bool(compact and stored is not None))
 
 
 def _index_or_slice(idx, n: int):
@@ -224,7 +229,8 @@ def _cross_interval(step, model, t0, x, u0, u1, p, h, n, scale, est, all_est):
     return x, Fx, Fp
 
 
-def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6, store_dtype: str = "auto") -> EKFOutput:
+def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6, store_dtype: str = "auto",
+            compact: bool = False) -> EKFOutput:
     """Run the augmented-state EKF over a batch.
 
     Parameters
@@ -243,6 +249,12 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6, store_
         ``nz^2`` and sample (with the smoother's output) at the price of rounding what the smoother
         reads (:mod:`shipid.identify._memory`).  ``"auto"``: float64, or float32 with a warning when
         float64 would exceed the memory limit.
+    compact : bool
+        With ``store``, keep of the predictions and transitions only what the adjoint-form smoother
+        (:func:`bf_smooth`) reads: ``P_prior`` as its rows at the measured states ``(B, N, nm, nz)``
+        and ``F`` as its ship-state rows ``(B, N, nx, nz)`` (the parameter rows are the identity);
+        half the memory traffic of the full storage.  Float64 only: where the storage would be
+        float32 the full storage is kept (``EKFOutput.compact`` says which one ran).
 
     Returns
     -------
@@ -293,7 +305,8 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6, store_
     """
     # refuse what cannot fit (or store in float32 where only that fits)
     sdt = _memory.check(*prob.shape[:2], prob.shape[2] + prob.shape[3], prob.shape[4], store, store_dtype)
-    fast = _run_compiled(prob, store, nis_limit, sdt)  # the compiled kernel (same semantics), when available
+    compact = bool(compact and store and sdt is np.float64)
+    fast = _run_compiled(prob, store, nis_limit, sdt, compact)  # the compiled kernel (same semantics), when available
     if fast is not None:
         return fast
     model = prob.model
@@ -353,14 +366,15 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6, store_
         z_post = np.empty((B, N, nz))
         P_post = np.empty((B, N, nz, nz), dtype=sdt)
         z_prior = np.empty((B, N, nz))
-        P_prior = np.empty((B, N, nz, nz), dtype=sdt)
-        Fs = np.zeros((B, N, nz, nz), dtype=sdt)
-        Fs[:, :, nx:, nx:] = np.eye(ne)
-        z_prior[:, 0], P_prior[:, 0] = z, P
-    if not store or sdt is not np.float64:  # the transition is computed in float64 (then stored rounded)
+        P_prior = np.empty((B, N, nm, nz) if compact else (B, N, nz, nz), dtype=sdt)
+        Fs = np.zeros((B, N, nx, nz) if compact else (B, N, nz, nz), dtype=sdt)
+        if not compact:
+            Fs[:, :, nx:, nx:] = np.eye(ne)
+        z_prior[:, 0], P_prior[:, 0] = z, P[:, mi] if compact else P
+    F_in_store = store and sdt is np.float64 and not compact
+    if not F_in_store:  # the transition is computed in float64 (then stored rounded, or its ship rows)
         Fbuf = np.zeros((B, nz, nz))
         Fbuf[:, nx:, nx:] = np.eye(ne)
-    F_in_store = store and sdt is np.float64
     innov = np.full((B, N, nm), np.nan)
     S_diag = np.full((B, N, nm), np.nan)
     nis = np.full((B, N), np.nan)
@@ -502,15 +516,15 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6, store_
             if store:
                 F[diverged] = np.nan
         if store and not F_in_store:
-            Fs[:, k] = F
+            Fs[:, k] = F[:, :nx] if compact else F
         z, P = zn, Pn
         if store:
-            z_prior[:, k + 1], P_prior[:, k + 1] = z, P
+            z_prior[:, k + 1], P_prior[:, k + 1] = z, P[:, mi] if compact else P
             if any_div:
                 z_prior[diverged, k + 1] = np.nan
                 P_prior[diverged, k + 1] = np.nan
     if store:
-        Fs[:, N - 1] = eye
+        Fs[:, N - 1] = eye[:nx] if compact else eye
         if k_end < N:  # every member diverged: nothing after was computed
             for a in (z_post, P_post, z_prior, P_prior, Fs):
                 a[:, k_end:] = np.nan
@@ -519,7 +533,7 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6, store_
             for b in np.flatnonzero(diverged):
                 Fs[b, diverged_at[b]:] = np.nan
     return _output((z_post, P_post, z_prior, P_prior, Fs) if store else None, z_good, P_good, innov, S_diag, nis,
-                   logdet_k, gated, diverged, diverged_at, message)
+                   logdet_k, gated, diverged, diverged_at, message, compact)
 
 
 def rts_smooth(out: EKFOutput, chunk: int = 256) -> tuple[np.ndarray, np.ndarray]:
@@ -537,8 +551,8 @@ def rts_smooth(out: EKFOutput, chunk: int = 256) -> tuple[np.ndarray, np.ndarray
     -------
     z_s : (B, N, nz), P_s : (B, N, nz, nz)
     """
-    if out.z_post is None:
-        raise ValueError("rts_smooth needs an EKF run with store=True")
+    if out.z_post is None or out.compact:
+        raise ValueError("rts_smooth needs an EKF run with store=True (and not compact)")
     fast = _smooth_compiled(out)  # compiled backward recursion, when available
     if fast is not None:
         return fast
@@ -564,6 +578,102 @@ def rts_smooth(out: EKFOutput, chunk: int = 256) -> tuple[np.ndarray, np.ndarray
     return zs, Ps
 
 
+def bf_smooth(out: EKFOutput, R: np.ndarray, meas_idx, nx: int, chunk: int = 256):
+    """The same smoother as :func:`rts_smooth` in Bryson-Frazier (adjoint) form, returning the smoothed
+    means, the ship states' smoothed variances at every sample and the whole smoothed covariance at
+    sample 0 -- what the identifier reports -- at a fraction of the cost: no inverse of the predicted
+    covariance and no full covariance per sample.
+
+    Backwards from ``lam = 0, Lam = 0`` at the last sample, with ``Pf``, ``Pp``, ``F`` the stored filter
+    quantities (:class:`EKFOutput`) and the accepted channels of each sample (finite innovation, not
+    gated)::
+
+        zs_k = zf_k + Pf_k lam_k,          Ps_k = Pf_k - Pf_k Lam_k Pf_k
+        lam~ = lam + H^T (S^-1 e - K^T lam),  Lam~ = (I - K H)^T Lam (I - K H) + H^T S^-1 H   (update at k)
+        lam_{k-1} = F_{k-1}^T lam~,          Lam_{k-1} = F_{k-1}^T Lam~ F_{k-1}                (transition)
+
+    with ``S = H Pp_k H^T + R`` and ``K = Pp_k H^T S^-1`` the filter's gain (Bierman 1977, the modified
+    Bryson-Frazier smoother; equal to the RTS recursion in exact arithmetic for the filter's
+    optimal-gain update).  Relies on the transition's parameter rows being the identity (the random
+    walks of the augmented state), as :func:`run_ekf` stores them.
+
+    Parameters
+    ----------
+    out : EKFOutput of a run with ``store=True`` (float64 storage, full or ``compact``)
+    R : (B, nm) measurement noise variances of that run (``EKFProblem.R``)
+    meas_idx : (nm,) state index of each channel
+    nx : number of ship states (the first ``nx`` of the augmented state)
+
+    Returns
+    -------
+    zs : (B, N, nz), var_x : (B, N, nx), Ps0 : (B, nz, nz) -- NaN for a member that diverged.
+    """
+    if out.z_post is None:
+        raise ValueError("bf_smooth needs an EKF run with store=True")
+    R = np.ascontiguousarray(R, dtype=float)
+    acc = np.isfinite(out.innov) & ~out.gated
+    fns = _jit.compiled(_kernel.SMOOTHER, fastmath=_kernel.FASTMATH)
+    B, N, nz = out.z_post.shape
+    nm = R.shape[1]
+    # the rows of the stored P_prior at the measured states (all of them, in channel order, when compact)
+    pp_rows = np.arange(nm) if out.compact else np.ascontiguousarray(meas_idx, dtype=np.int64)
+    if fns is not None:
+        c = lambda a: np.ascontiguousarray(a, dtype=float)  # noqa: E731
+        zs, var_x, Ps0 = np.empty((B, N, nz)), np.empty((B, N, nx)), np.empty((B, nz, nz))
+        fns["bf_batch"](c(out.z_post), c(out.P_post), c(out.P_prior), pp_rows, c(out.F), c(out.innov), acc, R,
+                        np.ascontiguousarray(meas_idx, dtype=np.int64), int(nx), zs, var_x, Ps0)
+        return zs, var_x, Ps0
+    zs, var_x, Ps0 = np.full((B, N, nz), np.nan), np.full((B, N, nx), np.nan), np.full((B, nz, nz), np.nan)
+    good = np.flatnonzero(np.isfinite(out.z_post[:, -1]).all(axis=1))
+    if good.size == 0:
+        return zs, var_x, Ps0
+    pick = (lambda a: a) if good.size == B else (lambda a: a[good])  # noqa: E731
+    zf, Pf, Pp, F, innov, acc, R = (pick(a) for a in (out.z_post, out.P_post, out.P_prior, out.F, out.innov, acc, R))
+    Bg = zf.shape[0]
+    mi = _index_or_slice(meas_idx, nz)
+    mi_rows = mi if isinstance(mi, slice) else mi[:, None]
+    rows = slice(None) if out.compact else mi
+    eye_m = np.eye(nm)
+    F_full = np.zeros((Bg, nz, nz))  # the transition with its identity parameter rows (the ship rows stored)
+    F_full[:, nx:, nx:] = np.eye(nz - nx)
+    zs_g, var_g, Ps0_g = np.empty((Bg, N, nz)), np.empty((Bg, N, nx)), np.empty((Bg, nz, nz))
+    lam, Lam = np.zeros((Bg, nz)), np.zeros((Bg, nz, nz))
+    hi = N
+    while hi > 0:
+        lo = max(0, hi - chunk)
+        # gains, S^-1 e and S^-1 of samples lo..hi-1 in one stacked solve; a channel not accepted is a
+        # decoupled unit row of S with zero right-hand sides (its K, S^-1 e and S^-1 entries are zero)
+        m = acc[:, lo:hi]
+        PH = Pp[:, lo:hi][:, :, rows, :] * m[..., None]
+        S = PH[..., mi] * m[..., None, :] + np.where(m, R[:, None, :], 1.0)[..., None] * eye_m
+        e = np.where(m, innov[:, lo:hi], 0.0)
+        X = np.linalg.solve(S, np.concatenate((PH, e[..., None], eye_m * m[..., None]), axis=-1))
+        for k in range(hi - 1, lo - 1, -1):
+            Pfk = Pf[:, k]
+            zs_g[:, k] = zf[:, k] + (Pfk @ lam[:, :, None])[:, :, 0]
+            Pfx = Pfk[:, :nx]
+            var_g[:, k] = np.diagonal(Pfx[:, :, :nx], axis1=1, axis2=2) - ((Pfx @ Lam) * Pfx).sum(axis=2)
+            if k == 0:
+                Ps0_g[:] = Pfk - Pfk @ Lam @ Pfk
+                Ps0_g[:] = 0.5 * (Ps0_g + Ps0_g.transpose(0, 2, 1))
+                break
+            Xk = X[:, k - lo]
+            Kt, a, Si = Xk[:, :, :nz], Xk[:, :, nz], Xk[:, :, nz + 1:]
+            LK = Lam @ Kt.transpose(0, 2, 1)  # (B, nz, nm)
+            lam[:, mi] += a - (Kt @ lam[:, :, None])[:, :, 0]
+            Lam[:, :, mi] -= LK
+            Lam[:, mi, :] -= LK.transpose(0, 2, 1)
+            Lam[:, mi_rows, mi] += Kt @ LK + Si
+            F_full[:, :nx] = F[:, k - 1, :nx]
+            Fk = F_full
+            lam = (lam[:, None, :] @ Fk)[:, 0]
+            Lam = Fk.transpose(0, 2, 1) @ Lam @ Fk
+            Lam = 0.5 * (Lam + Lam.transpose(0, 2, 1))
+        hi = lo
+    zs[good], var_x[good], Ps0[good] = zs_g, var_g, Ps0_g
+    return zs, var_x, Ps0
+
+
 def _psd_solve(A: np.ndarray, Bm: np.ndarray) -> np.ndarray:
     """Solve ``A X = B`` for stacked symmetric PSD ``A (..., n, n)``, robust to singular blocks.
 
@@ -576,7 +686,7 @@ def _psd_solve(A: np.ndarray, Bm: np.ndarray) -> np.ndarray:
         return np.linalg.pinv(A, hermitian=True) @ Bm
 
 
-def _run_compiled(prob, store: bool, nis_limit: float, store_dtype=np.float64):
+def _run_compiled(prob, store: bool, nis_limit: float, store_dtype=np.float64, compact: bool = False):
     """:func:`run_ekf` on the compiled kernel (:mod:`shipid._kernel`), or ``None`` when it is not available
     (numba off, the model has no compiled equations, or a method the kernel does not implement)."""
     if prob.method not in _kernel.METHODS:
@@ -609,7 +719,9 @@ def _run_compiled(prob, store: bool, nis_limit: float, store_dtype=np.float64):
     nan = lambda *shape: np.full(shape, np.nan)  # noqa: E731
     if store:  # every entry is written by the kernel (np.empty: the pages are touched once)
         z_post, z_prior = np.empty((B, N, nz)), np.empty((B, N, nz))
-        P_post, P_prior, Fs = (np.empty((B, N, nz, nz), dtype=store_dtype) for _ in range(3))
+        P_post = np.empty((B, N, nz, nz), dtype=store_dtype)
+        P_prior = np.empty((B, N, nm, nz) if compact else (B, N, nz, nz), dtype=store_dtype)
+        Fs = np.empty((B, N, nx, nz) if compact else (B, N, nz, nz), dtype=store_dtype)
     else:
         z_post = z_prior = np.empty((1, 1, nz))
         P_post = P_prior = Fs = np.empty((1, 1, nz, nz))
@@ -625,13 +737,13 @@ def _run_compiled(prob, store: bool, nis_limit: float, store_dtype=np.float64):
         np.ascontiguousarray(prob.est_idx, dtype=np.int64), f64(prob.scale),
         np.ascontiguousarray(prob.meas_idx, dtype=np.int64), f64(prob.model._kernel_constants()), nx,
         _kernel.METHODS[prob.method], prob.input_hold == "foh", -1.0 if prob.gate is None else float(prob.gate),
-        int(prob.gate_run), float(nis_limit), bool(store),
+        int(prob.gate_run), float(nis_limit), bool(store), bool(compact),
         z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated, div, div_at, d2_at)
     message = ["ok"] * B
     for b in np.flatnonzero(div):
         message[b] = _divergence_message(int(div_at[b]), t[b, div_at[b]], d2_at[b])
     return _output((z_post, P_post, z_prior, P_prior, Fs) if store else None, z_fin, P_fin, innov, S_diag, nis,
-                   logdet, gated, div, div_at, message)
+                   logdet, gated, div, div_at, message, compact)
 
 
 

@@ -11,7 +11,7 @@ import pandas as pd
 from ..models.base import Model
 from .data import LogArrays, frozen_mask, noise_std_from_data, prepare_logs, resolution_std
 from .diagnostics import coefficient_plausibility, consistency, identifiability
-from .ekf import EKFOutput, EKFProblem, rts_smooth, run_ekf
+from .ekf import EKFOutput, EKFProblem, bf_smooth, rts_smooth, run_ekf
 from .initial import equation_error_fit
 
 __all__ = ["EKFIdentifier", "NotFittedError"]
@@ -326,10 +326,13 @@ class EKFIdentifier:
 
         # noise levels raised where the first-pass innovations are wider than predicted
         factors = np.ones(len(meas))
+        first = None  # a stored first pass that equals pass 1's filter (same problem): not run twice
         if self.adapt_noise:
             free = np.array([m not in given_sig for m in meas])
             for _ in range(3):
-                out0 = run_ekf(self._problem(theta0 / scale), store=False)
+                first = out0 = prob0 = None  # (released first: two stored runs need not fit at once)
+                prob0 = self._problem(theta0 / scale)
+                out0 = run_ekf(prob0, store=not self.tune_noise, compact=True)
                 e, S = out0.innov[0], out0.S_diag[0]
                 f = np.ones(len(meas))
                 for j in np.flatnonzero(free):
@@ -339,6 +342,7 @@ class EKFIdentifier:
                         f[j] = spread / np.sqrt(np.median(S[ok, j]))
                 f = np.where(f > 1.5, f, 1.0)
                 if np.all(f == 1.0):
+                    first = None if self.tune_noise else (prob0, out0)
                     break
                 sig = sig * f
                 factors *= f
@@ -360,16 +364,20 @@ class EKFIdentifier:
 
             passes = tqdm(passes, desc="EKF passes", unit="pass")
         history = []
-        good = None  # (prob, out, zs, Ps) of the last pass that did not diverge
+        good = None  # (prob, out, zs, var_x, Ps0) of the last pass that did not diverge
         self.pass_messages_ = []
         for k in passes:
-            prob = self._problem(theta_s, q_mult, r_mult)
-            out = run_ekf(prob, store=True)
+            if k == 0 and first is not None:
+                prob, out = first
+            else:
+                prob = self._problem(theta_s, q_mult, r_mult)
+                out = run_ekf(prob, store=True, compact=True)
+            first = None
             if out.diverged[0]:  # the kernel stopped at the divergence sample; smoothing it cannot help
                 self.pass_messages_.append(f"pass {k + 1}: {out.message[0]} (filter stopped there, smoother skipped)")
                 break
-            zs, Ps = rts_smooth(out)
-            good = (prob, out, zs, Ps)
+            zs, var_x, Ps0 = self._smooth(out, prob)
+            good = (prob, out, zs, var_x, Ps0)
             theta_s = zs[0, 0, nx:].copy()
             history.append(theta_s * scale)
         if good is None:
@@ -378,15 +386,17 @@ class EKFIdentifier:
             nz = nx + len(est_idx)
             zs = np.broadcast_to(prob.z0[:, None, :], (1, prob.t.shape[1], nz)).copy()
             zs[0, :, :nx] = out.z_post[0, :, :nx]
-            Ps = np.broadcast_to(prob.P0[:, None], (1, prob.t.shape[1], nz, nz)).copy()
+            Ps0 = prob.P0.copy()
+            var_x = np.broadcast_to(np.diagonal(Ps0[:, :nx, :nx], axis1=1, axis2=2)[:, None],
+                                    (1, prob.t.shape[1], nx)).copy()
         else:
-            prob, out_good, zs, Ps = good
+            prob, out_good, zs, var_x, Ps0 = good
             if out_good is not out:  # a later pass diverged: report the last good one
                 warnings.warn(f"EKF identification: {self.pass_messages_[-1]}; the result of the previous pass "
                               "is reported", RuntimeWarning, stacklevel=2)
             out = out_good
         self.problem_, self.output_ = prob, out
-        self._finish(out, zs, Ps, prob, history, used_eq, q_mult, r_mult)
+        self._finish(out, zs, var_x, Ps0, prob, history, used_eq, q_mult, r_mult)
         return self
 
     def _process_noise(self, sig, meas_idx, dt) -> np.ndarray:
@@ -524,14 +534,35 @@ class EKFIdentifier:
         table = table.drop(columns=["q_exp", "r_exp"])
         return float(best["q_mult"]), float(best["r_mult"]), table
 
-    def _finish(self, out: EKFOutput, zs, Ps, prob: EKFProblem, history, used_eq, q_mult, r_mult):
+    def _smooth(self, out: EKFOutput, prob: EKFProblem):
+        """Smoothed means ``zs (1, N, nz)``, ship-state variances ``var_x (1, N, nx)`` and the whole
+        covariance at sample 0 ``Ps0 (1, nz, nz)`` of a pass: the adjoint (Bryson-Frazier) form
+        :func:`~shipid.identify.ekf.bf_smooth`, or the RTS form where the filter stored float32
+        (differences of rounded covariances would lose too much there).  Constant parameters
+        (``param_walk=0``) have the same smoothed estimate at every sample, the filtered one at the last
+        sample: that is taken as it is (exact, where a smoother's backward differences against a wide
+        prior lose digits)."""
+        nx = self.model.nx
+        if out.compact or out.P_post.dtype == np.float64:
+            zs, var_x, Ps0 = bf_smooth(out, prob.R, prob.meas_idx, nx)
+        else:
+            zs, Ps = rts_smooth(out)
+            var_x = np.diagonal(Ps[:, :, :nx, :nx], axis1=2, axis2=3).copy()
+            Ps0 = Ps[:, 0].copy()
+            del Ps
+        if self.param_walk == 0:
+            zs[:, :, nx:] = out.z_final[:, None, nx:]
+            Ps0[:, nx:, nx:] = out.P_final[:, nx:, nx:]
+        return zs, var_x, Ps0
+
+    def _finish(self, out: EKFOutput, zs, var_x, Ps0, prob: EKFProblem, history, used_eq, q_mult, r_mult):
         s = self._setup
         model = self.model
         nx = model.nx
         est = s["est_names"]
         scale = s["scale"]
         theta_s = zs[0, 0, nx:]
-        cov_s = Ps[0, 0, nx:, nx:]
+        cov_s = Ps0[0, nx:, nx:]
         # with a random walk the smoothed parameters vary in time; report the
         # time average and the covariance at the start (equal when walk = 0)
         if self.param_walk > 0:
@@ -573,17 +604,14 @@ class EKFIdentifier:
             n = a.t.size
             sl = slice(start, start + n)
             X = zs[0, sl, :nx]
-            SD = np.sqrt(np.clip(np.diagonal(Ps[0, sl, :nx, :nx], axis1=1, axis2=2), 0, None))
-            df = pd.DataFrame(X, columns=list(model.state_names))
-            for i, nme in enumerate(model.state_names):
-                df[f"{nme}_std"] = SD[:, i]
-            df.insert(0, "time", a.t)
+            SD = np.sqrt(np.clip(var_x[0, sl], 0, None))
+            # each table built at once (column by column, pandas copies its block at every insertion)
+            names = list(model.state_names)
+            df = pd.DataFrame(np.column_stack([a.t, X, SD]), columns=["time", *names, *(f"{m}_std" for m in names)])
             df.attrs["name"] = a.name
             self.states_.append(df)
-            inn = pd.DataFrame(out.innov[0, sl], columns=s["meas"])
-            for j, nme in enumerate(s["meas"]):
-                inn[f"{nme}_S"] = out.S_diag[0, sl, j]
-            inn.insert(0, "time", a.t)
+            inn = pd.DataFrame(np.column_stack([a.t, out.innov[0, sl], out.S_diag[0, sl]]),
+                               columns=["time", *s["meas"], *(f"{m}_S" for m in s["meas"])])
             inn.attrs["name"] = a.name
             self.innovations_.append(inn)
             start += n
