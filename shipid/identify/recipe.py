@@ -428,7 +428,7 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
              start: str = "staged", neutral: bool = True, free_neutral: bool = True, dt="auto",
              max_drift_deg="auto", refine: str | None = "auto", metric_weight: float | None = None,
              n_passes: int = 2, max_nfev: int = 60, tune_noise: bool = False, progress: bool = False,
-             meas_std=None, ekf_options=None, log=None) -> RecipeFit:
+             meas_std=None, ekf_options=None, hold_unresolved: bool = True, log=None) -> RecipeFit:
     """Fit ``model`` to ``logs`` with the project's recipe (module docstring: steps 1-6).
 
     Parameters
@@ -450,6 +450,7 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
     ekf_options : dict, optional  further keyword arguments of the EKF identifier (e.g. ``input_hold``, ``gate``)
     max_nfev : int  evaluation limit of the refinement
     metric_weight : float, optional  weight of the metric residuals of ``refine="metrics"`` (:func:`refine_fit`)
+    hold_unresolved : bool  step 6's identifiable subset (:func:`refine_fit`; default True)
     log : callable, optional  called with one line per step as it happens (e.g. ``print``)
 
     Returns
@@ -604,11 +605,13 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
         step("refinement", mode, "asked")
     if mode is None:
         return fit
-    return refine_fit(fit, logs, mode, max_nfev=max_nfev, metric_weight=metric_weight, log=log)
+    return refine_fit(fit, logs, mode, max_nfev=max_nfev, metric_weight=metric_weight,
+                      hold_unresolved=hold_unresolved, log=log)
 
 
 def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: int = 60,
-               metric_weight: float | None = None, channels=None, log=None) -> RecipeFit:
+               metric_weight: float | None = None, channels=None, hold_unresolved: bool = True,
+               log=None) -> RecipeFit:
     """Step 6 of the recipe on a fitted EKF stage: a new :class:`RecipeFit` with the refinement.
 
     Parameters
@@ -621,6 +624,8 @@ def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: in
     metric_weight : float, optional  multiplier of the metric residuals (``"metrics"`` only; default
         :data:`METRIC_WEIGHT`): the objective is replay cost + ``metric_weight**2`` * sum((error/tol)**2)
     channels : sequence of str, optional  replayed channels (default: u, v, r where all logs have them)
+    hold_unresolved : bool  hold at their EKF-stage values the coefficients the solver cannot resolve
+        (:func:`shipid.identify.batch.identifiable_subset`; default True); False: refine every one
     log : callable, optional  called with one line per step
     """
     from .batch import OutputErrorRefiner
@@ -660,8 +665,18 @@ def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: in
     est_ref = list(ekf.estimated_) + [p for p in fit.free_in_refine if p not in ekf.estimated_]
     ref = OutputErrorRefiner(start_model, estimate=est_ref, channels=chans, meas_std=sstd,
                              log_weights=list(1.0 / np.maximum(nsamp, 1.0)), extra_residuals=extra,
-                             max_nfev=max_nfev).fit(grid, start=ekf)
+                             max_nfev=max_nfev, hold_unresolved=hold_unresolved).fit(grid, start=ekf)
     out.refiner = ref
+    if ref.subset_ is not None:
+        sub = ref.subset_
+        step("identifiable subset", list(ref.held_),
+             (f"held at their EKF-stage values: {', '.join(ref.held_)}" if ref.held_ else "every coefficient refined")
+             + f" -- directions of the start's scaled Jacobian with singular value below sqrt(2 ftol cost) = "
+             f"{sub['threshold']:.3g} (a change of the coefficients by their own size moves the cost by less than "
+             f"the solver's tolerance ftol = {sub['ftol']:g}); scaled J^T J condition {sub['condition']:.3g}"
+             + (f" -> {sub['condition_kept']:.3g}" if ref.held_ else ""))
+    elif not hold_unresolved:
+        step("identifiable subset", None, "off (asked): every coefficient refined")
     step("output-error", ref.message_, f"{len(est_ref)} parameters on a {dt_ref:.3g} s common grid, channels "
          f"{chans} over their spread, each log weighted 1/samples; {ref.nfev_} evaluations, cost "
          f"{ref.cost_start_:.4g} -> {ref.cost_:.4g}")
