@@ -155,3 +155,28 @@ def test_cli_metric_weight_is_checked(tmp_path, capsys):
     assert main(["fit", str(bundled_kcs_logs()[1]), "--metric-weight", "-1", "-o", str(out), "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert "--metric-weight -1" in err and "Traceback" not in err and not out.exists()
+
+
+def test_batched_zigzag_members_are_independent_of_each_other():
+    """The metric refinement differentiates closed-loop zigzags by forward differences, all parameter sets in
+    one batch.  Members whose rudder reversals fall within rounding of each other used to couple: the event
+    locator stopped on |g| < 1e-13 with g a hair below zero and fired the second member a whole step late
+    (0.33 deg of overshoot on the MARIN response-nl fit, or a missed reversal: a failed manoeuvre), which
+    made that refinement follow the BLAS thread count.  Every member of a batch must give its solo run's
+    overshoots, for perturbations down to rounding."""
+    model = get_model("mmg", "kvlcc2")
+    i = model.param_index("Nr")
+    base = model.params.copy()
+    P = [base]
+    for rel in (1e-13, 1e-12, 1e-11, 1e-10, 1e-9, 1e-8, 1e-6):
+        p = base.copy()
+        p[i] *= 1.0 + rel
+        P.append(p)
+    P = np.array(P)
+    batch = zigzag(model, 10.0, 10.0, params=P, speed=np.full(len(P), 1.2), first="starboard")
+    for b, p in enumerate(P):
+        solo = zigzag(model, 10.0, 10.0, params=p, speed=1.2, first="starboard").metrics[0]
+        got = batch.metrics[b]
+        assert got.success and solo.success
+        for k in ("overshoot1_deg", "overshoot2_deg", "time_third_execute"):
+            assert getattr(got, k) == pytest.approx(getattr(solo, k), abs=1e-7), (b, k)

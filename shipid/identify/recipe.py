@@ -296,6 +296,14 @@ def _every(log, k: int):
                     notes=list(log.notes) + [f"every {k}. sample (fit recipe)"], fmt=log.fmt)
 
 
+def _head(log, n: int):
+    """The first ``n`` samples of a log, keeping its name, ship and provenance."""
+    from ..logs import TrialLog
+
+    return TrialLog(log.data.iloc[:n].reset_index(drop=True), name=log.name, ship=log.ship, path=log.path,
+                    sha256=log.sha256, rows=log.rows[:n], units_in=log.units_in, notes=list(log.notes), fmt=log.fmt)
+
+
 def common_grid(logs, dt: float) -> list:
     """The logs resampled (linear interpolation) onto one time grid ``t = k dt`` from each log's start [s],
     all as long as the longest: past the end of a shorter log its measured channels are NaN (missing, not
@@ -425,7 +433,8 @@ def _start_model(model, params, L):
 
 
 def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estimate=None, fixed=None,
-             start: str = "staged", neutral: bool = True, free_neutral: bool = True, dt="auto",
+             start: str = "staged", neutral: bool = True, free_neutral: bool = True, estimate_neutral: bool = False,
+             dt="auto",
              max_drift_deg="auto", refine: str | None = "auto", metric_weight: float | None = None,
              n_passes: int = 2, max_nfev: int = 60, tune_noise: bool = False, progress: bool = False,
              meas_std=None, ekf_options=None, hold_unresolved: bool = True, log=None) -> RecipeFit:
@@ -442,6 +451,7 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
     start : {"staged", "given"}  staged start values (step 4) or the start model as it is
     neutral : bool  rudder neutral angle from the straight approaches (step 3), where the model has ``delta0``
     free_neutral : bool  free that angle again in the refinement (default) or keep it fixed
+    estimate_neutral : bool  start from that angle and estimate it in the EKF stage too (default False: fixed there)
     dt : "auto", int or None  step 2: ``"auto"``; an int k: every k-th sample; None: every sample
     max_drift_deg : "auto", float or None  step 2b: ``"auto"`` = :data:`LINEAR_DRIFT_DEG` for models linear in
         v and r (:func:`linear_sway_yaw`), else every sample; a number [deg]: that window for any model; None: off
@@ -548,12 +558,20 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
     if "delta0" in m0.param_names and neutral and "delta0" not in fix:
         try:
             d0, n_logs = neutral_rudder_angle(used)
-            fix["delta0"] = d0
-            if free_neutral:
-                free_in_refine.append("delta0")
-            step("neutral rudder angle", math.degrees(d0),
-                 f"deg, mean rudder of the straight approaches of {n_logs} of {len(used)} logs; fixed in the EKF "
-                 "stage, " + ("freed in the refinement" if free_neutral else "and in the refinement"))
+            if estimate_neutral:
+                m0 = m0.with_params({"delta0": d0})
+                if est is not None and "delta0" not in est:
+                    est = list(est) + ["delta0"]
+                step("neutral rudder angle", math.degrees(d0),
+                     f"deg, mean rudder of the straight approaches of {n_logs} of {len(used)} logs; the start of "
+                     "delta0, estimated in the EKF stage and the refinement")
+            else:
+                fix["delta0"] = d0
+                if free_neutral:
+                    free_in_refine.append("delta0")
+                step("neutral rudder angle", math.degrees(d0),
+                     f"deg, mean rudder of the straight approaches of {n_logs} of {len(used)} logs; fixed in the "
+                     "EKF stage, " + ("freed in the refinement" if free_neutral else "and in the refinement"))
         except ValueError as exc:
             step("neutral rudder angle", None, str(exc))
     if est is not None:
@@ -611,7 +629,7 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
 
 def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: int = 60,
                metric_weight: float | None = None, channels=None, hold_unresolved: bool = True,
-               log=None) -> RecipeFit:
+               grid_dt=None, log=None) -> RecipeFit:
     """Step 6 of the recipe on a fitted EKF stage: a new :class:`RecipeFit` with the refinement.
 
     Parameters
@@ -624,6 +642,8 @@ def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: in
     metric_weight : float, optional  multiplier of the metric residuals (``"metrics"`` only; default
         :data:`METRIC_WEIGHT`): the objective is replay cost + ``metric_weight**2`` * sum((error/tol)**2)
     channels : sequence of str, optional  replayed channels (default: u, v, r where all logs have them)
+    grid_dt : None, "log" or float  the refinement's common grid step: None (default) twice the EKF step;
+        ``"log"`` the logs' own step (full rate, ``logs`` cut to the spans the EKF used); a step [s]
     hold_unresolved : bool  hold at their EKF-stage values the coefficients the solver cannot resolve
         (:func:`shipid.identify.batch.identifiable_subset`; default True); False: refine every one
     log : callable, optional  called with one line per step
@@ -647,8 +667,23 @@ def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: in
     if not ekf.success_:
         step("refinement", "skipped", f"the EKF stage failed ({ekf.message_}): no refinement from a diverged filter")
         return out
-    dt_ref = 2.0 * float(np.median(np.diff(used[0].time)))
-    grid = common_grid(used, dt_ref)
+    src = used
+    if grid_dt is None:
+        dt_ref = 2.0 * float(np.median(np.diff(used[0].time)))
+    elif grid_dt == "log":
+        # full rate: the training logs themselves over the spans the EKF used (same start, same end)
+        by_name = {lg.name: lg for lg in logs}
+        src = []
+        for u_lg in used:
+            full = by_name.get(u_lg.name, u_lg)
+            keep = np.flatnonzero(full.time <= u_lg.time[-1] + 1e-9)
+            src.append(full if keep.size == len(full) else _head(full, keep.size))
+        dt_ref = float(min(np.median(np.diff(lg.time)) for lg in src))
+    else:
+        dt_ref = float(grid_dt)
+        if not (np.isfinite(dt_ref) and dt_ref > 0):
+            raise ValueError(f"grid_dt={grid_dt!r}: give None, 'log' or a positive step in seconds")
+    grid = common_grid(src, dt_ref)
     chans = list(channels) if channels is not None else [c for c in ("u", "v", "r")
                                                           if all(c in lg.channels for lg in grid)]
     sstd = {c: float(np.nanstd(np.concatenate([lg[c] for lg in grid]))) for c in chans}
