@@ -114,7 +114,10 @@ def test_refine_fit_reuses_one_ekf_stage_and_weighs_the_metrics():
     m1 = refine_fit(ekf, logs, "metrics", metric_weight=1.0, **kw)
     assert ekf.refiner is None and [s["step"] for s in ekf.steps][-1] == "refinement"  # the EKF stage untouched
     np.testing.assert_array_equal(m0.refiner.coef_.to_numpy(), oe.refiner.coef_.to_numpy())
-    assert "weight 1" in m1.steps[-2]["reason"] and "weight 0" in m0.steps[-2]["reason"]
+    def reason(fit, name):
+        return next(s["reason"] for s in fit.steps if s["step"] == name)
+
+    assert "weight 1" in reason(m1, "metric residuals") and "weight 0" in reason(m0, "metric residuals")
     assert m1.result().settings["metric_weight"] == 1.0 and "metric_weight" not in oe.result().settings
     f, used = metric_residuals(ekf.to_model(), logs)
     assert len(used) == 2
@@ -180,3 +183,45 @@ def test_batched_zigzag_members_are_independent_of_each_other():
         assert got.success and solo.success
         for k in ("overshoot1_deg", "overshoot2_deg", "time_third_execute"):
             assert getattr(got, k) == pytest.approx(getattr(solo, k), abs=1e-7), (b, k)
+
+
+def test_identifiable_subset_holds_what_the_solver_cannot_resolve():
+    """identifiable_subset: a direction of the scaled Jacobian along which a change of the coefficients by
+    their own size moves the cost by less than ftol * cost (singular value below sqrt(2 ftol cost)) is held,
+    by subset selection (the column that carries it); a well-conditioned Jacobian keeps every column."""
+    from shipid.identify.batch import FTOL, identifiable_subset
+
+    rng = np.random.default_rng(0)
+    J = rng.normal(size=(200, 4))
+    keep, held, info = identifiable_subset(J, cost=1.0)
+    assert list(keep) == [0, 1, 2, 3] and held.size == 0
+    assert info["threshold"] == pytest.approx(np.sqrt(2 * FTOL * 1.0))
+    assert info["condition"] == pytest.approx(info["condition_kept"]) and np.isfinite(info["condition"])
+    # column 3 = column 1 + a change far below the threshold: one of the pair is held, the rest kept
+    J2 = np.column_stack([J[:, :3], J[:, 1] + 1e-9 * rng.normal(size=200)])
+    keep, held, info = identifiable_subset(J2, cost=1.0)
+    assert held.size == 1 and held[0] in (1, 3) and 0 in keep and 2 in keep
+    assert info["condition"] > 1e15 and info["condition_kept"] < 1e3
+    # the same pair, resolvable: its difference moves the cost by more than ftol * cost
+    J3 = np.column_stack([J[:, :3], J[:, 1] + 1e-2 * rng.normal(size=200)])
+    assert identifiable_subset(J3, cost=1.0)[1].size == 0
+    # a column with no effect at all is held
+    J4 = np.column_stack([J, np.zeros(200)])
+    assert list(identifiable_subset(J4, cost=1.0)[1]) == [4]
+
+
+def test_refinement_covariance_is_positive_semidefinite_and_its_condition_finite():
+    """The refinement's covariance comes from the SVD of J (the pseudo-inverse of J^T J gave rounding-negative
+    eigenvalues at condition ~1e13, which the diagnostics reported as a condition number of ~1e291)."""
+    from shipid.datasets import bundled_kcs_logs
+    from shipid.identify.recipe import fit_logs, refine_fit
+    from shipid.logs import read_log
+
+    logs = [read_log(p) for p in bundled_kcs_logs()[1:3]]
+    ekf = fit_logs(logs, "kcs-response", n_passes=1, refine=None)
+    ref = refine_fit(ekf, logs, "output-error", max_nfev=3).refiner
+    cov = ref.cov_.to_numpy() / np.outer(ref.coef_std_[ref.estimated_], ref.coef_std_[ref.estimated_])
+    assert np.linalg.eigvalsh(cov).min() > -1e-9
+    cond = ref.diagnostics_["condition_number"]
+    assert np.isfinite(cond) and cond < 1e20
+    assert ref.subset_ is not None and ref.result().settings["hold_rule"]["ftol"] == 1e-8
