@@ -46,7 +46,7 @@ def register(sub) -> None:
                    help="refine every estimated coefficient (default: hold at their EKF values those the refinement "
                         "cannot resolve: singular values of its scaled Jacobian below sqrt(2 ftol cost))")
     p.add_argument("--dt", default="auto", metavar="auto|K",
-                   help="use every K-th sample; default auto: >= 50 steps per fastest time constant of the model")
+                   help="use every K-th sample; default auto: >= 25 steps per fastest time constant of the model (mmg: 50)")
     p.add_argument("--max-drift", default="auto", metavar="auto|DEG|none",
                    help="models linear in v and r (kcs-response): use each log until its drift angle first exceeds "
                         "DEG (default auto: 10 deg for such models, every sample for the others; none: every sample)")

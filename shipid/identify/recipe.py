@@ -9,10 +9,10 @@ switchable steps (each one recorded in the result's ``settings["recipe"]``, with
 2. **Sampling step** (``dt="auto"``) -- every k-th sample, k the largest with ``k * dt_log`` at most
    1/:data:`SAMPLES_PER_TAU` of the fastest time constant of the start model's sway-yaw-surge
    dynamics linearised at the logs' approach speed (the eigenvalues of ``jac_x``); never finer than
-   the log.  (For the MARIN KVLCC2 runs: tau = 13.7 s, dt_log = 0.135 s -> k = 2 for ``mmg``, every sample
-   for ``response-nl`` (tau = 10.7 s); for the 4.36 m KCS logs: tau = 0.83 s -> every sample.)  50 steps
-   per time constant were chosen by leave-one-run-out within the KVLCC2 training runs (session 6; 25 before,
-   which gave every 4th sample, the value the KVLCC2 study had set by hand).
+   the log; ``mmg``: 1/50 (:data:`DEFAULT_SAMPLES_PER_TAU`, chosen by leave-one-run-out within the KVLCC2
+   training runs in session 6).  (For the MARIN KVLCC2 runs: tau = 13.7 s, dt_log = 0.135 s -> k = 2 for
+   ``mmg`` (4 at 25, the value the KVLCC2 study had set by hand), every 3rd sample for ``response-nl``
+   (tau = 10.7 s); for the 4.36 m KCS logs: tau = 0.83 s -> every sample.)
 2b. **Linear range** (``max_drift_deg="auto"``) -- a model whose sway and yaw equations are linear in
    ``v`` and ``r`` (:func:`linear_sway_yaw`: ``kcs-response``) holds for small drift only: linear hull
    derivatives describe the forces up to drift angles of about :data:`LINEAR_DRIFT_DEG`, beyond which
@@ -56,15 +56,19 @@ import pandas as pd
 
 __all__ = ["fit_logs", "RecipeFit", "neutral_rudder_angle", "approach_segment", "choose_sampling", "common_grid",
            "linear_sway_yaw", "linear_window", "LINEAR_DRIFT_DEG",
-           "metric_residuals", "refine_fit", "METRIC_TOL", "METRIC_WEIGHT", "SAMPLES_PER_TAU", "REFINE_MODES", "AUTO_REFINE"]
+           "metric_residuals", "refine_fit", "METRIC_TOL", "METRIC_WEIGHT", "SAMPLES_PER_TAU", "DEFAULT_SAMPLES_PER_TAU", "REFINE_MODES", "AUTO_REFINE"]
 
-#: Samples per fastest time constant of the model at the EKF step.  50: chosen by leave-one-run-out within the
-#: four KVLCC2 training runs (session 6, ``studies.kvlcc2.RECIPE_VARIANTS_6``, rule ``LORO_RULE_6`` fixed before
-#: any variant ran; the held-out zz+-20 not read): the EKF on every 2nd MARIN sample (what 50 gives for mmg's
-#: 13.7 s) scored 1.82 against 2.03 for every 4th (25, the value before) and 2.10 for every 8th.  RK4 is
-#: accurate at either step (h = tau/25: ~1e-7 per step); the finer step gives the filter twice the
-#: measurement updates per time constant.  One hull, one model (mmg) decided it.
-SAMPLES_PER_TAU = 50
+#: Samples per fastest time constant of the model at the EKF step (RK4 with h = tau/25 is accurate to ~1e-7
+#: per step); :data:`DEFAULT_SAMPLES_PER_TAU` overrides it per model.
+SAMPLES_PER_TAU = 25
+#: Per-model samples per time constant.  ``mmg``: 50, chosen by leave-one-run-out within the four KVLCC2
+#: training runs (session 6, ``studies.kvlcc2.RECIPE_VARIANTS_6``, rule ``LORO_RULE_6`` fixed before any variant
+#: ran; the held-out zz+-20 not read): the EKF on every 2nd MARIN sample (what 50 gives for its 13.7 s) scored
+#: 1.82 against 2.03 for every 4th (25) and 2.10 for every 8th; the finer step gives the filter twice the
+#: measurement updates per time constant.  The round ran on mmg only, so the other models keep 25: at 50
+#: (every MARIN sample) the kcs-response refinement stops on its 60-evaluation limit (exit 1) on the training
+#: runs.  One hull decided it.
+DEFAULT_SAMPLES_PER_TAU = {"mmg": 50}
 #: Metric residual scales of the ``"metrics"`` refinement: tactical diameter [%], first / second overshoot [deg]
 #: (a model off by this much pays as much as a replay error the size of the signal).
 METRIC_TOL = {"tactical_diameter_L": 5.0, "overshoot1_deg": 2.0, "overshoot2_deg": 3.0}
@@ -215,8 +219,11 @@ def _approach_speed(logs) -> float:
     return float(np.median(speeds))
 
 
-def choose_sampling(model, logs, samples_per_tau: int = SAMPLES_PER_TAU) -> tuple[int, str]:
-    """Every how many samples of the logs the EKF uses, and why (see the module docstring, step 2)."""
+def choose_sampling(model, logs, samples_per_tau: int | None = None) -> tuple[int, str]:
+    """Every how many samples of the logs the EKF uses, and why (see the module docstring, step 2);
+    ``samples_per_tau`` default: :data:`DEFAULT_SAMPLES_PER_TAU` for the model, else :data:`SAMPLES_PER_TAU`."""
+    if samples_per_tau is None:
+        samples_per_tau = DEFAULT_SAMPLES_PER_TAU.get(model.name, SAMPLES_PER_TAU)
     dts = [float(np.median(np.diff(lg.time))) for lg in logs if lg.time.size > 1]
     dt_log = max(dts)
     try:
