@@ -169,15 +169,16 @@ LORO_RULE_6 = ("lowest worst-fold goal-normalised error wins; replaces the defau
 
 
 def leave_one_run_out_recipes(runs: dict[str, TrialLog], name: str = "mmg", variants=None, train=TRAIN,
-                              log=None) -> pd.DataFrame:
+                              folds=None, log=None) -> pd.DataFrame:
     """As :func:`leave_one_run_out_refinements` for variants of the whole recipe (:data:`RECIPE_VARIANTS_6`:
     ``fit`` options of ``fit_logs`` with ``refine=None``, then ``refine`` options of ``refine_fit``); one EKF
     stage per fold and distinct ``fit`` options.  One row per (variant, left-out run); the held-out runs are
-    never read (pass runs loaded with ``load_runs(folder, names=TRAIN)``)."""
+    never read (pass runs loaded with ``load_runs(folder, names=TRAIN)``).  ``folds``: the left-out runs to do
+    (default all of ``train``)."""
     import json
 
     rows = []
-    for out in train:
+    for out in (folds or train):
         keep = [k for k in train if k != out]
         stages = {}
         for label, opts in (variants or RECIPE_VARIANTS_6).items():
