@@ -246,3 +246,29 @@ def test_refinement_covariance_is_positive_semidefinite_and_its_condition_finite
     cond = ref.diagnostics_["condition_number"]
     assert np.isfinite(cond) and cond < 1e20
     assert ref.subset_ is not None and ref.result().settings["hold_rule"]["ftol"] == 1e-8
+
+
+def test_cli_refine_all_switches_the_identifiable_subset_off(tmp_path):
+    """shipid fit --refine-all: the refinement fits every estimated coefficient and says so in the recipe steps.
+    By default the step holds what the solver cannot resolve -- on one constant-rpm turning circle the surge
+    term a3 (a unit change moves the cost by less than ftol * cost) -- at its EKF-stage value, reports it with
+    the threshold and the condition numbers before/after, and the rest is refined."""
+    from shipid.cli import main
+    from shipid.datasets import bundled_kcs_logs
+    from shipid.identify.result import load_result
+
+    log = str(bundled_kcs_logs()[1])
+    base = ["fit", log, "--refine", "output-error", "--max-nfev", "2", "--passes", "1", "--no-progress"]
+    assert main([*base, "-o", str(tmp_path / "a.json")]) in (0, 1, 3)
+    assert main([*base, "--refine-all", "-o", str(tmp_path / "b.json")]) in (0, 1, 3)
+    a, b = load_result(tmp_path / "a.json"), load_result(tmp_path / "b.json")
+    step_a = next(s for s in a.settings["recipe"] if s["step"] == "identifiable subset")
+    step_b = next(s for s in b.settings["recipe"] if s["step"] == "identifiable subset")
+    held = a.settings["held"]
+    assert held == step_a["value"] == ["a3"] and "sqrt(2 ftol cost)" in step_a["reason"]
+    rule = a.settings["hold_rule"]
+    assert rule["ftol"] == 1e-8 and rule["threshold"] > 0 and rule["condition_after"] < rule["condition_before"]
+    assert a.coef["a3"] == a.settings["ekf_stage"]["coef"]["a3"] and a.coef_std["a3"] == 0.0
+    assert "a3" not in a.settings["estimated"] and "a3" in b.settings["estimated"]
+    assert step_b["value"] is None and "off (asked)" in step_b["reason"] and "held" not in b.settings
+    assert b.coef["a3"] != a.coef["a3"]

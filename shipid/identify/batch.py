@@ -352,14 +352,13 @@ class OutputErrorRefiner:
         else:
             cov_s = np.full((free.size, free.size), np.nan)
         theta = full(sol.x) * scale
-        scale = scale[free]
-        cov = cov_s * np.outer(scale, scale)
+        scale_f = scale[free]  # (the closures above keep the full scale and est_idx)
+        cov = cov_s * np.outer(scale_f, scale_f)
         coef = p0.copy()
         coef[est_idx] = theta
-        est_idx = est_idx[free]
         self.coef_ = pd.Series(coef, index=list(model.param_names), name="coef")
         std = np.zeros(model.np)
-        std[est_idx] = np.sqrt(np.clip(np.diag(cov), 0, None))
+        std[est_idx[free]] = np.sqrt(np.clip(np.diag(cov), 0, None))
         self.coef_std_ = pd.Series(std, index=list(model.param_names), name="coef_std")
         self.cov_ = pd.DataFrame(cov, index=names, columns=names)
         self.estimated_ = names
@@ -384,7 +383,7 @@ class OutputErrorRefiner:
             self.message_ = (f"started from a diverged EKF fit ({getattr(start, 'message_', 'diverged')}); "
                              f"refinement reported as failed (optimiser: {sol.message})")
         if start is not None and hasattr(start, "prior_std_"):
-            prior_cov_s = np.diag((start.prior_std_.reindex(names).to_numpy() / scale) ** 2)
+            prior_cov_s = np.diag((start.prior_std_.reindex(names).to_numpy() / scale_f) ** 2)
         else:
             prior_cov_s = np.eye(len(names)) * max(1.0, 100 * np.max(np.diag(cov_s)))
         notes = list(model.identifiability_notes(arrays, names))
