@@ -331,12 +331,22 @@ def _rk4_law_step(f, law, t, x, h):
                     up = gm >= 0
                     hi, ghi = np.where(first & up, ths, hi), np.where(first & up, gm, np.where(first & ~up, ghi * 0.5, ghi))
                     lo, glo = np.where(first & ~up, ths, lo), np.where(first & ~up, gm, np.where(first & up, glo * 0.5, glo))
-                    if np.all(hi[first] - lo[first] < 1e-12) or np.all(np.abs(gm[first]) < 1e-13):
+                    if np.all(hi[first] - lo[first] < 1e-12):
+                        break
+                    if np.all(np.abs(gm[first]) < 1e-13):
+                        # located (g zero to rounding) at ths, also when gm is a hair below zero: the event is
+                        # there, not at the bracket's upper end (which may still be the step end, and a member
+                        # crossing just after another one's event then fired a whole step late)
+                        hi = np.where(first, ths, hi)
                         break
                 th_ev = float(np.min(hi[cross]))
                 hs = th_ev * hs
                 xn = rk4_map(f, t, x, law.inputs(t + 0.5 * hs, x), hs)
-                mask = cross & (hi <= th_ev + 1e-9)
+                # every member whose event function has reached zero by the event time fires there: a member
+                # crossing within rounding of the located one (its own bracket not refined) would otherwise
+                # start the next sub-step already past zero and never fire (batched zigzags of nearly equal
+                # parameter sets -- a forward-difference Jacobian -- then missed a rudder reversal)
+                mask = cross & ((hi <= th_ev + 1e-9) | (law.event(t + hs, xn) >= 0))
                 law.on_event(t + hs, xn, mask)
         t, x = t + hs, xn
     return x

@@ -5,7 +5,8 @@ the CLI exactly as a user types it: the fit never diverges, exits 0 (consistent)
 verdict: measured data have physics and sensors the models lack), never 1 (a refinement stopped on its
 evaluation limit) or 4, and its damping derivatives have their physical signs -- ``mmg``: Yv, Nv, Nr < 0;
 the response models: b1, c2 < 0 and c3 > 0 (the rudder's yaw moment with shipid's starboard-positive
-rudder).  Also the recipe's linear-range step that makes ``kcs-response`` right (its root cause).
+rudder); for ``response-nl``, whose linear damping is b1 + b5 |u| and c2 + c5 |u|, those sums at the approach
+speed (b1 alone is positive there: see the parametrisation's comment).  Also the recipe's linear-range step that makes ``kcs-response`` right (its root cause).
 """
 from __future__ import annotations
 
@@ -43,9 +44,11 @@ def _fit(tmp_path, *model_args):
 @needs_marin
 @pytest.mark.parametrize("model_args, negative, positive", [
     (("--model", "kcs-response"), ("b1", "c2"), ("c3",)),
-    # response-nl: b1 is not asserted.  Its 26-term fit is ill-conditioned on these runs (scaled covariance
-    # condition ~1e291) and b1's sign follows floating-point rounding: +0.0167 with one BLAS thread, -0.0015
-    # with two (the EKF stage: +0.021).  Issue 11's "b1 < 0" is therefore not met for response-nl (left open).
+    # response-nl: its linear sway damping is b1 + b5 |u| (and yaw c2 + c5 |u|); asserted negative at the
+    # approach speed below.  b1 alone is NOT asserted: it comes out +0.0177 (+-0.0005), the same with one and
+    # two BLAS threads since session 6 (the sign flip of session 5 was a batched-zigzag event bug, not the
+    # conditioning: the "condition ~1e291" was a rounding artefact of pinv(J^T J); the real scaled condition is
+    # ~5e8).  So issue 11's literal "b1 < 0" is not met for response-nl; b1 + b5 U = -0.011 is.
     (("--model", "response-nl"), ("c2",), ("c3",)),
     (("--model", "mmg", "--params", "kvlcc2"), ("Yv", "Nv", "Nr"), ()),
 ], ids=["kcs-response", "response-nl", "mmg"])
@@ -58,6 +61,15 @@ def test_raw_marin_fit_with_only_lpp_has_physical_damping_signs(tmp_path, model_
         assert coef[k] < 0, (k, coef[k], std[k])
     for k in positive:
         assert coef[k] > 0, (k, coef[k], std[k])
+    if res["model"] == "response-nl":
+        from shipid.identify.recipe import _approach_speed
+        from shipid.logs import read_log
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            U = _approach_speed([read_log(f) for f in _files()])
+        assert coef["b1"] + coef["b5"] * U < 0, (coef["b1"], coef["b5"], U)   # linear sway damping
+        assert coef["c2"] + coef["c5"] * U < 0, (coef["c2"], coef["c5"], U)   # linear yaw damping
     cons = res["diagnostics"]["consistency"]   # the EKF stage's verdict, which the exit status reports
     assert cons["consistent"] is (rc == 0) and cons.get("stage", "ekf") == "ekf"
     if res["settings"].get("ekf_stage"):

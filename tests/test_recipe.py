@@ -114,7 +114,10 @@ def test_refine_fit_reuses_one_ekf_stage_and_weighs_the_metrics():
     m1 = refine_fit(ekf, logs, "metrics", metric_weight=1.0, **kw)
     assert ekf.refiner is None and [s["step"] for s in ekf.steps][-1] == "refinement"  # the EKF stage untouched
     np.testing.assert_array_equal(m0.refiner.coef_.to_numpy(), oe.refiner.coef_.to_numpy())
-    assert "weight 1" in m1.steps[-2]["reason"] and "weight 0" in m0.steps[-2]["reason"]
+    def reason(fit, name):
+        return next(s["reason"] for s in fit.steps if s["step"] == name)
+
+    assert "weight 1" in reason(m1, "metric residuals") and "weight 0" in reason(m0, "metric residuals")
     assert m1.result().settings["metric_weight"] == 1.0 and "metric_weight" not in oe.result().settings
     f, used = metric_residuals(ekf.to_model(), logs)
     assert len(used) == 2
@@ -146,6 +149,27 @@ def test_leave_one_run_out_of_refinements_scores_each_variant_on_one_ekf_stage()
     assert tab["error"].iloc[1] == tab["error"].iloc[0]
 
 
+def test_leave_one_run_out_of_recipes_shares_ekf_stages_between_variants_with_the_same_fit_options():
+    """shipid.studies.kvlcc2.leave_one_run_out_recipes (session 6's round) on the bundled KCS logs, one fold:
+    variants with the same ``fit`` options share one EKF stage (with nothing held by the identifiable subset,
+    switching it off changes nothing), another sampling step is another EKF stage; one row per variant."""
+    from shipid.datasets import bundled_kcs_logs
+    from shipid.logs import read_log
+    from shipid.studies import kvlcc2 as ks
+
+    runs = {p.stem: read_log(p) for p in bundled_kcs_logs()[1:]}
+    oe = {"mode": "output-error", "max_nfev": 3}
+    variants = {"a": {"fit": {"n_passes": 1}, "refine": oe},
+                "a, all refined": {"fit": {"n_passes": 1}, "refine": {**oe, "hold_unresolved": False}},
+                "every 2nd": {"fit": {"n_passes": 1, "dt": 2}, "refine": oe}}
+    tab = ks.leave_one_run_out_recipes(runs, "kcs-response", variants=variants, train=tuple(runs),
+                                       folds=["kcs_zz_p20_rpm"])
+    assert list(tab["variant"]) == list(variants) and set(tab["left_out"]) == {"kcs_zz_p20_rpm"}
+    assert np.all(np.isfinite(tab["error"])) and list(tab["held"]) == [[], [], []]
+    assert tab["error"].iloc[1] == tab["error"].iloc[0] and tab["error"].iloc[2] != tab["error"].iloc[0]
+    assert ks.RECIPE_VARIANTS_6["default"] == {"fit": {}, "refine": {"mode": "metrics"}} and "0.01" in ks.LORO_RULE_6
+
+
 def test_cli_metric_weight_is_checked(tmp_path, capsys):
     """shipid fit --metric-weight -1: exit 2 with a one-line message naming the option (no fit run)."""
     from shipid.cli import main
@@ -155,3 +179,96 @@ def test_cli_metric_weight_is_checked(tmp_path, capsys):
     assert main(["fit", str(bundled_kcs_logs()[1]), "--metric-weight", "-1", "-o", str(out), "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert "--metric-weight -1" in err and "Traceback" not in err and not out.exists()
+
+
+def test_batched_zigzag_members_are_independent_of_each_other():
+    """The metric refinement differentiates closed-loop zigzags by forward differences, all parameter sets in
+    one batch.  Members whose rudder reversals fall within rounding of each other used to couple: the event
+    locator stopped on |g| < 1e-13 with g a hair below zero and fired the second member a whole step late
+    (0.33 deg of overshoot on the MARIN response-nl fit, or a missed reversal: a failed manoeuvre), which
+    made that refinement follow the BLAS thread count.  Every member of a batch must give its solo run's
+    overshoots, for perturbations down to rounding."""
+    model = get_model("mmg", "kvlcc2")
+    i = model.param_index("Nr")
+    base = model.params.copy()
+    P = [base]
+    for rel in (1e-13, 1e-12, 1e-11, 1e-10, 1e-9, 1e-8, 1e-6):
+        p = base.copy()
+        p[i] *= 1.0 + rel
+        P.append(p)
+    P = np.array(P)
+    batch = zigzag(model, 10.0, 10.0, params=P, speed=np.full(len(P), 1.2), first="starboard")
+    for b, p in enumerate(P):
+        solo = zigzag(model, 10.0, 10.0, params=p, speed=1.2, first="starboard").metrics[0]
+        got = batch.metrics[b]
+        assert got.success and solo.success
+        for k in ("overshoot1_deg", "overshoot2_deg", "time_third_execute"):
+            assert getattr(got, k) == pytest.approx(getattr(solo, k), abs=1e-7), (b, k)
+
+
+def test_identifiable_subset_holds_what_the_solver_cannot_resolve():
+    """identifiable_subset: a direction of the scaled Jacobian along which a change of the coefficients by
+    their own size moves the cost by less than ftol * cost (singular value below sqrt(2 ftol cost)) is held,
+    by subset selection (the column that carries it); a well-conditioned Jacobian keeps every column."""
+    from shipid.identify.batch import FTOL, identifiable_subset
+
+    rng = np.random.default_rng(0)
+    J = rng.normal(size=(200, 4))
+    keep, held, info = identifiable_subset(J, cost=1.0)
+    assert list(keep) == [0, 1, 2, 3] and held.size == 0
+    assert info["threshold"] == pytest.approx(np.sqrt(2 * FTOL * 1.0))
+    assert info["condition"] == pytest.approx(info["condition_kept"]) and np.isfinite(info["condition"])
+    # column 3 = column 1 + a change far below the threshold: one of the pair is held, the rest kept
+    J2 = np.column_stack([J[:, :3], J[:, 1] + 1e-9 * rng.normal(size=200)])
+    keep, held, info = identifiable_subset(J2, cost=1.0)
+    assert held.size == 1 and held[0] in (1, 3) and 0 in keep and 2 in keep
+    assert info["condition"] > 1e15 and info["condition_kept"] < 1e3
+    # the same pair, resolvable: its difference moves the cost by more than ftol * cost
+    J3 = np.column_stack([J[:, :3], J[:, 1] + 1e-2 * rng.normal(size=200)])
+    assert identifiable_subset(J3, cost=1.0)[1].size == 0
+    # a column with no effect at all is held
+    J4 = np.column_stack([J, np.zeros(200)])
+    assert list(identifiable_subset(J4, cost=1.0)[1]) == [4]
+
+
+def test_refinement_covariance_is_positive_semidefinite_and_its_condition_finite():
+    """The refinement's covariance comes from the SVD of J (the pseudo-inverse of J^T J gave rounding-negative
+    eigenvalues at condition ~1e13, which the diagnostics reported as a condition number of ~1e291)."""
+    from shipid.datasets import bundled_kcs_logs
+    from shipid.identify.recipe import fit_logs, refine_fit
+    from shipid.logs import read_log
+
+    logs = [read_log(p) for p in bundled_kcs_logs()[1:3]]
+    ekf = fit_logs(logs, "kcs-response", n_passes=1, refine=None)
+    ref = refine_fit(ekf, logs, "output-error", max_nfev=3).refiner
+    cov = ref.cov_.to_numpy() / np.outer(ref.coef_std_[ref.estimated_], ref.coef_std_[ref.estimated_])
+    assert np.linalg.eigvalsh(cov).min() > -1e-9
+    cond = ref.diagnostics_["condition_number"]
+    assert np.isfinite(cond) and cond < 1e20
+    assert ref.subset_ is not None and ref.result().settings["hold_rule"]["ftol"] == 1e-8
+
+
+def test_cli_refine_all_switches_the_identifiable_subset_off(tmp_path):
+    """shipid fit --refine-all: the refinement fits every estimated coefficient and says so in the recipe steps.
+    By default the step holds what the solver cannot resolve -- on one constant-rpm turning circle the surge
+    term a3 (a unit change moves the cost by less than ftol * cost) -- at its EKF-stage value, reports it with
+    the threshold and the condition numbers before/after, and the rest is refined."""
+    from shipid.cli import main
+    from shipid.datasets import bundled_kcs_logs
+    from shipid.identify.result import load_result
+
+    log = str(bundled_kcs_logs()[1])
+    base = ["fit", log, "--refine", "output-error", "--max-nfev", "2", "--passes", "1", "--no-progress"]
+    assert main([*base, "-o", str(tmp_path / "a.json")]) in (0, 1, 3)
+    assert main([*base, "--refine-all", "-o", str(tmp_path / "b.json")]) in (0, 1, 3)
+    a, b = load_result(tmp_path / "a.json"), load_result(tmp_path / "b.json")
+    step_a = next(s for s in a.settings["recipe"] if s["step"] == "identifiable subset")
+    step_b = next(s for s in b.settings["recipe"] if s["step"] == "identifiable subset")
+    held = a.settings["held"]
+    assert held == step_a["value"] == ["a3"] and "sqrt(2 ftol cost)" in step_a["reason"]
+    rule = a.settings["hold_rule"]
+    assert rule["ftol"] == 1e-8 and rule["threshold"] > 0 and rule["condition_after"] < rule["condition_before"]
+    assert a.coef["a3"] == a.settings["ekf_stage"]["coef"]["a3"] and a.coef_std["a3"] == 0.0
+    assert "a3" not in a.settings["estimated"] and "a3" in b.settings["estimated"]
+    assert step_b["value"] is None and "off (asked)" in step_b["reason"] and "held" not in b.settings
+    assert b.coef["a3"] != a.coef["a3"]

@@ -42,8 +42,11 @@ def register(sub) -> None:
                    help="weight of the metric residuals of the 'metrics' refinement (default 0.1, chosen by "
                         "leave-one-run-out on the KVLCC2 training runs)")
     p.add_argument("--max-nfev", type=int, default=60, help="evaluation limit of the refinement (default 60)")
+    p.add_argument("--refine-all", action="store_true",
+                   help="refine every estimated coefficient (default: hold at their EKF values those the refinement "
+                        "cannot resolve: singular values of its scaled Jacobian below sqrt(2 ftol cost))")
     p.add_argument("--dt", default="auto", metavar="auto|K",
-                   help="use every K-th sample; default auto: >= 25 steps per fastest time constant of the model")
+                   help="use every K-th sample; default auto: >= 25 steps per fastest time constant of the model (mmg: 50)")
     p.add_argument("--max-drift", default="auto", metavar="auto|DEG|none",
                    help="models linear in v and r (kcs-response): use each log until its drift angle first exceeds "
                         "DEG (default auto: 10 deg for such models, every sample for the others; none: every sample)")
@@ -204,7 +207,7 @@ def _fit(args) -> int:
             logs, model, lpp=args.lpp, estimate=_names(args.estimate) or None, fixed=_fixed(args, model),
             start=args.start, neutral=not args.no_neutral, dt=_dt(args), max_drift_deg=_max_drift(args),
             refine=None if args.refine == "none" else args.refine, metric_weight=args.metric_weight,
-            n_passes=args.passes, max_nfev=args.max_nfev,
+            n_passes=args.passes, max_nfev=args.max_nfev, hold_unresolved=not args.refine_all,
             tune_noise=args.tune_noise, progress=progress_on(args), meas_std=meas_std, log=print))
         fit, ident = recipe, recipe.ekf
     result = fit.result()

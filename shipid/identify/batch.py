@@ -15,6 +15,7 @@ complex-step) ``_jac_x``/``_jac_p`` to be cheap.
 """
 from __future__ import annotations
 
+import math
 import warnings
 from datetime import datetime, timezone
 
@@ -29,7 +30,59 @@ from .diagnostics import identifiability
 from .identifier import NotFittedError
 from .result import FitResult, _inputs, diagnostics_to_json, fitted_ship, software_versions
 
-__all__ = ["OutputErrorRefiner"]
+__all__ = ["OutputErrorRefiner", "identifiable_subset", "FTOL"]
+
+#: Relative cost-change tolerance of the refinement's ``least_squares`` (``ftol``, with ``xtol`` the same): it stops
+#: when a step lowers the cost by less than this fraction.  It also sets :func:`identifiable_subset`'s threshold.
+FTOL = 1e-8
+
+
+def identifiable_subset(J, cost: float, ftol: float = FTOL):
+    """Which columns of a scaled Jacobian the least-squares solver can resolve, and which it cannot.
+
+    ``J`` (n_res, ne) is the Jacobian of the residuals with respect to the *scaled* parameters (one unit = the
+    coefficient's own size, ``theta = p / scale``) at the start, ``cost`` = 0.5 * sum(residuals**2) there.
+    Moving the scaled parameters by one unit along a right singular vector of ``J`` with singular value ``s``
+    changes the (locally quadratic) cost by ``0.5 s**2``.  When that is below ``ftol * cost``, the solver's own
+    stopping test (a step that lowers the cost by less than ``ftol * cost`` ends the fit) cannot tell a change of
+    the coefficients by their whole size along that direction from none: where the fit stops along it is decided
+    by rounding (e.g. the BLAS thread count), not by the data.  The threshold is therefore
+    ``s_min = sqrt(2 * ftol * cost)``.  Of the ``ne`` columns, ``r`` = (number of singular values above it) are kept
+    by Golub-Klema-Stewart subset selection (QR with column pivoting of the leading ``r`` right singular vectors;
+    Golub & Van Loan, *Matrix Computations*, sec. 5.5.7), the others are held; repeated on the kept columns
+    until all their singular values exceed the threshold.
+
+    Returns ``(keep, held, info)``: sorted column indices kept and held, and a dict with ``threshold``,
+    ``singular_values`` (of the whole ``J``), ``condition`` of ``J^T J`` before and ``condition_kept`` after.
+    """
+    from scipy.linalg import qr
+
+    J = np.asarray(J, dtype=float)
+    ne = J.shape[1]
+    thr = math.sqrt(2.0 * ftol * max(float(cost), 0.0))
+    s_all = np.linalg.svd(J, compute_uv=False) if np.all(np.isfinite(J)) else np.full(ne, np.nan)
+
+    def cond2(s):
+        return float((s.max() / s.min()) ** 2) if s.size and s.min() > 0 else math.inf
+
+    keep = np.arange(ne)
+    if not np.all(np.isfinite(J)):
+        return keep, np.array([], dtype=int), {"threshold": thr, "singular_values": s_all.tolist(),
+                                               "condition": math.nan, "condition_kept": math.nan}
+    while keep.size:
+        _, s, Vt = np.linalg.svd(J[:, keep], full_matrices=False)
+        r = int(np.sum(s > thr))
+        if r == keep.size:
+            break
+        if r == 0:
+            keep = keep[:0]
+            break
+        _, _, piv = qr(Vt[:r], pivoting=True, mode="economic")
+        keep = np.sort(keep[piv[:r]])
+    held = np.setdiff1d(np.arange(ne), keep)
+    s_keep = np.linalg.svd(J[:, keep], compute_uv=False) if keep.size else np.array([])
+    return keep, held, {"threshold": thr, "singular_values": s_all.tolist(), "condition": cond2(s_all),
+                        "condition_kept": cond2(s_keep)}
 
 
 class OutputErrorRefiner:
@@ -75,11 +128,16 @@ class OutputErrorRefiner:
         smoothed states or ``x0``).  The coefficients' covariance is then the coefficient block of the
         joint inverse ``s^2 (J^T J)^-1``, i.e. marginalised over the initial states (a fixed, estimated
         initial state makes it too tight; docs/uncertainty.md sect. 3).  ``x0_`` / ``x0_std_`` hold them.
+    hold_unresolved : bool
+        Hold at their start values the coefficients the solver cannot resolve from the start's Jacobian
+        (:func:`identifiable_subset`; default False: fit every estimated coefficient).  The held ones are
+        listed in ``held_`` and in the result's settings, with the threshold and the condition numbers.
     """
 
     def __init__(self, model: Model, *, estimate=None, channels=None, meas_std=None, max_nfev: int = 30,
                  substeps: int = 1, jacobian: str = "fd", log_weights=None,
-                 extra_residuals=None, input_hold: str = "foh", estimate_x0=False):
+                 extra_residuals=None, input_hold: str = "foh", estimate_x0=False,
+                 hold_unresolved: bool = False):
         self.model = model
         self.estimate = estimate
         self.channels = channels
@@ -91,6 +149,7 @@ class OutputErrorRefiner:
         self.extra_residuals = extra_residuals
         self.input_hold = input_hold
         self.estimate_x0 = estimate_x0
+        self.hold_unresolved = hold_unresolved
 
     def fit(self, logs, start=None, x0=None) -> "OutputErrorRefiner":
         """Refine on ``logs``; ``start`` may be a fitted :class:`EKFIdentifier` whose
@@ -264,46 +323,89 @@ class OutputErrorRefiner:
             return np.where(np.isfinite(out), np.clip(out, -1e6, 1e6), 1e6)
 
         h = 1e-6
+        th0 = np.concatenate([p0[est_idx] / scale, np.zeros(len(arrays) * nk)])
+        free = np.arange(th0.size)  # the columns the solver moves (all, unless some are held)
 
-        def fun(th):
-            return residual_batch(th[None])[0]
+        def full(t):
+            th = th0.copy()
+            th[free] = t
+            return th
 
-        def jac(th):
+        def fun(t):
+            return residual_batch(full(t)[None])[0]
+
+        def jac(t):
+            th = full(t)
             if self.jacobian == "tangent":
-                Jt = tangent_jac(th)
+                Jt = tangent_jac(th)[:, free]
                 if self.extra_residuals is None:
                     return Jt
-                E = extra_batch(np.vstack([th, th + h * np.eye(th.size)]))
+                E = extra_batch(np.vstack([th, th + h * np.eye(th.size)[free]]))
                 return np.vstack([Jt, ((E[1:] - E[0]) / h).T])
-            batch = np.vstack([th, th + h * np.eye(th.size)])
+            batch = np.vstack([th, th + h * np.eye(th.size)[free]])
             R = residual_batch(batch)
+            last_f[:] = [t.copy(), R[0]]
             return ((R[1:] - R[0]) / h).T
 
-        th0 = np.concatenate([p0[est_idx] / scale, np.zeros(len(arrays) * nk)])
-        sol = least_squares(fun, th0, jac=jac, method="trf", max_nfev=self.max_nfev, x_scale=1.0)
+        self.held_, self.subset_ = [], None
+        col_names = list(names) + [f"{c}0[log {i}]" for i in range(len(arrays)) for c in x0_names]
+        last_f: list = [None, None]  # the nominal residuals of the last forward-difference Jacobian
+        if self.hold_unresolved and th0.size > 1:
+            J0 = jac(th0)
+            f0 = last_f[1] if last_f[0] is not None and np.array_equal(last_f[0], th0) else fun(th0)
+            keep, held, info = identifiable_subset(J0, 0.5 * float(np.sum(f0**2)))
+            self.subset_ = {**info, "held": [col_names[i] for i in held], "ftol": FTOL}
+            if held.size:
+                free = keep
+                self.held_ = [col_names[i] for i in held]
+                warnings.warn(f"output-error refinement: {', '.join(self.held_)} held at their start values: along "
+                              f"{held.size} direction(s) of the start's Jacobian a change of the coefficients by their "
+                              f"own size changes the cost by less than the solver's tolerance ({FTOL:g} of it), so the "
+                              "fit could not resolve them (scaled J^T J condition "
+                              f"{info['condition']:.3g} -> {info['condition_kept']:.3g})", UserWarning, stacklevel=2)
+        sol = least_squares(fun, th0[free], jac=jac, method="trf", max_nfev=self.max_nfev, x_scale=1.0,
+                            ftol=FTOL, xtol=FTOL)
         J = sol.jac
+        self.jac_ = J  # at the solution, scaled parameters (columns: the refined ones)
+        names_all = names
+        fcoef = free[free < ne]  # the refined coefficients (the rest of ``free``: initial states)
+        names = [names_all[i] for i in fcoef]
         n_obs = int(sum(m.sum() for m, w in zip(masks, wlog) if w > 0))
-        dof = max(n_obs - th0.size, 1)
+        dof = max(n_obs - free.size, 1)
         s2 = float(np.sum(sol.fun**2) / dof)
-        cov_all = np.linalg.pinv(J.T @ J) * s2 if np.all(np.isfinite(J)) else np.full((th0.size, th0.size), np.nan)
-        cov_s = cov_all[:ne, :ne]  # with estimated initial states: marginal over them (Laplace)
-        theta = sol.x[:ne] * scale
-        x0_fit = [x0_of(sol.x[None], i)[0] for i in range(len(arrays))]
-        x0_sd = np.sqrt(np.clip(np.diag(cov_all)[ne:], 0, None)).reshape(len(arrays), nk) * x0_scale
+        if np.all(np.isfinite(J)):
+            # (J^T J)^+ from the SVD of J: positive semi-definite by construction (the pseudo-inverse of the
+            # product itself squares J's condition and, near 1e13, gives rounding-negative eigenvalues, which the
+            # diagnostics reported as a condition number of ~1e291)
+            _, sv, Vt = np.linalg.svd(J, full_matrices=False)
+            inv = np.where(sv > sv.max() * max(J.shape) * np.finfo(float).eps, 1.0 / np.maximum(sv, 1e-300) ** 2, 0.0)
+            cov_all = (Vt.T * inv) @ Vt * s2
+        else:
+            cov_all = np.full((free.size, free.size), np.nan)
+        # with estimated initial states: the coefficients' block, i.e. marginal over them (Laplace)
+        cpos = np.flatnonzero(free < ne)
+        cov_s = cov_all[np.ix_(cpos, cpos)]
+        th_full = full(sol.x)
+        theta = th_full[:ne] * scale
+        x0_fit = [x0_of(th_full[None], i)[0] for i in range(len(arrays))]
+        x0_var = np.zeros(th_full.size)
+        x0_var[free] = np.clip(np.diag(cov_all), 0, None)
+        x0_sd = np.sqrt(x0_var[ne:]).reshape(len(arrays), nk) * x0_scale
         self.x0_ = pd.DataFrame(x0_fit, columns=list(model.state_names))
         self.x0_std_ = pd.DataFrame(x0_sd, columns=x0_names)
-        cov = cov_s * np.outer(scale, scale)
+        scale_f = scale[fcoef]  # (the closures above keep the full scale and est_idx)
+        cov = cov_s * np.outer(scale_f, scale_f)
         coef = p0.copy()
         coef[est_idx] = theta
         self.coef_ = pd.Series(coef, index=list(model.param_names), name="coef")
         std = np.zeros(model.np)
-        std[est_idx] = np.sqrt(np.clip(np.diag(cov), 0, None))
+        std[est_idx[fcoef]] = np.sqrt(np.clip(np.diag(cov), 0, None))
         self.coef_std_ = pd.Series(std, index=list(model.param_names), name="coef_std")
         self.cov_ = pd.DataFrame(cov, index=names, columns=names)
         self.estimated_ = names
         self.channels_ = chans
         self.cost_ = float(sol.cost)
-        self.cost_start_ = float(0.5 * np.sum(fun(th0) ** 2))
+        self.cost_start_ = float(0.5 * np.sum(fun(th0[free]) ** 2))
         self.rms_normalised_residual_ = float(np.sqrt(s2))
         finite = bool(np.all(np.isfinite(sol.x)) and np.isfinite(sol.cost))
         capped = finite and bool(np.any(np.abs(sol.fun) >= 1e6))  # a replay still diverges at the end
@@ -322,7 +424,7 @@ class OutputErrorRefiner:
             self.message_ = (f"started from a diverged EKF fit ({getattr(start, 'message_', 'diverged')}); "
                              f"refinement reported as failed (optimiser: {sol.message})")
         if start is not None and hasattr(start, "prior_std_"):
-            prior_cov_s = np.diag((start.prior_std_.reindex(names).to_numpy() / scale) ** 2)
+            prior_cov_s = np.diag((start.prior_std_.reindex(names).to_numpy() / scale_f) ** 2)
         else:
             prior_cov_s = np.eye(len(names)) * max(1.0, 100 * np.max(np.diag(cov_s)))
         notes = list(model.identifiability_notes(arrays, names))
@@ -350,7 +452,11 @@ class OutputErrorRefiner:
                       "input_hold": self.input_hold,
                       "estimate_x0": list(self.x0_std_.columns),
                       "log_weights": None if self.log_weights is None else [float(w) for w in self.log_weights],
-                      "extra_residuals": self.extra_residuals is not None},
+                      "extra_residuals": self.extra_residuals is not None,
+                      **({"held": list(self.held_), "hold_rule": {
+                          "threshold": self.subset_["threshold"], "ftol": self.subset_["ftol"],
+                          "condition_before": self.subset_["condition"],
+                          "condition_after": self.subset_["condition_kept"]}} if self.subset_ else {})},
             loglik=None, success=self.success_, message=self.message_, versions=software_versions(),
             created=datetime.now(timezone.utc).isoformat(timespec="seconds"),
             extra={"cost_start": self.cost_start_, "cost": self.cost_,

@@ -24,7 +24,8 @@ from ..validation import validate
 
 __all__ = ["RUNS", "TRAIN", "TEST", "RUDDER_SIGN", "MEASURED_README", "START", "GOAL_TOL", "load_runs", "fit_model",
            "evaluate", "neutral_rudder_angle", "common_grid", "metric_residuals", "rudder_sign", "leave_one_run_out",
-           "LORO_VARIANTS", "REFINE_VARIANTS", "REFINE_VARIANTS_2", "leave_one_run_out_refinements"]
+           "LORO_VARIANTS", "REFINE_VARIANTS", "REFINE_VARIANTS_2", "leave_one_run_out_refinements",
+           "RECIPE_VARIANTS_6", "LORO_RULE_6", "leave_one_run_out_recipes"]
 
 RUNS = ("tc_35", "tc_-35", "zz_10", "zz_-10", "zz_20", "zz_-20")
 TRAIN = ("tc_35", "tc_-35", "zz_10", "zz_-10")
@@ -59,12 +60,13 @@ def rudder_sign(log) -> float:
     return 1.0 if np.sign(d[k]) == np.sign(psi[ahead] - psi[k]) else RUDDER_SIGN
 
 
-def load_runs(folder, decimate: int = 1) -> dict[str, TrialLog]:
-    """The six runs as TrialLogs in the models' rudder sign convention (flipped where the file has the
-    opposite one, :func:`rudder_sign`), every ``decimate``-th sample (full scale; 0.135 s native sampling)."""
+def load_runs(folder, decimate: int = 1, names=RUNS) -> dict[str, TrialLog]:
+    """The runs ``names`` (default all six; pass :data:`TRAIN` to leave the hold-out files unread) as TrialLogs
+    in the models' rudder sign convention (flipped where the file has the opposite one, :func:`rudder_sign`),
+    every ``decimate``-th sample (full scale; 0.135 s native sampling)."""
     folder = Path(folder)
     out = {}
-    for k in RUNS:
+    for k in names:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)
             lg = read_log(folder / f"MARIN_FREE_KVLCC2_{k}_m.dat")
@@ -141,6 +143,60 @@ REFINE_VARIANTS_2 = {
     "metrics, weight 0.1": {"mode": "metrics", "metric_weight": 0.1},
     "metrics, weight 0.5": {"mode": "metrics", "metric_weight": 0.5},
 }
+
+#: Session 6 (issue 12): recipe variants of the ``mmg`` default, each ``{"fit": options of fit_logs, "refine":
+#: options of refine_fit}``, fixed and committed before any was run (the candidates session 5 left untried, plus
+#: this session's change to the refinement): the default as it now is (metrics at weight 0.1; the refinement's
+#: identifiable subset on; the batched-zigzag event fix in every variant, it is a bug fix); the default without
+#: the identifiable subset; the rudder neutral angle estimated jointly in the EKF stage (started from the
+#: straight approaches); the refinement on the full-rate logs (0.135 s instead of twice the EKF step); the EKF
+#: on every 2nd and on every 8th sample (the automatic step is every 4th for mmg; the refinement grid follows).
+RECIPE_VARIANTS_6 = {
+    "default": {"fit": {}, "refine": {"mode": "metrics"}},
+    "default without identifiable subset": {"fit": {}, "refine": {"mode": "metrics", "hold_unresolved": False}},
+    "delta0 estimated in the EKF": {"fit": {"estimate_neutral": True}, "refine": {"mode": "metrics"}},
+    "refinement on the full-rate logs": {"fit": {}, "refine": {"mode": "metrics", "grid_dt": "log"}},
+    "EKF every 2nd sample": {"fit": {"dt": 2}, "refine": {"mode": "metrics"}},
+    "EKF every 8th sample": {"fit": {"dt": 8}, "refine": {"mode": "metrics"}},
+}
+#: The rule of :data:`RECIPE_VARIANTS_6`, fixed with it: sessions 4/5's leave-one-run-out within tc+-35, zz+-10
+#: (fit on three, predict the fourth's tactical diameter or overshoots, each error over its goal tolerance;
+#: score = the worst over the four folds); the lowest score wins, and it becomes the default only when it is
+#: lower than the "default" row of the same round by more than 0.01 (and than session 5's 1.96); the zz+-20
+#: files are not read.
+LORO_RULE_6 = ("lowest worst-fold goal-normalised error wins; replaces the default only when lower than this "
+               "round's 'default' score by more than 0.01 and than session 5's 1.96")
+
+
+def leave_one_run_out_recipes(runs: dict[str, TrialLog], name: str = "mmg", variants=None, train=TRAIN,
+                              folds=None, log=None) -> pd.DataFrame:
+    """As :func:`leave_one_run_out_refinements` for variants of the whole recipe (:data:`RECIPE_VARIANTS_6`:
+    ``fit`` options of ``fit_logs`` with ``refine=None``, then ``refine`` options of ``refine_fit``); one EKF
+    stage per fold and distinct ``fit`` options.  One row per (variant, left-out run); the held-out runs are
+    never read (pass runs loaded with ``load_runs(folder, names=TRAIN)``).  ``folds``: the left-out runs to do
+    (default all of ``train``)."""
+    import json
+
+    rows = []
+    for out in (folds or train):
+        keep = [k for k in train if k != out]
+        stages = {}
+        for label, opts in (variants or RECIPE_VARIANTS_6).items():
+            key = json.dumps(opts["fit"], sort_keys=True)
+            if key not in stages:
+                stages[key] = fit_model(name, runs, train=keep, refine=None, **opts["fit"])
+            ekf = stages[key]
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                ref = recipe.refine_fit(ekf, [runs[k] for k in keep], **opts["refine"])
+            err = max(_goal_errors(ref.to_model(), runs[out]))
+            row = {"variant": label, "left_out": out, "error": err, "success": ref.success,
+                   "message": ref.refiner.message_ if ref.refiner is not None else ekf.ekf.message_,
+                   "nfev": getattr(ref.refiner, "nfev_", 0), "held": list(getattr(ref.refiner, "held_", []))}
+            rows.append(row)
+            if log is not None:
+                log(row)
+    return pd.DataFrame(rows)
 
 
 def _goal_errors(model, log) -> list[float]:
