@@ -130,7 +130,7 @@ class WindForce:
         """The 3 m Esso Osaka model of FRT-DS-ESSO: A_T 0.135 m^2, A_L 0.520 m^2 (data README; 0.13544
         and 0.52038 in the dataset authors' code), A_OD, C, C_BR, H_BR, H_C as in that code (NAOE-5thLab,
         Osaka University), whose published Fujiwara components this geometry reproduces.  ``C_BR`` =
-        -0.062 m (near midship, where the pond model carries its equipment) is the owners' value; a
+        -0.062 m (near midship) is the owners' value; a
         transcription with -1.233 m (a VLCC bridge aft) was traced to a copied line (docs/environment.md)."""
         return cls(lpp=3.0, breadth=0.48925, A_T=0.13544, A_L=0.52038, A_OD=0.14230, C=-0.01299, C_BR=-0.06209,
                    H_BR=0.294, H_C=0.10359)
