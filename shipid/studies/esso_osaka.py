@@ -171,13 +171,14 @@ class EssoStudy:
         return "\n".join(out)
 
 
-def _fit(model, frames, estimate, substeps, input_hold="foh", gate=5.0):
+def _fit(model, frames, estimate, substeps, input_hold="foh", gate=5.0, prior_std=1.0):
     from ..identify import EKFIdentifier
 
     extra = model.identifier_settings() if hasattr(model, "identifier_settings") else {}
     pstd = dict(PROCESS_STD, **extra.pop("process_std", {}))
     ident = EKFIdentifier(model, estimate=list(estimate), init="model", meas_std=MEAS_STD, process_std=pstd,
-                          n_passes=2, substeps=substeps, input_hold=input_hold, gate=gate, **extra)
+                          n_passes=2, substeps=substeps, input_hold=input_hold, gate=gate, prior_std=prior_std,
+                          **extra)
     t0 = time.time()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
@@ -242,7 +243,7 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
               by_type: bool = True, calm_water=("mmg",), input_hold: str = "foh", gate: float | None = 5.0,
               current: str = "constant", estimate=ESTIMATE, estimate_wind=ESTIMATE_WIND, substeps: int = 2,
               fixed: bool = True, turning: bool = True, all_types: bool = True, progress: bool = True,
-              rudder_rate: float | None = None, wind="esso-osaka-3m") -> EssoStudy:
+              rudder_rate: float | None = None, wind="esso-osaka-3m", by_type_prior: str = "prior") -> EssoStudy:
     """Fit and cross-validate on the Esso Osaka runs (see the module docstring for every choice).
 
     Parameters
@@ -268,6 +269,10 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
     rudder_rate : float, optional
         Rate-limit the logged rudder angle to this slew rate [deg/s] in fits and predictions
         (:func:`load_runs`; None: as logged).
+    by_type_prior : {"prior", "others"}
+        Start and prior of the per-type fits: the ``esso-osaka-prior`` set with 100 % std (default), or the
+        fit on the training runs of the *other* run types with its estimated stds (sequential Bayes: the
+        other types' posterior is this type's prior; no run enters twice).
     wind : WindForce or "esso-osaka-3m"
         Above-water geometry of the wind force (the prior of the estimated components and the value of the
         others).
@@ -299,11 +304,20 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
     def strip_wind(frames):
         return [f.drop(columns=[c for c in f.columns if c.startswith("wind")]) for f in frames]
 
-    def fit_pair(train, k, tag):
-        """The plain and the environment-aware lowspeed fits on ``train``; their models and mean current."""
+    def stds(ident):
+        s = ident.summary()
+        return {n: float(s.loc[n, "std"]) for n in s.index if np.isfinite(s.loc[n, "std"]) and s.loc[n, "std"] > 0}
+
+    def fit_pair(train, k, tag, start=None, return_identifiers=False):
+        """The plain and the environment-aware lowspeed fits on ``train``; their models and mean current.
+        ``start``: ``(plain identifier, environment-aware identifier)`` of an earlier fit whose estimates
+        and stds are the prior (sequential Bayes: ``by_type_prior="others"``)."""
         frames = [_frame(lg, fit_every) for lg in train]
-        plain, sec0 = _fit(prior, strip_wind(frames), estimate, substeps, **hold)
-        env, sec1 = _fit(env0, frames, tuple(estimate) + tuple(estimate_wind), substeps, **hold)
+        m_p, m_e, ps_p, ps_e = prior, env0, 1.0, 1.0
+        if start is not None:
+            m_p, m_e, ps_p, ps_e = start[0].to_model(), start[1].to_model(), stds(start[0]), stds(start[1])
+        plain, sec0 = _fit(m_p, strip_wind(frames), estimate, substeps, prior_std=ps_p, **hold)
+        env, sec1 = _fit(m_e, frames, tuple(estimate) + tuple(estimate_wind), substeps, prior_std=ps_e, **hold)
         fits.setdefault(k, {})[f"lowspeed{tag}"] = {"success": plain.success_, "message": plain.message_,
                                                     "seconds": sec0}
         fits[k][f"lowspeed + wind + current{tag}"] = {"success": env.success_, "message": env.message_,
@@ -319,6 +333,8 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
             currents.append(row)
             cc.append((row["cx"], row["cy"]))
         c_mean = np.mean(cc, axis=0) if cc else (0.0, 0.0)
+        if return_identifiers:
+            return plain, env
         return plain.to_model(), env.to_model(), {"cx": float(c_mean[0]), "cy": float(c_mean[1])}
 
     it = range(n_folds)
@@ -355,7 +371,11 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
                 same = [lg for lg in train if lg.run_type == kind]
                 if not same:
                     continue
-                tp, te, tc = fit_pair(same, k, f" ({kind})")
+                start = None
+                if by_type_prior == "others":
+                    others = [lg for lg in train if lg.run_type != kind]
+                    start = fit_pair(others, k, f" (not {kind})", return_identifiers=True) if others else None
+                tp, te, tc = fit_pair(same, k, f" ({kind})", start=start)
                 models[k][f"lowspeed fitted by type ({kind})"] = tp
                 models[k][f"lowspeed + wind + current fitted by type ({kind})"] = te
                 for lg in [t for t in test if t.run_type == kind]:
@@ -382,7 +402,7 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
                                "start_every": start_every, "runs": [lg.name for lg in runs], "fold_of": fold_of,
                                "input_hold": input_hold, "gate": gate, "current": current,
                                "estimate": list(estimate), "estimate_wind": list(estimate_wind),
-                               "rudder_rate": rudder_rate, "wind": getattr(wind, "to_dict", lambda: wind)()})
+                               "rudder_rate": rudder_rate, "by_type_prior": by_type_prior, "wind": getattr(wind, "to_dict", lambda: wind)()})
 
 
 def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shipid.studies.esso_osaka
@@ -408,6 +428,7 @@ def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shi
                     help=f"--rudder-rate {FROUDE_RUDDER_RATE_DEG_S:.1f} (IMO 2.32 deg/s Froude-scaled to 3 m)")
     ap.add_argument("--wind-cbr", type=float, default=None,
                     help="superstructure centroid C_BR [m] of the wind geometry (default: the esso_osaka_3m preset)")
+    ap.add_argument("--by-type-prior", default="prior", choices=("prior", "others"))
     ap.add_argument("--save", help="pickle the EssoStudy here")
     a = ap.parse_args(argv)
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -422,7 +443,8 @@ def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shi
                     gate=None if a.gate.lower() == "none" else float(a.gate), current=a.current,
                     fit_every=a.fit_every, estimate=tuple(a.estimate.split(",")) + tuple(x for x in a.estimate_extra.split(",") if x), by_type=not a.no_by_type,
                     calm_water=() if a.no_calm_water else ("mmg",), turning=not a.no_turning,
-                    all_types=not a.no_all_types, fixed=not a.no_fixed, progress=False, rudder_rate=rate, wind=wind)
+                    all_types=not a.no_all_types, fixed=not a.no_fixed, progress=False, rudder_rate=rate, wind=wind,
+                    by_type_prior=a.by_type_prior)
     print(f"settings: {res.settings | {'runs': len(res.settings['runs']), 'fold_of': '...'}}; {time.time() - t0:.0f} s")
     with pd.option_context("display.width", 200, "display.max_rows", 500, "display.float_format", "{:.3f}".format):
         for H in (10.0, 30.0, 60.0):
