@@ -25,7 +25,11 @@ Choices (made once, before looking at any held-out error, and the same for every
   cross-validation against the held inputs without gating the study used before (docs/environment.md);
   a constant current per run was preferred to a random walk by the same cross-validation;
 * fits on all run types and by run type (``by_type``); which to use for a run type is a cross-validated
-  choice reported in docs/environment.md, not made here.
+  choice reported in docs/environment.md, not made here;
+* options scored as pre-registered candidates and not kept (docs/environment.md, "Session 6"): a rudder
+  rate limit (``rudder_rate``), extra estimated coefficients, 1 Hz fits, the aft wind geometry
+  (``wind``), per-type fits on the other types' posterior (``by_type_prior="others"``).  The defaults are
+  the chosen settings.
 """
 from __future__ import annotations
 
