@@ -99,3 +99,18 @@ def test_cli_fit_wind_current_then_validate_and_report_with_horizons(tmp_path, c
     assert main(["validate", str(res), str(short), "--schema", "esso-frt", "--horizon", "ten", "-o",
                  str(tmp_path / "x.json")]) == 2
     assert "--horizon ten" in capsys.readouterr().err
+
+
+def test_rudder_rate_limit():
+    """The steering-gear candidate of the study: a 40 deg step becomes a ramp at the given slew rate,
+    slower changes pass unchanged, and the Froude-scaled IMO rate of the 3 m model is 2.32 sqrt(325/3)."""
+    from shipid.studies.esso_osaka import FROUDE_RUDDER_RATE_DEG_S, rate_limit
+
+    t = np.arange(0.0, 5.0, 0.1)
+    x = np.where(t < 1.0, 20.0, -20.0)
+    y = rate_limit(t, x, 24.0)
+    assert y[9] == 20.0 and y[10] == pytest.approx(17.6) and np.all(np.abs(np.diff(y)) <= 2.4 + 1e-12)
+    assert y[-1] == -20.0 and np.argmax(y <= -20.0) == 9 + 17  # 40 deg at 2.4 deg per sample: 17 samples
+    slow = np.linspace(0.0, 10.0, t.size)  # 2 deg/s
+    np.testing.assert_allclose(rate_limit(t, slow, 24.0), slow)
+    assert FROUDE_RUDDER_RATE_DEG_S == pytest.approx(24.15, abs=0.01)

@@ -26,9 +26,11 @@ superstructure), ``H_BR`` (height of the top of the superstructure), ``H_C`` (he
 
 The regression coefficients are those of Fujiwara et al. (1998) as transcribed in the open code of the
 Osaka University group for this very ship (NAOE-5thLab, used for Wakita et al. 2022); no table of the
-paper was reachable here to cross-check them, so ``tests/test_environment.py`` checks the physical
-signs and symmetries and the magnitudes against the ranges every wind-tunnel data set shows (head-wind
-``C_X`` -0.5 ... -1.0, beam ``|C_Y|`` 0.7 ... 1.1).
+paper was reachable here.  ``tests/test_environment.py`` checks that they and the ``esso_osaka_3m``
+geometry reproduce the ten components that group published for the 3 m model (NAOE-5thLab/
+mmg-1p1r-simulator, ``MMG_params_EssoOsaka3m.csv``) to rounding, besides the physical signs and
+symmetries and the magnitudes against the ranges every wind-tunnel data set shows (head-wind ``C_X``
+-0.5 ... -1.0, beam ``|C_Y|`` 0.7 ... 1.1).
 """
 from __future__ import annotations
 
@@ -127,7 +129,9 @@ class WindForce:
     def esso_osaka_3m(cls) -> "WindForce":
         """The 3 m Esso Osaka model of FRT-DS-ESSO: A_T 0.135 m^2, A_L 0.520 m^2 (data README; 0.13544
         and 0.52038 in the dataset authors' code), A_OD, C, C_BR, H_BR, H_C as in that code (NAOE-5thLab,
-        Osaka University)."""
+        Osaka University), whose published Fujiwara components this geometry reproduces.  ``C_BR`` =
+        -0.062 m (near midship) is the owners' value; a
+        transcription with -1.233 m (a VLCC bridge aft) was traced to a copied line (docs/environment.md)."""
         return cls(lpp=3.0, breadth=0.48925, A_T=0.13544, A_L=0.52038, A_OD=0.14230, C=-0.01299, C_BR=-0.06209,
                    H_BR=0.294, H_C=0.10359)
 
