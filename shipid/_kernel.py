@@ -61,6 +61,34 @@ def cholesky(A, n, L):
     return True
 
 
+def chol_solve(L, n, X, w, a):
+    """Solve ``L L^T [X | a] = [X | a]`` in place for the first ``n`` rows (``X`` ``w`` columns wide,
+    ``a`` a vector), by forward then backward substitution a row at a time: the filter's gain
+    ``[K^T, S^-1 e]`` and the smoother's ``[K^T, S^-1 e]`` and ``S^-1``."""
+    for i in range(n):
+        s = a[i]
+        for m in range(i):
+            lim = L[i, m]
+            s -= lim * a[m]
+            for j in range(w):
+                X[i, j] -= lim * X[m, j]
+        lii = L[i, i]
+        a[i] = s / lii
+        for j in range(w):
+            X[i, j] = X[i, j] / lii
+    for i in range(n - 1, -1, -1):
+        s = a[i]
+        for m in range(i + 1, n):
+            lmi = L[m, i]
+            s -= lmi * a[m]
+            for j in range(w):
+                X[i, j] -= lmi * X[m, j]
+        lii = L[i, i]
+        a[i] = s / lii
+        for j in range(w):
+            X[i, j] = X[i, j] / lii
+
+
 def mat_mul(A, B, out):
     """``out = A @ B`` (small matrices; loops)."""
     n, m = A.shape
@@ -311,31 +339,12 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
                     S[a_, a_] += R[b, sel[a_]]
                 ok = cholesky(S, cnt, L)  # S = L L^T (False: not positive definite or not finite)
                 if ok:
-                    # [K^T, a] = S^-1 [H P, e]: forward then backward substitution, a row (nz long) at a time
+                    # [K^T, a] = S^-1 [H P, e]
                     for i in range(cnt):
                         for j in range(nz):
                             Kt[i, j] = PH[i, j]
-                        s = e[i]
-                        for m in range(i):
-                            lim = L[i, m]
-                            s -= lim * a[m]
-                            for j in range(nz):
-                                Kt[i, j] -= lim * Kt[m, j]
-                        lii = L[i, i]
-                        a[i] = s / lii
-                        for j in range(nz):
-                            Kt[i, j] = Kt[i, j] / lii
-                    for i in range(cnt - 1, -1, -1):
-                        s = a[i]
-                        for m in range(i + 1, cnt):
-                            lmi = L[m, i]
-                            s -= lmi * a[m]
-                            for j in range(nz):
-                                Kt[i, j] -= lmi * Kt[m, j]
-                        lii = L[i, i]
-                        a[i] = s / lii
-                        for j in range(nz):
-                            Kt[i, j] = Kt[i, j] / lii
+                        a[i] = e[i]
+                    chol_solve(L, cnt, Kt, nz, a)
                     for i in range(cnt):
                         ld += 2.0 * math.log(L[i, i])
                         d2 += e[i] * a[i]
@@ -527,7 +536,7 @@ def rk4_replay(t, U, x0, p, Pk, nsteps, foh, X):
     return bad
 
 
-FILTER = {"cholesky": cholesky, "mat_mul": mat_mul, "rk4_rest": rk4_rest, "tangent": tangent, "_work": _work, "cross_interval": cross_interval,
+FILTER = {"cholesky": cholesky, "chol_solve": chol_solve, "mat_mul": mat_mul, "rk4_rest": rk4_rest, "tangent": tangent, "_work": _work, "cross_interval": cross_interval,
           "ekf_member": ekf_member, "ekf_batch": ekf_batch, "rk4_replay": rk4_replay}
 
 
@@ -639,6 +648,7 @@ def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps
     Si = np.empty((nm, nm))
     e = np.empty(nm)
     a = np.empty(nm)
+    a2 = np.empty(nm)  # chol_solve's vector for S^-1 (solves zeros)
     LKt = np.empty((nm, nz))
     KLK = np.empty((nm, nm))
     for k in range(N - 1, -1, -1):
@@ -694,37 +704,12 @@ def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps
                     Si[c_, d_] = 1.0 if c_ == d_ else 0.0
                 S[c_, c_] += R[sel[c_]]
             cholesky(S, cnt, L)  # positive definite: the filter factorised the same S at this sample
-            # [K^T, a, S^-1] = S^-1 [H Pp, e, I]: forward then backward substitution
+            # [K^T, a, S^-1] = S^-1 [H Pp, e, I]
             for i in range(cnt):
-                s = e[i]
-                for m in range(i):
-                    lim = L[i, m]
-                    s -= lim * a[m]
-                    for j in range(nz):
-                        Kt[i, j] -= lim * Kt[m, j]
-                    for j in range(cnt):
-                        Si[i, j] -= lim * Si[m, j]
-                lii = L[i, i]
-                a[i] = s / lii
-                for j in range(nz):
-                    Kt[i, j] = Kt[i, j] / lii
-                for j in range(cnt):
-                    Si[i, j] = Si[i, j] / lii
-            for i in range(cnt - 1, -1, -1):
-                s = a[i]
-                for m in range(i + 1, cnt):
-                    lmi = L[m, i]
-                    s -= lmi * a[m]
-                    for j in range(nz):
-                        Kt[i, j] -= lmi * Kt[m, j]
-                    for j in range(cnt):
-                        Si[i, j] -= lmi * Si[m, j]
-                lii = L[i, i]
-                a[i] = s / lii
-                for j in range(nz):
-                    Kt[i, j] = Kt[i, j] / lii
-                for j in range(cnt):
-                    Si[i, j] = Si[i, j] / lii
+                a[i] = e[i]
+                a2[i] = 0.0
+            chol_solve(L, cnt, Kt, nz, a)
+            chol_solve(L, cnt, Si, cnt, a2)
             for c_ in range(cnt):  # LKt = (Lam K)^T = K^T Lam (Lam symmetric), a row of Lam at a time
                 for i in range(nz):
                     LKt[c_, i] = 0.0
@@ -794,7 +779,7 @@ def bf_batch(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps0
             Ps0[b] = np.nan
 
 
-SMOOTHER = {"cholesky": cholesky, "rts_member": rts_member, "rts_batch": rts_batch, "bf_member": bf_member,
+SMOOTHER = {"cholesky": cholesky, "chol_solve": chol_solve, "rts_member": rts_member, "rts_batch": rts_batch, "bf_member": bf_member,
             "bf_batch": bf_batch}
 
 
