@@ -348,7 +348,7 @@ class OutputErrorRefiner:
             return ((R[1:] - R[0]) / h).T
 
         self.held_, self.subset_ = [], None
-        col_names = list(names) + [f"{c}0[log {i}]" for i in range(len(arrays)) for c in x0_names]
+        col_names = list(names) + [f"{c}0[{i}]" for i in range(len(arrays)) for c in x0_names]
         last_f: list = [None, None]  # the nominal residuals of the last forward-difference Jacobian
         if self.hold_unresolved and th0.size > 1:
             J0 = jac(th0)
