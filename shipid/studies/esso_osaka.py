@@ -252,7 +252,8 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
               by_type: bool = True, calm_water=("mmg",), input_hold: str = "foh", gate: float | None = 5.0,
               current: str = "constant", estimate=ESTIMATE, estimate_wind=ESTIMATE_WIND, substeps: int = 2,
               fixed: bool = True, turning: bool = True, all_types: bool = True, progress: bool = True,
-              rudder_rate: float | None = None, wind="esso-osaka-3m", by_type_prior: str = "prior") -> EssoStudy:
+              rudder_rate: float | None = None, wind="esso-osaka-3m", by_type_prior: str = "prior",
+              prior_params: dict | None = None) -> EssoStudy:
     """Fit and cross-validate on the Esso Osaka runs (see the module docstring for every choice).
 
     Parameters
@@ -282,6 +283,9 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
         Start and prior of the per-type fits: the ``esso-osaka-prior`` set with 100 % std (default), or the
         fit on the training runs of the *other* run types with its estimated stds (sequential Bayes: the
         other types' posterior is this type's prior; no run enters twice).
+    prior_params : dict, optional
+        Values that replace those of the ``esso-osaka-prior`` set in the start and prior of every
+        ``lowspeed`` fit (e.g. the session-7 round-4 candidates ``{"dgammaR": 0.1225}``).
     wind : WindForce or "esso-osaka-3m"
         Above-water geometry of the wind force (the prior of the estimated components and the value of the
         others).
@@ -294,6 +298,8 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
     fold_of = assign_folds(runs, folds)
     n_folds = max(fold_of.values()) + 1
     prior = get_model("lowspeed")
+    if prior_params:
+        prior = prior.with_params(prior_params)
     env0 = with_environment(prior, wind=wind, current=current)
     kvlcc2 = get_model("mmg", "kvlcc2", lpp=prior.lpp)
     fixed_models = {"dead reckoning": dead_reckoning(), "mmg kvlcc2 (Froude-scaled, no fit)": kvlcc2,
@@ -411,7 +417,8 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
                                "start_every": start_every, "runs": [lg.name for lg in runs], "fold_of": fold_of,
                                "input_hold": input_hold, "gate": gate, "current": current,
                                "estimate": list(estimate), "estimate_wind": list(estimate_wind),
-                               "rudder_rate": rudder_rate, "by_type_prior": by_type_prior, "wind": getattr(wind, "to_dict", lambda: wind)()})
+                               "rudder_rate": rudder_rate, "by_type_prior": by_type_prior,
+                               "prior_params": dict(prior_params or {}), "wind": getattr(wind, "to_dict", lambda: wind)()})
 
 
 def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shipid.studies.esso_osaka
@@ -438,6 +445,8 @@ def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shi
     ap.add_argument("--wind-cbr", type=float, default=None,
                     help="superstructure centroid C_BR [m] of the wind geometry (default: the esso_osaka_3m preset)")
     ap.add_argument("--by-type-prior", default="prior", choices=("prior", "others"))
+    ap.add_argument("--set", default="", help="comma-separated name=value replacing values of the lowspeed prior "
+                    "(start and prior of every fit), e.g. dgammaR=0.1225")
     ap.add_argument("--save", help="pickle the EssoStudy here")
     a = ap.parse_args(argv)
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -453,7 +462,8 @@ def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shi
                     fit_every=a.fit_every, estimate=tuple(a.estimate.split(",")) + tuple(x for x in a.estimate_extra.split(",") if x), by_type=not a.no_by_type,
                     calm_water=() if a.no_calm_water else ("mmg",), turning=not a.no_turning,
                     all_types=not a.no_all_types, fixed=not a.no_fixed, progress=False, rudder_rate=rate, wind=wind,
-                    by_type_prior=a.by_type_prior)
+                    by_type_prior=a.by_type_prior,
+                    prior_params={k: float(v) for k, v in (x.split("=") for x in a.set.split(",") if x)})
     print(f"settings: {res.settings | {'runs': len(res.settings['runs']), 'fold_of': '...'}}; {time.time() - t0:.0f} s")
     with pd.option_context("display.width", 200, "display.max_rows", 500, "display.float_format", "{:.3f}".format):
         for H in (10.0, 30.0, 60.0):
