@@ -44,7 +44,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-__all__ = ["run_study", "EssoStudy", "load_runs", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
+__all__ = ["run_study", "EssoStudy", "load_runs", "error_diagnosis", "split_position_error", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
 
 #: Where the shared data set lives relative to the repository root.
 DATA_DIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "esso_osaka_frt"
@@ -419,6 +419,77 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
                                "estimate": list(estimate), "estimate_wind": list(estimate_wind),
                                "rudder_rate": rudder_rate, "by_type_prior": by_type_prior,
                                "prior_params": dict(prior_params or {}), "wind": getattr(wind, "to_dict", lambda: wind)()})
+
+
+def split_position_error(dt: float, meas: dict, pred: dict) -> dict:
+    """Which predicted quantity makes an open-loop position error: the measured track re-integrated
+    (trapezoid, sample spacing ``dt``) with one predicted quantity swapped in.
+
+    ``meas``, ``pred``: arrays ``psi, u, v`` over the prediction window (body velocities over ground).
+    Returns the end-point distances [m] of the re-integrated track from the measured one's integral:
+    ``heading`` (predicted heading, measured u, v), ``velocity`` (measured heading, predicted u, v),
+    ``u`` and ``v`` (only that velocity predicted).  Each is the error that quantity alone would make."""
+    def end(psi, u, v):
+        c, s = np.cos(psi), np.sin(psi)
+        xd, yd = u * c - v * s, u * s + v * c
+        return np.array([np.sum(xd[1:] + xd[:-1]), np.sum(yd[1:] + yd[:-1])]) * (0.5 * dt)
+
+    ref = end(meas["psi"], meas["u"], meas["v"])
+    cases = {"heading": (pred["psi"], meas["u"], meas["v"]), "velocity": (meas["psi"], pred["u"], pred["v"]),
+             "u": (meas["psi"], pred["u"], meas["v"]), "v": (meas["psi"], meas["u"], pred["v"])}
+    return {k: float(np.hypot(*(end(*a) - ref))) for k, a in cases.items()}
+
+
+def error_diagnosis(study: "EssoStudy", run_type: str = "zigzag", horizon: float = 30.0,
+                    model: str = "lowspeed + wind + current fitted", data_dir=DATA_DIR,
+                    start_every: float = 5.0) -> pd.DataFrame:
+    """Per start of the held-out runs of ``run_type``: what the ``horizon`` s position error is made of.
+
+    Each run is predicted by the fold model of ``study`` that did not see it (all-types fit, started with
+    that fit's mean current), as in :func:`run_study`.  Columns: ``error`` (position, m), the
+    :func:`split_position_error` parts ``e_heading``, ``e_velocity``, ``e_u``, ``e_v``; the errors at the
+    horizon (predicted − measured) ``d_psi_deg``, ``d_u``, ``d_v``, ``d_r``; the measured ``r_end``, ``v_end``
+    (whose signs tell a port from a starboard turn); and ``t_v``, ``t_r``, ``t_u``, ``t_psi``: the first time
+    [s] the error of v exceeds 0.02 m/s, of r 0.01 rad/s, of u 0.03 m/s, of heading 5 deg (NaN: never)."""
+    from ..validation_horizon import horizon_prediction
+
+    fold_of = study.settings["fold_of"]
+    every = study.settings["eval_every"]
+    rows = []
+    for lg in load_runs(data_dir, (run_type,)):
+        k = fold_of[lg.name]
+        m = study.models[k][model]
+        cur = study.currents[(study.currents.fold == k) & (study.currents.fit == "all types")][["cx", "cy"]].mean()
+        d = _frame(lg, every)
+        init = {"cx": float(cur.cx), "cy": float(cur.cy)} if "cx" in m.state_names else None
+        r = horizon_prediction(m, d, horizons=(horizon,), start_every=start_every, initial=init)
+        X, tt = r.tracks["x"], r.tracks["t"]
+        dt = tt[1] - tt[0]
+        kh = int(round(horizon / dt))
+        t = d["time"].to_numpy()
+        for i, t0 in enumerate(r.start_times):
+            k0 = int(np.searchsorted(t, t0))
+            if k0 + kh >= t.size:
+                continue
+            sl = slice(k0, k0 + kh + 1)
+            meas = {s: d[s].to_numpy()[sl] for s in ("x", "y", "psi", "u", "v", "r")}
+            pred = {s: X[i, : kh + 1, m.state_index(s)] for s in meas}
+            err = {s: pred[s] - meas[s] for s in ("u", "v", "r")}
+            err["psi"] = np.degrees(np.angle(np.exp(1j * (pred["psi"] - meas["psi"]))))
+
+            def first(e, thr):
+                j = int(np.argmax(np.abs(e) > thr))
+                return float(tt[j]) if abs(e[j]) > thr else np.nan
+
+            parts = split_position_error(dt, meas, pred)
+            rows.append({"run": lg.name, "start_time": float(t0),
+                         "error": float(np.hypot(pred["x"][-1] - meas["x"][-1], pred["y"][-1] - meas["y"][-1])),
+                         **{f"e_{k_}": v for k_, v in parts.items()},
+                         "d_psi_deg": float(err["psi"][-1]), "d_u": float(err["u"][-1]), "d_v": float(err["v"][-1]),
+                         "d_r": float(err["r"][-1]), "r_end": float(meas["r"][-1]), "v_end": float(meas["v"][-1]),
+                         "t_v": first(err["v"], 0.02), "t_r": first(err["r"], 0.01), "t_u": first(err["u"], 0.03),
+                         "t_psi": first(err["psi"], 5.0)})
+    return pd.DataFrame(rows)
 
 
 def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shipid.studies.esso_osaka
