@@ -19,7 +19,8 @@ Choices (made once, before looking at any held-out error, and the same for every
   automatic defaults were not used (on these runs they diverge, as the issue reports);
 * estimated coefficients :data:`ESTIMATE` (hull, thrust ahead and astern, astern side force, rudder
   lift and its hull interaction aH, tR -- the last two chosen by cross-validation in session 6) and,
-  with wind, :data:`ESTIMATE_WIND`; prior = ``esso-osaka-prior`` with 100 % prior std;
+  with wind, :data:`ESTIMATE_WIND`; prior = ``esso-osaka-prior`` with :data:`PRIOR_PARAMS` (the
+  side-dependent flow straightening, chosen by cross-validation in session 7) and 100 % prior std;
 * current: constant per run (reset at each run), estimated with prior std 0.05 m/s; in prediction the
   held-out run starts with the training runs' mean current;
 * EKF inputs: the identifier's defaults, first-order hold and a 5-sigma innovation gate -- chosen by 8-fold
@@ -44,7 +45,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-__all__ = ["run_study", "EssoStudy", "load_runs", "error_diagnosis", "split_position_error", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
+__all__ = ["run_study", "EssoStudy", "load_runs", "error_diagnosis", "split_position_error", "PRIOR_PARAMS", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
 
 #: Where the shared data set lives relative to the repository root.
 DATA_DIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "esso_osaka_frt"
@@ -57,6 +58,13 @@ DUPLICATES = ("turn_cut_14-Sep-2020_15_58_08",)
 #: (they scatter over the folds; docs/environment.md) -- read them as a group, not one by one.
 ESTIMATE = ("X0F", "X0A", "Yv", "Yr", "Nv", "Nr", "CD", "k0", "CTa0", "YPa", "NPa", "f_alpha", "aH", "tR")
 ESTIMATE_WIND = ("wX1", "wY1", "wN1", "wN2")
+#: Values replacing the ``esso-osaka-prior`` set's in every ``lowspeed`` fit of the study: the MMG standard
+#: method's side-dependent flow straightening at the KVLCC2's published split (gamma_R 0.640 / 0.395 for
+#: beta_R > 0 / < 0, Yasukawa & Yoshimura 2015: +-0.1225 about the prior's 0.5), chosen in session 7 by the
+#: pre-registered round 4 (candidate G1: 8-fold mean of the 30 s medians 0.2898 vs 0.2922, leave-one-run-out
+#: chosen-scope mean 0.2708 vs 0.2780; docs/environment.md).  ``run_study(prior_params={})`` is the setting
+#: before.
+PRIOR_PARAMS = {"dgammaR": 0.1225}
 MEAS_STD = {"x": 0.01, "y": 0.01, "psi": 0.003, "u": 0.01, "v": 0.01, "r": 0.003}
 PROCESS_STD = {"x": 0.005, "y": 0.005, "psi": 0.002, "u": 0.003, "v": 0.003, "r": 0.002}
 
@@ -253,7 +261,7 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
               current: str = "constant", estimate=ESTIMATE, estimate_wind=ESTIMATE_WIND, substeps: int = 2,
               fixed: bool = True, turning: bool = True, all_types: bool = True, progress: bool = True,
               rudder_rate: float | None = None, wind="esso-osaka-3m", by_type_prior: str = "prior",
-              prior_params: dict | None = None) -> EssoStudy:
+              prior_params: dict | None = PRIOR_PARAMS) -> EssoStudy:
     """Fit and cross-validate on the Esso Osaka runs (see the module docstring for every choice).
 
     Parameters
@@ -285,7 +293,7 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
         other types' posterior is this type's prior; no run enters twice).
     prior_params : dict, optional
         Values that replace those of the ``esso-osaka-prior`` set in the start and prior of every
-        ``lowspeed`` fit (e.g. the session-7 round-4 candidates ``{"dgammaR": 0.1225}``).
+        ``lowspeed`` fit (default :data:`PRIOR_PARAMS`, chosen by cross-validation; ``{}``: the prior set).
     wind : WindForce or "esso-osaka-3m"
         Above-water geometry of the wind force (the prior of the estimated components and the value of the
         others).
@@ -517,7 +525,7 @@ def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shi
                     help="superstructure centroid C_BR [m] of the wind geometry (default: the esso_osaka_3m preset)")
     ap.add_argument("--by-type-prior", default="prior", choices=("prior", "others"))
     ap.add_argument("--set", default="", help="comma-separated name=value replacing values of the lowspeed prior "
-                    "(start and prior of every fit), e.g. dgammaR=0.1225")
+                    f"(start and prior of every fit), on top of {PRIOR_PARAMS} (dgammaR=0: the setting before)")
     ap.add_argument("--save", help="pickle the EssoStudy here")
     a = ap.parse_args(argv)
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -534,7 +542,7 @@ def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shi
                     calm_water=() if a.no_calm_water else ("mmg",), turning=not a.no_turning,
                     all_types=not a.no_all_types, fixed=not a.no_fixed, progress=False, rudder_rate=rate, wind=wind,
                     by_type_prior=a.by_type_prior,
-                    prior_params={k: float(v) for k, v in (x.split("=") for x in a.set.split(",") if x)})
+                    prior_params={**PRIOR_PARAMS, **{k: float(v) for k, v in (x.split("=") for x in a.set.split(",") if x)}})
     print(f"settings: {res.settings | {'runs': len(res.settings['runs']), 'fold_of': '...'}}; {time.time() - t0:.0f} s")
     with pd.option_context("display.width", 200, "display.max_rows", 500, "display.float_format", "{:.3f}".format):
         for H in (10.0, 30.0, 60.0):
