@@ -134,11 +134,11 @@ class OutputErrorRefiner:
         listed in ``held_`` and in the result's settings, with the threshold and the condition numbers.
     sign_bounds : bool
         Keep the model's dissipative coefficients (``model.dissipative``: the pure sway and yaw damping
-        terms) at their physical sign, <= 0, as bounds of the solver (default False).  A start value on
-        the wrong side starts at 0.  Coefficients that end on their bound (or within 1 % of their scale of
-        it: the solver's iterates stay strictly inside) are listed in ``at_bound_`` and
-        in the result's settings; they have no standard deviation (the Gaussian approximation does not
-        hold at an active bound) and the covariance is that of the others.
+        terms) at their physical sign, <= 0 (default False), by an active set: the unconstrained
+        solution first; coefficients on the wrong side are held at 0 and the rest solved again (each
+        solve up to ``max_nfev`` evaluations); a held one is released when its cost gradient points into
+        the allowed side.  The held ones are listed in ``at_bound_`` and in the result's settings and
+        have no standard deviation (like the identifiable subset's).
     """
 
     def __init__(self, model: Model, *, estimate=None, channels=None, meas_std=None, max_nfev: int = 30,
@@ -333,21 +333,6 @@ class OutputErrorRefiner:
         h = 1e-6
         th0 = np.concatenate([p0[est_idx] / scale, np.zeros(len(arrays) * nk)])
         free = np.arange(th0.size)  # the columns the solver moves (all, unless some are held)
-        # physical signs as bounds (scaled coordinates: coef = th * scale)
-        lb, ub = np.full(th0.size, -np.inf), np.full(th0.size, np.inf)
-        self.sign_bounded_, self.sign_start_moved_ = [], []
-        if self.sign_bounds:
-            for i, n in enumerate(names):
-                if n in getattr(model, "dissipative", ()):
-                    self.sign_bounded_.append(n)
-                    if scale[i] > 0:
-                        ub[i] = 0.0
-                    else:
-                        lb[i] = 0.0
-                    if th0[i] * scale[i] > 0:
-                        self.sign_start_moved_.append(n)
-                        th0[i] = 0.0
-
         def full(t):
             th = th0.copy()
             th[free] = t
@@ -369,6 +354,14 @@ class OutputErrorRefiner:
             last_f[:] = [t.copy(), R[0]]
             return ((R[1:] - R[0]) / h).T
 
+        # physical signs (scaled coordinates: coef = th * scale; +1: the coefficient must be <= 0)
+        self.sign_bounded_ = []
+        side = np.zeros(th0.size)
+        if self.sign_bounds:
+            for i, n in enumerate(names):
+                if n in getattr(model, "dissipative", ()):
+                    self.sign_bounded_.append(n)
+                    side[i] = 1.0 if scale[i] > 0 else -1.0
         self.held_, self.subset_ = [], None
         col_names = list(names) + [f"{c}0[{i}]" for i in range(len(arrays)) for c in x0_names]
         last_f: list = [None, None]  # the nominal residuals of the last forward-difference Jacobian
@@ -385,29 +378,51 @@ class OutputErrorRefiner:
                               f"own size changes the cost by less than the solver's tolerance ({FTOL:g} of it), so the "
                               "fit could not resolve them (scaled J^T J condition "
                               f"{info['condition']:.3g} -> {info['condition_kept']:.3g})", UserWarning, stacklevel=2)
-        bounded = bool(np.isfinite(lb[free]).any() or np.isfinite(ub[free]).any())
-        sol = least_squares(fun, th0[free], jac=jac, method="trf", max_nfev=self.max_nfev, x_scale=1.0,
-                            ftol=FTOL, xtol=FTOL, **({"bounds": (lb[free], ub[free])} if bounded else {}))
+        def solve(free_now):
+            return least_squares(fun, th0[free_now], jac=jac, method="trf", max_nfev=self.max_nfev, x_scale=1.0,
+                                 ftol=FTOL, xtol=FTOL)
+
+        sol = solve(free)
+        nfev = int(sol.nfev)
+        # Physical signs by an active set (not by least_squares' bounds, whose interior scaling slows the
+        # steps of a coefficient near its bound until xtol stops the solver early, at a point that follows
+        # the rounding): fix every coefficient that ends on the wrong side at 0 and solve for the others;
+        # release a fixed one whose cost gradient points into the allowed side; repeat.  Nothing changes
+        # when no coefficient leaves its side (the unconstrained solution is the constrained one).
+        self.at_bound_ = []
+        if side.any():
+            free_all, fixed = free.copy(), []
+            for _ in range(2 * int((side != 0).sum()) + 1):
+                th_now = full(sol.x)
+                viol = [int(i) for i in free if side[i] and th_now[i] * side[i] > 0]
+                if not viol and fixed:
+                    th0[:] = th_now
+                    free = np.array(fixed)
+                    g = jac(th0[free]).T @ fun(th0[free])  # d cost / d th of the fixed ones
+                    nfev += 1
+                    release = [i for i, gi in zip(fixed, g) if gi * side[i] > 0]
+                    if not release:
+                        free = np.array([i for i in free_all if i not in fixed])
+                        break
+                    fixed = [i for i in fixed if i not in release]
+                elif not viol:
+                    break
+                else:
+                    th0[:] = th_now
+                    th0[viol] = 0.0
+                    fixed = sorted(set(fixed) | set(viol))
+                free = np.array([i for i in free_all if i not in fixed])
+                sol = solve(free)
+                nfev += int(sol.nfev)
+            self.at_bound_ = [col_names[i] for i in fixed]
+            if fixed:
+                warnings.warn(f"output-error refinement: {', '.join(self.at_bound_)} held on the physical-sign "
+                              "bound 0 (dissipative terms must be <= 0): the logs pull them to the wrong sign, "
+                              "so the model's other terms carry that part of the dynamics", UserWarning, stacklevel=2)
         J = sol.jac
         self.jac_ = J  # at the solution, scaled parameters (columns: the refined ones)
         names_all = names
-        self.at_bound_ = []
-        if bounded:
-            # a coefficient on its bound is not a Gaussian estimate: it leaves the covariance, like a held one
-            # (trf's iterates stay strictly inside: "on" = marked active, or within 1 % of the coefficient's
-            # own scale of the bound)
-            has = np.isfinite(lb[free]) | np.isfinite(ub[free])
-            on = (np.asarray(sol.active_mask) != 0) | (has & (np.abs(sol.x) <= 1e-2))
-            self.at_bound_ = [col_names[i] for i in free[on]]
-            if on.any():
-                warnings.warn(f"output-error refinement: {', '.join(self.at_bound_)} ended on the physical-sign "
-                              "bound 0 (dissipative terms must be <= 0): the logs pull them to the wrong sign, "
-                              "so the model's other terms carry that part of the dynamics; no standard deviation "
-                              "is given for them", UserWarning, stacklevel=2)
-            J = J[:, ~on]
-            free_cov = free[~on]
-        else:
-            free_cov = free
+        free_cov = free
         fcoef = free_cov[free_cov < ne]  # the refined coefficients (the rest of ``free``: initial states)
         names = [names_all[i] for i in fcoef]
         n_obs = int(sum(m.sum() for m, w in zip(masks, wlog) if w > 0))
@@ -450,7 +465,7 @@ class OutputErrorRefiner:
         finite = bool(np.all(np.isfinite(sol.x)) and np.isfinite(sol.cost))
         capped = finite and bool(np.any(np.abs(sol.fun) >= 1e6))  # a replay still diverges at the end
         self.success_ = bool(sol.success) and finite and not capped
-        self.nfev_ = int(sol.nfev)
+        self.nfev_ = nfev
         if not finite:
             self.message_ = f"refinement failed: non-finite coefficients or cost ({sol.message}); the start model's replay diverges?"
         elif capped:
@@ -493,8 +508,8 @@ class OutputErrorRefiner:
                       "estimate_x0": list(self.x0_std_.columns),
                       "log_weights": None if self.log_weights is None else [float(w) for w in self.log_weights],
                       "extra_residuals": self.extra_residuals is not None,
-                      **({"sign_bounds": list(self.sign_bounded_), "at_bound": list(self.at_bound_),
-                          "sign_start_moved": list(self.sign_start_moved_)} if self.sign_bounds else {}),
+                      **({"sign_bounds": list(self.sign_bounded_), "at_bound": list(self.at_bound_)}
+                         if self.sign_bounds else {}),
                       **({"held": list(self.held_), "hold_rule": {
                           "threshold": self.subset_["threshold"], "ftol": self.subset_["ftol"],
                           "condition_before": self.subset_["condition"],

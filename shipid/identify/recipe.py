@@ -454,7 +454,7 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
              dt="auto",
              max_drift_deg="auto", refine: str | None = "auto", metric_weight: float | None = None,
              n_passes: int = 2, max_nfev: int = 60, tune_noise: bool = False, progress: bool = False,
-             meas_std=None, ekf_options=None, hold_unresolved: bool = True, sign_bounds: bool = True,
+             meas_std=None, ekf_options=None, hold_unresolved: bool = True, sign_bounds: bool = False,
              log=None) -> RecipeFit:
     """Fit ``model`` to ``logs`` with the project's recipe (module docstring: steps 1-6).
 
@@ -479,7 +479,7 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
     max_nfev : int  evaluation limit of the refinement
     metric_weight : float, optional  weight of the metric residuals of ``refine="metrics"`` (:func:`refine_fit`)
     hold_unresolved : bool  step 6's identifiable subset (:func:`refine_fit`; default True)
-    sign_bounds : bool  step 6 keeps the model's dissipative coefficients <= 0 (:func:`refine_fit`; default True)
+    sign_bounds : bool  step 6 keeps the model's dissipative coefficients <= 0 (:func:`refine_fit`; default False)
     log : callable, optional  called with one line per step as it happens (e.g. ``print``)
 
     Returns
@@ -648,7 +648,7 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
 
 def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: int = 60,
                metric_weight: float | None = None, channels=None, hold_unresolved: bool = True,
-               grid_dt=None, sign_bounds: bool = True, log=None) -> RecipeFit:
+               grid_dt=None, sign_bounds: bool = False, log=None) -> RecipeFit:
     """Step 6 of the recipe on a fitted EKF stage: a new :class:`RecipeFit` with the refinement.
 
     Parameters
@@ -666,7 +666,9 @@ def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: in
     hold_unresolved : bool  hold at their EKF-stage values the coefficients the solver cannot resolve
         (:func:`shipid.identify.batch.identifiable_subset`; default True); False: refine every one
     sign_bounds : bool  keep the model's dissipative coefficients (``model.dissipative``, the pure sway and yaw
-        damping terms) <= 0 (default True; :class:`shipid.identify.batch.OutputErrorRefiner`)
+        damping terms) <= 0 (default False; :class:`shipid.identify.batch.OutputErrorRefiner`).  Not the
+        default: on the MARIN ``response-nl`` fit the held set follows the BLAS thread count and the cross
+        terms can still make the own damping positive (docs/validation.md, session 7)
     log : callable, optional  called with one line per step
     """
     from .batch import OutputErrorRefiner
@@ -739,8 +741,8 @@ def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: in
         step("physical signs", list(ref.at_bound_),
              (f"{', '.join(bnd)} kept <= 0 (dissipative: pure sway/yaw damping)" if bnd else
               "the model declares no dissipative coefficient among the refined ones")
-             + (f"; started at 0 from the wrong sign: {', '.join(ref.sign_start_moved_)}" if ref.sign_start_moved_ else "")
-             + (f"; ended on the bound: {', '.join(ref.at_bound_)}" if ref.at_bound_ else ""))
+             + (f"; held on the bound 0 (the unconstrained fit puts them on the wrong side): "
+                f"{', '.join(ref.at_bound_)}" if ref.at_bound_ else ""))
     step("output-error", ref.message_, f"{len(est_ref)} parameters on a {dt_ref:.3g} s common grid, channels "
          f"{chans} over their spread, each log weighted 1/samples; {ref.nfev_} evaluations, cost "
          f"{ref.cost_start_:.4g} -> {ref.cost_:.4g}")

@@ -182,6 +182,11 @@ RECIPE_VARIANTS_7 = {
 #: reported for mmg, response-nl and kcs-response, and the zz+-20 hold-out is run once, after this commit.
 LORO_RULE_7 = ("no selection (the bounds are a physical requirement); both LORO scores reported per model; the "
                "hold-out runs once afterwards")
+#: Outcome (docs/validation.md, session 7): measured with least_squares' own bounds, which stopped the MARIN
+#: ``response-nl`` fit early (xtol, 1 BLAS thread) or at its evaluation limit (2 threads); the active-set
+#: version that replaced them holds different sets with 1 and 2 threads, and with 2 the cross terms still make
+#: the own damping positive.  So the bounds are NOT the default (``sign_bounds=False``; ``shipid fit
+#: --sign-bounds``); the first row's label is the pre-registered one.
 
 
 def leave_one_run_out_recipes(runs: dict[str, TrialLog], name: str = "mmg", variants=None, train=TRAIN,
