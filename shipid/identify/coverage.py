@@ -95,7 +95,8 @@ def _replicate(task: dict) -> dict:
                                  channels=chans or None,
                                  jacobian="tangent", max_nfev=task["max_nfev"], input_hold=ident.input_hold,
                                  estimate_x0=task.get("estimate_x0", True))
-        fit = ref.fit(logs, start=ident).result()
+        ref.fit(logs, start=ident)
+        fit = ref.result()
     names = list(fit.cov.index)
     out = {"seed": task["seed"], "success": bool(fit.success), "names": names,
            "coef": [fit.coef[n] for n in names], "std": [fit.coef_std[n] for n in names],
@@ -107,7 +108,14 @@ def _replicate(task: dict) -> dict:
         out["metrics"] = {f"{r.manoeuvre}:{r.metric}": [r.low, r.high, r.nominal] for r in pred.summary.itertuples()}
         out["n_failed_draws"] = {k: v["n_failed"] for k, v in pred.failures.items()}
     if task["mcmc"]:
-        s = sample_posterior(res, logs, seed=task["seed"] % (2**31), **task["mcmc_kwargs"])
+        kw = dict(task["mcmc_kwargs"])
+        if kw.get("proposal") == "output-error":
+            # the independence proposal from this replicate's output-error Laplace approximation (the chain
+            # still starts from the EKF posterior ``res``)
+            if task["refine"] != "output-error":
+                raise ValueError("mcmc_kwargs proposal='output-error' needs refine='output-error'")
+            kw["proposal"] = ref
+        s = sample_posterior(res, logs, seed=task["seed"] % (2**31), **kw)
         lo, hi = np.quantile(s.samples, [0.025, 0.975], axis=0)
         out["mcmc"] = {"low": lo.tolist(), "high": hi.tolist(), "converged": bool(s.converged),
                        "mean": s.samples.mean(axis=0).tolist(), "std": s.samples.std(axis=0, ddof=1).tolist(),
