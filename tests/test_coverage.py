@@ -23,7 +23,7 @@ def test_small_study_is_reproducible_and_counts():
     np.testing.assert_allclose(t["covered"].to_numpy(), (np.abs(z) <= 1.959964).sum(axis=0))
     with pytest.raises(ValueError, match="n_replicates must be >= 2"):
         coverage_study(n_replicates=1)
-    with pytest.raises(ValueError, match="refine must be None or 'output-error'"):
+    with pytest.raises(ValueError, match="refine must be None, .output-error. or .ekf-sensor-noise."):
         coverage_study(n_replicates=2, refine="mcmc")
 
 

@@ -83,6 +83,13 @@ def _replicate(task: dict) -> dict:
                               **task["identifier_kwargs"]).fit(logs)
     res = ident.result()
     fit = res
+    if task["refine"] == "ekf-sensor-noise":
+        # the same EKF estimate, its covariance re-evaluated with the filter's own gains under sensor noise only
+        import dataclasses
+
+        C = ident.sensor_noise_cov()
+        fit = dataclasses.replace(res, cov=C, coef_std={**res.coef_std, **{n: float(np.sqrt(max(C.loc[n, n], 0.0)))
+                                                                           for n in C.index}})
     if task["refine"] == "output-error":
         # the output-error maximum-likelihood estimate started from the EKF: weights = the EKF's noise levels,
         # exact RK4 sensitivities, Laplace covariance (J^T J)^-1 s^2
@@ -243,13 +250,15 @@ def coverage_study(truth=None, recipes=None, *, n_replicates: int = 100, seed: i
     mcmc_kwargs : dict  -- keyword arguments of :func:`sample_posterior` (steps, walkers, burn ...)
     engine : shipid.campaign.Engine, optional  -- default serial
     level : float  -- interval probability (0.95)
-    refine : {None, "output-error"}
+    refine : {None, "output-error", "ekf-sensor-noise"}
         None: the intervals of the EKF posterior (method "ekf" in the table).  "output-error": the EKF
         fit is followed by the output-error maximum-likelihood fit of the same coefficients
         (:class:`~shipid.identify.batch.OutputErrorRefiner`, weights = the EKF's noise levels, exact RK4
         sensitivities, initial states from the EKF smoother and, with ``estimate_x0``, estimated with the
         coefficients, at most ``max_nfev`` evaluations) and its Laplace covariance ``s^2 (J^T J)^-1``
-        gives the intervals (method "output-error").  The MCMC
+        gives the intervals (method "output-error").  "ekf-sensor-noise": the EKF estimate with its covariance
+        re-evaluated under sensor noise only (:meth:`EKFIdentifier.sensor_noise_cov`, the filter's own gains;
+        method "ekf-sensor-noise").  The MCMC
         column does not depend on it (the sampler starts from the EKF posterior).
     max_nfev : int  -- evaluation limit of that refinement
     checkpoint : path, optional
@@ -276,9 +285,9 @@ def coverage_study(truth=None, recipes=None, *, n_replicates: int = 100, seed: i
 
     if int(n_replicates) < 2:
         raise ValueError(f"n_replicates must be >= 2, got {n_replicates}")
-    if refine not in (None, "output-error"):
-        raise ValueError(f"refine must be None or 'output-error', got {refine!r}")
-    method = "ekf" if refine is None else "output-error"
+    if refine not in (None, "output-error", "ekf-sensor-noise"):
+        raise ValueError(f"refine must be None, 'output-error' or 'ekf-sensor-noise', got {refine!r}")
+    method = "ekf" if refine is None else refine
     truth = get_model("kcs-response", "synthetic-truth") if truth is None else truth
     recipes = COVERAGE_RECIPES if recipes is None else tuple(recipes)
     z = float(abs(__import__("scipy.stats", fromlist=["norm"]).norm.ppf((1 - level) / 2)))
