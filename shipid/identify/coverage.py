@@ -14,7 +14,12 @@ for the MCMC posterior of :func:`shipid.identify.sample_posterior`.
 ``refine="output-error"`` tables the output-error fit that also estimates each log's initial u, v, r
 (``estimate_x0``); the MCMC column (docs/uncertainty.md sect. 3) samples the 3 yaw coefficients and
 the initial states (``mcmc_kwargs=dict(steps=1000, burn=300, moves="independence", sample_x0=True)``);
-``checkpoint=`` makes a long study resumable.
+``checkpoint=`` makes a long study resumable.  The 16-coefficient MCMC column
+(``benchmarks/run_mcmc16_coverage.py``) samples all coefficients and the initial states with the
+independence proposal taken from the replicate's output-error Laplace approximation
+(``mcmc_kwargs=dict(..., proposal="output-error", use_prior=False)``, needs ``refine="output-error"``).
+``refine="ekf-sensor-noise"`` tables the EKF's estimates with their covariance re-evaluated under sensor
+noise only (:meth:`EKFIdentifier.sensor_noise_cov`).
 
 With ``n`` replicates a true coverage of 0.95 is observed between about
 0.95 -+ 1.96 sqrt(0.95 * 0.05 / n) (0.91-0.99 for n = 100); the table gives the
