@@ -147,6 +147,15 @@ def test_checkpoint_resume_gives_the_uninterrupted_table(tmp_path):
     with pytest.raises(ValueError, match="run=False tabulates a checkpoint"):
         coverage_study(run=False, **kw)
     assert other.settings["n_done"] == 0
+    # equal settings that are other objects (a call from another script): the same replicates (the key was a pickle,
+    # which encodes whether two equal strings are one object)
+    one = "output-error"
+    other_obj = "".join(["output", "-error"])
+    assert other_obj == one and other_obj is not one
+    ck2 = tmp_path / "ck2.jsonl"
+    first = coverage_study(checkpoint=ck2, refine=one, mcmc_kwargs={"proposal": one}, **kw)
+    found = coverage_study(checkpoint=ck2, run=False, refine=one, mcmc_kwargs={"proposal": other_obj}, **kw)
+    assert found.settings["n_done"] == 3 and found.table.equals(first.table)
 
 
 #: The MCMC column's settings (docs/uncertainty.md sect. 3): the three yaw coefficients, the initial states

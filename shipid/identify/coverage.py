@@ -310,14 +310,28 @@ def coverage_study(truth=None, recipes=None, *, n_replicates: int = 100, seed: i
         import hashlib
         import pickle
 
-        for t in tasks:  # the key: the replicate's seed and every setting it depends on
-            t["key"] = hashlib.sha256(pickle.dumps({k: v for k, v in t.items() if k != "truth"}) +
-                                      truth.params.tobytes() + truth.name.encode()).hexdigest()[:24]
+        import json
+
+        legacy = {}
+        tail = truth.params.tobytes() + truth.name.encode()
+        for t in tasks:  # the key: the replicate's seed and every setting it depends on, as canonical JSON
+            settings_t = {k: v for k, v in t.items() if k != "truth"}
+            t["key"] = hashlib.sha256(json.dumps(settings_t, sort_keys=True, default=repr).encode()
+                                      + tail).hexdigest()[:24]
+            # the key of files written before session 7: a pickle, which depends on whether equal strings of the
+            # settings are one object (a call from another script found nothing); still read
+            legacy[t["key"]] = hashlib.sha256(pickle.dumps(settings_t) + tail).hexdigest()[:24]
             t["checkpoint"] = str(checkpoint)
         done = _read_checkpoint(checkpoint)
+        for key, old in legacy.items():
+            if key not in done and old in done:
+                done[key] = done[old]
         todo = [t for t in tasks if t["key"] not in done] if run else []
         new = {t["key"]: o for t, o in zip(todo, eng.map(_replicate, todo, desc="coverage replicates"))}
         done = _read_checkpoint(checkpoint)
+        for key, old in legacy.items():
+            if key not in done and old in done:
+                done[key] = done[old]
         outs = [new[t["key"]] if t["key"] in new else _Done(done[t["key"]]) for t in tasks
                 if t["key"] in new or t["key"] in done]
     else:
