@@ -163,6 +163,17 @@ def test_checkpoint_resume_gives_the_uninterrupted_table(tmp_path):
 MCMC_KW = dict(steps=1000, burn=300, moves="independence", sample_x0=True)
 
 
+def _chain_agrees_with_laplace(g: dict) -> dict:
+    """A replicate's chain passed the convergence rules and agrees with its output-error Laplace approximation
+    (std within 15 %, means within 0.3 sigma); returns its MCMC record."""
+    m = g["mcmc"]
+    assert m["converged"] and m["rhat_max"] < 1.01 and m["ess_min"] >= 400, m["message"]
+    sd, osd = np.array(m["std"]), np.array(g["std"])
+    np.testing.assert_allclose(sd, osd, rtol=0.15)
+    np.testing.assert_array_less(np.abs(np.array(m["mean"]) - np.array(g["coef"])) / osd, 0.3)
+    return m
+
+
 @pytest.mark.slow
 def test_mcmc_column_machinery():
     """The MCMC column on 3 replicates (about 1 CPU-minute): every chain passes the unchanged convergence rules,
@@ -180,11 +191,7 @@ def test_mcmc_column_machinery():
     assert set(t["method"]) == {"output-error", "mcmc"}
     td = "turning_35_starboard:tactical_diameter_L"
     for g in r.replicates:
-        m = g["mcmc"]
-        assert m["converged"] and m["rhat_max"] < 1.01 and m["ess_min"] >= 400, m["message"]
-        sd, osd = np.array(m["std"]), np.array(g["std"])
-        np.testing.assert_allclose(sd, osd, rtol=0.15)
-        np.testing.assert_array_less(np.abs(np.array(m["mean"]) - np.array(g["coef"])) / osd, 0.3)
+        m = _chain_agrees_with_laplace(g)
         w_mc, w_oe = np.diff(m["metrics"][td]), np.diff(g["metrics"][td][:2])
         assert 0.75 <= w_mc[0] / w_oe[0] <= 1.33, (w_mc, w_oe)
 
@@ -213,8 +220,4 @@ def test_mcmc_column_16_coefficients():
     covered = int(mc["covered"].iloc[:16].sum())
     assert 113 <= covered <= 127, mc
     for g in r.replicates:
-        m = g["mcmc"]
-        assert m["converged"] and m["rhat_max"] < 1.01 and m["ess_min"] >= 400, m["message"]
-        sd, osd = np.array(m["std"]), np.array(g["std"])
-        np.testing.assert_allclose(sd, osd, rtol=0.15)
-        np.testing.assert_array_less(np.abs(np.array(m["mean"]) - np.array(g["coef"])) / osd, 0.3)
+        _chain_agrees_with_laplace(g)
