@@ -192,6 +192,10 @@ def test_sample_cli_moves_and_initial_states(small_problem, tmp_path):
     assert rc in (0, 1) and rc == (0 if doc["converged"] else 1)
     assert doc["names"] == ["c2", "c3"] and len(doc["samples"][0]) == 2 and len(doc["samples"]) == 32 * 20
     assert doc["settings"]["moves"] == "independence" and doc["settings"]["x0_sampled"] == ["u0[0]", "v0[0]", "r0[0]"]
+    assert doc["settings"]["prior"]["kind"] == "gaussian"
+    flat = tmp_path / "flat.json"
+    main(["sample", str(rp), str(lp), "-o", str(flat), "--steps", "20", "--burn", "10", "--no-prior", "--no-progress"])
+    assert json.loads(flat.read_text())["settings"]["prior"] == {"kind": "flat"}
     assert set(doc["diagnostics"]["rhat"]) == {"c2", "c3", "u0[0]", "v0[0]", "r0[0]"}
 
 
