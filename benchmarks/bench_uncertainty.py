@@ -3,7 +3,11 @@
 1. 500 parameter draws of a 35 deg turning circle as ONE batch (``predict_manoeuvres``) against 500
    single-member ``turning_circle`` runs (goal >= 30x).
 2. A campaign of 16 fits on 2 Dask worker processes (LocalCluster) against the same 16 fits serially
-   (goal >= 1.7x on 2 free cores; the cluster start-up is reported separately).
+   (goal >= 1.7x on 2 free cores; the cluster start-up is reported separately), with two member sizes:
+   "light" (EKF only, two 60 s logs: ~0.1 CPU-s a member once warm) and "full" (EKF, output-error
+   refinement and 200-draw predicted turn and zigzag on two whole bundled logs: ~4 CPU-s a member, what a
+   campaign member with ``refine`` and ``draws`` does).  Each fresh worker process pays ~2 CPU-s of imports
+   and compiled-kernel loading before its first member, so light members cannot reach 2x on 2 workers.
 3. MCMC effective samples per second: emcee with vectorised walkers (one batched simulation per half
    ensemble) against emcee calling the likelihood once per walker, same chain settings.
 4. The MCMC column's problem (docs/uncertainty.md sect. 3: c1-c3 and six initial states, two 40 s logs):
@@ -66,7 +70,7 @@ def _short_logs(tmp: Path) -> list[str]:
     return out
 
 
-def bench_campaign(n_fits: int, workers: int) -> None:
+def bench_campaign(n_fits: int, workers: int, members: str = "light") -> None:
     import json
     import pickle
 
@@ -79,8 +83,14 @@ def bench_campaign(n_fits: int, workers: int) -> None:
     load0 = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
-        logs = _short_logs(tmp)
-        fits = [{"name": f"fit{i:02d}", "logs": [logs[i % 4], logs[(i + 1) % 4]], "passes": 2} for i in range(n_fits)]
+        if members == "light":
+            logs = _short_logs(tmp)
+            extra = {}
+        else:
+            logs = [str(REPO / "data" / f"{n}.csv") for n in ("kcs_tc_p35", "kcs_zz_m10", "kcs_zz_p20_rpm", "kcs_tc_m25_rpm")]
+            extra = {"refine": True, "draws": 200, "manoeuvres": ["turning:35", "zigzag:10/10"]}
+        fits = [{"name": f"fit{i:02d}", "logs": [logs[i % 4], logs[(i + 1) % 4]], "passes": 2, **extra}
+                for i in range(n_fits)]
         camp = tmp / "c.json"
         camp.write_text(json.dumps({"seed": 1, "fits": fits}))
         # what travels to a worker per member: the member's settings and file paths, not the logs' arrays
@@ -97,7 +107,7 @@ def bench_campaign(n_fits: int, workers: int) -> None:
             t_dask = time.perf_counter() - t1
         same = all(json.loads((tmp / "serial" / f["name"] / "result.json").read_text())["coef"] ==
                    json.loads((tmp / "dask" / f["name"] / "result.json").read_text())["coef"] for f in fits)
-    print(f"[2] campaign of {n_fits} fits: serial {t_serial:.1f} s, {workers} Dask workers {t_dask:.1f} s "
+    print(f"[2] campaign of {n_fits} {members} fits: serial {t_serial:.1f} s, {workers} Dask workers {t_dask:.1f} s "
           f"(+ {t_start:.1f} s cluster start) -> {t_serial / t_dask:.2f}x without, {t_serial / (t_dask + t_start):.2f}x "
           f"with start-up (goal >= 1.7x); identical coefficients: {same}; load average {load0:.1f} before, "
           f"{os.getloadavg()[0]:.1f} after (1-min, incl. this run) on {os.cpu_count()} CPUs; largest member "
@@ -178,12 +188,15 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--steps", type=int, default=300)
     ap.add_argument("--only", choices=("draws", "campaign", "mcmc", "mcmc-study"), default=None)
+    ap.add_argument("--members", choices=("light", "full", "both"), default="both",
+                    help="campaign member size (module docstring, item 2)")
     ap.add_argument("--study-steps", type=int, default=1000)
     a = ap.parse_args()
     if a.only in (None, "draws"):
         bench_draws(a.draws)
     if a.only in (None, "campaign"):
-        bench_campaign(a.fits, a.workers)
+        for members in (("light", "full") if a.members == "both" else (a.members,)):
+            bench_campaign(a.fits, a.workers, members)
     if a.only in (None, "mcmc"):
         bench_mcmc(a.steps)
     if a.only in (None, "mcmc-study"):

@@ -92,3 +92,70 @@ def test_extra_residuals_are_appended_to_the_simulation_errors(two_truths, jacob
     assert pinned.coef_["c1"] == pytest.approx(c1_b, abs=1e-5)
     assert pinned.cost_ > 1.0 and pinned.coef_["c3"] != pytest.approx(ta.params_series()["c3"], rel=1e-3)
     assert pinned.result().settings["extra_residuals"] is True
+
+
+def test_sign_bounds_start_from_zero_and_reach_an_interior_truth(two_truths):
+    """A start with the yaw damping c2 on the wrong side (+) starts at 0 under the physical-sign bounds and
+    still recovers the truth (c2 < 0 is inside the bounds: no bound is active, and the estimate and its
+    standard deviation equal the unbounded fit's from the truthful side)."""
+    ta, _, _, logs, x0 = two_truths
+    c2 = float(ta.params_series()["c2"])
+    assert c2 < 0 and "c2" in type(ta).dissipative
+    wrong = ta.with_params({"c2": -c2})
+    kw = dict(estimate=["c2", "c3"], channels=["r"], meas_std={"r": 1e-3}, max_nfev=60)
+    fb = OutputErrorRefiner(wrong, sign_bounds=True, **kw).fit(logs[:1], x0=x0[:1])
+    assert fb.success_ and fb.sign_start_moved_ == ["c2"] and fb.at_bound_ == []
+    np.testing.assert_allclose(fb.coef_["c2"], c2, rtol=1e-5)
+    free = OutputErrorRefiner(ta.with_params({"c2": 0.8 * c2}), **kw).fit(logs[:1], x0=x0[:1])
+    np.testing.assert_allclose(fb.coef_["c2"], free.coef_["c2"], rtol=1e-6)
+    assert list(fb.cov_.index) == ["c2", "c3"] and fb.coef_std_["c2"] > 0
+    s = fb.result().settings
+    assert s["sign_bounds"] == ["c2"] and s["at_bound"] == [] and s["sign_start_moved"] == ["c2"]
+
+
+def test_sign_bound_that_binds_is_reported_and_leaves_the_covariance(two_truths):
+    """Logs made by a ship with positive (non-physical) yaw damping: the bounded fit ends on c2 = 0, says so
+    (warning, ``at_bound_``, settings) and gives c2 no standard deviation; the unbounded fit recovers the
+    positive value."""
+    ta, _, _, _, _ = two_truths
+    bad = ta.with_params({"c2": 0.02})
+    t = np.arange(0.0, 40.0, 0.5)
+    lg, x0 = _log(bad, "unstable", t, np.radians(5.0) * np.sin(0.3 * t))
+    kw = dict(estimate=["c2", "c3"], channels=["r"], meas_std={"r": 1e-3}, max_nfev=60)
+    free = OutputErrorRefiner(ta, **kw).fit([lg], x0=[x0])
+    np.testing.assert_allclose(free.coef_["c2"], 0.02, rtol=1e-4)
+    with pytest.warns(UserWarning, match="physical-sign bound"):
+        fb = OutputErrorRefiner(ta, sign_bounds=True, **kw).fit([lg], x0=[x0])
+    assert fb.at_bound_ == ["c2"] and -1e-3 <= fb.coef_["c2"] <= 0.0
+    assert fb.coef_std_["c2"] == 0.0 and list(fb.cov_.index) == ["c3"]
+    assert fb.result().settings["at_bound"] == ["c2"]
+
+
+def test_damping_check_flags_self_excited_sway_only():
+    """The own-damping diagnostic on each model's own 35 deg turn: the MMG KVLCC2 set and the linear
+    kcs-response truth are damped at every state; the shipped response-nl set (an equation-error projection
+    of the MMG KCS forces) is not -- its sway damping b1 + b5|u| + 2 b6|v| + 2 b8 v r/|u| + b9 r^2/|u| turns
+    positive in the turn (b9 r^2/|u|) -- and the diagnostic says so, naming sway; so does a kcs-response
+    with a positive b1."""
+    from shipid.identify.diagnostics import DAMPING_FRACTION, damping_check
+    from shipid.manoeuvres import turning_circle
+
+    def own_turn(m):
+        sim = turning_circle(m, 35).simulation  # members: the approach and the turn
+        x, u = sim.x[-1], sim.u[-1]
+        cols = {**{s: x[:, j] for j, s in enumerate(m.state_names)}, **{s: u[:, j] for j, s in enumerate(m.input_names)}}
+        return TrialLog.from_arrays(sim.t, name="turn", **cols)
+
+    for m in (get_model("mmg", "kvlcc2"), get_model("kcs-response")):
+        ok = damping_check(m, [own_turn(m)])
+        assert ok["physical"] is True and ok["v"]["fraction_positive"] == 0.0 and ok["r"]["fraction_positive"] == 0.0
+        assert ok["reasons"] == [] and ok["v"]["n"] > 100
+    rnl = get_model("response-nl")
+    chk = damping_check(rnl, [own_turn(rnl)])
+    # (measured: sway positive at 73 % of the turn's states, yaw at 10 %)
+    assert chk["physical"] is False and chk["v"]["fraction_positive"] > 0.5
+    assert "own sway damping" in chk["reasons"][0]
+    kcs = get_model("kcs-response")
+    bad = kcs.with_params({"b1": 0.05})
+    chk = damping_check(bad, [own_turn(kcs)])
+    assert chk["physical"] is False and chk["v"]["fraction_positive"] == 1.0 > DAMPING_FRACTION

@@ -114,3 +114,24 @@ def test_rudder_rate_limit():
     slow = np.linspace(0.0, 10.0, t.size)  # 2 deg/s
     np.testing.assert_allclose(rate_limit(t, slow, 24.0), slow)
     assert FROUDE_RUDDER_RATE_DEG_S == pytest.approx(24.15, abs=0.01)
+
+
+def test_split_position_error_attributes_each_part():
+    """The diagnosis of the zigzag error (docs/environment.md, session 7): swapping one predicted quantity
+    into the measured track gives the error that quantity alone makes."""
+    from shipid.studies.esso_osaka import split_position_error
+
+    t = np.arange(0.0, 30.0 + 1e-9, 0.2)
+    meas = {"psi": 0.02 * t, "u": np.full(t.size, 0.3), "v": np.full(t.size, 0.01)}
+    # only the sway velocity wrong, heading constant: 0.01 m/s for 30 s to the side
+    straight = dict(meas, psi=np.zeros(t.size))
+    e = split_position_error(0.2, straight, dict(straight, v=straight["v"] + 0.01))
+    assert e["v"] == pytest.approx(0.3) and e["velocity"] == pytest.approx(0.3)
+    assert e["u"] == 0.0 and e["heading"] == 0.0
+    # only the heading wrong by a constant 0.1 rad: the chord of the rotated 30 s track, 2 sin(0.05) |track|
+    e = split_position_error(0.2, straight, dict(straight, psi=np.full(t.size, 0.1)))
+    assert e["heading"] == pytest.approx(2 * np.sin(0.05) * np.hypot(9.0, 0.3), rel=1e-12)
+    assert e["velocity"] == e["u"] == e["v"] == 0.0
+    # a turning track: each part alone is the full error when only that part is wrong
+    e = split_position_error(0.2, meas, dict(meas, u=meas["u"] * 1.1))
+    assert e["u"] == pytest.approx(e["velocity"]) and e["v"] == 0.0 and e["u"] > 0.5

@@ -44,10 +44,15 @@ def env_logs(env_truth):
             for s in (1, 2)]
 
 
-def test_lowspeed_kernel_equals_numpy(env_logs, monkeypatch):
+@pytest.mark.parametrize("terms", ["prior", "asymmetric"])
+def test_lowspeed_kernel_equals_numpy(env_logs, monkeypatch, terms):
     model = get_model("lowspeed")
+    est = HYD
+    if terms == "asymmetric":  # the MMG side-dependent gamma_R and drift-dependent wake on, dgammaR estimated
+        model = model.with_params({"dgammaR": 0.1225, "C1": 2.0, "C2p": 1.6, "C2m": 1.1, "xP": -0.48})
+        est = HYD + ["dgammaR"]
     logs = [lg[["time", "x", "y", "psi", "u", "v", "r", "delta", "n"]] for lg in env_logs]
-    prob = _problem(model, logs, HYD, 120, monkeypatch)
+    prob = _problem(model, logs, est, 120, monkeypatch)
     assert _kernel.filter_functions(model) is not None
     _compare(_batch(prob, 2, np.random.default_rng(11)))
 

@@ -26,8 +26,15 @@ def test_registered_with_esso_particulars(ls):
     assert "NOT identified" in ls.parameter_set("esso-osaka-prior").caveat
 
 
+#: The MMG standard method's side-dependent terms at the KVLCC2's published values (Yasukawa & Yoshimura
+#: 2015, Table 2): gamma_R 0.640 / 0.395 for beta_R > 0 / < 0 and the wake falling with beta_P.
+MMG_ASYMMETRIC = {"dgammaR": 0.1225, "C1": 2.0, "C2p": 1.6, "C2m": 1.1, "xP": -0.48}
+
+
+@pytest.mark.parametrize("terms", ["prior", "asymmetric"])
 @pytest.mark.parametrize("quadrant", [(1, 1), (1, -1), (-1, 1), (-1, -1)])
-def test_jacobians_match_finite_differences_in_all_quadrants(ls, quadrant):
+def test_jacobians_match_finite_differences_in_all_quadrants(ls, quadrant, terms):
+    ls = ls.with_params(MMG_ASYMMETRIC) if terms == "asymmetric" else ls
     su, sn = quadrant
     rng = np.random.default_rng(3)
     x, u = ls.sample_point(rng, (6,))
@@ -79,13 +86,41 @@ def test_port_starboard_mirror_ahead(ls):
     np.testing.assert_allclose(g[3:], f[3:] * [1, -1, -1], rtol=1e-12)
 
 
+def test_side_dependent_terms_follow_the_mmg_standard(ls):
+    """dgammaR and the drift-dependent wake (defaults: off, the mirror symmetry above holds) against the MMG
+    standard method's formulas written out here: gamma_R = gammaR +- dgammaR for beta_R >< 0, and
+    1 - w_P = (1 - w_P0)(1 + (1 - exp(-C1 |beta_P|))(C2 - 1)) with beta_P = atan(-(v + x_P L r)/u)."""
+    p = ls.params_series()
+    assert p["dgammaR"] == 0.0 and p["C2p"] == p["C2m"] == 1.0
+    m = ls.with_params(MMG_ASYMMETRIC)
+    L = m.lpp
+    for v, r in ((0.03, 0.01), (-0.03, -0.01), (0.0, 0.02), (0.05, -0.03)):
+        x, u = [0, 0, 0, 0.3, v, r], [0.2, 10.0]
+        f = m.forces(x, u)
+        w = v + p["lR"] * L * r
+        g = p["gammaR"] + (0.1225 if w < 0 else -0.1225)  # beta_R = -w/U > 0 when w < 0
+        assert f["v_R"] == pytest.approx(-g * w, rel=1e-12, abs=1e-15)
+        # thrust linear in u_P (k0 = k2 = 0, k1 = 1): T = rho D^3 n u_P gives u_P
+        mk = m.with_params({"k0": 0.0, "k1": 1.0, "k2": 0.0})
+        D = m.particulars.D_p
+        uP = mk.forces(x, u)["T"] / (m.particulars.rho * D ** 3 * 10.0)
+        bP = np.arctan(-(v - 0.48 * L * r) / 0.3)
+        C2 = 1.6 if bP > 0 else 1.1
+        assert uP == pytest.approx(0.3 * (1 - p["wP0"]) * (1 + (1 - np.exp(-2.0 * abs(bP))) * (C2 - 1)), rel=1e-12)
+    # astern (u < 0): no wake, as before
+    assert m.with_params({"k0": 0.0, "k1": 1.0, "k2": 0.0}).forces([0, 0, 0, -0.1, 0.05, 0.0], [0.0, 10.0])["T"] \
+        == pytest.approx(m.particulars.rho * m.particulars.D_p ** 3 * 10.0 * -0.1, rel=1e-12)
+
+
 def test_rudder_force_reverses_in_reversed_flow(ls):
     fa = ls.forces([0, 0, 0, 0.2, 0, 0], [0.3, 0.0])["F_N"]
     fb = ls.forces([0, 0, 0, -0.2, 0, 0], [0.3, 0.0])["F_N"]
     assert fa > 0 > fb
 
 
-def test_froude_scaling(ls):
+@pytest.mark.parametrize("terms", ["prior", "asymmetric"])
+def test_froude_scaling(ls, terms):
+    ls = ls.with_params(MMG_ASYMMETRIC) if terms == "asymmetric" else ls
     lam = 2.0
     big = ls.scaled(3.0 * lam)
     t = np.arange(0.0, 40.0, 0.1)

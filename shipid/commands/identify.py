@@ -45,6 +45,9 @@ def register(sub) -> None:
     p.add_argument("--refine-all", action="store_true",
                    help="refine every estimated coefficient (default: hold at their EKF values those the refinement "
                         "cannot resolve: singular values of its scaled Jacobian below sqrt(2 ftol cost))")
+    p.add_argument("--no-sign-bounds", action="store_true",
+                   help="let the refinement move the model's dissipative coefficients (pure sway and yaw damping, "
+                        "e.g. response-nl b1 b5 b6 c2 c5 c7) to either sign (default: kept <= 0)")
     p.add_argument("--dt", default="auto", metavar="auto|K",
                    help="use every K-th sample; default auto: >= 25 steps per fastest time constant of the model (mmg: 50)")
     p.add_argument("--max-drift", default="auto", metavar="auto|DEG|none",
@@ -208,7 +211,7 @@ def _fit(args) -> int:
             start=args.start, neutral=not args.no_neutral, dt=_dt(args), max_drift_deg=_max_drift(args),
             refine=None if args.refine == "none" else args.refine, metric_weight=args.metric_weight,
             n_passes=args.passes, max_nfev=args.max_nfev, hold_unresolved=not args.refine_all,
-            tune_noise=args.tune_noise, progress=progress_on(args), meas_std=meas_std, log=print))
+            sign_bounds=not args.no_sign_bounds, tune_noise=args.tune_noise, progress=progress_on(args), meas_std=meas_std, log=print))
         fit, ident = recipe, recipe.ekf
     result = fit.result()
     result.to_json(out, force=args.force)
@@ -219,6 +222,9 @@ def _fit(args) -> int:
     verdict = ident.diagnostics_.get("consistency", {})
     if not verdict.get("consistent", True):
         print(_inconsistency_warning(verdict), file=sys.stderr)
+    damping = result.diagnostics.get("damping") or {}
+    for reason in damping.get("reasons", []):
+        print(f"warning: {reason} (result JSON: diagnostics.damping)", file=sys.stderr)
     if not result.success:
         return 1
     return 0 if verdict.get("consistent", True) else EXIT_INCONSISTENT

@@ -132,12 +132,19 @@ class OutputErrorRefiner:
         Hold at their start values the coefficients the solver cannot resolve from the start's Jacobian
         (:func:`identifiable_subset`; default False: fit every estimated coefficient).  The held ones are
         listed in ``held_`` and in the result's settings, with the threshold and the condition numbers.
+    sign_bounds : bool
+        Keep the model's dissipative coefficients (``model.dissipative``: the pure sway and yaw damping
+        terms) at their physical sign, <= 0, as bounds of the solver (default False).  A start value on
+        the wrong side starts at 0.  Coefficients that end on their bound (or within 1 % of their scale of
+        it: the solver's iterates stay strictly inside) are listed in ``at_bound_`` and
+        in the result's settings; they have no standard deviation (the Gaussian approximation does not
+        hold at an active bound) and the covariance is that of the others.
     """
 
     def __init__(self, model: Model, *, estimate=None, channels=None, meas_std=None, max_nfev: int = 30,
                  substeps: int = 1, jacobian: str = "fd", log_weights=None,
                  extra_residuals=None, input_hold: str = "foh", estimate_x0=False,
-                 hold_unresolved: bool = False):
+                 hold_unresolved: bool = False, sign_bounds: bool = False):
         self.model = model
         self.estimate = estimate
         self.channels = channels
@@ -150,6 +157,7 @@ class OutputErrorRefiner:
         self.input_hold = input_hold
         self.estimate_x0 = estimate_x0
         self.hold_unresolved = hold_unresolved
+        self.sign_bounds = sign_bounds
 
     def fit(self, logs, start=None, x0=None) -> "OutputErrorRefiner":
         """Refine on ``logs``; ``start`` may be a fitted :class:`EKFIdentifier` whose
@@ -325,6 +333,20 @@ class OutputErrorRefiner:
         h = 1e-6
         th0 = np.concatenate([p0[est_idx] / scale, np.zeros(len(arrays) * nk)])
         free = np.arange(th0.size)  # the columns the solver moves (all, unless some are held)
+        # physical signs as bounds (scaled coordinates: coef = th * scale)
+        lb, ub = np.full(th0.size, -np.inf), np.full(th0.size, np.inf)
+        self.sign_bounded_, self.sign_start_moved_ = [], []
+        if self.sign_bounds:
+            for i, n in enumerate(names):
+                if n in getattr(model, "dissipative", ()):
+                    self.sign_bounded_.append(n)
+                    if scale[i] > 0:
+                        ub[i] = 0.0
+                    else:
+                        lb[i] = 0.0
+                    if th0[i] * scale[i] > 0:
+                        self.sign_start_moved_.append(n)
+                        th0[i] = 0.0
 
         def full(t):
             th = th0.copy()
@@ -363,12 +385,30 @@ class OutputErrorRefiner:
                               f"own size changes the cost by less than the solver's tolerance ({FTOL:g} of it), so the "
                               "fit could not resolve them (scaled J^T J condition "
                               f"{info['condition']:.3g} -> {info['condition_kept']:.3g})", UserWarning, stacklevel=2)
+        bounded = bool(np.isfinite(lb[free]).any() or np.isfinite(ub[free]).any())
         sol = least_squares(fun, th0[free], jac=jac, method="trf", max_nfev=self.max_nfev, x_scale=1.0,
-                            ftol=FTOL, xtol=FTOL)
+                            ftol=FTOL, xtol=FTOL, **({"bounds": (lb[free], ub[free])} if bounded else {}))
         J = sol.jac
         self.jac_ = J  # at the solution, scaled parameters (columns: the refined ones)
         names_all = names
-        fcoef = free[free < ne]  # the refined coefficients (the rest of ``free``: initial states)
+        self.at_bound_ = []
+        if bounded:
+            # a coefficient on its bound is not a Gaussian estimate: it leaves the covariance, like a held one
+            # (trf's iterates stay strictly inside: "on" = marked active, or within 1 % of the coefficient's
+            # own scale of the bound)
+            has = np.isfinite(lb[free]) | np.isfinite(ub[free])
+            on = (np.asarray(sol.active_mask) != 0) | (has & (np.abs(sol.x) <= 1e-2))
+            self.at_bound_ = [col_names[i] for i in free[on]]
+            if on.any():
+                warnings.warn(f"output-error refinement: {', '.join(self.at_bound_)} ended on the physical-sign "
+                              "bound 0 (dissipative terms must be <= 0): the logs pull them to the wrong sign, "
+                              "so the model's other terms carry that part of the dynamics; no standard deviation "
+                              "is given for them", UserWarning, stacklevel=2)
+            J = J[:, ~on]
+            free_cov = free[~on]
+        else:
+            free_cov = free
+        fcoef = free_cov[free_cov < ne]  # the refined coefficients (the rest of ``free``: initial states)
         names = [names_all[i] for i in fcoef]
         n_obs = int(sum(m.sum() for m, w in zip(masks, wlog) if w > 0))
         dof = max(n_obs - free.size, 1)
@@ -381,15 +421,15 @@ class OutputErrorRefiner:
             inv = np.where(sv > sv.max() * max(J.shape) * np.finfo(float).eps, 1.0 / np.maximum(sv, 1e-300) ** 2, 0.0)
             cov_all = (Vt.T * inv) @ Vt * s2
         else:
-            cov_all = np.full((free.size, free.size), np.nan)
+            cov_all = np.full((free_cov.size, free_cov.size), np.nan)
         # with estimated initial states: the coefficients' block, i.e. marginal over them (Laplace)
-        cpos = np.flatnonzero(free < ne)
+        cpos = np.flatnonzero(free_cov < ne)
         cov_s = cov_all[np.ix_(cpos, cpos)]
         th_full = full(sol.x)
         theta = th_full[:ne] * scale
         x0_fit = [x0_of(th_full[None], i)[0] for i in range(len(arrays))]
         x0_var = np.zeros(th_full.size)
-        x0_var[free] = np.clip(np.diag(cov_all), 0, None)
+        x0_var[free_cov] = np.clip(np.diag(cov_all), 0, None)
         x0_sd = np.sqrt(x0_var[ne:]).reshape(len(arrays), nk) * x0_scale
         self.x0_ = pd.DataFrame(x0_fit, columns=list(model.state_names))
         self.x0_std_ = pd.DataFrame(x0_sd, columns=x0_names)
@@ -458,6 +498,8 @@ class OutputErrorRefiner:
                       "estimate_x0": list(self.x0_std_.columns),
                       "log_weights": None if self.log_weights is None else [float(w) for w in self.log_weights],
                       "extra_residuals": self.extra_residuals is not None,
+                      **({"sign_bounds": list(self.sign_bounded_), "at_bound": list(self.at_bound_),
+                          "sign_start_moved": list(self.sign_start_moved_)} if self.sign_bounds else {}),
                       **({"held": list(self.held_), "hold_rule": {
                           "threshold": self.subset_["threshold"], "ftol": self.subset_["ftol"],
                           "condition_before": self.subset_["condition"],

@@ -189,6 +189,70 @@ def coefficient_plausibility(names, theta, theta_std, theta_model, prior_std, ru
     return out
 
 
+#: Largest fraction of the logged states at which a fitted model's own sway or yaw damping may be positive
+#: before :func:`damping_check` calls the model unphysical (a few samples at a transient are tolerated).
+DAMPING_FRACTION = 0.01
+
+
+def damping_check(model, logs, max_points: int = 2000) -> dict:
+    """The fitted model's own damping along the logged motions: ``d(dv/dt)/dv`` and ``d(dr/dt)/dr``.
+
+    For a conventional hull both are negative in every state the ship visits (sway and yaw motions are
+    damped; a directionally unstable ship is unstable through the sway-yaw coupling, not through a
+    positive own damping).  A model whose terms combine to a positive own damping over part of the
+    logged states (e.g. a speed-independent term and a speed-proportional one of opposite signs, which
+    cancel at the approach speed but not in the slow part of a turn) reproduces the logs with
+    self-excited sway or yaw there: it is not a physical model of the ship, whatever its fit.
+
+    Evaluated with the model's analytic Jacobian at the logged states and inputs (up to ``max_points``
+    samples per log, evenly spaced).  Returns ``{"v": {...}, "r": {...}, "physical": bool, "reasons": [...]}``
+    with, per state, ``fraction_positive``, ``max`` and ``min`` [1/s] and ``n``; ``physical`` is False when
+    a fraction exceeds :data:`DAMPING_FRACTION`.  Models without both v and r states return
+    ``{"physical": None}``.
+    """
+    names = model.state_names
+    if "v" not in names or "r" not in names:
+        return {"physical": None, "reasons": [], "note": "the model has no v and r states"}
+    X, U = [], []
+    for lg in logs:
+        n = len(lg)
+        idx = np.unique(np.linspace(0, n - 1, min(n, max_points)).astype(int))
+        x = np.zeros((idx.size, model.nx))
+        for s in names:
+            if s in lg.channels:
+                x[:, model.state_index(s)] = np.asarray(lg[s], dtype=float)[idx]
+        u = np.zeros((idx.size, model.nu))
+        for j, s in enumerate(model.input_names):
+            if s in lg.channels:
+                u[:, j] = np.asarray(lg[s], dtype=float)[idx]
+        ok = np.isfinite(x).all(axis=1) & np.isfinite(u).all(axis=1)
+        X.append(x[ok])
+        U.append(u[ok])
+    X, U = np.concatenate(X), np.concatenate(U)
+    out: dict = {"reasons": [], "threshold": DAMPING_FRACTION}
+    if X.shape[0] == 0:
+        return {**out, "physical": None, "note": "no logged state with every channel finite"}
+    with np.errstate(all="ignore"):
+        J = model.jac_x(0.0, X, U)
+    physical = True
+    for s, what in (("v", "sway"), ("r", "yaw")):
+        i = model.state_index(s)
+        d = J[:, i, i]
+        d = d[np.isfinite(d)]
+        frac = float(np.mean(d > 0)) if d.size else float("nan")
+        out[s] = {"fraction_positive": frac, "max": _finite_or_none(d.max()) if d.size else None,
+                  "min": _finite_or_none(d.min()) if d.size else None, "n": int(d.size)}
+        if d.size and frac > DAMPING_FRACTION:
+            physical = False
+            out["reasons"].append(
+                f"the fitted model's own {what} damping d(d{s}/dt)/d{s} is positive (up to {d.max():.3g} 1/s) at "
+                f"{100 * frac:.1f} % of the logged states: the model makes {what} self-excited there, which no "
+                f"conventional hull does; its coefficients trade against each other (see the correlation "
+                f"warnings) -- refine with the physical-sign bounds or fix the offending terms")
+    out["physical"] = physical
+    return out
+
+
 def consistency(names, innov, S_diag, gated, segments, replay_ratio=None, dynamic=(), rules=None,
                 extra_reasons=()) -> dict:
     """Is the fit consistent with its own noise model?  Per channel and as one verdict.

@@ -164,6 +164,10 @@ class RecipeFit:
             if not self.ekf.success_:
                 res.success = False
                 res.message = f"EKF stage failed ({self.ekf.message_}); refinement: {res.message}"
+        if self.logs:
+            from .diagnostics import damping_check
+
+            res.diagnostics["damping"] = damping_check(self.final.to_model(), self.logs)
         return res
 
     def summary(self) -> str:
@@ -450,7 +454,8 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
              dt="auto",
              max_drift_deg="auto", refine: str | None = "auto", metric_weight: float | None = None,
              n_passes: int = 2, max_nfev: int = 60, tune_noise: bool = False, progress: bool = False,
-             meas_std=None, ekf_options=None, hold_unresolved: bool = True, log=None) -> RecipeFit:
+             meas_std=None, ekf_options=None, hold_unresolved: bool = True, sign_bounds: bool = True,
+             log=None) -> RecipeFit:
     """Fit ``model`` to ``logs`` with the project's recipe (module docstring: steps 1-6).
 
     Parameters
@@ -474,6 +479,7 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
     max_nfev : int  evaluation limit of the refinement
     metric_weight : float, optional  weight of the metric residuals of ``refine="metrics"`` (:func:`refine_fit`)
     hold_unresolved : bool  step 6's identifiable subset (:func:`refine_fit`; default True)
+    sign_bounds : bool  step 6 keeps the model's dissipative coefficients <= 0 (:func:`refine_fit`; default True)
     log : callable, optional  called with one line per step as it happens (e.g. ``print``)
 
     Returns
@@ -637,12 +643,12 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
     if mode is None:
         return fit
     return refine_fit(fit, logs, mode, max_nfev=max_nfev, metric_weight=metric_weight,
-                      hold_unresolved=hold_unresolved, log=log)
+                      hold_unresolved=hold_unresolved, sign_bounds=sign_bounds, log=log)
 
 
 def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: int = 60,
                metric_weight: float | None = None, channels=None, hold_unresolved: bool = True,
-               grid_dt=None, log=None) -> RecipeFit:
+               grid_dt=None, sign_bounds: bool = True, log=None) -> RecipeFit:
     """Step 6 of the recipe on a fitted EKF stage: a new :class:`RecipeFit` with the refinement.
 
     Parameters
@@ -659,6 +665,8 @@ def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: in
         ``"log"`` the logs' own step (full rate, ``logs`` cut to the spans the EKF used); a step [s]
     hold_unresolved : bool  hold at their EKF-stage values the coefficients the solver cannot resolve
         (:func:`shipid.identify.batch.identifiable_subset`; default True); False: refine every one
+    sign_bounds : bool  keep the model's dissipative coefficients (``model.dissipative``, the pure sway and yaw
+        damping terms) <= 0 (default True; :class:`shipid.identify.batch.OutputErrorRefiner`)
     log : callable, optional  called with one line per step
     """
     from .batch import OutputErrorRefiner
@@ -713,7 +721,8 @@ def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: in
     est_ref = list(ekf.estimated_) + [p for p in fit.free_in_refine if p not in ekf.estimated_]
     ref = OutputErrorRefiner(start_model, estimate=est_ref, channels=chans, meas_std=sstd,
                              log_weights=list(1.0 / np.maximum(nsamp, 1.0)), extra_residuals=extra,
-                             max_nfev=max_nfev, hold_unresolved=hold_unresolved).fit(grid, start=ekf)
+                             max_nfev=max_nfev, hold_unresolved=hold_unresolved,
+                             sign_bounds=sign_bounds).fit(grid, start=ekf)
     out.refiner = ref
     if ref.subset_ is not None:
         sub = ref.subset_
@@ -725,6 +734,13 @@ def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: in
              + (f" -> {sub['condition_kept']:.3g}" if ref.held_ else ""))
     elif not hold_unresolved:
         step("identifiable subset", None, "off (asked): every coefficient refined")
+    if sign_bounds:
+        bnd = ref.sign_bounded_
+        step("physical signs", list(ref.at_bound_),
+             (f"{', '.join(bnd)} kept <= 0 (dissipative: pure sway/yaw damping)" if bnd else
+              "the model declares no dissipative coefficient among the refined ones")
+             + (f"; started at 0 from the wrong sign: {', '.join(ref.sign_start_moved_)}" if ref.sign_start_moved_ else "")
+             + (f"; ended on the bound: {', '.join(ref.at_bound_)}" if ref.at_bound_ else ""))
     step("output-error", ref.message_, f"{len(est_ref)} parameters on a {dt_ref:.3g} s common grid, channels "
          f"{chans} over their spread, each log weighted 1/samples; {ref.nfev_} evaluations, cost "
          f"{ref.cost_start_:.4g} -> {ref.cost_:.4g}")

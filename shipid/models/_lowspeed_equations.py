@@ -16,7 +16,7 @@ from __future__ import annotations
 import cmath
 import hashlib
 import math
-from math import cos, sin, sqrt
+from math import atan as arctan, cos, exp, sin, sqrt
 
 import numpy as np
 
@@ -29,13 +29,14 @@ PARAM_NAMES = (
     "mx", "my", "Jz",
     "tP", "wP0", "k0", "k1", "k2", "CTa0", "CTa1", "YPa", "NPa",
     "tR", "aH", "xH", "gammaR", "lR", "eps", "kappa", "f_alpha",
+    "dgammaR", "xP", "C1", "C2p", "C2m",
 )
 
 #: Names of the values returned by :func:`forces`, in order.
 FORCE_KEYS = ("X_H", "Y_H", "N_H", "X_P", "Y_P", "N_P", "X_R", "Y_R", "N_R", "T", "F_N", "u_R", "v_R", "U")
 
 #: Number of constants of :func:`derived` read by :func:`forces` (the last 7 are eq. (4)'s, as in ``mmg``).
-N_FORCE_CONSTS = 35
+N_FORCE_CONSTS = 40
 
 # Gauss-Legendre nodes and weights of the cross-flow integrals on [-1/2, 1/2] (24 nodes)
 _s, _w = np.polynomial.legendre.leggauss(24)
@@ -73,7 +74,7 @@ def derived(p, P):
     """Constants ``c`` of the equations for one parameter set (everything that depends only on the
     parameters and the particulars).
 
-    ``p``: the 31 parameters in :data:`PARAM_NAMES` order (floats, arrays, complex);
+    ``p``: the 36 parameters in :data:`PARAM_NAMES` order (floats, arrays, complex);
     ``P``: the particulars ``(lpp, draught, rho, D_p, H_R, A_R, x_R, displacement, x_G, kzz)`` (as
     ``mmg``).  The first :data:`N_FORCE_CONSTS` are those of :func:`forces`, the last 7 those of eq. (4)
     (``1/Mx, Mx, My, B, C/det, B/det, My/det``, the layout of :func:`shipid.models._mmg_equations.derived`,
@@ -81,7 +82,7 @@ def derived(p, P):
     """
     L, d, rho, Dp, H_R, A_R, x_R, disp, x_G, kzz = P[0], P[1], P[2], P[3], P[4], P[5], P[6], P[7], P[8], P[9]
     (X0F, X0A, Xvv, Xvr, Yv, Yr, Nv, Nr, CD, CrY, CrN, mx, my, Jz, tP, wP0, k0, k1, k2, CTa0, CTa1, YPa, NPa,
-     tR, aH, xH, gammaR, lR, eps, kappa, f_alpha) = p[:31]
+     tR, aH, xH, gammaR, lR, eps, kappa, f_alpha, dgammaR, xP, C1, C2p, C2m) = p[:36]
     q = 0.5 * rho * L * d
     m = rho * disp
     q2 = 0.5 * rho * L * L * d
@@ -97,6 +98,7 @@ def derived(p, P):
         q * Dp * Dp * YPa, q * L * Dp * Dp * NPa, tP,
         8.0 / (math.pi * rho * Dp * Dp), kappa, eta, 1.0 - eta, eps, gammaR, lR * L,     # rudder inflow
         0.5 * rho * A_R * f_alpha, -(1.0 - tR), -(1.0 + aH), -(x_R + aH * xH) * L,       # rudder forces
+        dgammaR, xP * L, -C1, 0.5 * (C2p + C2m) - 1.0, 0.5 * (C2p - C2m),               # MMG eqs. (16), (26)
         1.0 / Mx, Mx, My, B, C / det, B / det, My / det,                                 # eq. (4)
     )
 
@@ -105,7 +107,8 @@ def forces(uu, v, r, delta, n, c):
     """The values named by :data:`FORCE_KEYS` (forces [N], moments [N m] at midship, speeds [m/s])."""
     (L, q, qL, hX0F, hX0A, Xvv, Xvr, Yv, Yr, Nv, Nr, CD, CrYL, CrNL,
      wP0, rhoD2, k0D2, k1D, k2, CTa0D2, CTa1D, cYP, cNP, tP,
-     c8, kappa, eta, one_m_eta, eps, gammaR, lRL, cF, cXR, cYR, cNR) = c[:N_FORCE_CONSTS]
+     c8, kappa, eta, one_m_eta, eps, gammaR, lRL, cF, cXR, cYR, cNR,
+     dgammaR, xPL, mC1, c2A, c2D) = c[:N_FORCE_CONSTS]
     U = sqrt(uu * uu + v * v)
     au = absf(uu)
     # hull: resistance blended ahead/astern, linear terms, Kose's cross-flow integrals (Gauss-Legendre)
@@ -122,7 +125,14 @@ def forces(uu, v, r, delta, n, c):
     NH = qL * (Nv * v * uu + Nr * rL * au - CD * Nc)
     # propeller, four quadrants: ahead K_T polynomial (n >= 0), astern linear K_T and side force (n < 0)
     ah = step_nn(n)
-    uP = uu * (1.0 - wP0 * step_pos(uu))
+    # wake ahead (u > 0) falling with drift and yaw, MMG eq. (16): 1 - w_P = (1 - w_P0)(1 + (1 - exp(-C1
+    # |beta_P|))(C2 - 1)), C2 = C2p for beta_P > 0, C2m for beta_P < 0, beta_P = atan(-(v + x_P L r)/u)
+    # (= beta - x'_P r' to first order); no wake for u <= 0 (the division is then by 1 and multiplied by 0)
+    sp = step_pos(uu)
+    vPl = v + xPL * r
+    bPa = arctan(absf(vPl) / (uu * sp + (1.0 - sp)))
+    fP = 1.0 + (c2A + c2D * (1.0 - 2.0 * step_pos(vPl))) * (1.0 - exp(mC1 * bPa))
+    uP = uu * (1.0 - sp * (1.0 - (1.0 - wP0) * fP))
     T = rhoD2 * (ah * (k0D2 * n * n + k1D * n * uP + k2 * uP * uP) + (1.0 - ah) * (CTa0D2 * n * n + CTa1D * n * uu))
     XP = T * (1.0 - tP * ah)
     n2a = n * n * (1.0 - ah)
@@ -132,7 +142,9 @@ def forces(uu, v, r, delta, n, c):
     Tp = T * (step_pos(T) * ah)
     a = uP + kappa * (sqrt(uP * uP + c8 * Tp) - absf(uP))
     uR = eps * ssqrt(eta * (a * absf(a)) + one_m_eta * (uP * absf(uP)))
-    vR = -gammaR * (v + lRL * r)
+    # flow straightening gammaR + dgammaR for beta_R > 0 (w < 0), gammaR - dgammaR for beta_R < 0 (MMG eq. (26))
+    w = v + lRL * r
+    vR = dgammaR * absf(w) - gammaR * w
     UR = sqrt(uR * uR + vR * vR)
     sd, cd = sin(delta), cos(delta)
     FN = cF * UR * (uR * sd - vR * cd)
@@ -186,7 +198,7 @@ FUNCTIONS_CS = {"absf": absf_cs, "step_nn": step_nn_cs, "step_pos": step_pos_cs,
                 "planar_rates_cs": planar_rates_cs, "derived": derived, "forces": forces, "rates": rates,
                 "cs_columns": _mmg.cs_columns, "jacobians": _mmg.jacobians}
 #: Globals of the compiled complex-step set.
-CMATH = {"sqrt": cmath.sqrt, "sin": cmath.sin, "cos": cmath.cos}
+CMATH = {"sqrt": cmath.sqrt, "sin": cmath.sin, "cos": cmath.cos, "exp": cmath.exp, "arctan": cmath.atan}
 
 
 def _np_ssqrt(z):
@@ -196,7 +208,7 @@ def _np_ssqrt(z):
 
 
 #: Globals of the batched numpy backend (real or complex arrays: branches from the real part).
-NUMPY = {"sqrt": np.sqrt, "sin": np.sin, "cos": np.cos,
+NUMPY = {"sqrt": np.sqrt, "sin": np.sin, "cos": np.cos, "exp": np.exp, "arctan": np.arctan,
          "absf": lambda z: z * np.where(np.real(z) < 0, -1.0, 1.0),
          "step_nn": lambda z: (np.real(z) >= 0) * 1.0, "step_pos": lambda z: (np.real(z) > 0) * 1.0,
          "ssqrt": _np_ssqrt}

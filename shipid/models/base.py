@@ -104,6 +104,10 @@ class Model:
     units: ClassVar[dict[str, str]] = {}
     #: Name of the parameter set used when ``params`` is None.
     default_parameter_set: ClassVar[str | None] = None
+    #: Coefficients that are pure damping of their own motion (sway force in v, yaw moment in r: the
+    #: linear and cross-flow terms), so dissipative, i.e. <= 0 in the model's sign convention, for any
+    #: conventional hull.  The identifiers can keep them at their physical sign (``sign_bounds``).
+    dissipative: ClassVar[tuple[str, ...]] = ()
     #: Package-relative folder of parameter-set JSON files.
     _parameter_dir: ClassVar[str] = "shipid.models.parameters"
 

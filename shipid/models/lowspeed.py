@@ -27,7 +27,11 @@ The resistance term blends the ahead (``X0F``, drift 0) and astern (``X0A``, dri
 with ``(1 + cos beta)/2`` (Yoshimura uses a linear interpolation in ``|beta|``; the cosine form is
 smooth at rest).  The cross-flow integral is evaluated by Gauss-Legendre quadrature (24 nodes).
 
-Propeller, four quadrants (``T`` thrust, ``u_P = u (1 - w_P0)`` for ``u > 0``, ``u`` otherwise)::
+Propeller, four quadrants (``T`` thrust, ``u_P = u (1 - w_P)`` for ``u > 0``, ``u`` otherwise, with the MMG
+standard method's wake falling with drift and yaw, eq. (16) of Yasukawa & Yoshimura (2015):
+``1 - w_P = (1 - w_P0)[1 + (1 - exp(-C1 |beta_P|))(C2 - 1)]``, ``C2 = C2p`` for beta_P > 0, ``C2m`` for
+beta_P < 0, ``beta_P = atan(-(v + xP L r)/u)`` (their ``beta - x'_P r'`` to first order); the default
+``C2p = C2m = 1`` is the constant wake ``w_P0``)::
 
     n >= 0:  X_P = (1 - tP) rho D^2 (k0 n^2 D^2 + k1 n D u_P + k2 u_P^2)      (MMG K_T(J) polynomial)
     n <  0:  X_P = rho D^2 (CTa0 n^2 D^2 + CTa1 n D u)                      (astern K_T, linear in J)
@@ -36,7 +40,9 @@ Propeller, four quadrants (``T`` thrust, ``u_P = u (1 - w_P0)`` for ``u > 0``, `
 Rudder: ``F_N = 1/2 rho A_R f_alpha U_R (u_R sin delta - v_R cos delta)`` -- the MMG normal force
 ``U_R^2 sin(delta - atan2(v_R, u_R))`` written without the angle, so that it stays defined and
 reverses correctly when the flow meets the rudder from behind (``u_R < 0``, going astern).
-``v_R = -gammaR (v + lR L r)``; ``u_R = eps ssqrt(eta a|a| + (1 - eta) u_P|u_P|)`` with
+``v_R = -gammaR w + dgammaR |w|`` with ``w = v + lR L r``: the flow straightening is ``gammaR + dgammaR``
+for beta_R > 0 (w < 0) and ``gammaR - dgammaR`` for beta_R < 0, the side dependence of the MMG standard
+method (Yasukawa & Yoshimura 2015, eq. (26); KVLCC2 0.640 / 0.395); default ``dgammaR = 0``.  ``u_R = eps ssqrt(eta a|a| + (1 - eta) u_P|u_P|)`` with
 ``a = u_P + kappa (sqrt(u_P^2 + 8 T+/(pi rho D^2)) - |u_P|)`` and ``T+`` the ahead thrust only
 (``ssqrt(z) = sign(z) sqrt|z|``; for ``u_P >= 0`` and ``n >= 0`` this is the MMG eq. (23)-(25)); an
 astern propeller sends its race forward, away from the rudder.  ``X_R = -(1 - tR) F_N sin delta``,

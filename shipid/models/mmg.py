@@ -511,6 +511,9 @@ class MMGModel(ShipEquationsModel):
     """
 
     name = "mmg"
+    #: Y'_v, Y'_vvv (sway), N'_r, N'_rrr (yaw) < 0 (e.g. KVLCC2: -0.315, -1.607, -0.049, -0.013; Yasukawa &
+    #: Yoshimura 2015, Table 3)
+    dissipative = ("Yv", "Yvvv", "Nr", "Nrrr")
     param_names = MMG_PARAM_NAMES
     units = {**SHIP_CHANNEL_UNITS, **{k: "-" for k in MMG_PARAM_NAMES}, "f_alpha": "1/rad", "delta0": "rad"}
     default_parameter_set = "kvlcc2"

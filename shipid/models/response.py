@@ -85,6 +85,8 @@ class KCSResponseModel(FroudeScaled, Model):
     """
 
     name = "kcs-response"
+    #: sway damping b1 (dv/dt per v) and yaw damping c2 (dr/dt per r)
+    dissipative = ("b1", "c2")
     state_names = ("x", "y", "psi", "u", "v", "r")
     input_names = ("delta", "n")
     param_names = ("a1", "a2", "a3", "a4", "a5", "a6", "a7", "a8", "a9",

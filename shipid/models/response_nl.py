@@ -127,6 +127,10 @@ class ResponseNLModel(FroudeScaled, Model):
     """
 
     name = "response-nl"
+    #: the sway damping of v (b1 v + b5 |u| v + b6 v|v|: at rest, growing with speed, cross-flow) and the yaw
+    #: damping of r (c2 r + c5 |u| r + c7 r|r|); each <= 0 keeps dv/dt per v and dr/dt per r (without the
+    #: cross terms) negative at every speed from rest
+    dissipative = ("b1", "b5", "b6", "c2", "c5", "c7")
     state_names = ("x", "y", "psi", "u", "v", "r")
     input_names = ("delta", "n")
     param_names = SEED_NAMES + EXTRA_NAMES + ASYM_NAMES

@@ -19,7 +19,8 @@ Choices (made once, before looking at any held-out error, and the same for every
   automatic defaults were not used (on these runs they diverge, as the issue reports);
 * estimated coefficients :data:`ESTIMATE` (hull, thrust ahead and astern, astern side force, rudder
   lift and its hull interaction aH, tR -- the last two chosen by cross-validation in session 6) and,
-  with wind, :data:`ESTIMATE_WIND`; prior = ``esso-osaka-prior`` with 100 % prior std;
+  with wind, :data:`ESTIMATE_WIND`; prior = ``esso-osaka-prior`` with :data:`PRIOR_PARAMS` (the
+  side-dependent flow straightening, chosen by cross-validation in session 7) and 100 % prior std;
 * current: constant per run (reset at each run), estimated with prior std 0.05 m/s; in prediction the
   held-out run starts with the training runs' mean current;
 * EKF inputs: the identifier's defaults, first-order hold and a 5-sigma innovation gate -- chosen by 8-fold
@@ -44,7 +45,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-__all__ = ["run_study", "EssoStudy", "load_runs", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
+__all__ = ["run_study", "EssoStudy", "load_runs", "error_diagnosis", "split_position_error", "PRIOR_PARAMS", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
 
 #: Where the shared data set lives relative to the repository root.
 DATA_DIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "esso_osaka_frt"
@@ -57,6 +58,13 @@ DUPLICATES = ("turn_cut_14-Sep-2020_15_58_08",)
 #: (they scatter over the folds; docs/environment.md) -- read them as a group, not one by one.
 ESTIMATE = ("X0F", "X0A", "Yv", "Yr", "Nv", "Nr", "CD", "k0", "CTa0", "YPa", "NPa", "f_alpha", "aH", "tR")
 ESTIMATE_WIND = ("wX1", "wY1", "wN1", "wN2")
+#: Values replacing the ``esso-osaka-prior`` set's in every ``lowspeed`` fit of the study: the MMG standard
+#: method's side-dependent flow straightening at the KVLCC2's published split (gamma_R 0.640 / 0.395 for
+#: beta_R > 0 / < 0, Yasukawa & Yoshimura 2015: +-0.1225 about the prior's 0.5), chosen in session 7 by the
+#: pre-registered round 4 (candidate G1: 8-fold mean of the 30 s medians 0.2898 vs 0.2922, leave-one-run-out
+#: chosen-scope mean 0.2708 vs 0.2780; docs/environment.md).  ``run_study(prior_params={})`` is the setting
+#: before.
+PRIOR_PARAMS = {"dgammaR": 0.1225}
 MEAS_STD = {"x": 0.01, "y": 0.01, "psi": 0.003, "u": 0.01, "v": 0.01, "r": 0.003}
 PROCESS_STD = {"x": 0.005, "y": 0.005, "psi": 0.002, "u": 0.003, "v": 0.003, "r": 0.002}
 
@@ -252,7 +260,8 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
               by_type: bool = True, calm_water=("mmg",), input_hold: str = "foh", gate: float | None = 5.0,
               current: str = "constant", estimate=ESTIMATE, estimate_wind=ESTIMATE_WIND, substeps: int = 2,
               fixed: bool = True, turning: bool = True, all_types: bool = True, progress: bool = True,
-              rudder_rate: float | None = None, wind="esso-osaka-3m", by_type_prior: str = "prior") -> EssoStudy:
+              rudder_rate: float | None = None, wind="esso-osaka-3m", by_type_prior: str = "prior",
+              prior_params: dict | None = PRIOR_PARAMS) -> EssoStudy:
     """Fit and cross-validate on the Esso Osaka runs (see the module docstring for every choice).
 
     Parameters
@@ -282,6 +291,9 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
         Start and prior of the per-type fits: the ``esso-osaka-prior`` set with 100 % std (default), or the
         fit on the training runs of the *other* run types with its estimated stds (sequential Bayes: the
         other types' posterior is this type's prior; no run enters twice).
+    prior_params : dict, optional
+        Values that replace those of the ``esso-osaka-prior`` set in the start and prior of every
+        ``lowspeed`` fit (default :data:`PRIOR_PARAMS`, chosen by cross-validation; ``{}``: the prior set).
     wind : WindForce or "esso-osaka-3m"
         Above-water geometry of the wind force (the prior of the estimated components and the value of the
         others).
@@ -294,6 +306,8 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
     fold_of = assign_folds(runs, folds)
     n_folds = max(fold_of.values()) + 1
     prior = get_model("lowspeed")
+    if prior_params:
+        prior = prior.with_params(prior_params)
     env0 = with_environment(prior, wind=wind, current=current)
     kvlcc2 = get_model("mmg", "kvlcc2", lpp=prior.lpp)
     fixed_models = {"dead reckoning": dead_reckoning(), "mmg kvlcc2 (Froude-scaled, no fit)": kvlcc2,
@@ -411,7 +425,79 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
                                "start_every": start_every, "runs": [lg.name for lg in runs], "fold_of": fold_of,
                                "input_hold": input_hold, "gate": gate, "current": current,
                                "estimate": list(estimate), "estimate_wind": list(estimate_wind),
-                               "rudder_rate": rudder_rate, "by_type_prior": by_type_prior, "wind": getattr(wind, "to_dict", lambda: wind)()})
+                               "rudder_rate": rudder_rate, "by_type_prior": by_type_prior,
+                               "prior_params": dict(prior_params or {}), "wind": getattr(wind, "to_dict", lambda: wind)()})
+
+
+def split_position_error(dt: float, meas: dict, pred: dict) -> dict:
+    """Which predicted quantity makes an open-loop position error: the measured track re-integrated
+    (trapezoid, sample spacing ``dt``) with one predicted quantity swapped in.
+
+    ``meas``, ``pred``: arrays ``psi, u, v`` over the prediction window (body velocities over ground).
+    Returns the end-point distances [m] of the re-integrated track from the measured one's integral:
+    ``heading`` (predicted heading, measured u, v), ``velocity`` (measured heading, predicted u, v),
+    ``u`` and ``v`` (only that velocity predicted).  Each is the error that quantity alone would make."""
+    def end(psi, u, v):
+        c, s = np.cos(psi), np.sin(psi)
+        xd, yd = u * c - v * s, u * s + v * c
+        return np.array([np.sum(xd[1:] + xd[:-1]), np.sum(yd[1:] + yd[:-1])]) * (0.5 * dt)
+
+    ref = end(meas["psi"], meas["u"], meas["v"])
+    cases = {"heading": (pred["psi"], meas["u"], meas["v"]), "velocity": (meas["psi"], pred["u"], pred["v"]),
+             "u": (meas["psi"], pred["u"], meas["v"]), "v": (meas["psi"], meas["u"], pred["v"])}
+    return {k: float(np.hypot(*(end(*a) - ref))) for k, a in cases.items()}
+
+
+def error_diagnosis(study: "EssoStudy", run_type: str = "zigzag", horizon: float = 30.0,
+                    model: str = "lowspeed + wind + current fitted", data_dir=DATA_DIR,
+                    start_every: float = 5.0) -> pd.DataFrame:
+    """Per start of the held-out runs of ``run_type``: what the ``horizon`` s position error is made of.
+
+    Each run is predicted by the fold model of ``study`` that did not see it (all-types fit, started with
+    that fit's mean current), as in :func:`run_study`.  Columns: ``error`` (position, m), the
+    :func:`split_position_error` parts ``e_heading``, ``e_velocity``, ``e_u``, ``e_v``; the errors at the
+    horizon (predicted − measured) ``d_psi_deg``, ``d_u``, ``d_v``, ``d_r``; the measured ``r_end``, ``v_end``
+    (whose signs tell a port from a starboard turn); and ``t_v``, ``t_r``, ``t_u``, ``t_psi``: the first time
+    [s] the error of v exceeds 0.02 m/s, of r 0.01 rad/s, of u 0.03 m/s, of heading 5 deg (NaN: never)."""
+    from ..validation_horizon import horizon_prediction
+
+    fold_of = study.settings["fold_of"]
+    every = study.settings["eval_every"]
+    rows = []
+    for lg in load_runs(data_dir, (run_type,)):
+        k = fold_of[lg.name]
+        m = study.models[k][model]
+        cur = study.currents[(study.currents.fold == k) & (study.currents.fit == "all types")][["cx", "cy"]].mean()
+        d = _frame(lg, every)
+        init = {"cx": float(cur.cx), "cy": float(cur.cy)} if "cx" in m.state_names else None
+        r = horizon_prediction(m, d, horizons=(horizon,), start_every=start_every, initial=init)
+        X, tt = r.tracks["x"], r.tracks["t"]
+        dt = tt[1] - tt[0]
+        kh = int(round(horizon / dt))
+        t = d["time"].to_numpy()
+        for i, t0 in enumerate(r.start_times):
+            k0 = int(np.searchsorted(t, t0))
+            if k0 + kh >= t.size:
+                continue
+            sl = slice(k0, k0 + kh + 1)
+            meas = {s: d[s].to_numpy()[sl] for s in ("x", "y", "psi", "u", "v", "r")}
+            pred = {s: X[i, : kh + 1, m.state_index(s)] for s in meas}
+            err = {s: pred[s] - meas[s] for s in ("u", "v", "r")}
+            err["psi"] = np.degrees(np.angle(np.exp(1j * (pred["psi"] - meas["psi"]))))
+
+            def first(e, thr):
+                j = int(np.argmax(np.abs(e) > thr))
+                return float(tt[j]) if abs(e[j]) > thr else np.nan
+
+            parts = split_position_error(dt, meas, pred)
+            rows.append({"run": lg.name, "start_time": float(t0),
+                         "error": float(np.hypot(pred["x"][-1] - meas["x"][-1], pred["y"][-1] - meas["y"][-1])),
+                         **{f"e_{k_}": v for k_, v in parts.items()},
+                         "d_psi_deg": float(err["psi"][-1]), "d_u": float(err["u"][-1]), "d_v": float(err["v"][-1]),
+                         "d_r": float(err["r"][-1]), "r_end": float(meas["r"][-1]), "v_end": float(meas["v"][-1]),
+                         "t_v": first(err["v"], 0.02), "t_r": first(err["r"], 0.01), "t_u": first(err["u"], 0.03),
+                         "t_psi": first(err["psi"], 5.0)})
+    return pd.DataFrame(rows)
 
 
 def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shipid.studies.esso_osaka
@@ -438,6 +524,8 @@ def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shi
     ap.add_argument("--wind-cbr", type=float, default=None,
                     help="superstructure centroid C_BR [m] of the wind geometry (default: the esso_osaka_3m preset)")
     ap.add_argument("--by-type-prior", default="prior", choices=("prior", "others"))
+    ap.add_argument("--set", default="", help="comma-separated name=value replacing values of the lowspeed prior "
+                    f"(start and prior of every fit), on top of {PRIOR_PARAMS} (dgammaR=0: the setting before)")
     ap.add_argument("--save", help="pickle the EssoStudy here")
     a = ap.parse_args(argv)
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -453,7 +541,8 @@ def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shi
                     fit_every=a.fit_every, estimate=tuple(a.estimate.split(",")) + tuple(x for x in a.estimate_extra.split(",") if x), by_type=not a.no_by_type,
                     calm_water=() if a.no_calm_water else ("mmg",), turning=not a.no_turning,
                     all_types=not a.no_all_types, fixed=not a.no_fixed, progress=False, rudder_rate=rate, wind=wind,
-                    by_type_prior=a.by_type_prior)
+                    by_type_prior=a.by_type_prior,
+                    prior_params={**PRIOR_PARAMS, **{k: float(v) for k, v in (x.split("=") for x in a.set.split(",") if x)}})
     print(f"settings: {res.settings | {'runs': len(res.settings['runs']), 'fold_of': '...'}}; {time.time() - t0:.0f} s")
     with pd.option_context("display.width", 200, "display.max_rows", 500, "display.float_format", "{:.3f}".format):
         for H in (10.0, 30.0, 60.0):
