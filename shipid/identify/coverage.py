@@ -144,6 +144,20 @@ def _replicate(task: dict) -> dict:
     return out
 
 
+def _task_keys(task: dict, truth) -> tuple[str, str]:
+    """Checkpoint key of a replicate task: the replicate's seed and every setting it depends on, as canonical JSON;
+    and the key of files written before session 7 (a pickle, which depends on whether equal strings of the settings
+    are one object, so a call from another script could find nothing; such files are still read)."""
+    import hashlib
+    import json
+    import pickle
+
+    settings_t = {k: v for k, v in task.items() if k not in ("truth", "key", "checkpoint")}
+    tail = truth.params.tobytes() + truth.name.encode()
+    new = hashlib.sha256(json.dumps(settings_t, sort_keys=True, default=repr).encode() + tail).hexdigest()[:24]
+    return new, hashlib.sha256(pickle.dumps(settings_t) + tail).hexdigest()[:24]
+
+
 def _append_line(path, doc: dict) -> None:
     """Append one JSON line (one ``write`` of a line opened with O_APPEND: whole lines from several workers)."""
     import json
@@ -307,20 +321,10 @@ def coverage_study(truth=None, recipes=None, *, n_replicates: int = 100, seed: i
              for i, s in enumerate(seeds)]
     eng = engine or Engine(1, progress=False)
     if checkpoint is not None:
-        import hashlib
-        import pickle
-
-        import json
-
         legacy = {}
-        tail = truth.params.tobytes() + truth.name.encode()
-        for t in tasks:  # the key: the replicate's seed and every setting it depends on, as canonical JSON
-            settings_t = {k: v for k, v in t.items() if k != "truth"}
-            t["key"] = hashlib.sha256(json.dumps(settings_t, sort_keys=True, default=repr).encode()
-                                      + tail).hexdigest()[:24]
-            # the key of files written before session 7: a pickle, which depends on whether equal strings of the
-            # settings are one object (a call from another script found nothing); still read
-            legacy[t["key"]] = hashlib.sha256(pickle.dumps(settings_t) + tail).hexdigest()[:24]
+        for t in tasks:
+            t["key"], legacy_key = _task_keys(t, truth)
+            legacy[t["key"]] = legacy_key
             t["checkpoint"] = str(checkpoint)
         done = _read_checkpoint(checkpoint)
         for key, old in legacy.items():
