@@ -45,6 +45,9 @@ def register(sub) -> None:
                         "Metropolis-Hastings from a Student-t fitted to it (docs/uncertainty.md)")
     p.add_argument("--sample-x0", action="store_true",
                    help="also sample each log's initial u, v, r (nuisance parameters; the exact posterior)")
+    p.add_argument("--no-prior", action="store_true",
+                   help="flat prior: sample the likelihood alone (the default Gaussian prior is centred on the fit's "
+                        "estimate, i.e. on the same data; docs/uncertainty.md sect. 2)")
     _progress_option(p)
     add_log_options(p)
 
@@ -109,7 +112,7 @@ def _sample(args) -> int:
         warnings.simplefilter("ignore", RuntimeWarning)
         s = sample_posterior(args.result, logs, walkers=args.walkers, steps=args.steps, burn=args.burn, thin=args.thin,
                              seed=args.seed, vectorize=not args.no_vectorize, channels=chans, moves=args.moves,
-                             sample_x0=args.sample_x0,
+                             sample_x0=args.sample_x0, use_prior=not args.no_prior,
                              progress=progress_on(args))
     s.to_json(out, force=args.force)
     import pandas as pd

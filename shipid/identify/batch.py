@@ -457,6 +457,13 @@ class OutputErrorRefiner:
         std[est_idx[fcoef]] = np.sqrt(np.clip(np.diag(cov), 0, None))
         self.coef_std_ = pd.Series(std, index=list(model.param_names), name="coef_std")
         self.cov_ = pd.DataFrame(cov, index=names, columns=names)
+        # the joint Laplace covariance of everything refined (coefficients, then initial states), physical units:
+        # the independence proposal of sample_posterior(proposal=refiner) uses it with ``theta_``
+        # (held columns and coefficients on a sign bound are not in it: a proposal then lacks them, which
+        # sample_posterior refuses)
+        units = np.concatenate([scale, np.tile(x0_scale, len(arrays))])[free_cov]
+        self.cov_joint_ = pd.DataFrame(cov_all * np.outer(units, units), index=[col_names[i] for i in free_cov],
+                                       columns=[col_names[i] for i in free_cov])
         self.estimated_ = names
         self.channels_ = chans
         self.cost_ = float(sol.cost)

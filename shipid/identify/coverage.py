@@ -14,7 +14,12 @@ for the MCMC posterior of :func:`shipid.identify.sample_posterior`.
 ``refine="output-error"`` tables the output-error fit that also estimates each log's initial u, v, r
 (``estimate_x0``); the MCMC column (docs/uncertainty.md sect. 3) samples the 3 yaw coefficients and
 the initial states (``mcmc_kwargs=dict(steps=1000, burn=300, moves="independence", sample_x0=True)``);
-``checkpoint=`` makes a long study resumable.
+``checkpoint=`` makes a long study resumable.  The 16-coefficient MCMC column
+(``benchmarks/run_mcmc16_coverage.py``) samples all coefficients and the initial states with the
+independence proposal taken from the replicate's output-error Laplace approximation
+(``mcmc_kwargs=dict(..., proposal="output-error", use_prior=False)``, needs ``refine="output-error"``).
+``refine="ekf-sensor-noise"`` tables the EKF's estimates with their covariance re-evaluated under sensor
+noise only (:meth:`EKFIdentifier.sensor_noise_cov`).
 
 With ``n`` replicates a true coverage of 0.95 is observed between about
 0.95 -+ 1.96 sqrt(0.95 * 0.05 / n) (0.91-0.99 for n = 100); the table gives the
@@ -83,6 +88,13 @@ def _replicate(task: dict) -> dict:
                               **task["identifier_kwargs"]).fit(logs)
     res = ident.result()
     fit = res
+    if task["refine"] == "ekf-sensor-noise":
+        # the same EKF estimate, its covariance re-evaluated with the filter's own gains under sensor noise only
+        import dataclasses
+
+        C = ident.sensor_noise_cov()
+        fit = dataclasses.replace(res, cov=C, coef_std={**res.coef_std, **{n: float(np.sqrt(max(C.loc[n, n], 0.0)))
+                                                                           for n in C.index}})
     if task["refine"] == "output-error":
         # the output-error maximum-likelihood estimate started from the EKF: weights = the EKF's noise levels,
         # exact RK4 sensitivities, Laplace covariance (J^T J)^-1 s^2
@@ -95,7 +107,8 @@ def _replicate(task: dict) -> dict:
                                  channels=chans or None,
                                  jacobian="tangent", max_nfev=task["max_nfev"], input_hold=ident.input_hold,
                                  estimate_x0=task.get("estimate_x0", True))
-        fit = ref.fit(logs, start=ident).result()
+        ref.fit(logs, start=ident)
+        fit = ref.result()
     names = list(fit.cov.index)
     out = {"seed": task["seed"], "success": bool(fit.success), "names": names,
            "coef": [fit.coef[n] for n in names], "std": [fit.coef_std[n] for n in names],
@@ -107,7 +120,14 @@ def _replicate(task: dict) -> dict:
         out["metrics"] = {f"{r.manoeuvre}:{r.metric}": [r.low, r.high, r.nominal] for r in pred.summary.itertuples()}
         out["n_failed_draws"] = {k: v["n_failed"] for k, v in pred.failures.items()}
     if task["mcmc"]:
-        s = sample_posterior(res, logs, seed=task["seed"] % (2**31), **task["mcmc_kwargs"])
+        kw = dict(task["mcmc_kwargs"])
+        if kw.get("proposal") == "output-error":
+            # the independence proposal from this replicate's output-error Laplace approximation (the chain
+            # still starts from the EKF posterior ``res``)
+            if task["refine"] != "output-error":
+                raise ValueError("mcmc_kwargs proposal='output-error' needs refine='output-error'")
+            kw["proposal"] = ref
+        s = sample_posterior(res, logs, seed=task["seed"] % (2**31), **kw)
         lo, hi = np.quantile(s.samples, [0.025, 0.975], axis=0)
         out["mcmc"] = {"low": lo.tolist(), "high": hi.tolist(), "converged": bool(s.converged),
                        "mean": s.samples.mean(axis=0).tolist(), "std": s.samples.std(axis=0, ddof=1).tolist(),
@@ -122,6 +142,20 @@ def _replicate(task: dict) -> dict:
     if task.get("checkpoint"):
         _append_line(task["checkpoint"], {"key": task["key"], **out})
     return out
+
+
+def _task_keys(task: dict, truth) -> tuple[str, str]:
+    """Checkpoint key of a replicate task: the replicate's seed and every setting it depends on, as canonical JSON;
+    and the key of files written before session 7 (a pickle, which depends on whether equal strings of the settings
+    are one object, so a call from another script could find nothing; such files are still read)."""
+    import hashlib
+    import json
+    import pickle
+
+    settings_t = {k: v for k, v in task.items() if k not in ("truth", "key", "checkpoint")}
+    tail = truth.params.tobytes() + truth.name.encode()
+    new = hashlib.sha256(json.dumps(settings_t, sort_keys=True, default=repr).encode() + tail).hexdigest()[:24]
+    return new, hashlib.sha256(pickle.dumps(settings_t) + tail).hexdigest()[:24]
 
 
 def _append_line(path, doc: dict) -> None:
@@ -235,13 +269,15 @@ def coverage_study(truth=None, recipes=None, *, n_replicates: int = 100, seed: i
     mcmc_kwargs : dict  -- keyword arguments of :func:`sample_posterior` (steps, walkers, burn ...)
     engine : shipid.campaign.Engine, optional  -- default serial
     level : float  -- interval probability (0.95)
-    refine : {None, "output-error"}
+    refine : {None, "output-error", "ekf-sensor-noise"}
         None: the intervals of the EKF posterior (method "ekf" in the table).  "output-error": the EKF
         fit is followed by the output-error maximum-likelihood fit of the same coefficients
         (:class:`~shipid.identify.batch.OutputErrorRefiner`, weights = the EKF's noise levels, exact RK4
         sensitivities, initial states from the EKF smoother and, with ``estimate_x0``, estimated with the
         coefficients, at most ``max_nfev`` evaluations) and its Laplace covariance ``s^2 (J^T J)^-1``
-        gives the intervals (method "output-error").  The MCMC
+        gives the intervals (method "output-error").  "ekf-sensor-noise": the EKF estimate with its covariance
+        re-evaluated under sensor noise only (:meth:`EKFIdentifier.sensor_noise_cov`, the filter's own gains;
+        method "ekf-sensor-noise").  The MCMC
         column does not depend on it (the sampler starts from the EKF posterior).
     max_nfev : int  -- evaluation limit of that refinement
     checkpoint : path, optional
@@ -268,9 +304,9 @@ def coverage_study(truth=None, recipes=None, *, n_replicates: int = 100, seed: i
 
     if int(n_replicates) < 2:
         raise ValueError(f"n_replicates must be >= 2, got {n_replicates}")
-    if refine not in (None, "output-error"):
-        raise ValueError(f"refine must be None or 'output-error', got {refine!r}")
-    method = "ekf" if refine is None else "output-error"
+    if refine not in (None, "output-error", "ekf-sensor-noise"):
+        raise ValueError(f"refine must be None, 'output-error' or 'ekf-sensor-noise', got {refine!r}")
+    method = "ekf" if refine is None else refine
     truth = get_model("kcs-response", "synthetic-truth") if truth is None else truth
     recipes = COVERAGE_RECIPES if recipes is None else tuple(recipes)
     z = float(abs(__import__("scipy.stats", fromlist=["norm"]).norm.ppf((1 - level) / 2)))
@@ -285,17 +321,21 @@ def coverage_study(truth=None, recipes=None, *, n_replicates: int = 100, seed: i
              for i, s in enumerate(seeds)]
     eng = engine or Engine(1, progress=False)
     if checkpoint is not None:
-        import hashlib
-        import pickle
-
-        for t in tasks:  # the key: the replicate's seed and every setting it depends on
-            t["key"] = hashlib.sha256(pickle.dumps({k: v for k, v in t.items() if k != "truth"}) +
-                                      truth.params.tobytes() + truth.name.encode()).hexdigest()[:24]
+        legacy = {}
+        for t in tasks:
+            t["key"], legacy_key = _task_keys(t, truth)
+            legacy[t["key"]] = legacy_key
             t["checkpoint"] = str(checkpoint)
         done = _read_checkpoint(checkpoint)
+        for key, old in legacy.items():
+            if key not in done and old in done:
+                done[key] = done[old]
         todo = [t for t in tasks if t["key"] not in done] if run else []
         new = {t["key"]: o for t, o in zip(todo, eng.map(_replicate, todo, desc="coverage replicates"))}
         done = _read_checkpoint(checkpoint)
+        for key, old in legacy.items():
+            if key not in done and old in done:
+                done[key] = done[old]
         outs = [new[t["key"]] if t["key"] in new else _Done(done[t["key"]]) for t in tasks
                 if t["key"] in new or t["key"] in done]
     else:

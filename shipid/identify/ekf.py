@@ -31,7 +31,8 @@ from ..models.base import Model
 from .. import _jit, _kernel
 from . import _memory
 
-__all__ = ["EKFProblem", "EKFOutput", "run_ekf", "rts_smooth", "bf_smooth", "interval_steps", "INPUT_HOLDS"]
+__all__ = ["EKFProblem", "EKFOutput", "run_ekf", "rts_smooth", "bf_smooth", "interval_steps", "INPUT_HOLDS",
+           "gain_covariance"]
 
 _LOG2PI = np.log(2.0 * np.pi)
 
@@ -684,6 +685,68 @@ def _psd_solve(A: np.ndarray, Bm: np.ndarray) -> np.ndarray:
         return np.linalg.solve(A, Bm)
     except np.linalg.LinAlgError:
         return np.linalg.pinv(A, hermitian=True) @ Bm
+
+
+def gain_covariance(prob: EKFProblem, out: EKFOutput, q=None) -> np.ndarray:
+    """Error covariance of a filter run's last posterior with its own gains, under process noise ``q``.
+
+    The filter's ``P`` is the error covariance only when the noise it assumed (``prob.R``, ``prob.q``) is the noise
+    of the data.  With the gains ``K_k`` and transitions ``F_k`` of the run held, the error of the same estimate
+    under other process noise follows the linear recursion (Gelb, *Applied Optimal Estimation*, 1974, sect. 7.2,
+    sensitivity analysis of a suboptimal filter; the Joseph form of the update)::
+
+        Pa+_k = (I - K_k H_k) Pa-_k (I - K_k H_k)^T + K_k R K_k^T,   Pa-_{k+1} = F_k Pa+_k F_k^T + q dt_k
+
+    from ``Pa-_0 = P0``, with the measurements the filter used at each sample (gated or missing ones skipped) and
+    the log resets of the run (``x_reset`` with ``P_reset``).  ``q`` (nz,) or (B, nz): process-noise intensities
+    as ``prob.q``; None: no process noise (logs with sensor noise only).  With ``q = prob.q`` it reproduces the
+    filter's own ``P_post[:, -1]`` (the gains are then the optimal ones).
+
+    Parameters
+    ----------
+    prob : EKFProblem
+    out : EKFOutput of ``run_ekf(prob, store=True, compact=False, store_dtype="float64")``
+
+    Returns
+    -------
+    ndarray (B, nz, nz)
+    """
+    if out.P_prior is None or out.compact or out.F is None or out.P_prior.dtype != np.float64:
+        raise ValueError("gain_covariance needs run_ekf(prob, store=True, compact=False, store_dtype='float64')")
+    if np.any(out.diverged):
+        raise ValueError("gain_covariance: the filter diverged; its gains do not define an estimate")
+    B, N, nx, ne, nm = prob.shape
+    nz = nx + ne
+    mi = np.asarray(prob.meas_idx)
+    qq = np.zeros((B, nz)) if q is None else np.broadcast_to(np.asarray(q, dtype=float), (B, nz))
+    dt = np.diff(prob.t, axis=1)
+    used = np.isfinite(out.innov) & ~out.gated
+    res = np.empty((B, nz, nz))
+    for b in range(B):
+        Rb = np.asarray(prob.R[b], dtype=float)
+        Pa = np.array(prob.P0[b], dtype=float)
+        for k in range(N):
+            m = used[b, k]
+            if m.any():
+                Pp = out.P_prior[b, k]
+                rows = mi[m]
+                Rm = np.diag(Rb[m])
+                K = np.linalg.solve(Pp[np.ix_(rows, rows)] + Rm, Pp[rows, :]).T  # the filter's gain (nz, nm_k)
+                A = np.eye(nz)
+                A[:, rows] -= K
+                Pa = A @ Pa @ A.T + K @ Rm @ K.T
+            if k == N - 1:
+                break
+            F = out.F[b, k]
+            Pa = F @ Pa @ F.T
+            if prob.reset[b, k + 1]:
+                Pa[:nx, :nx] += prob.P_reset[b]
+                Pa[np.arange(nx, nz), np.arange(nx, nz)] += qq[b, nx:] * dt[b, k]
+            else:
+                Pa[np.arange(nz), np.arange(nz)] += qq[b] * dt[b, k]
+            Pa = 0.5 * (Pa + Pa.T)
+        res[b] = Pa
+    return res
 
 
 def _run_compiled(prob, store: bool, nis_limit: float, store_dtype=np.float64, compact: bool = False):

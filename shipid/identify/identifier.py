@@ -697,6 +697,27 @@ class EKFIdentifier:
             "ci95_low": v - 1.96 * sd, "ci95_high": v + 1.96 * sd, "prior_std": self.prior_std_[est],
         })
 
+    def sensor_noise_cov(self) -> pd.DataFrame:
+        """The coefficients' covariance of this fit re-evaluated under sensor noise only.
+
+        The reported ``cov_`` assumes the process noise of the filter (``process_std_``); on logs with sensor noise
+        only that makes it conservative (docs/uncertainty.md sect. 3).  This is the error covariance of the same
+        estimate, with the last pass's own gains, when the data have no process noise
+        (:func:`~shipid.identify.ekf.gain_covariance`): the assumption of the output-error likelihood.  It is not
+        the right covariance when the logs carry real process noise (waves, wind, model error).  Needs
+        ``param_walk = 0`` (constant coefficients)."""
+        from .ekf import gain_covariance
+
+        if not hasattr(self, "problem_"):
+            raise NotFittedError("this EKFIdentifier is not fitted yet: call fit(logs) first")
+        if self.param_walk > 0:
+            raise ValueError("sensor_noise_cov needs constant coefficients (param_walk = 0)")
+        out = run_ekf(self.problem_, store=True, compact=False, store_dtype="float64")
+        nx = self.model.nx
+        sc = self.scale_.to_numpy()
+        C = gain_covariance(self.problem_, out)[0, nx:, nx:] * np.outer(sc, sc)
+        return pd.DataFrame(C, index=self.estimated_, columns=self.estimated_)
+
     def result(self):
         """A :class:`~shipid.identify.result.FitResult` (serialisable) of this fit."""
         from .result import FitResult

@@ -19,8 +19,9 @@ with process noise or model error it is over-confident (see
 ``docs/uncertainty.md``).  Prior: independent Gaussians centred on the fitted
 coefficients with the fit's prior standard deviations
 (``result.settings["prior_std"]``, >= 100 % of each start value in the EKF;
-the result does not record the prior centre, so the estimate is used -- a weak
-prior of that width barely moves the posterior).
+the result does not record the prior centre, so the estimate is used -- which
+uses the data twice; with 16 coefficients it moved posterior means by up to 0.4
+sigma, docs/uncertainty.md sect. 2; ``use_prior=False`` samples the likelihood alone).
 
 Convergence is judged, never assumed: the mean acceptance fraction, the
 integrated autocorrelation time tau per coefficient (Sokal's automatic window,
@@ -401,10 +402,39 @@ def chain_diagnostics(chain: np.ndarray, acceptance: np.ndarray, names, n_total_
             "not_converged_because": why}
 
 
+def _proposal_in_sampler_coordinates(proposal, all_names, like):
+    """Mean and covariance of a Laplace ``proposal`` (refiner or dict) over ``all_names``, the initial states
+    as offsets from the likelihood's ``x0`` (the mean of each log's first five samples)."""
+    if hasattr(proposal, "cov_joint_"):
+        mean = dict(proposal.coef_.items())
+        for i in range(len(like.arrays)):
+            for c in like.x0_states:
+                mean[f"{c}0[{i}]"] = float(proposal.x0_.iloc[i][c])
+        cov = proposal.cov_joint_
+    elif isinstance(proposal, dict) and "mean" in proposal and "cov" in proposal:
+        mean, cov = dict(proposal["mean"]), pd.DataFrame(proposal["cov"])
+    else:
+        raise ValueError("proposal must be a fitted OutputErrorRefiner (estimate_x0=True for sample_x0) or a dict "
+                         "{'mean': ..., 'cov': DataFrame}")
+    missing = [n for n in all_names if n not in mean or n not in cov.index]
+    if missing:
+        raise ValueError(f"proposal lacks sampled dimension(s) {missing} (an initial state or a coefficient the "
+                         "refinement held?): give a Laplace approximation over every sampled dimension")
+    m = np.array([mean[n] for n in all_names], dtype=float)
+    off = {f"{c}0[{i}]": like.x0[i][like.model.state_index(c)]
+           for i in range(len(like.arrays)) for c in like.x0_states}
+    m -= np.array([off.get(n, 0.0) for n in all_names])
+    C = cov.loc[all_names, all_names].to_numpy(dtype=float)
+    C = 0.5 * (C + C.T)
+    if not (np.all(np.isfinite(m)) and np.all(np.isfinite(C)) and np.all(np.linalg.eigvalsh(C) > 0)):
+        raise ValueError("proposal: the Laplace covariance is not finite and positive definite")
+    return m, C
+
+
 def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2000, burn: int | None = None,
                      thin: int = 1, seed=0, vectorize: bool = True, channels=None, substeps: int = 1,
                      start_scale: float = 1.0, use_prior: bool = True, moves: str = "de",
-                     input_hold: str | None = None, sample_x0: bool = False,
+                     input_hold: str | None = None, sample_x0: bool = False, proposal=None,
                      progress: bool = False) -> PosteriorSamples:
     """Sample the posterior of a fit's estimated coefficients with emcee (optional extra ``mcmc``).
 
@@ -446,6 +476,16 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
         states are held at that mean, and the coefficients' posterior is conditional on them (too narrow
         along the directions the initial states move; docs/uncertainty.md sect. 3).  The convergence
         checks cover every sampled dimension.
+    proposal : fitted OutputErrorRefiner or dict, optional
+        Only with ``moves="independence"``: the multivariate t of the independence proposal is centred on
+        this Laplace approximation and scaled by its covariance (:data:`INDEPENDENCE_T`) instead of being
+        fitted to a DE burn-in, and it is fixed from the first step (every step, the burn-in included, is
+        then the same Metropolis-Hastings kernel with the exact target; ``burn`` only discards the walk
+        away from the EKF start).  A refiner (``OutputErrorRefiner(..., estimate_x0=True)`` fitted to the
+        same logs, e.g. started from ``result``) gives ``coef_``, its initial states ``x0_`` and the joint
+        covariance ``cov_joint_``; a dict gives ``{"mean": {name: value}, "cov": DataFrame}`` over the
+        sampled names (initial states as absolute values ``u0[i]`` ...).  Every sampled dimension must be in
+        it.  The walkers still start from the EKF posterior ``N(coef, cov)`` of ``result``.
     progress : bool  -- emcee's tqdm progress bar
 
     Returns
@@ -508,12 +548,20 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
     fn = like if vectorize else (lambda th: like(th))
     if moves not in ("de", "stretch", "independence"):
         raise ValueError(f"moves={moves!r}: use 'de', 'stretch' or 'independence'")
-    if moves == "independence" and burn < 20:
+    if proposal is not None and moves != "independence":
+        raise ValueError(f"proposal= is the independence proposal: use moves='independence' (got {moves!r})")
+    if moves == "independence" and proposal is None and burn < 20:
         raise ValueError(f"moves='independence' fits its proposal to the burn-in: need burn >= 20, got {burn}")
     mv = emcee.moves.StretchMove() if moves == "stretch" else [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
     sampler = emcee.EnsembleSampler(nw, k, fn, vectorize=vectorize, moves=mv)
     sampler._random = np.random.mtrand.RandomState(int(rng.integers(2**31 - 1)))  # emcee's own stream, seeded
-    if moves == "independence":
+    if moves == "independence" and proposal is not None:
+        pm, pc = _proposal_in_sampler_coordinates(proposal, all_names, like)
+        kept = emcee.EnsembleSampler(nw, k, fn, vectorize=vectorize, moves=_independence_move(emcee, pm, pc))
+        kept._random = sampler._random
+        kept.run_mcmc(emcee.State(p0, log_prob=lp0), steps, progress=progress)
+        chain, acceptance = kept.get_chain(discard=burn, thin=thin), kept.acceptance_fraction
+    elif moves == "independence":
         state = sampler.run_mcmc(emcee.State(p0, log_prob=lp0), burn, progress=progress)
         pts = sampler.get_chain(discard=burn // 2).reshape(-1, k)
         kept = emcee.EnsembleSampler(nw, k, fn, vectorize=vectorize,
@@ -532,7 +580,9 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
         "NOT converged: " + "; ".join(diag["not_converged_because"]) + " -- run longer (more steps) or check the fit"
     if not ok:
         warnings.warn(f"sample_posterior: {msg}", RuntimeWarning, stacklevel=2)
-    settings = {"walkers": nw, "steps": steps, "moves": moves, "burn": burn, "thin": thin, "seed": seed if isinstance(seed, int) else None,
+    settings = {"walkers": nw, "steps": steps, "moves": moves, "burn": burn,
+                "proposal": ("laplace (given)" if proposal is not None else
+                             "t fitted to the DE burn-in" if moves == "independence" else None), "thin": thin, "seed": seed if isinstance(seed, int) else None,
                 "vectorize": bool(vectorize), "channels": like.channels, "substeps": int(substeps),
                 "input_hold": like.input_hold, "sample_x0": bool(sample_x0), "x0_sampled": x0_names,
                 "meas_std": dict(zip(like.channels, map(float, like.sig))), "start_scale": float(start_scale),
