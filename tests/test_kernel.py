@@ -74,6 +74,17 @@ def _compare(prob, nis_limit=1e6):
     bf_small = bf_smooth(small, prob.R, prob.meas_idx, nx)
     with _jit.disabled():
         bf_small0 = bf_smooth(small0, prob.R, prob.meas_idx, nx)
+    # the ship-row storage (the identifier's, param_walk=0): the same ship means and variances
+    ship = run_ekf(prob, store=True, nis_limit=nis_limit, compact="ship")
+    with _jit.disabled():
+        ship0 = run_ekf(prob, store=True, nis_limit=nis_limit, compact="ship")
+    bs, bs0 = bf_smooth(ship, prob.R, prob.meas_idx, nx), _numpy(lambda: bf_smooth(ship0, prob.R, prob.meas_idx, nx))
+    for out_, b_, what in ((ship, bs, "compiled"), (ship0, bs0, "numpy")):
+        assert out_.compact == "ship"
+        _close(out_.P_post, slow.P_post[:, :, :nx], "ship rows of P_post, " + what)
+        _close(b_[0][..., :nx], bf0[0][..., :nx], "smoothed ship means from the ship rows, " + what)
+        _close(b_[1], bf0[1], "smoothed ship variances from the ship rows, " + what)
+        assert np.isnan(b_[0][..., nx:]).all() and np.isnan(b_[2]).all()
     for name, a, b, c, d, e in zip(("means", "state variances", "covariance at sample 0"), bf, bf0, rts, bf_small,
                                    bf_small0):
         _close(a, b, "adjoint-form smoothed " + name)
