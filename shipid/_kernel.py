@@ -642,6 +642,7 @@ def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps
     Lam = np.zeros((nz, nz))
     A = np.empty((nz, nz))
     row = np.empty(nz)
+    row2 = np.empty(nz)
     sel = np.empty(nm, dtype=np.int64)
     S = np.empty((nm, nm))
     L = np.empty((nm, nm))
@@ -661,17 +662,25 @@ def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps
             zs[k, i] = zf[k, i] + s
         for i in range(nr, nz):
             zs[k, i] = np.nan
-        for i in range(nx):  # ship-state variances: Pf_ii - (Pf_i Lam) . Pf_i
+        for i in range(0, nx, 2):  # ship-state variances: Pf_ii - (Pf_i Lam) . Pf_i, two rows at a time
+            i2 = min(i + 1, nx - 1)  # (an odd last row is computed twice)
             for j in range(nz):
                 row[j] = 0.0
+                row2[j] = 0.0
             for m in range(nz):
                 f = Pfk[i, m]
+                f2 = Pfk[i2, m]
                 for j in range(nz):
-                    row[j] += f * Lam[m, j]
+                    lmj = Lam[m, j]
+                    row[j] += f * lmj
+                    row2[j] += f2 * lmj
             s = 0.0
+            s2 = 0.0
             for j in range(nz):
                 s += row[j] * Pfk[i, j]
+                s2 += row2[j] * Pfk[i2, j]
             var_x[k, i] = Pfk[i, i] - s
+            var_x[k, i2] = Pfk[i2, i2] - s2
         if k == 0 and nr < nz:
             Ps0[:, :] = np.nan
             break
@@ -716,13 +725,21 @@ def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps
                 a2[i] = 0.0
             chol_solve(L, cnt, Kt, nz, a)
             chol_solve(L, cnt, Si, cnt, a2)
-            for c_ in range(cnt):  # LKt = (Lam K)^T = K^T Lam (Lam symmetric), a row of Lam at a time
+            for c_ in range(0, cnt, 2):  # LKt = (Lam K)^T = K^T Lam (Lam symmetric), two rows at a time
+                c2 = min(c_ + 1, cnt - 1)  # (an odd last row is computed twice, the second copy in row2)
                 for i in range(nz):
                     LKt[c_, i] = 0.0
+                    row2[i] = 0.0
                 for j in range(nz):
                     kcj = Kt[c_, j]
+                    kc2 = Kt[c2, j]
                     for i in range(nz):
-                        LKt[c_, i] += kcj * Lam[j, i]
+                        lji = Lam[j, i]
+                        LKt[c_, i] += kcj * lji
+                        row2[i] += kc2 * lji
+                if c2 != c_:
+                    for i in range(nz):
+                        LKt[c2, i] = row2[i]
             for c_ in range(cnt):  # lam += H^T (a - K^T lam)
                 s = 0.0
                 for j in range(nz):
@@ -755,16 +772,25 @@ def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps
             row[j] = s
         for j in range(nz):
             lam[j] = row[j]
-        for i in range(nz):  # A = Lam F: the ship rows, and of the others the lower triangle (all F^T A reads)
-            jn = nz if i < nx else i + 1
+        for i in range(0, nz, 2):  # A = Lam F: the ship rows, and of the others the lower triangle (all F^T A
+            i2 = min(i + 1, nz - 1)  # reads), two rows at a time (an odd last row is computed twice, the
+            jn = nz if i2 < nx else i2 + 1  # second copy in row2)
             for j in range(min(nx, jn)):
                 A[i, j] = 0.0
+                row2[j] = 0.0
             for j in range(nx, jn):
                 A[i, j] = Lam[i, j]
+                row2[j] = Lam[i2, j]
             for m in range(nx):
                 lim = Lam[i, m]
+                li2 = Lam[i2, m]
                 for j in range(jn):
-                    A[i, j] += lim * Fk[m, j]
+                    fmj = Fk[m, j]
+                    A[i, j] += lim * fmj
+                    row2[j] += li2 * fmj
+            if i2 != i:
+                for j in range(jn):
+                    A[i2, j] = row2[j]
         for i in range(nz):  # Lam = F^T A: its lower triangle (a symmetric product), mirrored
             for j in range(i + 1):
                 Lam[i, j] = A[i, j] if i >= nx else 0.0

@@ -151,6 +151,17 @@ def test_diverging_member_is_frozen_alike(kcs_problem):
     assert list(out.diverged) == [False, True, False] and out.diverged_at[1] == first
 
 
+def test_odd_sizes_kernel_equals_numpy(kcs_truth, kcs_logs):
+    """An odd augmented state (6 + 15) and odd channel counts: the kernel's loops over pairs of rows."""
+    est = [n for n in kcs_truth.param_names if n != "a8"]
+    prob = _problem(kcs_truth, [kcs_logs["kcs_zz_p20_rpm"][0], kcs_logs["kcs_tc_m25_rpm"][0]], est)
+    assert (prob.z0.shape[1] % 2) == 1
+    prob = _batch(prob, 2, np.random.default_rng(9))
+    Y = prob.Y.copy()
+    Y[:, 50:60, 4] = np.nan  # five channels at these samples
+    _compare(replace(prob, Y=Y))
+
+
 def test_response_nl_kernel_equals_numpy(kcs_logs):
     model = get_model("response-nl")
     logs = [f for f, _ in kcs_logs.values()][:2]
