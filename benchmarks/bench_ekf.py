@@ -159,8 +159,8 @@ def main(argv=None) -> int:
     fitted, a = ident.to_model(), ident._setup["arrays"][0]
     x0 = ident.states_[0][list(truth.state_names)].to_numpy()[0]
     sub = 2  # the identifier's consistency replay: max(2, substeps) RK4 steps per sample
-    stored = run_ekf(prob, store=True, compact=True)
-    parts = {"filter, compact storage": lambda: run_ekf(prob, store=True, compact=True),
+    stored = run_ekf(prob, store=True, compact=ident._compact())  # as the fit stores it
+    parts = {"filter, compact storage": lambda: run_ekf(prob, store=True, compact=ident._compact()),
              "smoother (adjoint form)": lambda: bf_smooth(stored, prob.R, prob.meas_idx, truth.nx),
              "consistency replay (RK4, 2 steps/sample)": lambda: simulate(
                  fitted, x0, a.t, a.U, substeps=sub, input_hold=prob.input_hold, h_max=1.5 * ident._setup["dt"] / sub)}

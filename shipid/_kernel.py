@@ -407,7 +407,7 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
                 return
         if store:
             z_post[b, k] = z
-            P_post[b, k] = P
+            P_post[b, k] = P[:P_post.shape[2]]  # all rows, or the ship rows (``compact="ship"``)
         if k == N - 1:
             break
         # ---- predict to sample k+1 (nothing is integrated into a reset sample)
@@ -636,11 +636,13 @@ def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps
     the ship rows of ``F`` and the rows ``pp_rows`` of ``Pp`` (those at the measured states, channel
     ``j`` in row ``pp_rows[j]``) are read, so the compact storage of the filter serves."""
     N, nz = zf.shape
+    nr = Pf.shape[1]  # rows of Pf stored: all, or the ship rows (compact="ship": no parameter means, no Ps0)
     nm = meas_idx.shape[0]
     lam = np.zeros(nz)
     Lam = np.zeros((nz, nz))
     A = np.empty((nz, nz))
     row = np.empty(nz)
+    row2 = np.empty(nz)
     sel = np.empty(nm, dtype=np.int64)
     S = np.empty((nm, nm))
     L = np.empty((nm, nm))
@@ -653,22 +655,35 @@ def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps
     KLK = np.empty((nm, nm))
     for k in range(N - 1, -1, -1):
         Pfk = Pf[k]
-        for i in range(nz):  # smoothed mean
+        for i in range(nr):  # smoothed mean
             s = 0.0
             for j in range(nz):
                 s += Pfk[i, j] * lam[j]
             zs[k, i] = zf[k, i] + s
-        for i in range(nx):  # ship-state variances: Pf_ii - (Pf_i Lam) . Pf_i
+        for i in range(nr, nz):
+            zs[k, i] = np.nan
+        for i in range(0, nx, 2):  # ship-state variances: Pf_ii - (Pf_i Lam) . Pf_i, two rows at a time
+            i2 = min(i + 1, nx - 1)  # (an odd last row is computed twice)
             for j in range(nz):
                 row[j] = 0.0
+                row2[j] = 0.0
             for m in range(nz):
                 f = Pfk[i, m]
+                f2 = Pfk[i2, m]
                 for j in range(nz):
-                    row[j] += f * Lam[m, j]
+                    lmj = Lam[m, j]
+                    row[j] += f * lmj
+                    row2[j] += f2 * lmj
             s = 0.0
+            s2 = 0.0
             for j in range(nz):
                 s += row[j] * Pfk[i, j]
+                s2 += row2[j] * Pfk[i2, j]
             var_x[k, i] = Pfk[i, i] - s
+            var_x[k, i2] = Pfk[i2, i2] - s2
+        if k == 0 and nr < nz:
+            Ps0[:, :] = np.nan
+            break
         if k == 0:
             for i in range(nz):  # A = Lam Pf, then Ps0 = Pf - Pf A (lower triangle, mirrored)
                 for j in range(nz):
@@ -710,13 +725,21 @@ def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps
                 a2[i] = 0.0
             chol_solve(L, cnt, Kt, nz, a)
             chol_solve(L, cnt, Si, cnt, a2)
-            for c_ in range(cnt):  # LKt = (Lam K)^T = K^T Lam (Lam symmetric), a row of Lam at a time
+            for c_ in range(0, cnt, 2):  # LKt = (Lam K)^T = K^T Lam (Lam symmetric), two rows at a time
+                c2 = min(c_ + 1, cnt - 1)  # (an odd last row is computed twice, the second copy in row2)
                 for i in range(nz):
                     LKt[c_, i] = 0.0
+                    row2[i] = 0.0
                 for j in range(nz):
                     kcj = Kt[c_, j]
+                    kc2 = Kt[c2, j]
                     for i in range(nz):
-                        LKt[c_, i] += kcj * Lam[j, i]
+                        lji = Lam[j, i]
+                        LKt[c_, i] += kcj * lji
+                        row2[i] += kc2 * lji
+                if c2 != c_:
+                    for i in range(nz):
+                        LKt[c2, i] = row2[i]
             for c_ in range(cnt):  # lam += H^T (a - K^T lam)
                 s = 0.0
                 for j in range(nz):
@@ -749,15 +772,25 @@ def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps
             row[j] = s
         for j in range(nz):
             lam[j] = row[j]
-        for i in range(nz):  # A = Lam F
-            for j in range(nx):
+        for i in range(0, nz, 2):  # A = Lam F: the ship rows, and of the others the lower triangle (all F^T A
+            i2 = min(i + 1, nz - 1)  # reads), two rows at a time (an odd last row is computed twice, the
+            jn = nz if i2 < nx else i2 + 1  # second copy in row2)
+            for j in range(min(nx, jn)):
                 A[i, j] = 0.0
-            for j in range(nx, nz):
+                row2[j] = 0.0
+            for j in range(nx, jn):
                 A[i, j] = Lam[i, j]
+                row2[j] = Lam[i2, j]
             for m in range(nx):
                 lim = Lam[i, m]
-                for j in range(nz):
-                    A[i, j] += lim * Fk[m, j]
+                li2 = Lam[i2, m]
+                for j in range(jn):
+                    fmj = Fk[m, j]
+                    A[i, j] += lim * fmj
+                    row2[j] += li2 * fmj
+            if i2 != i:
+                for j in range(jn):
+                    A[i2, j] = row2[j]
         for i in range(nz):  # Lam = F^T A: its lower triangle (a symmetric product), mirrored
             for j in range(i + 1):
                 Lam[i, j] = A[i, j] if i >= nx else 0.0
@@ -788,13 +821,21 @@ _noticed: set = set()
 
 
 def _source_hash(functions: dict) -> str:
-    """Hash of the source files of ``functions`` (and of this module): the compiled kernel inlines them."""
-    files = {inspect.getsourcefile(getattr(f, "py_func", f)) for f in functions.values()} | {__file__}
-    h = hashlib.sha1()
-    for name in sorted(files):
-        with open(name, "rb") as fh:
-            h.update(fh.read())
-    return h.hexdigest()[:10]
+    """Hash of the source files of ``functions`` (and of this module): the compiled kernel inlines them.
+    Read once per process and set of functions (every fit asks; reading and hashing the files cost ~0.7 ms)."""
+    key = tuple(sorted((name, id(f)) for name, f in functions.items()))
+    out = _hashes.get(key)
+    if out is None:
+        files = {inspect.getsourcefile(getattr(f, "py_func", f)) for f in functions.values()} | {__file__}
+        h = hashlib.sha1()
+        for name in sorted(files):
+            with open(name, "rb") as fh:
+                h.update(fh.read())
+        out = _hashes[key] = h.hexdigest()[:10]
+    return out
+
+
+_hashes: dict = {}
 
 
 def filter_functions(model, notice: bool = True):
@@ -828,20 +869,44 @@ FASTMATH = {"reassoc", "contract"}
 
 
 def replay_compiled(model, x0, t, U, p, nsteps, foh: bool):
-    """Open-loop RK4 of ``model`` on the compiled equations (what :func:`shipid.simulate.simulate` does
-    with sampled inputs and ``method="rk4"``), or ``None`` when compilation is off, the model declares
-    no compiled equations, or a state became non-finite (the caller's numpy path then reports it with
-    its own failure semantics).
+    """Open-loop RK4 of ``model`` on its kernel equations (what :func:`shipid.simulate.simulate` does
+    with sampled inputs and ``method="rk4"``): compiled, or -- without compilation, for one
+    trajectory -- the same :func:`rk4_replay` run by the Python interpreter on floats (one trajectory
+    is a chain of scalar operations, ~3.5x cheaper on floats than on numpy arrays of six entries; a
+    batch stays on the caller's numpy path).  ``None`` when neither applies (a batch without
+    compilation, a model without kernel equations) or a state became non-finite (the caller's numpy
+    path then reports it with its own failure semantics).
 
     ``x0 (B, nx)``, ``t (nt,)``, ``U (B, nt, nu)``, ``p (np,)`` or ``(B, np)``, ``nsteps (nt-1,)`` int,
     ``foh``: first-order hold.  Returns ``X (B, nt, nx)``.
     """
     fns = filter_functions(model, notice=False)  # the simulator's numpy path is not slower than expected
     if fns is None:
-        return None
+        if len(x0) != 1 or _jit.enabled() or not getattr(model, "_python_replay", False):
+            return None
+        fns = python_functions(model)
+        if fns is None:
+            return None
     f64 = lambda a: np.ascontiguousarray(a, dtype=float)  # noqa: E731
     x0 = f64(x0)
     X = np.empty((x0.shape[0], len(t), x0.shape[1]))
-    bad = fns["rk4_replay"](f64(t), f64(U), x0, f64(np.atleast_2d(p)), f64(model._kernel_constants()),
-                            np.ascontiguousarray(nsteps, dtype=np.int64), bool(foh), X)
+    try:
+        bad = fns["rk4_replay"](f64(t), f64(U), x0, f64(np.atleast_2d(p)), f64(model._kernel_constants()),
+                                np.ascontiguousarray(nsteps, dtype=np.int64), bool(foh), X)
+    except (ArithmeticError, ValueError):  # the interpreter's float maths raises where numpy gives inf/NaN
+        return None
     return None if bad else X
+
+
+def python_functions(model):
+    """:data:`FILTER` with ``model``'s kernel equations as globals, not compiled (run by the interpreter:
+    the same source as the compiled kernel), or ``None`` when the model declares no equations."""
+    eq = getattr(model, "_equations", None)
+    if eq is None:
+        return None
+    key = ("python", id(eq), type(model))
+    hit = _cache.get(key)
+    if hit is None or hit[0] is not eq:
+        ns = model._equations_namespace()
+        hit = _cache[key] = (eq, _jit.rebind(FILTER, {**ns, **_jit.rebind(eq, ns)}))  # eq kept: ids stay unique
+    return hit[1]

@@ -241,7 +241,8 @@ def simulate(
     n_int = interval_steps(t, substeps, h_max).tolist()
     if (U is not None and controller is None and model.nu > 0 and p.dtype.kind == "f"
             and (p.ndim == 1 or p.shape[:-1] == batch)):
-        # sampled inputs: the same RK4 map on the model's compiled equations (issue 15), when available
+        # sampled inputs: the same RK4 map on the model's kernel equations (issue 15): compiled, or run by the
+        # interpreter on floats for one trajectory of a model that sets _python_replay
         from ._kernel import replay_compiled
 
         Xc = replay_compiled(model, x0.reshape(-1, model.nx), t, U.reshape(-1, n_t, model.nu), p, n_int, foh)

@@ -273,7 +273,8 @@ def test_divergence_is_detected_and_reported_not_nan(kcs_truth, kcs_logs):
 
 
 def test_covariance_stays_symmetric_positive_definite(kcs_fit):
-    P = kcs_fit.output_.P_post[0]
+    # the fit keeps only the ship rows of the filtered covariance (compact="ship"): the whole matrices of its problem
+    P = run_ekf(kcs_fit.problem_, store=True).P_post[0]
     assert np.allclose(P, P.transpose(0, 2, 1), atol=0)
     assert np.all(np.linalg.eigvalsh(P[::50]) > 0)
 
@@ -466,7 +467,7 @@ def test_the_noise_check_pass_is_the_first_pass_and_is_not_run_twice(kcs_truth, 
     log = kcs_logs["kcs_zz_m10"][0]
     fit = EKFIdentifier(kcs_truth, n_passes=1, init="model").fit(log)
     assert (fit.noise_["innovation_factor"] == 1.0).all()
-    assert calls == [{"store": True, "compact": True}]
+    assert calls == [{"store": True, "compact": "ship"}]  # the ship rows of P_post: param_walk=0
     ref = EKFIdentifier(kcs_truth, n_passes=1, init="model", adapt_noise=False).fit(log)
     np.testing.assert_array_equal(fit.coef_.to_numpy(), ref.coef_.to_numpy())
     np.testing.assert_array_equal(fit.coef_std_.to_numpy(), ref.coef_std_.to_numpy())

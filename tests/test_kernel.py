@@ -74,6 +74,17 @@ def _compare(prob, nis_limit=1e6):
     bf_small = bf_smooth(small, prob.R, prob.meas_idx, nx)
     with _jit.disabled():
         bf_small0 = bf_smooth(small0, prob.R, prob.meas_idx, nx)
+    # the ship-row storage (the identifier's, param_walk=0): the same ship means and variances
+    ship = run_ekf(prob, store=True, nis_limit=nis_limit, compact="ship")
+    with _jit.disabled():
+        ship0 = run_ekf(prob, store=True, nis_limit=nis_limit, compact="ship")
+    bs, bs0 = bf_smooth(ship, prob.R, prob.meas_idx, nx), _numpy(lambda: bf_smooth(ship0, prob.R, prob.meas_idx, nx))
+    for out_, b_, what in ((ship, bs, "compiled"), (ship0, bs0, "numpy")):
+        assert out_.compact == "ship"
+        _close(out_.P_post, slow.P_post[:, :, :nx], "ship rows of P_post, " + what)
+        _close(b_[0][..., :nx], bf0[0][..., :nx], "smoothed ship means from the ship rows, " + what)
+        _close(b_[1], bf0[1], "smoothed ship variances from the ship rows, " + what)
+        assert np.isnan(b_[0][..., nx:]).all() and np.isnan(b_[2]).all()
     for name, a, b, c, d, e in zip(("means", "state variances", "covariance at sample 0"), bf, bf0, rts, bf_small,
                                    bf_small0):
         _close(a, b, "adjoint-form smoothed " + name)
@@ -138,6 +149,17 @@ def test_diverging_member_is_frozen_alike(kcs_problem):
     # with the identifier's innovation gate the jump is rejected gate_run times before it is accepted
     first = 120 + (prob.gate_run if prob.gate is not None else 0)
     assert list(out.diverged) == [False, True, False] and out.diverged_at[1] == first
+
+
+def test_odd_sizes_kernel_equals_numpy(kcs_truth, kcs_logs):
+    """An odd augmented state (6 + 15) and odd channel counts: the kernel's loops over pairs of rows."""
+    est = [n for n in kcs_truth.param_names if n != "a8"]
+    prob = _problem(kcs_truth, [kcs_logs["kcs_zz_p20_rpm"][0], kcs_logs["kcs_tc_m25_rpm"][0]], est)
+    assert (prob.z0.shape[1] % 2) == 1
+    prob = _batch(prob, 2, np.random.default_rng(9))
+    Y = prob.Y.copy()
+    Y[:, 50:60, 4] = np.nan  # five channels at these samples
+    _compare(replace(prob, Y=Y))
 
 
 def test_response_nl_kernel_equals_numpy(kcs_logs):

@@ -188,6 +188,8 @@ class EnvironmentModel(DerivedConstants, ComplexStepJacobians, Model):
         shape = np.broadcast_shapes(*[np.shape(o) for o in out])
         return np.stack([np.broadcast_to(o, shape) for o in out], axis=-1)
 
+    _python_replay = True  # 326 against 2344 us per sample (kcs-response with wind and current)
+
     # the compiled EKF kernel (shipid._kernel) runs the same equations
     @property
     def _equations(self):

@@ -138,7 +138,7 @@ def ljung_box(x_segments, lags: int):
     Returns ``(Q, p_value, rho (L,), n)``; ``p`` from the chi-square distribution with ``L`` degrees of
     freedom (no fitted ARMA terms are subtracted: the innovations are tested as they are).
     """
-    from scipy.stats import chi2
+    from scipy.special import chdtrc
 
     num = np.zeros(lags)
     den = 0.0
@@ -155,7 +155,7 @@ def ljung_box(x_segments, lags: int):
         return float("nan"), float("nan"), np.full(lags, np.nan), n
     rho = num / den
     Q = float(n * (n + 2) * np.sum(rho**2 / (n - np.arange(1, lags + 1))))
-    return Q, float(chi2.sf(Q, lags)), rho, n
+    return Q, float(chdtrc(lags, Q)), rho, n  # chi2.sf(Q, lags), without scipy.stats' per-call overhead
 
 
 def _finite_or_none(v):
@@ -279,8 +279,10 @@ def consistency(names, innov, S_diag, gated, segments, replay_ratio=None, dynami
     (largest |autocorrelation| over the lags), ``replay_ratio``, ``n_gated``, ``gated_fraction``.
     Non-finite values are None (the JSON stays strict).
     """
-    from scipy.stats import chi2
+    from scipy.special import gammaincinv
 
+    # chi2.ppf(q, df) is 2 gammaincinv(df / 2, q) (scipy.stats' own formula; called directly, ~30x cheaper)
+    chi2_ppf = lambda q, df: 2.0 * gammaincinv(df / 2.0, q)  # noqa: E731
     r = dict(CONSISTENCY_RULES)
     r.update(rules or {})
     alpha = r["alpha"]
@@ -301,7 +303,7 @@ def consistency(names, innov, S_diag, gated, segments, replay_ratio=None, dynami
             rho_f = np.where(np.isfinite(rho), rho, 0.0)
             n_eff = n / (1.0 + 2.0 * float(np.sum(rho_f**2)))
             m = float(np.nanmean(nu**2))
-            band = (float(chi2.ppf(alpha / 2, n_eff) / n_eff), float(chi2.ppf(1 - alpha / 2, n_eff) / n_eff))
+            band = (float(chi2_ppf(alpha / 2, n_eff) / n_eff), float(chi2_ppf(1 - alpha / 2, n_eff) / n_eff))
             row.update(nis_mean=m, nis_band=list(band), n_eff=n_eff, mean=float(np.nanmean(nu)), ljung_box=Q,
                        ljung_box_p=p, rho_max=float(np.max(np.abs(rho_f))), lags=lags)
             f = r["nis_factor"]

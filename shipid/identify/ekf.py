@@ -122,7 +122,9 @@ class EKFOutput:
     ``message`` per member, ``gated`` (B, N, nm) bool the measurements rejected by
     the innovation gate and ``n_gated`` (B, nm) their count per channel.  ``compact``:
     ``P_prior`` holds only its rows at the measured states (B, N, nm, nz) and ``F``
-    its ship-state rows (B, N, nx, nz) (``run_ekf(compact=True)``).
+    its ship-state rows (B, N, nx, nz) (``run_ekf(compact=True)``); ``"ship"``: in
+    addition ``P_post`` holds only its ship-state rows (B, N, nx, nz)
+    (``run_ekf(compact="ship")``).
 
     A member that diverged at sample ``kd`` was not computed further: its
     ``z_post/P_post/F`` from ``kd`` on and ``z_prior/P_prior/innov/S_diag/nis`` after
@@ -146,7 +148,7 @@ class EKFOutput:
     message: list
     gated: np.ndarray
     n_gated: np.ndarray
-    compact: bool = False
+    compact: bool | str = False
 
 
 def _divergence_message(k: int, tk: float, d2: float) -> str:
@@ -168,7 +170,7 @@ def _output(stored, z_final, P_final, innov, S_diag, nis, logdet, gated, diverge
     return EKFOutput(z_post=z_post, P_post=P_post, z_prior=z_prior, P_prior=P_prior, F=F, z_final=z_final,
                      P_final=P_final, innov=innov, S_diag=S_diag, loglik=loglik, nis=nis, diverged=diverged,
                      diverged_at=diverged_at, message=message, gated=gated, n_gated=gated.sum(axis=1),
-                     compact=bool(compact and stored is not None))
+                     compact=compact if (compact and stored is not None) else False)
 
 
 def _index_or_slice(idx, n: int):
@@ -221,7 +223,7 @@ def _cross_interval(step, model, t0, x, u0, u1, p, h, n, scale, est, all_est):
     Fx = Fp = None
     for i, (ua, ub) in enumerate(hold_steps(u0, u1, n)):
         x, Ax, Ap = step(model, t0 + i * h if i else t0, x, ua, p, h, ub)
-        Ap = Ap * scale if all_est else Ap[:, :, est] * scale
+        Ap = Ap * scale if all_est else Ap[..., est] * scale
         if Fx is None:
             Fx, Fp = Ax, Ap
         else:
@@ -231,7 +233,7 @@ def _cross_interval(step, model, t0, x, u0, u1, p, h, n, scale, est, all_est):
 
 
 def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6, store_dtype: str = "auto",
-            compact: bool = False) -> EKFOutput:
+            compact: bool | str = False) -> EKFOutput:
     """Run the augmented-state EKF over a batch.
 
     Parameters
@@ -256,6 +258,10 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6, store_
         and ``F`` as its ship-state rows ``(B, N, nx, nz)`` (the parameter rows are the identity);
         half the memory traffic of the full storage.  Float64 only: where the storage would be
         float32 the full storage is kept (``EKFOutput.compact`` says which one ran).
+        ``"ship"``: in addition ``P_post`` as its ship-state rows ``(B, N, nx, nz)``, all that
+        :func:`bf_smooth` reads of it for the ship states' smoothed means and variances (it then
+        does not compute the parameters' smoothed means nor the covariance at sample 0: what the
+        identifier takes from the filter's last sample when the parameters do not walk).
 
     Returns
     -------
@@ -306,7 +312,9 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6, store_
     """
     # refuse what cannot fit (or store in float32 where only that fits)
     sdt = _memory.check(*prob.shape[:2], prob.shape[2] + prob.shape[3], prob.shape[4], store, store_dtype)
-    compact = bool(compact and store and sdt is np.float64)
+    if compact not in (False, True, "ship"):
+        raise ValueError(f"compact must be False, True or 'ship', got {compact!r}")
+    compact = (compact if store and sdt is np.float64 else False) or False
     fast = _run_compiled(prob, store, nis_limit, sdt, compact)  # the compiled kernel (same semantics), when available
     if fast is not None:
         return fast
@@ -365,7 +373,8 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6, store_
     p = prob.p_base.copy()
     if store:
         z_post = np.empty((B, N, nz))
-        P_post = np.empty((B, N, nz, nz), dtype=sdt)
+        nr = nx if compact == "ship" else nz  # the rows of P_post kept
+        P_post = np.empty((B, N, nr, nz), dtype=sdt)
         z_prior = np.empty((B, N, nz))
         P_prior = np.empty((B, N, nm, nz) if compact else (B, N, nz, nz), dtype=sdt)
         Fs = np.zeros((B, N, nx, nz) if compact else (B, N, nz, nz), dtype=sdt)
@@ -457,7 +466,7 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6, store_
                     z[bad] = z_good[bad]
                     P[bad] = P_good[bad]
         if store:
-            z_post[:, k], P_post[:, k] = z, P
+            z_post[:, k], P_post[:, k] = z, P[:, :nr]
             if any_div:
                 z_post[diverged, k] = np.nan
                 P_post[diverged, k] = np.nan
@@ -480,7 +489,11 @@ def run_ekf(prob: EKFProblem, store: bool = True, nis_limit: float = 1e6, store_
                 p[:, est] = z[:, nx:] * scale
             u0 = prob.U[:, k]
             u1 = prob.U[:, k + 1] if foh else None
-            if shared_t[k] and shared_t[k + 1]:
+            if B == 1:  # one member: the model on its unbatched arrays (numpy scalars: cheaper than (1,) arrays)
+                x, Fx, Fp = _cross_interval(step, model, t_first[k], x[0], u0[0], None if u1 is None else u1[0],
+                                            p[0], h_first[k], n_first[k], scale, est, all_est)
+                x, Fx, Fp = x[None], Fx[None], Fp[None]
+            elif shared_t[k] and shared_t[k + 1]:
                 x, Fx, Fp = _cross_interval(step, model, t_first[k], x, u0, u1, p, h_first[k], n_first[k],
                                             scale, est, all_est)
             else:
@@ -600,7 +613,9 @@ def bf_smooth(out: EKFOutput, R: np.ndarray, meas_idx, nx: int, chunk: int = 256
 
     Parameters
     ----------
-    out : EKFOutput of a run with ``store=True`` (float64 storage, full or ``compact``)
+    out : EKFOutput of a run with ``store=True`` (float64 storage, full or ``compact``; with
+        ``compact="ship"`` only the ship rows of ``P_post`` are stored, and the parameters' smoothed
+        means and ``Ps0`` are not computed: NaN)
     R : (B, nm) measurement noise variances of that run (``EKFProblem.R``)
     meas_idx : (nm,) state index of each channel
     nx : number of ship states (the first ``nx`` of the augmented state)
@@ -637,7 +652,8 @@ def bf_smooth(out: EKFOutput, R: np.ndarray, meas_idx, nx: int, chunk: int = 256
     eye_m = np.eye(nm)
     F_full = np.zeros((Bg, nz, nz))  # the transition with its identity parameter rows (the ship rows stored)
     F_full[:, nx:, nx:] = np.eye(nz - nx)
-    zs_g, var_g, Ps0_g = np.empty((Bg, N, nz)), np.empty((Bg, N, nx)), np.empty((Bg, nz, nz))
+    nr = Pf.shape[2]  # rows of P_post stored: all, or the ship rows (compact="ship")
+    zs_g, var_g, Ps0_g = np.full((Bg, N, nz), np.nan), np.empty((Bg, N, nx)), np.full((Bg, nz, nz), np.nan)
     lam, Lam = np.zeros((Bg, nz)), np.zeros((Bg, nz, nz))
     hi = N
     while hi > 0:
@@ -651,12 +667,13 @@ def bf_smooth(out: EKFOutput, R: np.ndarray, meas_idx, nx: int, chunk: int = 256
         X = np.linalg.solve(S, np.concatenate((PH, e[..., None], eye_m * m[..., None]), axis=-1))
         for k in range(hi - 1, lo - 1, -1):
             Pfk = Pf[:, k]
-            zs_g[:, k] = zf[:, k] + (Pfk @ lam[:, :, None])[:, :, 0]
+            zs_g[:, k, :nr] = zf[:, k, :nr] + (Pfk @ lam[:, :, None])[:, :, 0]
             Pfx = Pfk[:, :nx]
             var_g[:, k] = np.diagonal(Pfx[:, :, :nx], axis1=1, axis2=2) - ((Pfx @ Lam) * Pfx).sum(axis=2)
             if k == 0:
-                Ps0_g[:] = Pfk - Pfk @ Lam @ Pfk
-                Ps0_g[:] = 0.5 * (Ps0_g + Ps0_g.transpose(0, 2, 1))
+                if nr == nz:
+                    Ps0_g[:] = Pfk - Pfk @ Lam @ Pfk
+                    Ps0_g[:] = 0.5 * (Ps0_g + Ps0_g.transpose(0, 2, 1))
                 break
             Xk = X[:, k - lo]
             Kt, a, Si = Xk[:, :, :nz], Xk[:, :, nz], Xk[:, :, nz + 1:]
@@ -749,7 +766,7 @@ def gain_covariance(prob: EKFProblem, out: EKFOutput, q=None) -> np.ndarray:
     return res
 
 
-def _run_compiled(prob, store: bool, nis_limit: float, store_dtype=np.float64, compact: bool = False):
+def _run_compiled(prob, store: bool, nis_limit: float, store_dtype=np.float64, compact: bool | str = False):
     """:func:`run_ekf` on the compiled kernel (:mod:`shipid._kernel`), or ``None`` when it is not available
     (numba off, the model has no compiled equations, or a method the kernel does not implement)."""
     if prob.method not in _kernel.METHODS:
@@ -782,7 +799,7 @@ def _run_compiled(prob, store: bool, nis_limit: float, store_dtype=np.float64, c
     nan = lambda *shape: np.full(shape, np.nan)  # noqa: E731
     if store:  # every entry is written by the kernel (np.empty: the pages are touched once)
         z_post, z_prior = np.empty((B, N, nz)), np.empty((B, N, nz))
-        P_post = np.empty((B, N, nz, nz), dtype=store_dtype)
+        P_post = np.empty((B, N, nx if compact == "ship" else nz, nz), dtype=store_dtype)
         P_prior = np.empty((B, N, nm, nz) if compact else (B, N, nz, nz), dtype=store_dtype)
         Fs = np.empty((B, N, nx, nz) if compact else (B, N, nz, nz), dtype=store_dtype)
     else:

@@ -332,7 +332,7 @@ class EKFIdentifier:
             for _ in range(3):
                 first = out0 = prob0 = None  # (released first: two stored runs need not fit at once)
                 prob0 = self._problem(theta0 / scale)
-                out0 = run_ekf(prob0, store=not self.tune_noise, compact=True)
+                out0 = run_ekf(prob0, store=not self.tune_noise, compact=self._compact())
                 e, S = out0.innov[0], out0.S_diag[0]
                 f = np.ones(len(meas))
                 for j in np.flatnonzero(free):
@@ -371,7 +371,7 @@ class EKFIdentifier:
                 prob, out = first
             else:
                 prob = self._problem(theta_s, q_mult, r_mult)
-                out = run_ekf(prob, store=True, compact=True)
+                out = run_ekf(prob, store=True, compact=self._compact())
             first = None
             if out.diverged[0]:  # the kernel stopped at the divergence sample; smoothing it cannot help
                 self.pass_messages_.append(f"pass {k + 1}: {out.message[0]} (filter stopped there, smoother skipped)")
@@ -533,6 +533,12 @@ class EKFIdentifier:
                                  f"{best['r_mult']:.3g}) are still on the edge of the widened grid")
         table = table.drop(columns=["q_exp", "r_exp"])
         return float(best["q_mult"]), float(best["r_mult"]), table
+
+    def _compact(self):
+        """The filter's storage for the smoother (:func:`~shipid.identify.ekf.run_ekf`'s ``compact``): with
+        constant parameters (``param_walk=0``) the ship rows of the filtered covariance are all that is
+        read of it (the parameters' estimate and covariance are the filter's at the last sample)."""
+        return "ship" if self.param_walk == 0 else True
 
     def _smooth(self, out: EKFOutput, prob: EKFProblem):
         """Smoothed means ``zs (1, N, nz)``, ship-state variances ``var_x (1, N, nx)`` and the whole

@@ -270,6 +270,10 @@ class Model:
     #: kernel protocol ``k_consts``, ``k_rhs``, ``k_jac`` (see :mod:`shipid.models._response_equations`).
     #: ``None``: no compiled path (the EKF uses numpy and says so once).
     _equations: ClassVar[dict | None] = None
+    #: Without numba, replay one trajectory (:func:`shipid.simulate.simulate` with sampled inputs) by
+    #: running :attr:`_equations` in the interpreter on floats (:func:`shipid._kernel.replay_compiled`):
+    #: set where that was measured faster than the numpy path (small equations; the same values).
+    _python_replay: ClassVar[bool] = False
 
     def _equations_namespace(self) -> dict:
         """Extra globals of :attr:`_equations` (e.g. already compiled helpers)."""

@@ -180,6 +180,7 @@ class ResponseNLModel(FroudeScaled, Model):
 
     # the compiled EKF kernel (shipid._kernel) uses the same equations
     _equations = _req.KERNEL_NL
+    _python_replay = True  # 60 against 200 us per sample (as kcs-response)
 
     def _kernel_constants(self) -> np.ndarray:
         return np.array([self.u_floor])
