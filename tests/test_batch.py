@@ -128,6 +128,7 @@ def test_sign_bound_that_binds_is_reported_and_leaves_the_covariance(two_truths)
     assert fb.at_bound_ == ["c2"] and fb.coef_["c2"] == 0.0
     assert fb.coef_std_["c2"] == 0.0 and list(fb.cov_.index) == ["c3"]
     assert fb.result().settings["at_bound"] == ["c2"]
+    assert fb.cost_start_ == pytest.approx(free.cost_start_, rel=1e-12)   # the start's cost, not the held point's
     only_c3 = OutputErrorRefiner(ta.with_params({"c2": 0.0}), estimate=["c3"], **kw).fit([lg], x0=[x0])
     np.testing.assert_allclose(fb.coef_["c3"], only_c3.coef_["c3"], rtol=1e-6)
 

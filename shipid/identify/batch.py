@@ -390,7 +390,9 @@ class OutputErrorRefiner:
         # release a fixed one whose cost gradient points into the allowed side; repeat.  Nothing changes
         # when no coefficient leaves its side (the unconstrained solution is the constrained one).
         self.at_bound_ = []
+        cost_start = None
         if side.any():
+            cost_start = float(0.5 * np.sum(fun(th0[free]) ** 2))  # before the active set moves th0
             free_all, fixed = free.copy(), []
             for _ in range(2 * int((side != 0).sum()) + 1):
                 th_now = full(sol.x)
@@ -467,7 +469,7 @@ class OutputErrorRefiner:
         self.estimated_ = names
         self.channels_ = chans
         self.cost_ = float(sol.cost)
-        self.cost_start_ = float(0.5 * np.sum(fun(th0[free]) ** 2))
+        self.cost_start_ = cost_start if cost_start is not None else float(0.5 * np.sum(fun(th0[free]) ** 2))
         self.rms_normalised_residual_ = float(np.sqrt(s2))
         finite = bool(np.all(np.isfinite(sol.x)) and np.isfinite(sol.cost))
         capped = finite and bool(np.any(np.abs(sol.fun) >= 1e6))  # a replay still diverges at the end
