@@ -210,24 +210,23 @@ def damping_check(model, logs, max_points: int = 2000) -> dict:
     a fraction exceeds :data:`DAMPING_FRACTION`.  Models without both v and r states return
     ``{"physical": None}``.
     """
+    from .data import prepare_logs
+
     names = model.state_names
     if "v" not in names or "r" not in names:
         return {"physical": None, "reasons": [], "note": "the model has no v and r states"}
+    arrays, meas = prepare_logs(model, logs)  # the identifier's own alignment (inputs required, states by name)
+    cols = [model.state_index(s) for s in meas]
     X, U = [], []
-    for lg in logs:
-        n = len(lg)
+    for a in arrays:
+        n = a.t.size
         idx = np.unique(np.linspace(0, n - 1, min(n, max_points)).astype(int))
         x = np.zeros((idx.size, model.nx))
-        for s in names:
-            if s in lg.channels:
-                x[:, model.state_index(s)] = np.asarray(lg[s], dtype=float)[idx]
-        u = np.zeros((idx.size, model.nu))
-        for j, s in enumerate(model.input_names):
-            if s in lg.channels:
-                u[:, j] = np.asarray(lg[s], dtype=float)[idx]
-        ok = np.isfinite(x).all(axis=1) & np.isfinite(u).all(axis=1)
+        x[:, cols] = a.Y[idx]
+        x[:, [cols[j] for j in range(len(meas)) if not np.isfinite(a.Y[:, j]).any()]] = 0.0  # not in this log
+        ok = np.isfinite(x).all(axis=1) & np.isfinite(a.U[idx]).all(axis=1)
         X.append(x[ok])
-        U.append(u[ok])
+        U.append(a.U[idx][ok])
     X, U = np.concatenate(X), np.concatenate(U)
     out: dict = {"reasons": [], "threshold": DAMPING_FRACTION}
     if X.shape[0] == 0:
