@@ -28,7 +28,8 @@ def test_registered_with_esso_particulars(ls):
 
 #: The MMG standard method's side-dependent terms at the KVLCC2's published values (Yasukawa & Yoshimura
 #: 2015, Table 2): gamma_R 0.640 / 0.395 for beta_R > 0 / < 0 and the wake falling with beta_P.
-MMG_ASYMMETRIC = {"dgammaR": 0.1225, "C1": 2.0, "C2p": 1.6, "C2m": 1.1, "xP": -0.48}
+MMG_ASYMMETRIC = {"dgammaR": 0.1225, "C1": 2.0, "C2p": 1.6, "C2m": 1.1, "xP": -0.48,
+                  "YPf": 0.002, "NPf": -0.001, "delta0": 0.03}
 
 
 @pytest.mark.parametrize("terms", ["prior", "asymmetric"])
@@ -110,6 +111,29 @@ def test_side_dependent_terms_follow_the_mmg_standard(ls):
     # astern (u < 0): no wake, as before
     assert m.with_params({"k0": 0.0, "k1": 1.0, "k2": 0.0}).forces([0, 0, 0, -0.1, 0.05, 0.0], [0.0, 10.0])["T"] \
         == pytest.approx(m.particulars.rho * m.particulars.D_p ** 3 * 10.0 * -0.1, rel=1e-12)
+
+
+def test_ahead_propeller_side_force_and_rudder_neutral_angle(ls):
+    """YPf, NPf (side force and yaw moment of the propeller turning ahead, q n^2 D^2 YPf and q L n^2 D^2 NPf;
+    none astern) and delta0 (the rudder acts as if at delta - delta0): defaults off, exact when on."""
+    p = ls.params_series()
+    assert p["YPf"] == p["NPf"] == p["delta0"] == 0.0
+    P = ls.particulars
+    q = 0.5 * P.rho * ls.lpp * P.draught
+    m = ls.with_params({"YPf": 0.002, "NPf": -0.001})
+    x = [0, 0, 0, 0.3, 0.02, -0.01]
+    for n in (12.0, 0.0, -8.0):
+        f0, f = ls.forces(x, [0.1, n]), m.forces(x, [0.1, n])
+        ahead = n >= 0
+        assert f["Y_P"] - f0["Y_P"] == pytest.approx(ahead * q * n * n * P.D_p ** 2 * 0.002, rel=1e-12, abs=1e-15)
+        assert f["N_P"] - f0["N_P"] == pytest.approx(ahead * q * ls.lpp * n * n * P.D_p ** 2 * -0.001,
+                                                     rel=1e-12, abs=1e-15)
+        for k in ("X_H", "Y_H", "N_H", "X_P", "X_R", "Y_R", "N_R", "T"):
+            assert f[k] == f0[k]
+    md = ls.with_params({"delta0": 0.03})
+    for n, u in ((10.0, 0.3), (-8.0, -0.1)):
+        np.testing.assert_allclose(md.rhs(0.0, [0, 0, 0, u, 0.02, 0.01], [0.13, n]),
+                                   ls.rhs(0.0, [0, 0, 0, u, 0.02, 0.01], [0.10, n]), rtol=1e-12, atol=1e-15)
 
 
 def test_rudder_force_reverses_in_reversed_flow(ls):

@@ -30,13 +30,14 @@ PARAM_NAMES = (
     "tP", "wP0", "k0", "k1", "k2", "CTa0", "CTa1", "YPa", "NPa",
     "tR", "aH", "xH", "gammaR", "lR", "eps", "kappa", "f_alpha",
     "dgammaR", "xP", "C1", "C2p", "C2m",
+    "YPf", "NPf", "delta0",
 )
 
 #: Names of the values returned by :func:`forces`, in order.
 FORCE_KEYS = ("X_H", "Y_H", "N_H", "X_P", "Y_P", "N_P", "X_R", "Y_R", "N_R", "T", "F_N", "u_R", "v_R", "U")
 
 #: Number of constants of :func:`derived` read by :func:`forces` (the last 7 are eq. (4)'s, as in ``mmg``).
-N_FORCE_CONSTS = 40
+N_FORCE_CONSTS = 43
 
 # Gauss-Legendre nodes and weights of the cross-flow integrals on [-1/2, 1/2] (24 nodes)
 _s, _w = np.polynomial.legendre.leggauss(24)
@@ -74,7 +75,7 @@ def derived(p, P):
     """Constants ``c`` of the equations for one parameter set (everything that depends only on the
     parameters and the particulars).
 
-    ``p``: the 36 parameters in :data:`PARAM_NAMES` order (floats, arrays, complex);
+    ``p``: the 39 parameters in :data:`PARAM_NAMES` order (floats, arrays, complex);
     ``P``: the particulars ``(lpp, draught, rho, D_p, H_R, A_R, x_R, displacement, x_G, kzz)`` (as
     ``mmg``).  The first :data:`N_FORCE_CONSTS` are those of :func:`forces`, the last 7 those of eq. (4)
     (``1/Mx, Mx, My, B, C/det, B/det, My/det``, the layout of :func:`shipid.models._mmg_equations.derived`,
@@ -82,7 +83,7 @@ def derived(p, P):
     """
     L, d, rho, Dp, H_R, A_R, x_R, disp, x_G, kzz = P[0], P[1], P[2], P[3], P[4], P[5], P[6], P[7], P[8], P[9]
     (X0F, X0A, Xvv, Xvr, Yv, Yr, Nv, Nr, CD, CrY, CrN, mx, my, Jz, tP, wP0, k0, k1, k2, CTa0, CTa1, YPa, NPa,
-     tR, aH, xH, gammaR, lR, eps, kappa, f_alpha, dgammaR, xP, C1, C2p, C2m) = p[:36]
+     tR, aH, xH, gammaR, lR, eps, kappa, f_alpha, dgammaR, xP, C1, C2p, C2m, YPf, NPf, delta0) = p[:39]
     q = 0.5 * rho * L * d
     m = rho * disp
     q2 = 0.5 * rho * L * L * d
@@ -99,6 +100,7 @@ def derived(p, P):
         8.0 / (math.pi * rho * Dp * Dp), kappa, eta, 1.0 - eta, eps, gammaR, lR * L,     # rudder inflow
         0.5 * rho * A_R * f_alpha, -(1.0 - tR), -(1.0 + aH), -(x_R + aH * xH) * L,       # rudder forces
         dgammaR, xP * L, -C1, 0.5 * (C2p + C2m) - 1.0, 0.5 * (C2p - C2m),               # MMG eqs. (16), (26)
+        q * Dp * Dp * YPf, q * L * Dp * Dp * NPf, delta0,                                # ahead side force, neutral angle
         1.0 / Mx, Mx, My, B, C / det, B / det, My / det,                                 # eq. (4)
     )
 
@@ -108,7 +110,7 @@ def forces(uu, v, r, delta, n, c):
     (L, q, qL, hX0F, hX0A, Xvv, Xvr, Yv, Yr, Nv, Nr, CD, CrYL, CrNL,
      wP0, rhoD2, k0D2, k1D, k2, CTa0D2, CTa1D, cYP, cNP, tP,
      c8, kappa, eta, one_m_eta, eps, gammaR, lRL, cF, cXR, cYR, cNR,
-     dgammaR, xPL, mC1, c2A, c2D) = c[:N_FORCE_CONSTS]
+     dgammaR, xPL, mC1, c2A, c2D, cYPf, cNPf, delta0) = c[:N_FORCE_CONSTS]
     U = sqrt(uu * uu + v * v)
     au = absf(uu)
     # hull: resistance blended ahead/astern, linear terms, Kose's cross-flow integrals (Gauss-Legendre)
@@ -135,9 +137,11 @@ def forces(uu, v, r, delta, n, c):
     uP = uu * (1.0 - sp * (1.0 - (1.0 - wP0) * fP))
     T = rhoD2 * (ah * (k0D2 * n * n + k1D * n * uP + k2 * uP * uP) + (1.0 - ah) * (CTa0D2 * n * n + CTa1D * n * uu))
     XP = T * (1.0 - tP * ah)
-    n2a = n * n * (1.0 - ah)
-    YP = cYP * n2a
-    NP = cNP * n2a
+    # side force and yaw moment of the propeller, both proportional to n^2: astern (YPa, NPa) and, for a
+    # single screw turning ahead, the lateral force the MMG standard method neglects (YPf, NPf; default 0)
+    n2 = n * n
+    YP = n2 * (cYP * (1.0 - ah) + cYPf * ah)
+    NP = n2 * (cNP * (1.0 - ah) + cNPf * ah)
     # rudder: inflow from the ahead thrust only, normal force without the inflow angle
     Tp = T * (step_pos(T) * ah)
     a = uP + kappa * (sqrt(uP * uP + c8 * Tp) - absf(uP))
@@ -146,7 +150,8 @@ def forces(uu, v, r, delta, n, c):
     w = v + lRL * r
     vR = dgammaR * absf(w) - gammaR * w
     UR = sqrt(uR * uR + vR * vR)
-    sd, cd = sin(delta), cos(delta)
+    # rudder neutral angle delta0: the rudder acts as if at delta - delta0 (default 0)
+    sd, cd = sin(delta - delta0), cos(delta - delta0)
     FN = cF * UR * (uR * sd - vR * cd)
     return (XH, YH, NH, XP, YP, NP, cXR * FN * sd, cYR * FN * cd, cNR * FN * cd, T, FN, uR, vR, U)
 

@@ -36,6 +36,11 @@ beta_P < 0, ``beta_P = atan(-(v + xP L r)/u)`` (their ``beta - x'_P r'`` to firs
     n >= 0:  X_P = (1 - tP) rho D^2 (k0 n^2 D^2 + k1 n D u_P + k2 u_P^2)      (MMG K_T(J) polynomial)
     n <  0:  X_P = rho D^2 (CTa0 n^2 D^2 + CTa1 n D u)                      (astern K_T, linear in J)
              Y_P = q n^2 D^2 YPa,   N_P = q L n^2 D^2 NPa                  (astern side force)
+    n >= 0:  Y_P = q n^2 D^2 YPf,   N_P = q L n^2 D^2 NPf                  (ahead side force, default 0)
+
+The ahead pair is the lateral force and yaw moment of a single screw turning ahead (the "paddle-wheel"
+effect of the blades in the hull's non-uniform wake), which the MMG standard method neglects (Yasukawa &
+Yoshimura 2015 keep only ``X_P`` ahead); defaults ``YPf = NPf = 0`` reproduce the equations without it.
 
 Rudder: ``F_N = 1/2 rho A_R f_alpha U_R (u_R sin delta - v_R cos delta)`` -- the MMG normal force
 ``U_R^2 sin(delta - atan2(v_R, u_R))`` written without the angle, so that it stays defined and
@@ -46,7 +51,10 @@ method (Yasukawa & Yoshimura 2015, eq. (26); KVLCC2 0.640 / 0.395); default ``dg
 ``a = u_P + kappa (sqrt(u_P^2 + 8 T+/(pi rho D^2)) - |u_P|)`` and ``T+`` the ahead thrust only
 (``ssqrt(z) = sign(z) sqrt|z|``; for ``u_P >= 0`` and ``n >= 0`` this is the MMG eq. (23)-(25)); an
 astern propeller sends its race forward, away from the rudder.  ``X_R = -(1 - tR) F_N sin delta``,
-``Y_R = -(1 + aH) F_N cos delta``, ``N_R = -(x_R + aH xH) L F_N cos delta``.
+``Y_R = -(1 + aH) F_N cos delta``, ``N_R = -(x_R + aH xH) L F_N cos delta``.  A rudder neutral angle
+``delta0`` (default 0) replaces ``delta`` by ``delta - delta0`` in these: the rudder angle at which a
+single-screw ship runs straight is not zero, because the propeller race meets the rudder asymmetrically
+(and a logged angle may carry an offset); the two cannot be told apart from free-running data.
 
 Motion: eq. (4) of Yasukawa & Yoshimura (2015), as in ``mmg``.  All coefficients are
 non-dimensional with ``1/2 rho L d`` (forces, per velocity squared) and ``1/2 rho L^2 d`` (moments);

@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-__all__ = ["run_study", "EssoStudy", "load_runs", "error_diagnosis", "split_position_error", "PRIOR_PARAMS", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
+__all__ = ["run_study", "EssoStudy", "load_runs", "error_diagnosis", "residual_accelerations", "split_position_error", "PRIOR_PARAMS", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
 
 #: Where the shared data set lives relative to the repository root.
 DATA_DIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "esso_osaka_frt"
@@ -497,6 +497,51 @@ def error_diagnosis(study: "EssoStudy", run_type: str = "zigzag", horizon: float
                          "d_r": float(err["r"][-1]), "r_end": float(meas["r"][-1]), "v_end": float(meas["v"][-1]),
                          "t_v": first(err["v"], 0.02), "t_r": first(err["r"], 0.01), "t_u": first(err["u"], 0.03),
                          "t_psi": first(err["psi"], 5.0)})
+    return pd.DataFrame(rows)
+
+
+def residual_accelerations(study: "EssoStudy", candidates=("YPf", "NPf", "delta0", "CrY", "CrN"),
+                           model: str = "lowspeed + wind + current fitted", data_dir=DATA_DIR,
+                           every: int = 2, window: int = 21) -> pd.DataFrame:
+    """Equation error of the fold models on the runs they did not see: per sample (every ``every``-th of the
+    10 Hz log), the measured sway and yaw accelerations (Savitzky-Golay derivative over ``window`` samples,
+    quadratic) minus the fold model's at the measured state, inputs and wind (current: the fold's mean, as
+    in :func:`run_study`), as ``ev`` [m/s^2] and ``er`` [rad/s^2], with the model's sensitivities
+    ``Jv_<name>``, ``Jr_<name>`` of those accelerations to the ``lowspeed`` parameters ``candidates`` (the
+    fold's fitted values, rebuilt on the current equations so that parameters added since are at their
+    defaults).  Regressing ``ev, er`` on a candidate's columns says how much of the residual it could take."""
+    from scipy.signal import savgol_filter
+
+    from ..environment import with_environment
+    from ..models import get_model
+
+    base = get_model("lowspeed").with_params(study.settings.get("prior_params") or {})
+    env = with_environment(base, wind=study.settings.get("wind") or "esso-osaka-3m", current="constant")
+    fold_of = study.settings["fold_of"]
+    rows = []
+    for lg in load_runs(data_dir):
+        k = fold_of[lg.name]
+        fitted = study.models[k][model]
+        ps = dict(zip(fitted.param_names, fitted.params))
+        m = env.with_params({n: ps[n] for n in env.param_names if n in ps})
+        cur = study.currents[(study.currents.fold == k) & (study.currents.fit == "all types")][["cx", "cy"]].mean()
+        d = lg.data
+        t = d["time"].to_numpy(dtype=float)
+        dt = float(np.median(np.diff(t)))
+        X = np.column_stack([d.x, d.y, np.unwrap(d.psi.to_numpy(dtype=float)), d.u, d.v, d.r,
+                             np.full(len(d), cur.cx), np.full(len(d), cur.cy)])
+        U = d[list(m.input_names)].to_numpy(dtype=float)
+        vd = savgol_filter(d.v.to_numpy(dtype=float), window, 2, deriv=1, delta=dt)
+        rd = savgol_filter(d.r.to_numpy(dtype=float), window, 2, deriv=1, delta=dt)
+        jc = [m.param_index(c) for c in candidates]
+        for i in range(window // 2, len(d) - window // 2, every):
+            f = m.rhs(t[i], X[i], U[i])
+            J = m.jac_p(t[i], X[i], U[i])
+            row = {"run": lg.name, "run_type": lg.run_type, "time": t[i], "u": X[i, 3], "v": X[i, 4],
+                   "r": X[i, 5], "delta": U[i, 0], "n": U[i, 1], "ev": vd[i] - f[4], "er": rd[i] - f[5]}
+            for c, j in zip(candidates, jc):
+                row["Jv_" + c], row["Jr_" + c] = J[4, j], J[5, j]
+            rows.append(row)
     return pd.DataFrame(rows)
 
 
