@@ -135,3 +135,38 @@ def test_split_position_error_attributes_each_part():
     # a turning track: each part alone is the full error when only that part is wrong
     e = split_position_error(0.2, meas, dict(meas, u=meas["u"] * 1.1))
     assert e["u"] == pytest.approx(e["velocity"]) and e["v"] == 0.0 and e["u"] > 0.5
+
+
+def test_residual_accelerations_recover_a_missing_side_force():
+    """The round-6 diagnosis (docs/environment.md, session 8) on a synthetic run with a known truth: the run
+    is simulated with an ahead propeller side force and yaw moment (YPf, NPf) that the "fitted" model lacks;
+    the equation error regressed on the model's sensitivities recovers both, and is ~0 for the true model."""
+    from types import SimpleNamespace
+
+    import pandas as pd
+
+    from shipid.environment import with_environment
+    from shipid.models import get_model
+    from shipid.simulate import simulate
+    from shipid.studies.esso_osaka import EssoStudy, residual_accelerations
+
+    fitted = with_environment(get_model("lowspeed"), wind="esso-osaka-3m", current="constant")
+    truth = fitted.with_params({"YPf": 0.002, "NPf": -0.0006})
+    t = np.arange(0.0, 120.0, 0.1)
+    U = np.column_stack([np.radians(20.0) * np.sign(np.sin(2 * np.pi * t / 40.0)), np.full(t.size, 12.0),
+                         np.full(t.size, 1.5), np.full(t.size, -1.2)])
+    sim = simulate(truth, np.array([0, 0, 0, 0.3, 0, 0, 0, 0]), t, U)
+    X = np.asarray(sim.x)
+    data = pd.DataFrame({"time": t, "x": X[:, 0], "y": X[:, 1], "psi": np.angle(np.exp(1j * X[:, 2])), "u": X[:, 3],
+                         "v": X[:, 4], "r": X[:, 5], "delta": U[:, 0], "n": U[:, 1], "wind_speed_true": U[:, 2],
+                         "wind_dir_true": U[:, 3]})
+    run = SimpleNamespace(name="synthetic", run_type="zigzag", data=data)
+    currents = pd.DataFrame({"fold": [0], "fit": ["all types"], "cx": [0.0], "cy": [0.0]})
+    for model, expect in ((fitted, (0.002, -0.0006)), (truth, (0.0, 0.0))):
+        study = EssoStudy(horizon=pd.DataFrame(), coefficients=pd.DataFrame(), currents=currents,
+                          turning=pd.DataFrame(), models={0: {"m": model}},
+                          settings={"fold_of": {"synthetic": 0}, "prior_params": {}, "wind": "esso-osaka-3m"})
+        df = residual_accelerations(study, candidates=("YPf", "NPf"), model="m", runs=[run])
+        A = np.vstack([np.concatenate([df["Jv_" + c], df["Jr_" + c]]) for c in ("YPf", "NPf")]).T
+        b = np.linalg.lstsq(A, np.concatenate([df.ev, df.er]), rcond=None)[0]
+        np.testing.assert_allclose(b, expect, atol=0.03 * 0.002)

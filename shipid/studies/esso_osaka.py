@@ -30,8 +30,10 @@ Choices (made once, before looking at any held-out error, and the same for every
   choice reported in docs/environment.md, not made here;
 * options scored as pre-registered candidates and not kept (docs/environment.md, "Session 6"): a rudder
   rate limit (``rudder_rate``), other extra estimated coefficients, 1 Hz fits, the aft wind geometry
-  (``wind``), per-type fits on the other types' posterior (``by_type_prior="others"``).  The defaults are
-  the chosen settings.
+  (``wind``), per-type fits on the other types' posterior (``by_type_prior="others"``); in sessions 7 and 8
+  the cross-flow factors ``CrY``, ``CrN``, a wake falling with drift, the side force and yaw moment of the
+  propeller turning ahead (``YPf``, ``NPf``) and a rudder neutral angle (``delta0``) (rounds 4-6,
+  docs/environment.md).  The defaults are the chosen settings.
 """
 from __future__ import annotations
 
@@ -502,14 +504,15 @@ def error_diagnosis(study: "EssoStudy", run_type: str = "zigzag", horizon: float
 
 def residual_accelerations(study: "EssoStudy", candidates=("YPf", "NPf", "delta0", "CrY", "CrN"),
                            model: str = "lowspeed + wind + current fitted", data_dir=DATA_DIR,
-                           every: int = 2, window: int = 21) -> pd.DataFrame:
+                           every: int = 2, window: int = 21, runs=None) -> pd.DataFrame:
     """Equation error of the fold models on the runs they did not see: per sample (every ``every``-th of the
     10 Hz log), the measured sway and yaw accelerations (Savitzky-Golay derivative over ``window`` samples,
     quadratic) minus the fold model's at the measured state, inputs and wind (current: the fold's mean, as
     in :func:`run_study`), as ``ev`` [m/s^2] and ``er`` [rad/s^2], with the model's sensitivities
     ``Jv_<name>``, ``Jr_<name>`` of those accelerations to the ``lowspeed`` parameters ``candidates`` (the
     fold's fitted values, rebuilt on the current equations so that parameters added since are at their
-    defaults).  Regressing ``ev, er`` on a candidate's columns says how much of the residual it could take."""
+    defaults).  Regressing ``ev, er`` on a candidate's columns says how much of the residual it could take.
+    ``runs``: the logs (``name``, ``run_type``, ``data``; default :func:`load_runs` of ``data_dir``)."""
     from scipy.signal import savgol_filter
 
     from ..environment import with_environment
@@ -519,7 +522,7 @@ def residual_accelerations(study: "EssoStudy", candidates=("YPf", "NPf", "delta0
     env = with_environment(base, wind=study.settings.get("wind") or "esso-osaka-3m", current="constant")
     fold_of = study.settings["fold_of"]
     rows = []
-    for lg in load_runs(data_dir):
+    for lg in load_runs(data_dir) if runs is None else runs:
         k = fold_of[lg.name]
         fitted = study.models[k][model]
         ps = dict(zip(fitted.param_names, fitted.params))
