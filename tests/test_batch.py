@@ -161,3 +161,70 @@ def test_damping_check_flags_self_excited_sway_only():
     bad = kcs.with_params({"b1": 0.05})
     chk = damping_check(bad, [own_turn(kcs)])
     assert chk["physical"] is False and chk["v"]["fraction_positive"] == 1.0 > DAMPING_FRACTION
+
+
+def test_damping_check_at_rest():
+    """The own damping at rest (u = v = r = 0, rudder amidships, propeller at the logs' median rate): the
+    MMG KVLCC2 set has none there (0: its hull forces scale with the speed), which is not flagged; the
+    shipped response-nl set has b1 = +0.027 1/s, i.e. a ship that starts to sway by itself when it slows
+    down, and is flagged with that number; a kcs-response with b1 > 0 likewise (its damping is b1 at every
+    state)."""
+    from shipid.identify.diagnostics import damping_check, rest_state
+
+    t = np.arange(0.0, 30.0, 0.5)
+    for name, kw, expect in (("mmg", {"params": "kvlcc2"}, None), ("response-nl", {}, "b1"),
+                             ("kcs-response", {}, None)):
+        m = get_model(name, **kw)
+        lg, _ = _log(m, "straight", t, np.zeros_like(t))
+        X0, U0 = rest_state(m, [lg])
+        assert np.all(X0 == 0) and U0[0, m.input_index("n")] == pytest.approx(np.median(lg["n"]))
+        chk = damping_check(m, [lg])
+        if expect is None:
+            assert chk["rest"]["v"] <= 0 and chk["rest"]["r"] <= 0 and chk["physical"] is True, chk
+        else:
+            b1 = float(m.params_series()["b1"])
+            assert b1 > 0 and chk["rest"]["v"] == pytest.approx(b1, rel=1e-12)
+            assert chk["physical"] is False
+            assert any(r.startswith("at rest") and f"({b1:.3g} 1/s)" in r for r in chk["reasons"]), chk["reasons"]
+
+
+def test_damping_penalty_values_and_its_use_in_the_refiner(two_truths):
+    """``damping_penalty`` is an exterior penalty on the own damping: for kcs-response the own sway damping
+    is b1 at every state, so each logged row is w (b1 T + margin) / margin with w = 1/sqrt(2N), the rest
+    row 1/sqrt(2) times the same, and ~zero when b1 < -margin / T (a softened hinge).  Appended to an output-error refinement
+    of logs made by a ship with POSITIVE yaw damping (c2 = +0.02), it pulls the fitted c2 to the margin
+    (c2 T between -2 and -0.95 margins) where the free fit recovers +0.02.  (recipe.refine_fit sets
+    the weight from the unconstrained fit's cost; here it is given.)"""
+    from shipid.identify.diagnostics import DAMPING_MARGIN, PENALTY_SOFTNESS, damping_penalty
+
+    ta, _, _, logs, x0 = two_truths
+    T = 10.0
+    pen = damping_penalty(ta, logs, time_scale=T)
+    p = ta.params.copy()
+    ib1, ic2 = ta.param_index("b1"), ta.param_index("c2")
+    p[ib1], p[ic2] = 0.01, -1.0
+    r = pen(p)
+    n = r.size // 2   # v rows (N logged states, then rest), then the r rows
+    N = n - 1
+    val = (0.01 * T + DAMPING_MARGIN) / DAMPING_MARGIN
+    np.testing.assert_allclose(r[:N], val / np.sqrt(2 * N), rtol=1e-12)
+    assert r[N] == pytest.approx(val / np.sqrt(2), rel=1e-12)
+    assert np.all(r[n:] == 0)                                  # c2 = -1: yaw far inside
+    assert pen(np.vstack([p, p])).shape == (2, r.size)
+    p[ib1] = -3 * DAMPING_MARGIN / T          # two margins inside: the softened hinge is ~0 (s log(1 + e^-20))
+    assert np.all(pen(p) < 1e-9)
+    p[ib1] = -DAMPING_MARGIN / T              # on the margin: s log 2 (the hinge's softening)
+    assert pen(p)[N] == pytest.approx(PENALTY_SOFTNESS * np.log(2.0) / np.sqrt(2), rel=1e-12)
+
+    bad = ta.with_params({"c2": 0.02})
+    t = np.arange(0.0, 40.0, 0.5)
+    lg, xb = _log(bad, "unstable", t, np.radians(5.0) * np.sin(0.3 * t))
+    kw = dict(estimate=["c2", "c3"], channels=["r"], meas_std={"r": 1e-3}, max_nfev=60)
+    free = OutputErrorRefiner(ta, **kw).fit([lg], x0=[xb])
+    assert free.coef_["c2"] == pytest.approx(0.02, rel=1e-4)
+    # (the weight sets the penalty against the fit's cost: r in units of 1e-3 rad/s costs ~1e5 here)
+    pen = damping_penalty(ta, [lg], time_scale=T, weight=1e4)
+    held = OutputErrorRefiner(ta, extra_residuals=pen, **kw).fit([lg], x0=[xb])
+    c2 = float(held.coef_["c2"])
+    # on or just beyond the margin (the softened hinge still pulls within a few widths of it)
+    assert -2 * DAMPING_MARGIN < c2 * T < -0.95 * DAMPING_MARGIN, c2 * T

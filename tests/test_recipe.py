@@ -3,11 +3,13 @@ every ship model in the prime system, particulars carried from the logs, the che
 from __future__ import annotations
 
 import json
+import warnings
 
 import numpy as np
 import pytest
 
 from shipid.identify.result import FitResult, load_result
+from shipid.logs import TrialLog
 from shipid.manoeuvres import zigzag
 from shipid.models import get_model
 
@@ -272,3 +274,46 @@ def test_cli_refine_all_switches_the_identifiable_subset_off(tmp_path):
     assert "a3" not in a.settings["estimated"] and "a3" in b.settings["estimated"]
     assert step_b["value"] is None and "off (asked)" in step_b["reason"] and "held" not in b.settings
     assert b.coef["a3"] != a.coef["a3"]
+
+
+def test_refinement_keeps_the_own_damping_negative():
+    """Logs made by a ship whose sway is self-excited (a kcs-response with b1 = +0.02 1/s: its own sway
+    damping is b1 at every state): the EKF stage finds b1 > 0 and so does the unconstrained refinement, which
+    the recipe then solves again with the own damping kept below -DAMPING_MARGIN U/L at the logged states and
+    at rest, and reports both solutions in its steps; b1 lands on (or just beyond) the margin.  ``physical_damping=False``
+    keeps the unconstrained fit, and the result's diagnostics say it is not physical."""
+    from shipid.identify.diagnostics import DAMPING_MARGIN
+    from shipid.identify.recipe import fit_logs, refine_fit
+    from shipid.manoeuvres import turning_circle, zigzag
+
+    base = get_model("kcs-response")
+    bad = base.with_params({"b1": 0.02})
+    rng = np.random.default_rng(1)
+
+    def log_of(run, name):
+        x, u = run.simulation.x[-1], run.simulation.u[-1]
+        cols = {**{s: x[:, j] for j, s in enumerate(base.state_names)},
+                **{s: u[:, j] for j, s in enumerate(base.input_names)}}
+        for s in ("u", "v", "r"):
+            cols[s] = cols[s] + rng.normal(0.0, 1e-3, cols[s].size)
+        return TrialLog.from_arrays(run.simulation.t, name=name, **cols)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        logs = [log_of(zigzag(bad, 10.0, first="starboard", dt=0.1), "zz"),
+                log_of(turning_circle(bad, 35.0, side="starboard", dt=0.1, heading_change_deg=360), "tc")]
+        ekf = fit_logs(logs, "kcs-response", n_passes=1, refine=None, lpp=4.36)
+        assert ekf.ekf.coef_["b1"] == pytest.approx(0.02, abs=0.002)
+        on = refine_fit(ekf, logs, "output-error", max_nfev=20)
+        off = refine_fit(ekf, logs, "output-error", max_nfev=20, physical_damping=False)
+    step = next(s for s in on.steps if s["step"] == "physical damping")
+    assert step["value"] is True and "unconstrained: own damping positive at 100.0 % (v)" in step["reason"]
+    U0 = 1.7  # the approach speed of the bundled KCS set
+    margins = on.refiner.coef_["b1"] * 4.36 / U0 / DAMPING_MARGIN
+    assert -2.0 < margins < -0.95, margins   # on or just beyond the margin (a softened hinge)
+    assert f"at rest {on.refiner.coef_['b1']:+.3g} 1/s (v)" in step["reason"]
+    assert on.result().diagnostics["damping"]["physical"] is True
+    assert "physical damping" not in [s["step"] for s in off.steps]
+    assert off.refiner.coef_["b1"] > 0.01
+    dmp = off.result().diagnostics["damping"]
+    assert dmp["physical"] is False and dmp["v"]["fraction_positive"] == 1.0

@@ -49,6 +49,9 @@ def register(sub) -> None:
                    help="keep the model's dissipative coefficients (pure sway and yaw damping, e.g. response-nl b1 b5 "
                         "b6 c2 c5 c7) <= 0 in the refinement (default: off; the fit's diagnostics.damping reports the "
                         "fitted model's own damping either way)")
+    p.add_argument("--no-physical-damping", action="store_true",
+                   help="do not constrain the refinement when the refined model's own sway or yaw damping is positive "
+                        "along the logged states (default: solve again with d(dv/dt)/dv, d(dr/dt)/dr <= -0.02 U/L there)")
     p.add_argument("--dt", default="auto", metavar="auto|K",
                    help="use every K-th sample; default auto: >= 25 steps per fastest time constant of the model (mmg: 50)")
     p.add_argument("--max-drift", default="auto", metavar="auto|DEG|none",
@@ -212,7 +215,7 @@ def _fit(args) -> int:
             start=args.start, neutral=not args.no_neutral, dt=_dt(args), max_drift_deg=_max_drift(args),
             refine=None if args.refine == "none" else args.refine, metric_weight=args.metric_weight,
             n_passes=args.passes, max_nfev=args.max_nfev, hold_unresolved=not args.refine_all,
-            sign_bounds=args.sign_bounds, tune_noise=args.tune_noise, progress=progress_on(args), meas_std=meas_std, log=print))
+            sign_bounds=args.sign_bounds, physical_damping=not args.no_physical_damping, tune_noise=args.tune_noise, progress=progress_on(args), meas_std=meas_std, log=print))
         fit, ident = recipe, recipe.ekf
     result = fit.result()
     result.to_json(out, force=args.force)

@@ -19,23 +19,11 @@ from typing import Callable, Mapping
 
 import numpy as np
 
+from .._blas import one_blas_thread  # noqa: F401  (re-exported: the control solvers' context)
 from ..models.base import Model
 
 __all__ = ["Problem", "rk4_sensitivities", "Trajectory", "evaluate", "Bounds", "one_blas_thread"]
 
-
-def one_blas_thread():
-    """Context in which BLAS/LAPACK use one thread (``threadpoolctl``).
-
-    The optimisers' iterates depend on floating-point summation order, which a
-    multi-threaded BLAS changes with the thread count: SLSQP on scenario 3 stopped
-    at final time 54.624 s with ``OPENBLAS_NUM_THREADS=1`` and 54.712 s with 2.
-    Inside this context the solvers give the same answer on every machine setting
-    (the matrices are small, so one thread costs nothing).
-    """
-    from threadpoolctl import threadpool_limits
-
-    return threadpool_limits(limits=1, user_api="blas")
 
 Bounds = Mapping[str, tuple]
 

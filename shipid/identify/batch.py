@@ -163,7 +163,16 @@ class OutputErrorRefiner:
         """Refine on ``logs``; ``start`` may be a fitted :class:`EKFIdentifier` whose
         smoothed initial states and prior are used.  ``x0`` (sequence of arrays of shape
         (nx,), one per log) gives the initial states explicitly (e.g. the exact ones of
-        simulated logs); by default they are the mean of each log's first five samples."""
+        simulated logs); by default they are the mean of each log's first five samples.
+
+        Runs with one BLAS thread (:func:`shipid._blas.one_blas_thread`): on an ill-conditioned
+        problem the solver's path, and so its answer, would otherwise follow the thread count."""
+        from .._blas import one_blas_thread
+
+        with one_blas_thread():
+            return self._fit(logs, start, x0)
+
+    def _fit(self, logs, start, x0) -> "OutputErrorRefiner":
         if self.jacobian not in ("fd", "tangent"):
             raise ValueError(f"jacobian must be 'fd' or 'tangent', got {self.jacobian!r}")
         if self.input_hold not in ("foh", "zoh"):

@@ -194,28 +194,16 @@ def coefficient_plausibility(names, theta, theta_std, theta_model, prior_std, ru
 DAMPING_FRACTION = 0.01
 
 
-def damping_check(model, logs, max_points: int = 2000) -> dict:
-    """The fitted model's own damping along the logged motions: ``d(dv/dt)/dv`` and ``d(dr/dt)/dr``.
+def damping_states(model, logs, max_points: int = 2000):
+    """The logged states and inputs at which :func:`damping_check` evaluates the own damping.
 
-    For a conventional hull both are negative in every state the ship visits (sway and yaw motions are
-    damped; a directionally unstable ship is unstable through the sway-yaw coupling, not through a
-    positive own damping).  A model whose terms combine to a positive own damping over part of the
-    logged states (e.g. a speed-independent term and a speed-proportional one of opposite signs, which
-    cancel at the approach speed but not in the slow part of a turn) reproduces the logs with
-    self-excited sway or yaw there: it is not a physical model of the ship, whatever its fit.
-
-    Evaluated with the model's analytic Jacobian at the logged states and inputs (up to ``max_points``
-    samples per log, evenly spaced).  Returns ``{"v": {...}, "r": {...}, "physical": bool, "reasons": [...]}``
-    with, per state, ``fraction_positive``, ``max`` and ``min`` [1/s] and ``n``; ``physical`` is False when
-    a fraction exceeds :data:`DAMPING_FRACTION`.  Models without both v and r states return
-    ``{"physical": None}``.
+    Up to ``max_points`` samples per log, evenly spaced, aligned as every fit aligns them
+    (:func:`shipid.identify.data.prepare_logs`: inputs required, states by name; a state a log lacks counts
+    as 0); rows with a non-finite value are left out.  Returns ``(X (N, nx), U (N, nu))``.
     """
     from .data import prepare_logs
 
-    names = model.state_names
-    if "v" not in names or "r" not in names:
-        return {"physical": None, "reasons": [], "note": "the model has no v and r states"}
-    arrays, meas = prepare_logs(model, logs)  # the identifier's own alignment (inputs required, states by name)
+    arrays, meas = prepare_logs(model, logs)
     cols = [model.state_index(s) for s in meas]
     X, U = [], []
     for a in arrays:
@@ -227,16 +215,135 @@ def damping_check(model, logs, max_points: int = 2000) -> dict:
         ok = np.isfinite(x).all(axis=1) & np.isfinite(a.U[idx]).all(axis=1)
         X.append(x[ok])
         U.append(a.U[idx][ok])
-    X, U = np.concatenate(X), np.concatenate(U)
+    return np.concatenate(X), np.concatenate(U)
+
+
+def rest_state(model, logs):
+    """The ship at rest, ``(X (1, nx), U (1, nu))``: every state 0, the rudder amidships (every input 0) but the
+    propeller rate ``n`` at its median over the logs (the propeller keeps turning when a manoeuvre slows the
+    ship down).  Scaling a logged motion's ``u, v, r`` together by ``s`` (the same drift angle and turning
+    radius at a lower speed) takes it to this state at ``s = 0``; for a model whose own damping is linear in
+    ``s`` (``response-nl``, ``kcs-response``) it is negative along every such slower motion exactly when it is
+    at ``s = 1`` (the logged states) and at ``s = 0`` (here).
+    """
+    X = np.zeros((1, model.nx))
+    U = np.zeros((1, model.nu))
+    if "n" in model.input_names:
+        n = np.concatenate([np.asarray(lg["n"], dtype=float) for lg in logs if "n" in lg.channels] or [np.zeros(0)])
+        n = n[np.isfinite(n)]
+        U[0, model.input_index("n")] = float(np.median(n)) if n.size else 0.0
+    return X, U
+
+
+def own_damping(model, X, U, params=None):
+    """``(d(dv/dt)/dv, d(dr/dt)/dr)`` [1/s] of ``model`` at the states ``X`` (N, nx) and inputs ``U`` (N, nu).
+
+    From the model's analytic state Jacobian.  ``params`` (B, np) evaluates B parameter vectors at once
+    (then each array is (B, N)); default the model's own parameters ((N,) each).
+    """
+    iv, ir = model.state_index("v"), model.state_index("r")
+    with np.errstate(all="ignore"):
+        if params is None:
+            J = model.jac_x(0.0, X, U)
+        else:
+            J = model.jac_x(0.0, X, U, params=np.asarray(params, dtype=float)[:, None, :])
+    return J[..., iv, iv], J[..., ir, ir]
+
+
+#: Margin of the own-damping constraint of the recipe's refinement, in units of the approach-speed time
+#: scale U/L: the constraint asks ``d(dv/dt)/dv * L/U <= -margin`` (and the same for r).  A strict inequality
+#: (no state undamped) written as a small fraction of a hull's own damping: the published KVLCC2 MMG set
+#: (Yasukawa & Yoshimura 2015) has ``d(dv/dt)/dv * L/U`` of -0.43 to -1.38 and ``d(dr/dt)/dr * L/U`` of -1.59
+#: to -3.10 along its own 35 deg turn and 10/10 and 20/20 zigzags (its Jacobian), so 0.02 is at most 5 % (sway)
+#: and 1.3 % (yaw) of them.  Set from physics before any fit used it; no score chose it.
+DAMPING_MARGIN = 0.02
+
+
+#: Width of the softened hinge of :func:`damping_penalty`, in units of the margin: the residual is
+#: ``w * s * log(1 + exp(z / s))`` for the violation ``z`` (in margins), i.e. ``max(0, z)`` within ``s * log 2``.
+PENALTY_SOFTNESS = 0.1
+
+
+def damping_penalty(model, logs, *, time_scale: float, margin: float = DAMPING_MARGIN, max_points: int = 500,
+                    weight: float = 1.0):
+    """Residuals that keep the own sway and yaw damping negative along the logged states and at rest.
+
+    Returns ``f(params) -> (B, 2(N+1))`` for parameter vectors ``(B, np)`` (or ``(np,) -> (2(N+1),)``): at
+    each of the N logged states of :func:`damping_states` (``max_points`` per log) and at the
+    :func:`rest_state`, for v and for r, ``w * max(0, d * time_scale + margin) / margin`` (softened over
+    :data:`PENALTY_SOFTNESS` margins); i.e. ~zero where the own damping ``d`` is below ``-margin / time_scale``
+    and growing linearly with the violation.  A
+    logged state has ``w = weight / sqrt(2N)`` (violating the margin at every one costs ``weight**2 / 2``),
+    the rest state ``w = weight / sqrt(2)`` (as much as all of them).  An exterior penalty for
+    :class:`shipid.identify.batch.OutputErrorRefiner`'s ``extra_residuals``; ``time_scale`` is L/U [s] of
+    the approach speed.
+    """
+    if not (np.isfinite(time_scale) and time_scale > 0):
+        raise ValueError(f"time_scale={time_scale!r}: give L/U in seconds (> 0)")
+    if not (np.isfinite(margin) and margin > 0):
+        raise ValueError(f"margin={margin!r}: give a positive margin (units of U/L)")
+    X, U = damping_states(model, logs, max_points)
+    if X.shape[0] == 0:
+        raise ValueError("damping_penalty: no logged state with every channel finite")
+    X0, U0 = rest_state(model, logs)
+    X, U = np.concatenate([X, X0]), np.concatenate([U, U0])
+    n = X.shape[0] - 1
+    # each logged state weighs 1/(2N), the rest state as much as all of them together
+    w = np.full(X.shape[0], float(weight) / np.sqrt(2.0 * n))
+    w[-1] = float(weight) / np.sqrt(2.0)
+    w = np.concatenate([w, w])
+
+    def f(params):
+        P = np.asarray(params, dtype=float)
+        dv, dr = own_damping(model, X, U, np.atleast_2d(P))
+        z = (np.concatenate([dv, dr], axis=1) * time_scale + margin) / margin
+        # a softened hinge max(0, z): softplus of width PENALTY_SOFTNESS (a residual with a continuous
+        # derivative, so that the solver's Gauss-Newton model holds across the constraint's edge)
+        s = PENALTY_SOFTNESS
+        out = w * s * np.logaddexp(0.0, z / s)
+        out = np.where(np.isfinite(out), out, 1e6)
+        return out if P.ndim == 2 else out[0]
+
+    return f
+
+
+def damping_check(model, logs, max_points: int = 2000) -> dict:
+    """The fitted model's own damping along the logged motions: ``d(dv/dt)/dv`` and ``d(dr/dt)/dr``.
+
+    For a conventional hull both are negative in every state the ship visits (sway and yaw motions are
+    damped; a directionally unstable ship is unstable through the sway-yaw coupling, not through a
+    positive own damping).  A model whose terms combine to a positive own damping over part of the
+    logged states (e.g. a speed-independent term and a speed-proportional one of opposite signs, which
+    cancel at the approach speed but not in the slow part of a turn) reproduces the logs with
+    self-excited sway or yaw there: it is not a physical model of the ship, whatever its fit.
+
+    Evaluated with the model's analytic Jacobian at the logged states and inputs (:func:`damping_states`,
+    up to ``max_points`` samples per log, evenly spaced) and at rest (:func:`rest_state`).  Returns
+    ``{"v": {...}, "r": {...}, "rest": {"v": d, "r": d}, "physical": bool, "reasons": [...]}`` with, per
+    state, ``fraction_positive``, ``max`` and ``min`` [1/s] and ``n``; ``physical`` is False when a fraction
+    exceeds :data:`DAMPING_FRACTION` or the damping at rest is positive.  Models without both v and r
+    states return ``{"physical": None}``.
+    """
+    names = model.state_names
+    if "v" not in names or "r" not in names:
+        return {"physical": None, "reasons": [], "note": "the model has no v and r states"}
+    X, U = damping_states(model, logs, max_points)
     out: dict = {"reasons": [], "threshold": DAMPING_FRACTION}
     if X.shape[0] == 0:
         return {**out, "physical": None, "note": "no logged state with every channel finite"}
-    with np.errstate(all="ignore"):
-        J = model.jac_x(0.0, X, U)
     physical = True
-    for s, what in (("v", "sway"), ("r", "yaw")):
-        i = model.state_index(s)
-        d = J[:, i, i]
+    X0, U0 = rest_state(model, logs)
+    out["rest"] = {}
+    for s, what, d in zip(("v", "r"), ("sway", "yaw"), own_damping(model, X0, U0)):
+        d0 = float(d[0])
+        out["rest"][s] = _finite_or_none(d0)
+        if np.isfinite(d0) and d0 > 0:
+            physical = False
+            out["reasons"].append(
+                f"at rest (u = v = r = 0, rudder amidships, propeller turning) the fitted model's own {what} damping "
+                f"d(d{s}/dt)/d{s} is positive ({d0:.3g} 1/s): it makes {what} self-excited when the ship slows down "
+                f"(along every logged motion scaled down in speed, for a model whose damping is linear in that scale)")
+    for s, what, d in zip(("v", "r"), ("sway", "yaw"), own_damping(model, X, U)):
         d = d[np.isfinite(d)]
         frac = float(np.mean(d > 0)) if d.size else float("nan")
         out[s] = {"fraction_positive": frac, "max": _finite_or_none(d.max()) if d.size else None,
@@ -247,7 +354,8 @@ def damping_check(model, logs, max_points: int = 2000) -> dict:
                 f"the fitted model's own {what} damping d(d{s}/dt)/d{s} is positive (up to {d.max():.3g} 1/s) at "
                 f"{100 * frac:.1f} % of the logged states: the model makes {what} self-excited there, which no "
                 f"conventional hull does; its coefficients trade against each other (see the correlation "
-                f"warnings) -- refine with the physical-sign bounds or fix the offending terms")
+                f"warnings) -- refine with the own-damping constraint (shipid fit's default, "
+                f"physical_damping=True) or fix the offending terms")
     out["physical"] = physical
     return out
 

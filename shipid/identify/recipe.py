@@ -42,6 +42,16 @@ switchable steps (each one recorded in the result's ``settings["recipe"]``, with
    so (``success`` False).  ``"auto"``: :data:`AUTO_REFINE` (``"metrics"`` at weight 0.1, chosen by
    leave-one-run-out within the KVLCC2 training runs -- one hull: a choice made on one data set) when the
    logs hold turning circles and zigzags, else no refinement.
+6b. **Physical damping** (``physical_damping=True``) -- when the refined model's own sway or yaw damping,
+   ``d(dv/dt)/dv`` and ``d(dr/dt)/dr`` from its Jacobian, is positive on more than 1 % of the logged states
+   or at rest (:func:`~shipid.identify.diagnostics.damping_check`), the refinement is solved again from the
+   start with both kept below ``-DAMPING_MARGIN * U/L`` there, as an exterior penalty
+   (:func:`~shipid.identify.diagnostics.damping_penalty`).  Scaling a logged motion's u, v, r together
+   towards rest keeps the drift angle and the turning radius; for the response models the own damping is
+   linear in that scale, so the logged states and the rest state cover every slower copy of the logged
+   motions.  A fit whose own damping is negative is not touched.  On the MARIN KVLCC2 training runs the
+   unconstrained ``response-nl`` refinement had b1 +0.0177 and positive sway damping on 17 % of the
+   states (self-excited sway in the slow part of the turns); constrained: b1 < 0, 0 % (docs/validation.md).
 
 Only the logs passed in enter any step: held-out runs never do.
 """
@@ -455,7 +465,7 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
              max_drift_deg="auto", refine: str | None = "auto", metric_weight: float | None = None,
              n_passes: int = 2, max_nfev: int = 60, tune_noise: bool = False, progress: bool = False,
              meas_std=None, ekf_options=None, hold_unresolved: bool = True, sign_bounds: bool = False,
-             log=None) -> RecipeFit:
+             physical_damping: bool = True, log=None) -> RecipeFit:
     """Fit ``model`` to ``logs`` with the project's recipe (module docstring: steps 1-6).
 
     Parameters
@@ -480,12 +490,32 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
     metric_weight : float, optional  weight of the metric residuals of ``refine="metrics"`` (:func:`refine_fit`)
     hold_unresolved : bool  step 6's identifiable subset (:func:`refine_fit`; default True)
     sign_bounds : bool  step 6 keeps the model's dissipative coefficients <= 0 (:func:`refine_fit`; default False)
+    physical_damping : bool  step 6 keeps the model's own sway and yaw damping negative along the logs
+        (:func:`refine_fit`; default True)
     log : callable, optional  called with one line per step as it happens (e.g. ``print``)
 
     Returns
     -------
     RecipeFit  (``.result()`` is the FitResult with ``settings["recipe"]``)
+
+    Runs with one BLAS thread (:func:`shipid._blas.one_blas_thread`): the equation-error starts, the EKF and the
+    refinement then give the same answer whatever the machine's thread setting (on the MARIN ``response-nl``
+    fit, 1 and 2 OpenBLAS threads had ended the refinement in different minima).
     """
+    from .._blas import one_blas_thread
+
+    with one_blas_thread():
+        return _fit_logs(logs, model, params, lpp=lpp, estimate=estimate, fixed=fixed, start=start, neutral=neutral,
+                         free_neutral=free_neutral, estimate_neutral=estimate_neutral, dt=dt,
+                         max_drift_deg=max_drift_deg, refine=refine, metric_weight=metric_weight, n_passes=n_passes,
+                         max_nfev=max_nfev, tune_noise=tune_noise, progress=progress, meas_std=meas_std,
+                         ekf_options=ekf_options, hold_unresolved=hold_unresolved, sign_bounds=sign_bounds,
+                         physical_damping=physical_damping, log=log)
+
+
+def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free_neutral, estimate_neutral, dt,
+              max_drift_deg, refine, metric_weight, n_passes, max_nfev, tune_noise, progress, meas_std, ekf_options,
+              hold_unresolved, sign_bounds, physical_damping, log) -> RecipeFit:
     from .identifier import EKFIdentifier
 
     logs = list(logs)
@@ -643,12 +673,13 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
     if mode is None:
         return fit
     return refine_fit(fit, logs, mode, max_nfev=max_nfev, metric_weight=metric_weight,
-                      hold_unresolved=hold_unresolved, sign_bounds=sign_bounds, log=log)
+                      hold_unresolved=hold_unresolved, sign_bounds=sign_bounds,
+                      physical_damping=physical_damping, log=log)
 
 
 def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: int = 60,
                metric_weight: float | None = None, channels=None, hold_unresolved: bool = True,
-               grid_dt=None, sign_bounds: bool = False, log=None) -> RecipeFit:
+               grid_dt=None, sign_bounds: bool = False, physical_damping: bool = True, log=None) -> RecipeFit:
     """Step 6 of the recipe on a fitted EKF stage: a new :class:`RecipeFit` with the refinement.
 
     Parameters
@@ -669,9 +700,16 @@ def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: in
         damping terms) <= 0 (default False; :class:`shipid.identify.batch.OutputErrorRefiner`).  Not the
         default: on the MARIN ``response-nl`` fit the held set follows the BLAS thread count and the cross
         terms can still make the own damping positive (docs/validation.md, session 7)
+    physical_damping : bool  when the refined model's own sway or yaw damping is positive along the logged
+        states (:func:`~shipid.identify.diagnostics.damping_check` fails), solve again from the same start with
+        the constraint ``d(dv/dt)/dv, d(dr/dt)/dr <= -DAMPING_MARGIN * U/L`` at those states as an exterior
+        penalty (:func:`~shipid.identify.diagnostics.damping_penalty`; default True).  A fit that keeps its own
+        damping negative is not touched.  Unlike ``sign_bounds`` it constrains the damping itself, whatever
+        terms make it up (docs/validation.md, session 8)
     log : callable, optional  called with one line per step
     """
     from .batch import OutputErrorRefiner
+    from .diagnostics import DAMPING_MARGIN, damping_check, damping_penalty
 
     if mode not in REFINE_MODES:
         raise ValueError(f"mode={mode!r}: use one of {REFINE_MODES}")
@@ -721,10 +759,39 @@ def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: in
         step("metric residuals", with_metrics, "the training logs' own standard-manoeuvre metrics over "
              + ", ".join(f"{k} {v:g}" for k, v in METRIC_TOL.items()) + f", weight {w:g}")
     est_ref = list(ekf.estimated_) + [p for p in fit.free_in_refine if p not in ekf.estimated_]
-    ref = OutputErrorRefiner(start_model, estimate=est_ref, channels=chans, meas_std=sstd,
-                             log_weights=list(1.0 / np.maximum(nsamp, 1.0)), extra_residuals=extra,
-                             max_nfev=max_nfev, hold_unresolved=hold_unresolved,
-                             sign_bounds=sign_bounds).fit(grid, start=ekf)
+
+    def refine(extra_res):
+        return OutputErrorRefiner(start_model, estimate=est_ref, channels=chans, meas_std=sstd,
+                                  log_weights=list(1.0 / np.maximum(nsamp, 1.0)), extra_residuals=extra_res,
+                                  max_nfev=max_nfev, hold_unresolved=hold_unresolved,
+                                  sign_bounds=sign_bounds).fit(grid, start=ekf)
+
+    ref = refine(extra)
+    damp = None
+    if physical_damping and {"v", "r"} <= set(start_model.state_names):
+        damp = damping_check(start_model.with_params(ref.coef_.to_numpy()), used)
+    if damp is not None and damp["physical"] is False:
+        U0 = _approach_speed(logs)
+        pen = damping_penalty(start_model, used, time_scale=L / U0)
+        both = pen if extra is None else (lambda P, _e=extra, _p=pen: np.concatenate(
+            [np.asarray(_e(P), dtype=float).reshape(np.shape(P)[0], -1), _p(P)], axis=1))
+
+        def where(d):
+            frac = ", ".join(f"{100 * d[s]['fraction_positive']:.1f} % ({s})" for s in ("v", "r"))
+            rest = ", ".join(f"{d['rest'][s]:+.3g} 1/s ({s})" for s in ("v", "r") if d["rest"][s] is not None)
+            return f"own damping positive at {frac} of the logged states, at rest {rest}"
+
+        first = f"unconstrained: {where(damp)}, cost {ref.cost_:.4g}"
+        ref = refine(both)
+        damp2 = damping_check(start_model.with_params(ref.coef_.to_numpy()), used)
+        pen_cost = 0.5 * float(np.sum(pen(ref.coef_.to_numpy()) ** 2))
+        step("physical damping", bool(damp2["physical"]),
+             f"{first}; solved again from the same start with d(dv/dt)/dv and d(dr/dt)/dr <= -{DAMPING_MARGIN:g} U/L "
+             f"(U = {U0:.4g} m/s, L = {L:.4g} m) at the logged states and at rest as a penalty: {where(damp2)}, "
+             f"cost {ref.cost_:.4g} of which the penalty {pen_cost:.3g}")
+    elif damp is not None:
+        step("physical damping", True, "the refined model's own sway and yaw damping is negative along the logged "
+             "states and not positive at rest: no constraint needed")
     out.refiner = ref
     if ref.subset_ is not None:
         sub = ref.subset_
