@@ -106,11 +106,14 @@ def _pid_after(seconds: float) -> int:
     return os.getpid()
 
 
-def bench_campaign(n_fits: int, workers: int, members: str = "light", ceiling: bool = True) -> None:
+def bench_campaign(n_fits: int, workers: int, members: str = "light", ceiling: bool = True,
+                   compare: bool = True) -> None:
     """Campaign of ``n_fits`` members: serial (a fresh process) against ``workers`` Dask workers.
 
     Both halves are timed warm (after the same warm-up, :func:`shipid.campaign.warm_fits`, that the
     engine runs on each worker at start-up) and cold (warm-up included; for Dask also the cluster start).
+    ``ceiling``: also the same members on a pre-warmed ProcessPoolExecutor; ``compare``: also a Dask half
+    with Dask's default configuration (``Engine(quiet=False)``, the engine before session 8).
     """
     import json
     import pickle
@@ -143,17 +146,19 @@ def bench_campaign(n_fits: int, workers: int, members: str = "light", ceiling: b
                                          str(tmp / "serial")], env=env, capture_output=True, text=True,
                                         check=True).stdout.strip().splitlines()[-1])
         member_s = [m["seconds"] for m in json.loads((tmp / "serial" / "campaign.json").read_text())["members"]]
-        with Engine(workers, progress=False) as eng:
-            eng._start()
-            t0 = time.perf_counter()
-            eng.warm(partial(warm_fits, warm_specs(camp["fits"])))  # what run_campaign asks for: not repeated
-            t_warm = time.perf_counter() - t0
-            t0 = time.perf_counter()
-            run_campaign(camp, tmp / "dask", engine=eng)
-            t_dask = time.perf_counter() - t0
-            st = dict(eng.stats)
+        runs = {}
+        for quiet in (True, False) if compare else (True,):
+            with Engine(workers, progress=False, quiet=quiet) as eng:
+                eng._start()
+                t0 = time.perf_counter()
+                eng.warm(partial(warm_fits, warm_specs(camp["fits"])))  # what run_campaign asks for: not repeated
+                t_warm = time.perf_counter() - t0
+                t0 = time.perf_counter()
+                run_campaign(camp, tmp / f"dask{int(quiet)}", engine=eng)
+                runs[quiet] = (t_warm, time.perf_counter() - t0, dict(eng.stats))
+        t_warm, t_dask, st = runs[True]
         same = all(json.loads((tmp / "serial" / f["name"] / "result.json").read_text()) ==
-                   json.loads((tmp / "dask" / f["name"] / "result.json").read_text()) for f in fits)
+                   json.loads((tmp / f"dask{int(q)}" / f["name"] / "result.json").read_text()) for f in fits for q in runs)
         t_pool = _pool_ceiling(camp, workers) if ceiling else float("nan")
     cold_s, cold_d = ser["warm"] + ser["run"], st["start"] + t_warm + t_dask
     member_cpu = sum(st["member_cpu"])
@@ -171,6 +176,12 @@ def bench_campaign(n_fits: int, workers: int, members: str = "light", ceiling: b
           f"    CPU during the Dask run: members {member_cpu:.1f} s, the workers' other threads "
           f"{sum(st['worker_cpu'].values()) - member_cpu:.2f} s, main process (client, scheduler, nannies) "
           f"{st['main_cpu']:.2f} s; identical results: {same}; largest member payload {payload} bytes")
+    if False in runs:  # the same Dask half with Dask's default configuration (the engine before session 8)
+        t_warm, t_dask, st = runs[False]
+        member_cpu = sum(st["member_cpu"])
+        print(f"    Dask's default configuration (Engine(quiet=False)): warm {t_dask:.1f} s -> {ser['run'] / t_dask:.2f}x, "
+              f"cold {cold_s / (st['start'] + t_warm + t_dask):.2f}x; CPU: members {member_cpu:.1f} s, the workers' "
+              f"other threads {sum(st['worker_cpu'].values()) - member_cpu:.2f} s, main process {st['main_cpu']:.2f} s")
 
 
 def bench_mcmc(steps: int) -> None:
@@ -251,12 +262,14 @@ def main() -> None:
                     help="campaign member size (module docstring, item 2)")
     ap.add_argument("--study-steps", type=int, default=1000)
     ap.add_argument("--no-ceiling", action="store_true", help="campaign: skip the ProcessPoolExecutor ceiling")
+    ap.add_argument("--no-compare", action="store_true",
+                    help="campaign: skip the Dask half with Dask's default configuration")
     a = ap.parse_args()
     if a.only in (None, "draws"):
         bench_draws(a.draws)
     if a.only in (None, "campaign"):
         for members in (("light", "full") if a.members == "both" else (a.members,)):
-            bench_campaign(a.fits, a.workers, members, ceiling=not a.no_ceiling)
+            bench_campaign(a.fits, a.workers, members, ceiling=not a.no_ceiling, compare=not a.no_compare)
     if a.only in (None, "mcmc"):
         bench_mcmc(a.steps)
     if a.only in (None, "mcmc-study"):

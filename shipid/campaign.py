@@ -145,14 +145,19 @@ class Engine:
         Address of an existing Dask scheduler (``tcp://host:port``); ``workers`` is then ignored.
     progress : bool
         tqdm bar over completed members.
+    quiet : bool
+        Start the embedded LocalCluster with :data:`QUIET_CONFIG` (default); False keeps Dask's
+        configuration (its profiler and monitors, e.g. for a dashboard).
     """
 
-    def __init__(self, workers: int | None = None, *, scheduler: str | None = None, progress: bool = True):
+    def __init__(self, workers: int | None = None, *, scheduler: str | None = None, progress: bool = True,
+                 quiet: bool = True):
         if workers is not None and int(workers) < 1:
             raise ValueError(f"workers must be >= 1, got {workers}")
         self.workers = int(workers) if workers is not None else (os.cpu_count() or 1)
         self.scheduler = scheduler
         self.progress = progress
+        self.quiet = bool(quiet)
         self._client = None
         self._cluster = None
         self.mode = "serial"
@@ -191,7 +196,7 @@ class Engine:
             import dask
 
             t0 = time.perf_counter()
-            with dask.config.set(QUIET_CONFIG):  # the nannies hand this configuration to their workers
+            with dask.config.set(QUIET_CONFIG if self.quiet else {}):  # the nannies hand it to their workers
                 self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
                                              host="127.0.0.1", dashboard_address=None, silence_logs=logging.ERROR,
                                              env=dict(WORKER_ENV))
