@@ -3,11 +3,15 @@
 1. 500 parameter draws of a 35 deg turning circle as ONE batch (``predict_manoeuvres``) against 500
    single-member ``turning_circle`` runs (goal >= 30x).
 2. A campaign of 16 fits on 2 Dask worker processes (LocalCluster) against the same 16 fits serially
-   (goal >= 1.7x on 2 free cores; the cluster start-up is reported separately), with two member sizes:
-   "light" (EKF only, two 60 s logs: ~0.1 CPU-s a member once warm) and "full" (EKF, output-error
-   refinement and 200-draw predicted turn and zigzag on two whole bundled logs: ~4 CPU-s a member, what a
-   campaign member with ``refine`` and ``draws`` does).  Each fresh worker process pays ~2 CPU-s of imports
-   and compiled-kernel loading before its first member, so light members cannot reach 2x on 2 workers.
+   (goal >= 1.7x on 2 free cores), with two member sizes: "light" (EKF only, two 60 s logs: ~0.1 CPU-s
+   a member once warm) and "full" (EKF, output-error refinement and 200-draw predicted turn and zigzag
+   on two whole bundled logs: ~3 CPU-s a member, what a campaign member with ``refine`` and ``draws``
+   does).  The serial half runs in a fresh process; both halves are timed warm (after the warm-up the
+   engine runs on each worker at start-up, ``shipid.campaign.warm_fits``, ~3 s per process) and cold
+   (warm-up, and for Dask the cluster start, included).  Also printed: the ceiling (the same members on
+   a pre-warmed ``ProcessPoolExecutor``), the per-worker warm-up, member durations, the idle tail, the
+   CPU of the members, of the workers' other threads and of the main process, and the same Dask half
+   with Dask's default configuration (``Engine(quiet=False)``, the engine before session 8).
 3. MCMC effective samples per second: emcee with vectorised walkers (one batched simulation per half
    ensemble) against emcee calling the likelihood once per walker, same chain settings.
 4. The MCMC column's problem (docs/uncertainty.md sect. 3: c1-c3 and six initial states, two 40 s logs):
