@@ -81,9 +81,9 @@ sys.path.insert(0, sys.argv[1])
 from shipid.campaign import Engine, load_campaign, run_campaign, warm_fits, warm_specs
 camp = load_campaign(sys.argv[2])
 warm_fits(warm_specs(camp["fits"]))
-t1 = time.perf_counter()
+t1, c1 = time.perf_counter(), time.process_time()
 run_campaign(camp, sys.argv[3], engine=Engine(1, progress=False))
-print(json.dumps({"warm": t1 - t0, "run": time.perf_counter() - t1}))
+print(json.dumps({"warm": t1 - t0, "run": time.perf_counter() - t1, "run_cpu": time.process_time() - c1}))
 """
 
 
@@ -179,13 +179,23 @@ def bench_campaign(n_fits: int, workers: int, members: str = "light", ceiling: b
           f"{', '.join(f'{e:.1f}' for e in ends)} s (idle tail {ends[-1] - ends[0]:.1f} s)\n"
           f"    CPU during the Dask run: members {member_cpu:.1f} s, the workers' other threads "
           f"{sum(st['worker_cpu'].values()) - member_cpu:.2f} s, main process (client, scheduler, nannies) "
-          f"{st['main_cpu']:.2f} s; identical results: {same}; largest member payload {payload} bytes")
+          f"{st['main_cpu']:.2f} s; identical results: {same}; largest member payload {payload} bytes\n"
+          f"    CPU-time projection for free cores (serial CPU / (busiest worker's CPU + main process CPU / "
+          f"{workers})): {_cpu_projection(ser, st, workers):.2f}x -- a model that ignores waiting; the wall ratios "
+          "on an idle machine are the measurement")
     if False in runs:  # the same Dask half with Dask's default configuration (the engine before session 8)
         t_warm, t_dask, st = runs[False]
         member_cpu = sum(st["member_cpu"])
         print(f"    Dask's default configuration (Engine(quiet=False)): warm {t_dask:.1f} s -> {ser['run'] / t_dask:.2f}x, "
               f"cold {cold_s / (st['start'] + t_warm + t_dask):.2f}x; CPU: members {member_cpu:.1f} s, the workers' "
-              f"other threads {sum(st['worker_cpu'].values()) - member_cpu:.2f} s, main process {st['main_cpu']:.2f} s")
+              f"other threads {sum(st['worker_cpu'].values()) - member_cpu:.2f} s, main process {st['main_cpu']:.2f} s; "
+              f"CPU-time projection {_cpu_projection(ser, st, workers):.2f}x")
+
+
+def _cpu_projection(ser: dict, st: dict, workers: int) -> float:
+    """Serial run's CPU over the parallel run's critical CPU (busiest worker process + its share of the main
+    process): the ratio free cores would give if nothing ever waited (load-independent, a model)."""
+    return ser["run_cpu"] / (max(st["worker_cpu"].values()) + st["main_cpu"] / workers)
 
 
 def bench_mcmc(steps: int) -> None:
