@@ -127,8 +127,8 @@ def _process_cpu():
 #: Dask settings of the embedded LocalCluster: its workers have no dashboard, so the statistical profiler
 #: (a stack sample every 10 ms), the 20 ms event-loop tick, the 100 ms memory monitor and the 500 ms system
 #: monitor only cost CPU.  Measured on 2 busy workers (benchmarks/bench_uncertainty.py, docs/uncertainty.md):
-#: the workers' own threads used 12-13 % of the members' CPU and the main process (scheduler, nannies) 6-7 %,
-#: both 1.2-1.5 % with these.  An existing cluster (``scheduler=``) keeps its own configuration.
+#: the workers' own threads used 9-13 % of the members' CPU and the main process (scheduler, nannies) 3-7 %;
+#: with these 1.0-1.4 % and 1.1-1.8 %.  An existing cluster (``scheduler=``) keeps its own configuration.
 QUIET_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.admin.tick.interval": "1s",
                 "distributed.worker.memory.monitor-interval": "1s",
                 "distributed.admin.system-monitor.interval": "2s", "distributed.admin.system-monitor.disk": False}
