@@ -3,11 +3,15 @@
 1. 500 parameter draws of a 35 deg turning circle as ONE batch (``predict_manoeuvres``) against 500
    single-member ``turning_circle`` runs (goal >= 30x).
 2. A campaign of 16 fits on 2 Dask worker processes (LocalCluster) against the same 16 fits serially
-   (goal >= 1.7x on 2 free cores; the cluster start-up is reported separately), with two member sizes:
-   "light" (EKF only, two 60 s logs: ~0.1 CPU-s a member once warm) and "full" (EKF, output-error
-   refinement and 200-draw predicted turn and zigzag on two whole bundled logs: ~4 CPU-s a member, what a
-   campaign member with ``refine`` and ``draws`` does).  Each fresh worker process pays ~2 CPU-s of imports
-   and compiled-kernel loading before its first member, so light members cannot reach 2x on 2 workers.
+   (goal >= 1.7x on 2 free cores), with two member sizes: "light" (EKF only, two 60 s logs: ~0.1 CPU-s
+   a member once warm) and "full" (EKF, output-error refinement and 200-draw predicted turn and zigzag
+   on two whole bundled logs: ~3 CPU-s a member, what a campaign member with ``refine`` and ``draws``
+   does).  The serial half runs in a fresh process; both halves are timed warm (after the warm-up the
+   engine runs on each worker at start-up, ``shipid.campaign.warm_fits``, ~3 s per process) and cold
+   (warm-up, and for Dask the cluster start, included).  Also printed: the ceiling (the same members on
+   a pre-warmed ``ProcessPoolExecutor``), the per-worker warm-up, member durations, the idle tail, the
+   CPU of the members, of the workers' other threads and of the main process, and the same Dask half
+   with Dask's default configuration (``Engine(quiet=False)``, the engine before session 8).
 3. MCMC effective samples per second: emcee with vectorised walkers (one batched simulation per half
    ensemble) against emcee calling the likelihood once per walker, same chain settings.
 4. The MCMC column's problem (docs/uncertainty.md sect. 3: c1-c3 and six initial states, two 40 s logs):
@@ -70,16 +74,62 @@ def _short_logs(tmp: Path) -> list[str]:
     return out
 
 
-def bench_campaign(n_fits: int, workers: int, members: str = "light") -> None:
+_SERIAL_HALF = """
+import json, sys, time
+t0 = time.perf_counter()
+sys.path.insert(0, sys.argv[1])
+from shipid.campaign import Engine, load_campaign, run_campaign, warm_fits, warm_specs
+camp = load_campaign(sys.argv[2])
+warm_fits(warm_specs(camp["fits"]))
+t1, c1 = time.perf_counter(), time.process_time()
+run_campaign(camp, sys.argv[3], engine=Engine(1, progress=False))
+print(json.dumps({"warm": t1 - t0, "run": time.perf_counter() - t1, "run_cpu": time.process_time() - c1}))
+"""
+
+
+def _pool_ceiling(camp: dict, workers: int) -> float:
+    """Wall seconds of the campaign's members on a pre-warmed ProcessPoolExecutor (no Dask, nothing written)."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+    from functools import partial
+
+    from shipid.campaign import member_seeds, run_member, warm_fits, warm_specs
+
+    specs = [{**f, "seed": s} for f, s in zip(camp["fits"], member_seeds(camp["seed"], len(camp["fits"])))]
+    with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"),
+                             initializer=partial(warm_fits, warm_specs(specs))) as ex:
+        while len({f.result() for f in [ex.submit(_pid_after, 0.5) for _ in range(workers)]}) < workers:
+            pass  # every worker process is up and warm
+        t0 = time.perf_counter()
+        list(ex.map(run_member, specs))
+        return time.perf_counter() - t0
+
+
+def _pid_after(seconds: float) -> int:
+    time.sleep(seconds)
+    return os.getpid()
+
+
+def bench_campaign(n_fits: int, workers: int, members: str = "light", ceiling: bool = True,
+                   compare: bool = True) -> None:
+    """Campaign of ``n_fits`` members: serial (a fresh process) against ``workers`` Dask workers.
+
+    Both halves are timed warm (after the same warm-up, :func:`shipid.campaign.warm_fits`, that the
+    engine runs on each worker at start-up) and cold (warm-up included; for Dask also the cluster start).
+    ``ceiling``: also the same members on a pre-warmed ProcessPoolExecutor; ``compare``: also a Dask half
+    with Dask's default configuration (``Engine(quiet=False)``, the engine before session 8).
+    """
     import json
     import pickle
+    import subprocess
+    from functools import partial
 
-    from shipid.campaign import WORKER_ENV, Engine, load_campaign, run_campaign
+    from shipid.campaign import WORKER_ENV, Engine, load_campaign, run_campaign, warm_fits, warm_specs
 
     threads = {k: os.environ.get(k) for k in WORKER_ENV}
+    env = {**os.environ, **WORKER_ENV}  # the serial half runs with the workers' thread settings
     if any(v != "1" for v in threads.values()):
-        print(f"[2] note: this (serial) process runs with {threads}; the workers with {WORKER_ENV} -- "
-              "set them to 1 here too for a like-for-like ratio")
+        print(f"[2] note: this process runs with {threads}; the serial half and the workers with {WORKER_ENV}")
     load0 = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
@@ -91,27 +141,61 @@ def bench_campaign(n_fits: int, workers: int, members: str = "light") -> None:
             extra = {"refine": True, "draws": 200, "manoeuvres": ["turning:35", "zigzag:10/10"]}
         fits = [{"name": f"fit{i:02d}", "logs": [logs[i % 4], logs[(i + 1) % 4]], "passes": 2, **extra}
                 for i in range(n_fits)]
-        camp = tmp / "c.json"
-        camp.write_text(json.dumps({"seed": 1, "fits": fits}))
+        camp_path = tmp / "c.json"
+        camp_path.write_text(json.dumps({"seed": 1, "fits": fits}))
+        camp = load_campaign(camp_path)
         # what travels to a worker per member: the member's settings and file paths, not the logs' arrays
-        payload = max(len(pickle.dumps(f)) for f in load_campaign(camp)["fits"])
-        t0 = time.perf_counter()
-        run_campaign(camp, tmp / "serial", engine=Engine(1, progress=False))
-        t_serial = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        with Engine(workers, progress=False) as eng:
-            eng._start()
-            t_start = time.perf_counter() - t0
-            t1 = time.perf_counter()
-            run_campaign(camp, tmp / "dask", engine=eng)
-            t_dask = time.perf_counter() - t1
-        same = all(json.loads((tmp / "serial" / f["name"] / "result.json").read_text())["coef"] ==
-                   json.loads((tmp / "dask" / f["name"] / "result.json").read_text())["coef"] for f in fits)
-    print(f"[2] campaign of {n_fits} {members} fits: serial {t_serial:.1f} s, {workers} Dask workers {t_dask:.1f} s "
-          f"(+ {t_start:.1f} s cluster start) -> {t_serial / t_dask:.2f}x without, {t_serial / (t_dask + t_start):.2f}x "
-          f"with start-up (goal >= 1.7x); identical coefficients: {same}; load average {load0:.1f} before, "
-          f"{os.getloadavg()[0]:.1f} after (1-min, incl. this run) on {os.cpu_count()} CPUs; largest member "
-          f"payload {payload} bytes; {n_fits} members on {workers} one-thread workers")
+        payload = max(len(pickle.dumps(f)) for f in camp["fits"])
+        ser = json.loads(subprocess.run([sys.executable, "-c", _SERIAL_HALF, str(REPO), str(camp_path),
+                                         str(tmp / "serial")], env=env, capture_output=True, text=True,
+                                        check=True).stdout.strip().splitlines()[-1])
+        member_s = [m["seconds"] for m in json.loads((tmp / "serial" / "campaign.json").read_text())["members"]]
+        runs = {}
+        for quiet in (True, False) if compare else (True,):
+            with Engine(workers, progress=False, quiet=quiet) as eng:
+                eng._start()
+                t0 = time.perf_counter()
+                eng.warm(partial(warm_fits, warm_specs(camp["fits"])))  # what run_campaign asks for: not repeated
+                t_warm = time.perf_counter() - t0
+                t0 = time.perf_counter()
+                run_campaign(camp, tmp / f"dask{int(quiet)}", engine=eng)
+                runs[quiet] = (t_warm, time.perf_counter() - t0, dict(eng.stats))
+        t_warm, t_dask, st = runs[True]
+        same = all(json.loads((tmp / "serial" / f["name"] / "result.json").read_text()) ==
+                   json.loads((tmp / f"dask{int(q)}" / f["name"] / "result.json").read_text()) for f in fits for q in runs)
+        t_pool = _pool_ceiling(camp, workers) if ceiling else float("nan")
+    cold_s, cold_d = ser["warm"] + ser["run"], st["start"] + t_warm + t_dask
+    member_cpu = sum(st["member_cpu"])
+    ends = sorted(st["worker_end"].values())
+    print(f"[2] campaign of {n_fits} {members} fits, serial (fresh process) against {workers} Dask workers; load "
+          f"average {load0:.1f} before, {os.getloadavg()[0]:.1f} after (1-min, incl. this run) on {os.cpu_count()} CPUs\n"
+          f"    warm: serial {ser['run']:.1f} s, Dask {t_dask:.1f} s -> {ser['run'] / t_dask:.2f}x (goal >= 1.7x); "
+          f"ceiling, pre-warmed ProcessPoolExecutor({workers}) {t_pool:.1f} s -> {ser['run'] / t_pool:.2f}x\n"
+          f"    cold: serial {cold_s:.1f} s (warm-up {ser['warm']:.1f} s), Dask {cold_d:.1f} s (cluster start "
+          f"{st['start']:.1f} s, warm-up {t_warm:.1f} s; per worker {', '.join(f'{v:.1f}' for v in st['warm'].values())} s)"
+          f" -> {cold_s / cold_d:.2f}x\n"
+          f"    members: serial {min(member_s):.2f}-{max(member_s):.2f} s (median {np.median(member_s):.2f}); on Dask "
+          f"{min(st['member_seconds']):.2f}-{max(st['member_seconds']):.2f} s; workers' last member ends at "
+          f"{', '.join(f'{e:.1f}' for e in ends)} s (idle tail {ends[-1] - ends[0]:.1f} s)\n"
+          f"    CPU during the Dask run: members {member_cpu:.1f} s, the workers' other threads "
+          f"{sum(st['worker_cpu'].values()) - member_cpu:.2f} s, main process (client, scheduler, nannies) "
+          f"{st['main_cpu']:.2f} s; identical results: {same}; largest member payload {payload} bytes\n"
+          f"    CPU-time projection for free cores (serial CPU / (busiest worker's CPU + main process CPU / "
+          f"{workers})): {_cpu_projection(ser, st, workers):.2f}x -- a model that ignores waiting; the wall ratios "
+          "on an idle machine are the measurement")
+    if False in runs:  # the same Dask half with Dask's default configuration (the engine before session 8)
+        t_warm, t_dask, st = runs[False]
+        member_cpu = sum(st["member_cpu"])
+        print(f"    Dask's default configuration (Engine(quiet=False)): warm {t_dask:.1f} s -> {ser['run'] / t_dask:.2f}x, "
+              f"cold {cold_s / (st['start'] + t_warm + t_dask):.2f}x; CPU: members {member_cpu:.1f} s, the workers' "
+              f"other threads {sum(st['worker_cpu'].values()) - member_cpu:.2f} s, main process {st['main_cpu']:.2f} s; "
+              f"CPU-time projection {_cpu_projection(ser, st, workers):.2f}x")
+
+
+def _cpu_projection(ser: dict, st: dict, workers: int) -> float:
+    """Serial run's CPU over the parallel run's critical CPU (busiest worker process + its share of the main
+    process): the ratio free cores would give if nothing ever waited (load-independent, a model)."""
+    return ser["run_cpu"] / (max(st["worker_cpu"].values()) + st["main_cpu"] / workers)
 
 
 def bench_mcmc(steps: int) -> None:
@@ -191,12 +275,15 @@ def main() -> None:
     ap.add_argument("--members", choices=("light", "full", "both"), default="both",
                     help="campaign member size (module docstring, item 2)")
     ap.add_argument("--study-steps", type=int, default=1000)
+    ap.add_argument("--no-ceiling", action="store_true", help="campaign: skip the ProcessPoolExecutor ceiling")
+    ap.add_argument("--no-compare", action="store_true",
+                    help="campaign: skip the Dask half with Dask's default configuration")
     a = ap.parse_args()
     if a.only in (None, "draws"):
         bench_draws(a.draws)
     if a.only in (None, "campaign"):
         for members in (("light", "full") if a.members == "both" else (a.members,)):
-            bench_campaign(a.fits, a.workers, members)
+            bench_campaign(a.fits, a.workers, members, ceiling=not a.no_ceiling, compare=not a.no_compare)
     if a.only in (None, "mcmc"):
         bench_mcmc(a.steps)
     if a.only in (None, "mcmc-study"):

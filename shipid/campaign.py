@@ -47,16 +47,18 @@ import json
 import logging
 import os
 import re
+import time
 import traceback
 import warnings
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
 
 __all__ = ["Engine", "Outcome", "member_seeds", "load_campaign", "run_campaign", "run_fit_member", "run_sweep_member",
-           "run_member", "FIT_KEYS", "SWEEP_KEYS", "dask_available"]
+           "run_member", "member_cost", "warm_fits", "warm_specs", "FIT_KEYS", "SWEEP_KEYS", "dask_available"]
 
 
 #: Environment of the embedded LocalCluster's worker processes (set before they import numpy/numba).
@@ -78,24 +80,58 @@ def member_seeds(seed: int, n: int) -> list[int]:
 
 @dataclass
 class Outcome:
-    """One member's outcome: ``ok``, its ``value`` (None on error), ``error`` (one line) and ``trace``."""
+    """One member's outcome: ``ok``, its ``value`` (None on error), ``error`` (one line) and ``trace``;
+    ``seconds`` and ``cpu_seconds`` it took and the ``worker`` (process id) that ran it."""
 
     index: int
     ok: bool
     value: Any = None
     error: str | None = None
     trace: str | None = None
+    seconds: float = float("nan")
+    cpu_seconds: float = float("nan")
+    worker: int = 0
 
 
 def _call(func, item, index):
-    """Run one member, turning an exception into a reported error (runs on a worker)."""
+    """Run one member, turning an exception into a reported error (runs on a worker).  The outcome records
+    the member's wall and CPU seconds (CPU of this thread: a Dask worker's own threads are not counted)."""
+    t0, c0 = time.perf_counter(), time.thread_time()
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            return Outcome(index, True, func(item))
+            out = Outcome(index, True, func(item))
     except Exception as exc:  # noqa: BLE001 - every member error is reported, the others continue
-        return Outcome(index, False, None, f"{type(exc).__name__}: {' '.join(str(exc).split())}",
-                       traceback.format_exc(limit=6))
+        out = Outcome(index, False, None, f"{type(exc).__name__}: {' '.join(str(exc).split())}",
+                      traceback.format_exc(limit=6))
+    out.seconds, out.cpu_seconds, out.worker = time.perf_counter() - t0, time.thread_time() - c0, os.getpid()
+    return out
+
+
+def _warm_call(warm):
+    """Run ``warm()`` in this worker process; returns its wall seconds (errors are the members' to report)."""
+    t0 = time.perf_counter()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            warm()
+    except Exception:  # noqa: BLE001 - a warm-up is an optimisation: a member that fails reports its own error
+        pass
+    return time.perf_counter() - t0
+
+
+def _process_cpu():
+    return time.process_time()
+
+
+#: Dask settings of the embedded LocalCluster: its workers have no dashboard, so the statistical profiler
+#: (a stack sample every 10 ms), the 20 ms event-loop tick, the 100 ms memory monitor and the 500 ms system
+#: monitor only cost CPU.  Measured on 2 busy workers (benchmarks/bench_uncertainty.py, docs/uncertainty.md):
+#: the workers' own threads used 9-13 % of the members' CPU and the main process (scheduler, nannies) 3-7 %;
+#: with these 1.0-1.4 % and 1.1-1.8 %.  An existing cluster (``scheduler=``) keeps its own configuration.
+QUIET_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.admin.tick.interval": "1s",
+                "distributed.worker.memory.monitor-interval": "1s",
+                "distributed.admin.system-monitor.interval": "2s", "distributed.admin.system-monitor.disk": False}
 
 
 class Engine:
@@ -109,18 +145,29 @@ class Engine:
         Address of an existing Dask scheduler (``tcp://host:port``); ``workers`` is then ignored.
     progress : bool
         tqdm bar over completed members.
+    quiet : bool
+        Start the embedded LocalCluster with :data:`QUIET_CONFIG` (default); False keeps Dask's
+        configuration (its profiler and monitors, e.g. for a dashboard).
     """
 
-    def __init__(self, workers: int | None = None, *, scheduler: str | None = None, progress: bool = True):
+    def __init__(self, workers: int | None = None, *, scheduler: str | None = None, progress: bool = True,
+                 quiet: bool = True):
         if workers is not None and int(workers) < 1:
             raise ValueError(f"workers must be >= 1, got {workers}")
         self.workers = int(workers) if workers is not None else (os.cpu_count() or 1)
         self.scheduler = scheduler
         self.progress = progress
+        self.quiet = bool(quiet)
         self._client = None
         self._cluster = None
         self.mode = "serial"
         self.note = ""
+        #: timings of the engine: ``start`` (cluster start and connection, s), ``warm`` ({worker: s} of the
+        #: last warm-up), and of the last :meth:`map`: ``wall``, ``main_cpu`` (this process's CPU seconds: client,
+        #: and for the embedded cluster its scheduler and nannies), ``worker_cpu`` ({worker: process CPU s}),
+        #: ``worker_end`` ({worker: s to its last member}), ``member_seconds`` and ``member_cpu`` (per member)
+        self.stats: dict = {}
+        self._warmed: set = set()
         if scheduler is None and self.workers == 1:
             return
         if not dask_available():
@@ -146,10 +193,32 @@ class Engine:
             # one thread per worker process and one BLAS/OpenMP/numba thread inside it: W workers use W
             # cores, never W x (threads of each library) (Dask's pre-spawn environment sets the BLAS ones
             # already; numba's is added here)
-            self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                         host="127.0.0.1", dashboard_address=None, silence_logs=logging.ERROR,
-                                         env=dict(WORKER_ENV))
-            self._client = Client(self._cluster)
+            import dask
+
+            t0 = time.perf_counter()
+            with dask.config.set(QUIET_CONFIG if self.quiet else {}):  # the nannies hand it to their workers
+                self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                                             host="127.0.0.1", dashboard_address=None, silence_logs=logging.ERROR,
+                                             env=dict(WORKER_ENV))
+                self._client = Client(self._cluster)
+            self.stats["start"] = time.perf_counter() - t0
+
+    def warm(self, warm: Callable | None) -> dict:
+        """Run ``warm()`` (importable, no arguments) once in every worker process now, so that imports,
+        compiled-kernel loading and first-call costs are paid at start-up rather than inside the first
+        members (a serial engine does nothing: its members pay them once, in order).  Returns
+        ``{worker: seconds}``; a warm-up already run on this engine is not repeated."""
+        if warm is None or self.mode != "dask":
+            return {}
+        import pickle
+
+        key = pickle.dumps(warm)
+        if key in self._warmed:
+            return {}
+        self._start()
+        self.stats["warm"] = {str(k): float(v) for k, v in self._client.run(_warm_call, warm).items()}
+        self._warmed.add(key)
+        return self.stats["warm"]
 
     def close(self):
         if self._client is not None:
@@ -170,17 +239,26 @@ class Engine:
         return f"dask scheduler {self.scheduler}" if self.scheduler else f"dask LocalCluster, {self.workers} processes"
 
     # -- work
-    def map(self, func: Callable, items: Sequence, *, desc: str = "members") -> list[Outcome]:
-        """``[Outcome(func(item))]`` in the order of ``items``; ``func`` must be importable (top level)."""
+    def map(self, func: Callable, items: Sequence, *, desc: str = "members", warm: Callable | None = None,
+            cost: Sequence[float] | None = None) -> list[Outcome]:
+        """``[Outcome(func(item))]`` in the order of ``items``; ``func`` must be importable (top level).
+
+        ``warm``: see :meth:`warm` (run on every worker before the members).  ``cost``: an estimate of
+        each member's run time (any unit); on Dask the members start in order of decreasing cost (longest
+        first, so that no long member starts last while the other workers idle).  Neither changes any result.
+        """
         items = list(items)
         bar = None
+        if self.mode == "dask":
+            self.warm(warm)
         if self.progress:
             from tqdm.auto import tqdm
 
             bar = tqdm(total=len(items), desc=desc, unit="member")
+        t0, c0 = time.perf_counter(), time.process_time()
+        out: list = []
         try:
             if self.mode == "serial":
-                out = []
                 for i, it in enumerate(items):
                     out.append(_call(func, it, i))
                     if bar is not None:
@@ -189,15 +267,27 @@ class Engine:
             from distributed import as_completed
 
             self._start()
-            futs = self._client.map(_call, [func] * len(items), items, range(len(items)), pure=False)
-            out: list = [None] * len(items)
+            cpu0 = self._client.run(_process_cpu)
+            rank = np.argsort(-np.asarray(cost, float), kind="stable") if cost is not None else range(len(items))
+            rank = [int(i) for i in rank]  # client.map gives its tasks priority in the order submitted
+            futs = self._client.map(_call, [func] * len(items), [items[i] for i in rank], rank, pure=False)
+            out = [None] * len(items)
+            ends = {}
             for fut in as_completed(futs):
                 o = fut.result()
                 out[o.index] = o
+                ends[o.worker] = time.perf_counter() - t0
                 if bar is not None:
                     bar.update(1)
+            cpu1 = self._client.run(_process_cpu)
+            self.stats["worker_cpu"] = {str(k): float(cpu1[k] - cpu0.get(k, 0.0)) for k in cpu1}
+            self.stats["worker_end"] = ends  # {worker process id: seconds from the start of the map to its last member}
             return out
         finally:
+            self.stats["wall"], self.stats["main_cpu"] = time.perf_counter() - t0, time.process_time() - c0
+            done = [o for o in out if o is not None]
+            self.stats["member_seconds"] = [o.seconds for o in done]
+            self.stats["member_cpu"] = [o.cpu_seconds for o in done]
             if bar is not None:
                 bar.close()
 
@@ -357,8 +447,17 @@ def _sweep_spec(p: Path, i: int, w, names: set) -> dict:
 def run_fit_member(spec: dict) -> dict:
     """One campaign member: read its logs, fit (EKF, optional output-error refinement) and, with
     ``draws`` > 0, predict its manoeuvres with intervals.  Returns JSON-able dicts (runs on a worker)."""
-    from .identify import EKFIdentifier, model_from
     from .logs import read_log
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        logs = [read_log(f, lpp=spec.get("lpp")) for f in spec["logs"]]
+    return _fit_member(spec, logs)
+
+
+def _fit_member(spec: dict, logs: list) -> dict:
+    """:func:`run_fit_member` on logs already read."""
+    from .identify import EKFIdentifier, model_from
     from .models import get_model, model_class
 
     model_name = spec.get("model", "kcs-response")
@@ -371,9 +470,6 @@ def run_fit_member(spec: dict) -> dict:
         model = model_from(params, model=model_name)[0]
     else:
         model = get_model(model_name, params, **opts)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
-        logs = [read_log(f, lpp=spec.get("lpp")) for f in spec["logs"]]
     fixed = spec.get("fixed")
     ident = EKFIdentifier(model, estimate=spec.get("estimate"), fixed=fixed, n_passes=int(spec.get("passes", 2)),
                           tune_noise=bool(spec.get("tune_noise", False))).fit(logs)
@@ -433,6 +529,66 @@ def run_member(spec: dict):
     return run_sweep_member(spec) if spec.get("_member") == "sweep" else run_fit_member(spec)
 
 
+#: Run-time estimate of a member [s], for longest-first scheduling only (results never depend on it):
+#: per log byte and EKF pass (x 2 with ``refine``), and per parameter draw of each manoeuvre kind;
+#: measured on the bundled KCS logs (EKF + refinement ~0.15 s for two 1100-sample logs, 200 draws of a
+#: 35 deg turn ~0.1 s, of a 10/10 zigzag ~3.3 s) and ~0.05 s per case of a sweep.
+_COST_PER_BYTE_PASS, _COST_PER_DRAW, _COST_PER_CASE = 1e-7, {"turning": 5e-4, "zigzag": 1.6e-2}, 0.05
+
+
+def member_cost(spec: dict) -> float:
+    """Estimated run time of a campaign member (:data:`_COST_PER_BYTE_PASS` ...), for scheduling."""
+    if spec.get("_member") == "sweep":
+        if spec["kind"] == "glider":
+            from .glider import PAPER_SWEEP
+
+            return _COST_PER_CASE * float(np.prod([len(spec.get(k, PAPER_SWEEP[k])) for k in PAPER_SWEEP]))
+        n = len(spec.get("rudder", [10.0, 15.0, 25.0])) * len(spec.get("speeds", [0]))
+        return _COST_PER_CASE * n * (2 if spec.get("side") == "both" else 1)
+    size = sum(os.path.getsize(f) for f in spec["logs"] if os.path.isfile(f))
+    cost = _COST_PER_BYTE_PASS * size * int(spec.get("passes", 2)) * (2 if spec.get("refine") else 1)
+    if int(spec.get("draws", 0)) > 0:
+        kinds = [str(m).split(":")[0] for m in spec.get("manoeuvres", ["turning:35", "zigzag:10/10"])]
+        cost += int(spec["draws"]) * sum(_COST_PER_DRAW.get(k, _COST_PER_DRAW["zigzag"]) for k in kinds)
+    return cost
+
+
+#: Draws of a warm-up fit.
+_WARM_DRAWS = 4
+#: Settings that select the code (and compiled kernels) a fit member runs.
+_WARM_KEYS = ("model", "params", "estimate", "fixed", "refine", "manoeuvres", "lpp", "tune_noise", "inflation", "speed")
+
+
+def warm_fits(specs: Sequence[dict]) -> None:
+    """Warm-up of a worker for the fit members ``specs``: one fit per distinct set of settings
+    (:data:`_WARM_KEYS`; at most 3): the first such member with :data:`_WARM_DRAWS` draws.  That imports what the members import and loads their compiled kernels,
+    so that the first member runs as fast as the others (the engine runs it on every worker at start-up)."""
+    from .logs import read_log
+
+    for spec in warm_specs(specs):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            logs = [read_log(f, lpp=spec.get("lpp")) for f in spec["logs"]]
+        try:
+            _fit_member({**spec, "draws": min(int(spec.get("draws", 0)), _WARM_DRAWS), "seed": 0}, logs)
+        except Exception:  # noqa: BLE001 - the member itself will report its error
+            pass
+
+
+def warm_specs(specs: Sequence[dict]) -> tuple:
+    """The fit members :func:`warm_fits` runs for ``specs``: the first of each distinct set of settings
+    (:data:`_WARM_KEYS`, at most 3), reduced to those settings, its logs and passes."""
+    out = {}
+    for spec in specs:
+        if spec.get("_member") == "sweep":
+            continue
+        key = json.dumps({k: spec.get(k) for k in _WARM_KEYS}, sort_keys=True, default=str)
+        if key not in out and len(out) < 3:
+            out[key] = {**{k: spec[k] for k in _WARM_KEYS if k in spec}, "logs": spec["logs"],
+                        "passes": int(spec.get("passes", 2)), "draws": int(spec.get("draws", 0))}
+    return tuple(out.values())
+
+
 def run_campaign(campaign, outdir, *, engine: Engine | None = None, force: bool = False) -> dict:
     """Run every fit and sweep of a campaign (file path or :func:`load_campaign` dict) and write the outputs.
 
@@ -452,11 +608,13 @@ def run_campaign(campaign, outdir, *, engine: Engine | None = None, force: bool 
     specs = [{**f, "seed": int(f.get("seed", s))} for f, s in zip(fits, seeds)]
     specs += [{**w, "seed": s, "_member": "sweep"} for w, s in zip(sweeps, seeds[len(fits):])]
     eng = engine or Engine(1, progress=False)
-    outcomes = eng.map(run_member, specs, desc="campaign members")
+    outcomes = eng.map(run_member, specs, desc="campaign members", warm=partial(warm_fits, warm_specs(specs)),
+                       cost=[member_cost(sp) for sp in specs])
     members = []
     for spec, o in zip(specs, outcomes):
         kind = spec.get("_member", "fit")
-        rec = {"name": spec["name"], "type": kind, "ok": o.ok, "error": o.error, "seed": spec["seed"], "files": []}
+        rec = {"name": spec["name"], "type": kind, "ok": o.ok, "error": o.error, "seed": spec["seed"],
+               "seconds": round(o.seconds, 3), "files": []}
         if o.ok and kind == "sweep":
             d = out / spec["name"]
             d.mkdir(exist_ok=True)

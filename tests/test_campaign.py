@@ -115,7 +115,14 @@ def test_serial_and_two_dask_workers_give_identical_results(tmp_path):
     serial = run_campaign(p, tmp_path / "serial", engine=Engine(1, progress=False))
     with Engine(2, progress=False) as eng:
         dist = run_campaign(p, tmp_path / "dask", engine=eng)
+        import dask
+
+        # the quiet configuration reached the worker processes; each was warmed once, before the members
+        assert set(eng._client.run(dask.config.get, "distributed.worker.profile.enabled").values()) == {False}
+        assert len(eng.stats["warm"]) == 2 and len(eng.stats["worker_cpu"]) == 2
+        assert len(eng.stats["member_seconds"]) == 5 and all(c > 0 for c in eng.stats["member_cpu"])
     assert "LocalCluster, 2 processes" in dist["engine"]
+    assert all(m["seconds"] > 0 for m in dist["members"])
     for s in (serial, dist):
         st = {m["name"]: m for m in s["members"]}
         assert st["tc"]["ok"] and st["zz"]["ok"] and not st["bad"]["ok"]
@@ -130,6 +137,24 @@ def test_serial_and_two_dask_workers_give_identical_results(tmp_path):
     for name in ("td", "launch"):  # sweep members: byte-identical tables
         assert (tmp_path / "serial" / name / "sweep.csv").read_bytes() == (tmp_path / "dask" / name / "sweep.csv").read_bytes()
     assert [m["type"] for m in dist["members"]] == ["fit"] * 3 + ["sweep"] * 2
+
+
+def test_member_cost_and_warm_up_settings(tmp_path):
+    """Scheduling helpers: the cost estimate grows with logs, passes, refinement and draws (zigzag draws
+    dominate); the warm-up runs one member per distinct setting, never the seed or the name."""
+    from shipid.campaign import member_cost, warm_specs
+
+    logs = _short_logs(tmp_path)
+    a = {"name": "a", "logs": [logs["kcs_tc_p35"]], "passes": 2, "seed": 1}
+    b = {**a, "name": "b", "logs": [logs["kcs_tc_p35"], logs["kcs_zz_m10"]], "seed": 2}
+    costs = [member_cost(x) for x in (a, b, {**b, "refine": True}, {**b, "draws": 50, "manoeuvres": ["turning:35"]},
+                                      {**b, "draws": 50, "manoeuvres": ["zigzag:10/10"]})]
+    assert costs[0] < costs[1] < costs[2] < costs[4] and costs[1] < costs[3] < costs[4]
+    assert member_cost({"_member": "sweep", "kind": "turning", "rudder": [10, 20], "speeds": [1, 2]}) == \
+        2 * member_cost({"_member": "sweep", "kind": "turning", "rudder": [10], "speeds": [1, 2]})
+    w = warm_specs([a, b, {**b, "name": "c", "seed": 3}, {**a, "refine": True}, {"_member": "sweep", "name": "s"}])
+    assert [x.get("refine") for x in w] == [None, True] and all("seed" not in x and "name" not in x for x in w)
+    assert w[0]["logs"] == a["logs"]
 
 
 def test_campaign_cli_serial(tmp_path, capsys):

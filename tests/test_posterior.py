@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -107,7 +108,7 @@ def test_mcmc_matches_the_exact_grid_posterior(small_problem):
     assert s.converged, s.message
     like = OutputErrorLikelihood(res.to_model(), log, ["c2", "c3"],
                                  meas_std=res.settings["meas_std"],
-                                 prior_mean=[res.coef["c2"], res.coef["c3"]],
+                                 prior_mean=[res.settings["prior_mean"]["c2"], res.settings["prior_mean"]["c3"]],
                                  prior_std=[res.settings["prior_std"]["c2"], res.settings["prior_std"]["c3"]])
     m, sd = s.samples.mean(axis=0), s.samples.std(axis=0)
     g = [np.linspace(m[j] - 6 * sd[j], m[j] + 6 * sd[j], 81) for j in range(2)]
@@ -156,7 +157,7 @@ def test_independence_sampler_with_initial_states_matches_exact_posteriors(small
     h = sample_posterior(res, log, walkers=32, steps=900, burn=300, seed=3, moves="independence")
     assert h.converged, h.message
     like = OutputErrorLikelihood(res.to_model(), log, ["c2", "c3"], meas_std=res.settings["meas_std"],
-                                 prior_mean=[res.coef["c2"], res.coef["c3"]],
+                                 prior_mean=[res.settings["prior_mean"]["c2"], res.settings["prior_mean"]["c3"]],
                                  prior_std=[res.settings["prior_std"]["c2"], res.settings["prior_std"]["c3"]])
     m, sd = h.samples.mean(axis=0), h.samples.std(axis=0)
     g = [np.linspace(m[j] - 6 * sd[j], m[j] + 6 * sd[j], 81) for j in range(2)]
@@ -175,6 +176,48 @@ def test_independence_sampler_with_initial_states_matches_exact_posteriors(small
     np.testing.assert_allclose(ss, osd, rtol=0.10)
     np.testing.assert_array_less(np.abs(ms - oe.coef_[["c2", "c3"]].to_numpy()) / osd, 0.2)
     assert np.all(ss >= 0.95 * gsd)  # the marginal is not narrower than the held-state posterior
+
+
+def test_the_prior_is_the_one_the_ekf_started_from(small_problem, kcs_truth):
+    """The result records the EKF's prior (the first pass's start and its widths) and the sampler uses it by
+    default, not the fit's own estimate (which would use the data twice); the JSON round trip keeps it."""
+    from shipid.identify import FitResult
+
+    res, log = small_problem
+    pm = res.settings["prior_mean"]
+    assert pm == {n: float(kcs_truth.params_series()[n]) for n in ("c2", "c3")}  # init="model": the model's values
+    assert pm != {n: res.coef[n] for n in ("c2", "c3")}
+    assert FitResult.from_dict(json.loads(json.dumps(res.to_dict()))).settings["prior_mean"] == pm
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)  # a recorded prior: no warning
+        s = sample_posterior(res, log, walkers=32, steps=20, burn=10, seed=1)
+    pr = s.settings["prior"]
+    assert pr["kind"] == "gaussian" and pr["mean"] == pm and pr["std"] == res.settings["prior_std"]
+    like = OutputErrorLikelihood(res.to_model(), log, ["c2", "c3"], meas_std=res.settings["meas_std"],
+                                 prior_mean=list(pm.values()), prior_std=list(res.settings["prior_std"].values()))
+    flat = OutputErrorLikelihood(res.to_model(), log, ["c2", "c3"], meas_std=res.settings["meas_std"])
+    th = s.samples[:5]
+    z = (th - np.array(list(pm.values()))) / np.array(list(res.settings["prior_std"].values()))
+    np.testing.assert_allclose(like(th) - flat(th), -0.5 * np.sum(z**2, axis=1), rtol=1e-6, atol=1e-12)
+
+
+def test_a_result_without_a_recorded_prior_is_sampled_flat_with_a_warning(small_problem):
+    """Results written before the prior's centre was recorded: a one-line warning and a flat prior (never the
+    fit's estimate as the centre); --no-prior / use_prior=False stays silent."""
+    from shipid.identify import FitResult
+
+    res, log = small_problem
+    doc = json.loads(json.dumps(res.to_dict()))  # a copy: to_dict shares the (module-scoped) result's settings
+    del doc["settings"]["prior_mean"]
+    old = FitResult.from_dict(doc)
+    with pytest.warns(UserWarning, match=r"records no prior centre and width for c2, c3 .*: flat prior"):
+        s = sample_posterior(old, log, walkers=32, steps=20, burn=10, seed=1)
+    assert s.settings["prior"] == {"kind": "flat"}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        f = sample_posterior(res, log, walkers=32, steps=20, burn=10, seed=1, use_prior=False)
+    assert f.settings["prior"] == {"kind": "flat"}
+    np.testing.assert_array_equal(f.samples, s.samples)  # flat is flat, whichever way it was asked for
 
 
 def test_sample_cli_moves_and_initial_states(small_problem, tmp_path):

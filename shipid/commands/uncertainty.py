@@ -27,7 +27,7 @@ def register(sub) -> None:
     p = _command(sub, "sample", _sample,
                  "sample the posterior of a fit's coefficients by MCMC (emcee) -> samples JSON",
                  "Sample the posterior of the estimated coefficients of RESULT.json over the output-error likelihood "
-                 "of the logs (noise levels and prior widths from the fit), started from the EKF posterior; reports "
+                 "of the logs (noise levels and the EKF's prior from the fit), started from the EKF posterior; reports "
                  "acceptance, autocorrelation time, effective sample size and split-R-hat, and exits 1 when the "
                  "chain has not converged.",
                  positional=[("result", "RESULT.json", "fit result written by `shipid fit -o`"),
@@ -46,8 +46,9 @@ def register(sub) -> None:
     p.add_argument("--sample-x0", action="store_true",
                    help="also sample each log's initial u, v, r (nuisance parameters; the exact posterior)")
     p.add_argument("--no-prior", action="store_true",
-                   help="flat prior: sample the likelihood alone (the default Gaussian prior is centred on the fit's "
-                        "estimate, i.e. on the same data; docs/uncertainty.md sect. 2)")
+                   help="flat prior: sample the likelihood alone (default: the Gaussian prior the EKF started from, "
+                        "as the result records it; flat with a warning for results that do not; docs/uncertainty.md "
+                        "sect. 2)")
     _progress_option(p)
     add_log_options(p)
 

@@ -322,7 +322,7 @@ class EKFIdentifier:
             start += a.t.size
         self._setup = dict(arrays=arrays, meas=meas, meas_idx=meas_idx, p_base=p_base, est_idx=est_idx,
                            est_names=est_names, sig=sig, qx=qx, scale=scale, prior_cov_s=prior_cov_s, dt=dt,
-                           pieces=pieces)
+                           pieces=pieces, theta0=theta0.copy())
 
         # noise levels raised where the first-pass innovations are wider than predicted
         factors = np.ones(len(meas))
@@ -584,6 +584,8 @@ class EKFIdentifier:
         self.estimated_ = list(est)
         self.scale_ = pd.Series(scale, index=est, name="scale")
         self.prior_std_ = pd.Series(np.sqrt(np.diag(s["prior_cov_s"])) * scale, index=est, name="prior_std")
+        # the first pass's start: the centre of the prior (later passes restart from the previous estimate)
+        self.prior_mean_ = pd.Series(s["theta0"], index=est, name="prior_mean")
         self.meas_std_ = pd.Series(s["sig"] * np.sqrt(r_mult), index=s["meas"], name="meas_std")
         self.process_std_ = pd.Series(np.sqrt(s["qx"] * q_mult), index=list(model.state_names), name="process_std")
         self.loglik_ = float(out.loglik[0])

@@ -16,12 +16,14 @@ independent Gaussian with the fit's measurement-noise standard deviations
 (``result.settings["meas_std"]``, else estimated from the data).  This is the
 exact likelihood when the logs have sensor noise only (no process noise);
 with process noise or model error it is over-confident (see
-``docs/uncertainty.md``).  Prior: independent Gaussians centred on the fitted
-coefficients with the fit's prior standard deviations
-(``result.settings["prior_std"]``, >= 100 % of each start value in the EKF;
-the result does not record the prior centre, so the estimate is used -- which
-uses the data twice; with 16 coefficients it moved posterior means by up to 0.4
-sigma, docs/uncertainty.md sect. 2; ``use_prior=False`` samples the likelihood alone).
+``docs/uncertainty.md``).  Prior: the EKF's own, i.e. independent Gaussians
+centred on the values its first pass started from (``result.settings["prior_mean"]``)
+with its prior standard deviations (``result.settings["prior_std"]``, >= 100 % of
+each start value).  A result without a recorded prior (written before the centre
+was recorded, or an output-error refinement) is sampled under a flat prior, with a
+warning: centring the prior on the fit's own estimate, as before session 8, used the
+data twice (with 16 coefficients it moved posterior means by up to 0.4 sigma,
+docs/uncertainty.md sect. 2).  ``use_prior=False`` samples the likelihood alone.
 
 Convergence is judged, never assumed: the mean acceptance fraction, the
 integrated autocorrelation time tau per coefficient (Sokal's automatic window,
@@ -431,6 +433,21 @@ def _proposal_in_sampler_coordinates(proposal, all_names, like):
     return m, C
 
 
+def _recorded_prior(res, names):
+    """``(mean, std)`` arrays of the Gaussian prior the result's EKF started from, or ``(None, None)``
+    (flat, with a warning) when the result does not record both for every name."""
+    st = res.settings or {}
+    pm, ps = st.get("prior_mean") or {}, st.get("prior_std") or {}
+    mean = np.array([pm.get(n, np.nan) for n in names], dtype=float)
+    std = np.array([ps.get(n, np.nan) for n in names], dtype=float)
+    if np.all(np.isfinite(mean)) and np.all(np.isfinite(std) & (std > 0)):
+        return mean, std
+    warnings.warn(f"sample_posterior: the {res.method} result records no prior centre and width for "
+                  f"{', '.join(n for n, m, s in zip(names, mean, std) if not (np.isfinite(m) and s > 0))} "
+                  "(an older result, or a refinement): flat prior", UserWarning, stacklevel=3)
+    return None, None
+
+
 def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2000, burn: int | None = None,
                      thin: int = 1, seed=0, vectorize: bool = True, channels=None, substeps: int = 1,
                      start_scale: float = 1.0, use_prior: bool = True, moves: str = "de",
@@ -442,8 +459,8 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
     ----------
     result : FitResult, dict or path to a result JSON
         Supplies the model, the estimated coefficients (``cov`` names), the start (the Gaussian
-        ``N(coef, start_scale**2 cov)``), the noise levels (``settings["meas_std"]``) and the prior widths
-        (``settings["prior_std"]``).
+        ``N(coef, start_scale**2 cov)``), the noise levels (``settings["meas_std"]``) and the prior (the
+        EKF's: ``settings["prior_mean"]``, ``settings["prior_std"]``; flat with a warning when not recorded).
     logs : TrialLog, DataFrame or list of them (the logs of the fit, or others)
     walkers : int, optional  -- ensemble size (default ``max(4 * n_coef, 32)``, even)
     steps : int  -- steps per walker
@@ -454,7 +471,7 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
     channels : list of str, optional  -- output-error channels (default u, v, r)
     substeps : int  -- RK4 steps per log sample
     start_scale : float  -- spread of the start relative to the EKF posterior
-    use_prior : bool  -- include the result's prior (Gaussian, see module docstring)
+    use_prior : bool  -- include the prior the result's EKF started from (see module docstring)
     moves : {"de", "stretch", "independence"}
         emcee proposal: "de" (default) the mixture 0.8 differential evolution + 0.2 DE snooker
         (ter Braak 2006; ter Braak & Vrugt 2008), which decorrelates faster than "stretch", the
@@ -511,12 +528,9 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
     mu = np.array([res.coef[n] for n in names], dtype=float)
     cov = res.cov.loc[names, names].to_numpy(dtype=float)
     meas_std = (res.settings or {}).get("meas_std") or None
-    pstd = (res.settings or {}).get("prior_std") or {}
-    prior_std = np.array([pstd.get(n, np.nan) for n in names], dtype=float) if use_prior and pstd else None
-    if prior_std is not None and not np.all(np.isfinite(prior_std) & (prior_std > 0)):
-        prior_std = None
+    prior_mean, prior_std = _recorded_prior(res, names) if use_prior else (None, None)
     like = OutputErrorLikelihood(model, logs, names, meas_std=meas_std, channels=channels,
-                                 prior_mean=mu if prior_std is not None else None, prior_std=prior_std,
+                                 prior_mean=prior_mean, prior_std=prior_std,
                                  substeps=substeps,
                                  input_hold=input_hold or (res.settings or {}).get("input_hold") or "foh",
                                  x0_states=True if sample_x0 else None)
@@ -586,7 +600,9 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
                 "vectorize": bool(vectorize), "channels": like.channels, "substeps": int(substeps),
                 "input_hold": like.input_hold, "sample_x0": bool(sample_x0), "x0_sampled": x0_names,
                 "meas_std": dict(zip(like.channels, map(float, like.sig))), "start_scale": float(start_scale),
-                "prior": ({"kind": "gaussian", "mean": "fit estimate", "std": dict(zip(names, map(float, prior_std)))}
+                "prior": ({"kind": "gaussian", "source": "the EKF's start (result settings prior_mean, prior_std)",
+                           "mean": dict(zip(names, map(float, prior_mean))),
+                           "std": dict(zip(names, map(float, prior_std)))}
                           if prior_std is not None else {"kind": "flat"}),
                 "likelihood": "output error, independent Gaussian residuals", "n_obs": like.n_obs,
                 "logs": [a.meta for a in like.arrays], "result_method": res.method,

@@ -118,6 +118,7 @@ class FitResult:
             "meas_std": ident.meas_std_.to_dict(),
             "process_std": ident.process_std_.to_dict(),
             "prior_std": ident.prior_std_.to_dict(),
+            "prior_mean": ident.prior_mean_.to_dict(),  # the EKF's start (the prior's centre, pass 1)
             "scale": ident.scale_.to_dict(),
             "n_passes": int(ident.n_passes),
             "param_walk": float(ident.param_walk),
