@@ -89,6 +89,22 @@ def test_raw_marin_fit_with_only_lpp_has_physical_damping_signs(tmp_path, capsys
         assert res["settings"]["ekf_stage"]["success"] is True
 
 
+@pytest.mark.slow
+@needs_marin
+def test_raw_marin_response_nl_without_the_damping_constraint_says_it_is_not_physical(tmp_path, capsys):
+    """``--no-physical-damping``: the unconstrained refinement (b1 +0.0177, own sway damping positive on ~17 %
+    of the logged states and at rest) is kept, and the fit SAYS it is not physical: the diagnostic, the warning
+    on stderr naming the sway damping and the rest state."""
+    rc, res = _fit(tmp_path, "--model", "response-nl", "--no-physical-damping")
+    assert rc in (0, 3) and res["success"] is True, res["message"]
+    assert res["coef"]["b1"] > 0
+    assert "physical damping" not in [s["step"] for s in res["settings"]["recipe"]]
+    damp = res["diagnostics"]["damping"]
+    assert damp["physical"] is False and damp["v"]["fraction_positive"] > 0.05 and damp["rest"]["v"] > 0, damp
+    err = capsys.readouterr().err
+    assert "own sway damping" in err and "at rest" in err
+
+
 @needs_marin
 def test_linear_range_cuts_the_turning_circles_at_10_deg_of_drift():
     """The recipe's step 2b: kcs-response (linear in v, r) uses each run until its drift angle first exceeds
