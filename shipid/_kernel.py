@@ -857,7 +857,7 @@ def filter_functions(model, notice: bool = True):
     key = ("filter", id(eq), tag)
     out = _cache.get(key)
     if out is None:
-        funcs = _jit.rebind(eq, ns, jit=True, tag=tag)
+        funcs = _jit.rebind(eq, ns, jit=True, tag=tag, inline=MODEL_INLINE)
         out = _cache[key] = _jit.rebind(FILTER, {**ns, **funcs}, jit=True, tag=tag, fastmath=FASTMATH, inline=INLINE)
     return out
 
@@ -867,6 +867,9 @@ _cache: dict = {}
 #: or more per sample with up to ~25 array arguments, their calls cost ~1.2 us of a ~5 us filter step
 #: (kcs-response, 22 states; same results to the bit).  The model's equations are not inlined.
 INLINE = frozenset({"cholesky", "chol_solve", "mat_mul", "rk4_rest", "tangent", "cross_interval"})
+#: The model's kernel-protocol wrappers that are inlined too: they only unpack arguments, call the
+#: equations (compiled on their own, without fastmath) and store results, so their flags change nothing.
+MODEL_INLINE = frozenset({"k_rhs", "k_jac", "k_consts", "fill"})
 #: numba's fastmath flags of the filter and smoother: sums may be reassociated and fused (so that the
 #: loops vectorise); not "nnan"/"ninf", which would break the NaN-based divergence checks.
 FASTMATH = {"reassoc", "contract"}
