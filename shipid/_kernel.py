@@ -236,11 +236,12 @@ def cross_interval(method, t0, x, u0, u1, foh, n, p, P, c, cols, h, scale, xn, F
                 ub[j] = (1.0 - wt) * u0[j] + wt * u1[j]
             um[j] = 0.5 * (ua[j] + ub[j]) if foh else ua[j]
         ti = t0 + i * h if i else t0
-        if i == 0:
-            tangent(method, ti, x, ua, um, ub, p, P, c, cols, h, scale, xn, Fx, Fp, w)
-        else:
+        if i > 0:
             x[:] = xn
-            tangent(method, ti, x, ua, um, ub, p, P, c, cols, h, scale, xn, Ax, Ap, w)
+        # the first step's tangent is the interval's, later ones (Ax, Ap) are chained onto it; one call
+        # site, as tangent is inlined (compile time)
+        tangent(method, ti, x, ua, um, ub, p, P, c, cols, h, scale, xn, Fx if i == 0 else Ax, Fp if i == 0 else Ap, w)
+        if i > 0:
             mat_mul(Ax, Fp, tmpp)
             for r in range(nx):
                 for j in range(ne):
@@ -857,19 +858,18 @@ def filter_functions(model, notice: bool = True):
     key = ("filter", id(eq), tag)
     out = _cache.get(key)
     if out is None:
-        funcs = _jit.rebind(eq, ns, jit=True, tag=tag, inline=MODEL_INLINE)
+        funcs = _jit.rebind(eq, ns, jit=True, tag=tag)
         out = _cache[key] = _jit.rebind(FILTER, {**ns, **funcs}, jit=True, tag=tag, fastmath=FASTMATH, inline=INLINE)
     return out
 
 
 _cache: dict = {}
 #: The kernel's helpers that numba inlines into their callers (``_jit.rebind``'s ``inline``): called once
-#: or more per sample with up to ~25 array arguments, their calls cost ~1.2 us of a ~5 us filter step
-#: (kcs-response, 22 states; same results to the bit).  The model's equations are not inlined.
+#: or more per sample with up to ~25 array arguments, their calls cost ~0.6 us of a ~4 us filter step
+#: (kcs-response, 22 states; same results to the bit), for ~2.5 s more compile time (17.8 -> 20.2 s with
+#: an empty cache).  The model's equations and wrappers are not inlined: no measurable gain, and
+#: inlining the equations themselves would let the filter's fastmath flags change their rounding.
 INLINE = frozenset({"cholesky", "chol_solve", "mat_mul", "rk4_rest", "tangent", "cross_interval"})
-#: The model's kernel-protocol wrappers that are inlined too: they only unpack arguments, call the
-#: equations (compiled on their own, without fastmath) and store results, so their flags change nothing.
-MODEL_INLINE = frozenset({"k_rhs", "k_jac", "k_consts", "fill"})
 #: numba's fastmath flags of the filter and smoother: sums may be reassociated and fused (so that the
 #: loops vectorise); not "nnan"/"ninf", which would break the NaN-based divergence checks.
 FASTMATH = {"reassoc", "contract"}
