@@ -62,7 +62,8 @@ def disabled():
         _off[0] = prev
 
 
-def rebind(functions: dict, namespace: dict, jit: bool = False, tag: str = "", fastmath=False) -> dict:
+def rebind(functions: dict, namespace: dict, jit: bool = False, tag: str = "", fastmath=False,
+           inline=frozenset()) -> dict:
     """The ``functions`` (name -> function, in dependency order) with their globals overridden.
 
     Each function is rebuilt from its own code object with its module's globals updated by
@@ -72,7 +73,10 @@ def rebind(functions: dict, namespace: dict, jit: bool = False, tag: str = "", f
     first call); ``tag`` is appended to the qualified names so that two sets built from the same
     functions with different globals keep separate disk caches.  ``fastmath`` is numba's option (e.g.
     ``{"reassoc", "contract"}``: sums may be reordered and fused, so loops vectorise; never the flags
-    that assume finite values, which the divergence checks rely on).
+    that assume finite values, which the divergence checks rely on).  ``inline``: names of functions
+    that numba inlines into their callers (``inline="always"``) -- small helpers called once per sample
+    with many array arguments, whose call (each array passed as its ~9 fields, reference counts
+    adjusted) costs more than their arithmetic; the results are the same, compiling takes longer.
     """
     if jit:
         _import_numba()
@@ -86,7 +90,7 @@ def rebind(functions: dict, namespace: dict, jit: bool = False, tag: str = "", f
         new = types.FunctionType(fn.__code__, g, fn.__name__, fn.__defaults__, fn.__closure__)
         new.__qualname__, new.__doc__ = fn.__qualname__ + tag, fn.__doc__
         if jit:
-            new = _numba.njit(cache=True, fastmath=fastmath)(new)
+            new = _numba.njit(cache=True, fastmath=fastmath, inline="always" if name in inline else "never")(new)
         ns[name] = out[name] = new
     return out
 
@@ -102,7 +106,8 @@ def _import_numba():
     return _numba
 
 
-def compiled(functions: dict, namespace: dict | None = None, tag: str = "", fastmath=False) -> dict | None:
+def compiled(functions: dict, namespace: dict | None = None, tag: str = "", fastmath=False,
+             inline=frozenset()) -> dict | None:
     """numba-compiled ``functions`` with globals overridden by ``namespace`` (see :func:`rebind`; built
     once per ``functions`` dict), or ``None`` when compilation is not :func:`enabled`."""
     if not _HAVE_NUMBA or _ENV_OFF or _off[0]:
@@ -110,5 +115,5 @@ def compiled(functions: dict, namespace: dict | None = None, tag: str = "", fast
     out = _compiled.get(id(functions))
     if out is None:
         out = _compiled[id(functions)] = (functions, rebind(functions, namespace or {}, jit=True, tag=tag,
-                                                                fastmath=fastmath))
+                                                                fastmath=fastmath, inline=inline))
     return out[1]
