@@ -272,9 +272,9 @@ def damping_penalty(model, logs, *, time_scale: float, margin: float = DAMPING_M
     each of the N logged states of :func:`damping_states` (``max_points`` per log) and at the
     :func:`rest_state`, for v and for r, ``w * max(0, d * time_scale + margin) / margin`` (softened over
     :data:`PENALTY_SOFTNESS` margins); i.e. ~zero where the own damping ``d`` is below ``-margin / time_scale``
-    and growing linearly with the violation.  A
-    logged state has ``w = weight / sqrt(2N)`` (violating the margin at every one costs ``weight**2 / 2``),
-    the rest state ``w = weight / sqrt(2)`` (as much as all of them).  An exterior penalty for
+    and growing linearly with the violation.  A logged state has ``w = weight / sqrt(2N)`` (violating the
+    margin at every one costs ``weight**2 / 2``), the rest state ``w = weight / sqrt(2)`` (as much as all of
+    them).  An exterior penalty for
     :class:`shipid.identify.batch.OutputErrorRefiner`'s ``extra_residuals``; ``time_scale`` is L/U [s] of
     the approach speed.
     """
