@@ -317,3 +317,21 @@ def test_refinement_keeps_the_own_damping_negative():
     assert off.refiner.coef_["b1"] > 0.01
     dmp = off.result().diagnostics["damping"]
     assert dmp["physical"] is False and dmp["v"]["fraction_positive"] == 1.0
+
+
+def test_speed_scale_of_the_damping_margin():
+    """The own-damping margin's speed: the approach speed; the median speed when the logs start from rest (the
+    approach speed below a tenth of it, e.g. the Esso Osaka runs); none when nothing moves."""
+    from shipid.identify.recipe import _speed_scale
+
+    t = np.arange(200.0)
+    moving = TrialLog.from_arrays(t, name="m", u=np.full(200, 2.0), v=np.zeros(200), r=np.zeros(200))
+    U, why = _speed_scale([moving])
+    assert U == pytest.approx(2.0) and why == "the approach speed"
+    u = np.concatenate([np.zeros(30), np.full(170, 0.5)])
+    from_rest = TrialLog.from_arrays(t, name="r", u=u, v=np.zeros(200), r=np.zeros(200))
+    U, why = _speed_scale([from_rest])
+    assert U == pytest.approx(0.5) and "start from rest" in why
+    still = TrialLog.from_arrays(t, name="s", u=np.zeros(200), v=np.zeros(200), r=np.zeros(200))
+    U, why = _speed_scale([still])
+    assert np.isnan(U) and why == "no log moves"

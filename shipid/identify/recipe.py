@@ -233,6 +233,25 @@ def _approach_speed(logs) -> float:
     return float(np.median(speeds))
 
 
+def _speed_scale(logs) -> tuple[float, str]:
+    """The speed U of the own-damping margin's time scale L/U (step 6b): the approach speed
+    (:func:`_approach_speed`), or the median speed over all samples when the logs start from rest (approach
+    speed below a tenth of it); ``(nan, why)`` when neither is positive."""
+    sp = np.concatenate([np.hypot(np.asarray(lg["u"], dtype=float),
+                                  np.asarray(lg["v"], dtype=float) if "v" in lg.channels else 0.0) for lg in logs])
+    sp = sp[np.isfinite(sp)]
+    med = float(np.median(sp)) if sp.size else float("nan")
+    try:
+        U0 = _approach_speed(logs)
+    except ValueError:
+        U0 = float("nan")
+    if np.isfinite(U0) and U0 > 0 and not (med > 10.0 * U0):
+        return U0, "the approach speed"
+    if np.isfinite(med) and med > 0:
+        return med, "the median speed (the logs start from rest)"
+    return float("nan"), "no log moves"
+
+
 def choose_sampling(model, logs, samples_per_tau: int | None = None) -> tuple[int, str]:
     """Every how many samples of the logs the EKF uses, and why (see the module docstring, step 2);
     ``samples_per_tau`` default: :data:`DEFAULT_SAMPLES_PER_TAU` for the model, else :data:`SAMPLES_PER_TAU`."""
@@ -770,8 +789,12 @@ def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: in
     damp = None
     if physical_damping and {"v", "r"} <= set(start_model.state_names):
         damp = damping_check(start_model.with_params(ref.coef_.to_numpy()), used)
-    if damp is not None and damp["physical"] is False:
-        U0 = _approach_speed(logs)
+    U0, what_U = _speed_scale(logs) if damp is not None and damp["physical"] is False else (float("nan"), "")
+    if damp is not None and damp["physical"] is False and not np.isfinite(U0):
+        step("physical damping", False, f"the refined model's own damping is not negative along the logs, but "
+             f"{what_U}: no speed scale for the constraint's margin; the fit is kept unconstrained (its "
+             "diagnostics say so)")
+    elif damp is not None and damp["physical"] is False:
         pen = damping_penalty(start_model, used, time_scale=L / U0)
         both = pen if extra is None else (lambda P, _e=extra, _p=pen: np.concatenate(
             [np.asarray(_e(P), dtype=float).reshape(np.shape(P)[0], -1), _p(P)], axis=1))
@@ -787,7 +810,8 @@ def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: in
         pen_cost = 0.5 * float(np.sum(pen(ref.coef_.to_numpy()) ** 2))
         step("physical damping", bool(damp2["physical"]),
              f"{first}; solved again from the same start with d(dv/dt)/dv and d(dr/dt)/dr <= -{DAMPING_MARGIN:g} U/L "
-             f"(U = {U0:.4g} m/s, L = {L:.4g} m) at the logged states and at rest as a penalty: {where(damp2)}, "
+             f"(U = {U0:.4g} m/s, {what_U}; L = {L:.4g} m) at the logged states and at rest as a penalty: "
+             f"{where(damp2)}, "
              f"cost {ref.cost_:.4g} of which the penalty {pen_cost:.3g}")
     elif damp is not None:
         step("physical damping", True, "the refined model's own sway and yaw damping is negative along the logged "
