@@ -449,17 +449,12 @@ def run_fit_member(spec: dict) -> dict:
     ``draws`` > 0, predict its manoeuvres with intervals.  Returns JSON-able dicts (runs on a worker)."""
     from .logs import read_log
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
-        logs = [read_log(f, lpp=spec.get("lpp")) for f in spec["logs"]]
-    return _fit_member(spec, logs)
-
-
-def _fit_member(spec: dict, logs: list) -> dict:
-    """:func:`run_fit_member` on logs already read."""
     from .identify import EKFIdentifier, model_from
     from .models import get_model, model_class
 
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        logs = [read_log(f, lpp=spec.get("lpp")) for f in spec["logs"]]
     model_name = spec.get("model", "kcs-response")
     cls = model_class(model_name)
     opts = {"lpp": spec["lpp"]} if ("lpp" in spec and "lpp" in cls.__init__.__code__.co_varnames) else {}
@@ -561,16 +556,12 @@ _WARM_KEYS = ("model", "params", "estimate", "fixed", "refine", "manoeuvres", "l
 
 def warm_fits(specs: Sequence[dict]) -> None:
     """Warm-up of a worker for the fit members ``specs``: one fit per distinct set of settings
-    (:data:`_WARM_KEYS`; at most 3): the first such member with :data:`_WARM_DRAWS` draws.  That imports what the members import and loads their compiled kernels,
-    so that the first member runs as fast as the others (the engine runs it on every worker at start-up)."""
-    from .logs import read_log
-
+    (:data:`_WARM_KEYS`; at most 3): the first such member with :data:`_WARM_DRAWS` draws.  That imports what
+    the members import and loads their compiled kernels, so that the first member runs as fast as the others
+    (the engine runs it on every worker at start-up)."""
     for spec in warm_specs(specs):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)
-            logs = [read_log(f, lpp=spec.get("lpp")) for f in spec["logs"]]
         try:
-            _fit_member({**spec, "draws": min(int(spec.get("draws", 0)), _WARM_DRAWS), "seed": 0}, logs)
+            run_fit_member({**spec, "draws": min(int(spec.get("draws", 0)), _WARM_DRAWS), "seed": 0})
         except Exception:  # noqa: BLE001 - the member itself will report its error
             pass
 

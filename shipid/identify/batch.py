@@ -433,8 +433,7 @@ class OutputErrorRefiner:
         J = sol.jac
         self.jac_ = J  # at the solution, scaled parameters (columns: the refined ones)
         names_all = names
-        free_cov = free
-        fcoef = free_cov[free_cov < ne]  # the refined coefficients (the rest of ``free``: initial states)
+        fcoef = free[free < ne]  # the refined coefficients (the rest of ``free``: initial states)
         names = [names_all[i] for i in fcoef]
         n_obs = int(sum(m.sum() for m, w in zip(masks, wlog) if w > 0))
         dof = max(n_obs - free.size, 1)
@@ -447,15 +446,15 @@ class OutputErrorRefiner:
             inv = np.where(sv > sv.max() * max(J.shape) * np.finfo(float).eps, 1.0 / np.maximum(sv, 1e-300) ** 2, 0.0)
             cov_all = (Vt.T * inv) @ Vt * s2
         else:
-            cov_all = np.full((free_cov.size, free_cov.size), np.nan)
+            cov_all = np.full((free.size, free.size), np.nan)
         # with estimated initial states: the coefficients' block, i.e. marginal over them (Laplace)
-        cpos = np.flatnonzero(free_cov < ne)
+        cpos = np.flatnonzero(free < ne)
         cov_s = cov_all[np.ix_(cpos, cpos)]
         th_full = full(sol.x)
         theta = th_full[:ne] * scale
         x0_fit = [x0_of(th_full[None], i)[0] for i in range(len(arrays))]
         x0_var = np.zeros(th_full.size)
-        x0_var[free_cov] = np.clip(np.diag(cov_all), 0, None)
+        x0_var[free] = np.clip(np.diag(cov_all), 0, None)
         x0_sd = np.sqrt(x0_var[ne:]).reshape(len(arrays), nk) * x0_scale
         self.x0_ = pd.DataFrame(x0_fit, columns=list(model.state_names))
         self.x0_std_ = pd.DataFrame(x0_sd, columns=x0_names)
@@ -472,9 +471,9 @@ class OutputErrorRefiner:
         # the independence proposal of sample_posterior(proposal=refiner) uses it with ``theta_``
         # (held columns and coefficients on a sign bound are not in it: a proposal then lacks them, which
         # sample_posterior refuses)
-        units = np.concatenate([scale, np.tile(x0_scale, len(arrays))])[free_cov]
-        self.cov_joint_ = pd.DataFrame(cov_all * np.outer(units, units), index=[col_names[i] for i in free_cov],
-                                       columns=[col_names[i] for i in free_cov])
+        units = np.concatenate([scale, np.tile(x0_scale, len(arrays))])[free]
+        self.cov_joint_ = pd.DataFrame(cov_all * np.outer(units, units), index=[col_names[i] for i in free],
+                                       columns=[col_names[i] for i in free])
         self.estimated_ = names
         self.channels_ = chans
         self.cost_ = float(sol.cost)

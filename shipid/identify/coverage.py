@@ -326,16 +326,15 @@ def coverage_study(truth=None, recipes=None, *, n_replicates: int = 100, seed: i
             t["key"], legacy_key = _task_keys(t, truth)
             legacy[t["key"]] = legacy_key
             t["checkpoint"] = str(checkpoint)
-        done = _read_checkpoint(checkpoint)
-        for key, old in legacy.items():
-            if key not in done and old in done:
-                done[key] = done[old]
+        def read_done():  # the checkpoint, replicates stored under a legacy key also found by the new one
+            d = _read_checkpoint(checkpoint)
+            d.update({key: d[old] for key, old in legacy.items() if key not in d and old in d})
+            return d
+
+        done = read_done()
         todo = [t for t in tasks if t["key"] not in done] if run else []
         new = {t["key"]: o for t, o in zip(todo, eng.map(_replicate, todo, desc="coverage replicates"))}
-        done = _read_checkpoint(checkpoint)
-        for key, old in legacy.items():
-            if key not in done and old in done:
-                done[key] = done[old]
+        done = read_done()
         outs = [new[t["key"]] if t["key"] in new else _Done(done[t["key"]]) for t in tasks
                 if t["key"] in new or t["key"] in done]
     else:

@@ -450,6 +450,12 @@ def split_position_error(dt: float, meas: dict, pred: dict) -> dict:
     return {k: float(np.hypot(*(end(*a) - ref))) for k, a in cases.items()}
 
 
+def _fold_current(study: "EssoStudy", k) -> pd.Series:
+    """The mean current (``cx``, ``cy``) of fold ``k``'s all-types fit: the start of its predictions."""
+    c = study.currents
+    return c[(c.fold == k) & (c.fit == "all types")][["cx", "cy"]].mean()
+
+
 def error_diagnosis(study: "EssoStudy", run_type: str = "zigzag", horizon: float = 30.0,
                     model: str = "lowspeed + wind + current fitted", data_dir=DATA_DIR,
                     start_every: float = 5.0) -> pd.DataFrame:
@@ -469,7 +475,7 @@ def error_diagnosis(study: "EssoStudy", run_type: str = "zigzag", horizon: float
     for lg in load_runs(data_dir, (run_type,)):
         k = fold_of[lg.name]
         m = study.models[k][model]
-        cur = study.currents[(study.currents.fold == k) & (study.currents.fit == "all types")][["cx", "cy"]].mean()
+        cur = _fold_current(study, k)
         d = _frame(lg, every)
         init = {"cx": float(cur.cx), "cy": float(cur.cy)} if "cx" in m.state_names else None
         r = horizon_prediction(m, d, horizons=(horizon,), start_every=start_every, initial=init)
@@ -527,7 +533,7 @@ def residual_accelerations(study: "EssoStudy", candidates=("YPf", "NPf", "delta0
         fitted = study.models[k][model]
         ps = dict(zip(fitted.param_names, fitted.params))
         m = env.with_params({n: ps[n] for n in env.param_names if n in ps})
-        cur = study.currents[(study.currents.fold == k) & (study.currents.fit == "all types")][["cx", "cy"]].mean()
+        cur = _fold_current(study, k)
         d = lg.data
         t = d["time"].to_numpy(dtype=float)
         dt = float(np.median(np.diff(t)))
@@ -537,15 +543,15 @@ def residual_accelerations(study: "EssoStudy", candidates=("YPf", "NPf", "delta0
         vd = savgol_filter(d.v.to_numpy(dtype=float), window, 2, deriv=1, delta=dt)
         rd = savgol_filter(d.r.to_numpy(dtype=float), window, 2, deriv=1, delta=dt)
         jc = [m.param_index(c) for c in candidates]
-        for i in range(window // 2, len(d) - window // 2, every):
-            f = m.rhs(t[i], X[i], U[i])
-            J = m.jac_p(t[i], X[i], U[i])
-            row = {"run": lg.name, "run_type": lg.run_type, "time": t[i], "u": X[i, 3], "v": X[i, 4],
-                   "r": X[i, 5], "delta": U[i, 0], "n": U[i, 1], "ev": vd[i] - f[4], "er": rd[i] - f[5]}
-            for c, j in zip(candidates, jc):
-                row["Jv_" + c], row["Jr_" + c] = J[4, j], J[5, j]
-            rows.append(row)
-    return pd.DataFrame(rows)
+        idx = np.arange(window // 2, len(d) - window // 2, every)
+        f = m.rhs(0.0, X[idx], U[idx])      # all samples as one batch (the models are time-invariant)
+        J = m.jac_p(0.0, X[idx], U[idx])
+        block = {"run": lg.name, "run_type": lg.run_type, "time": t[idx], "u": X[idx, 3], "v": X[idx, 4],
+                 "r": X[idx, 5], "delta": U[idx, 0], "n": U[idx, 1], "ev": vd[idx] - f[:, 4], "er": rd[idx] - f[:, 5]}
+        for c, j in zip(candidates, jc):
+            block["Jv_" + c], block["Jr_" + c] = J[:, 4, j], J[:, 5, j]
+        rows.append(pd.DataFrame(block))
+    return pd.concat(rows, ignore_index=True) if rows else pd.DataFrame()
 
 
 def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shipid.studies.esso_osaka
