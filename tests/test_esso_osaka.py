@@ -170,3 +170,32 @@ def test_residual_accelerations_recover_a_missing_side_force():
         A = np.vstack([np.concatenate([df["Jv_" + c], df["Jr_" + c]]) for c in ("YPf", "NPf")]).T
         b = np.linalg.lstsq(A, np.concatenate([df.ev, df.er]), rcond=None)[0]
         np.testing.assert_allclose(b, expect, atol=0.03 * 0.002)
+
+
+def test_wind_driven_start_current():
+    """Round 7's candidate D1: the drift factor is the least-squares k of c = k w over runs, and each
+    start's current is k x the mean air velocity of the trailing window (causal)."""
+    import pandas as pd
+
+    from shipid.studies.esso_osaka import air_velocity, drift_factor, with_drift_current
+
+    rng = np.random.default_rng(3)
+    w = rng.normal(0.0, 1.5, (12, 2))
+    assert drift_factor(0.007 * w, w) == pytest.approx(0.007, rel=1e-12)
+    c = 0.007 * w + rng.normal(0.0, 0.001, w.shape)
+    assert abs(drift_factor(c, w) - 0.007) < 3 * 0.001 / np.sqrt(np.sum(w * w))
+    assert drift_factor(np.zeros((2, 2)), np.zeros((2, 2))) == 0.0
+    # wind from north (dir 0) at 2 m/s blows towards -x; from east (+pi/2) towards -y
+    t = np.arange(0.0, 200.0, 0.5)
+    f = pd.DataFrame({"time": t, "wind_speed_true": 2.0, "wind_dir_true": np.where(t < 100.0, 0.0, np.pi / 2)})
+    np.testing.assert_allclose(air_velocity(f)[[0, -1]], [[-2.0, 0.0], [0.0, -2.0]], atol=1e-12)
+    g = with_drift_current(f, 0.01, window=60.0)
+    assert list(f.columns) == ["time", "wind_speed_true", "wind_dir_true"]  # not modified in place
+    np.testing.assert_allclose(g[["cx", "cy"]].to_numpy()[[0, 150, -1]], [[-0.02, 0.0], [-0.02, 0.0], [0.0, -0.02]],
+                               atol=1e-12)
+    # half-way through the change of direction the trailing minute holds both winds equally
+    i = int(np.searchsorted(t, 130.0))
+    n_old = np.sum((t >= t[i] - 60.0) & (t < 100.0))
+    n_all = np.sum((t >= t[i] - 60.0) & (t <= t[i]))
+    np.testing.assert_allclose(g.loc[i, ["cx", "cy"]].to_numpy(dtype=float),
+                               [-0.02 * n_old / n_all, -0.02 * (n_all - n_old) / n_all], atol=1e-12)

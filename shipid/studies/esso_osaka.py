@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-__all__ = ["run_study", "EssoStudy", "load_runs", "error_diagnosis", "residual_accelerations", "split_position_error", "PRIOR_PARAMS", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
+__all__ = ["run_study", "drift_factor", "with_drift_current", "air_velocity", "EssoStudy", "load_runs", "error_diagnosis", "residual_accelerations", "split_position_error", "PRIOR_PARAMS", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
 
 #: Where the shared data set lives relative to the repository root.
 DATA_DIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "esso_osaka_frt"
@@ -190,6 +190,42 @@ class EssoStudy:
         return "\n".join(out)
 
 
+#: Trailing window [s] of the measured true wind behind a held-out start's wind-driven current
+#: (``current_start="wind"``; fixed with the round-7 candidate list, docs/environment.md).
+DRIFT_WINDOW_S = 60.0
+
+
+def air_velocity(frame) -> np.ndarray:
+    """``(N, 2)`` earth-fixed velocity of the air [m/s] (where the true wind blows *to*) of a frame with
+    ``wind_speed_true`` and ``wind_dir_true`` (direction it comes from, measured like the heading)."""
+    ws = frame["wind_speed_true"].to_numpy(dtype=float)
+    wd = frame["wind_dir_true"].to_numpy(dtype=float)
+    return np.column_stack([-ws * np.cos(wd), -ws * np.sin(wd)])
+
+
+def drift_factor(currents, winds) -> float:
+    """Least-squares ``k`` of ``c = k w`` over runs: per-run currents ``(n, 2)`` [m/s] on the runs' mean air
+    velocities ``(n, 2)`` (a current driven down the wind, proportional to it, no intercept)."""
+    c, w = np.asarray(currents, dtype=float), np.asarray(winds, dtype=float)
+    den = float(np.sum(w * w))
+    return float(np.sum(c * w) / den) if den > 0 else 0.0
+
+
+def with_drift_current(frame: pd.DataFrame, k: float, window: float = DRIFT_WINDOW_S) -> pd.DataFrame:
+    """``frame`` with columns ``cx, cy`` = ``k`` x the mean air velocity over the trailing ``window`` s up
+    to each sample (causal; shorter at the run's start): the start current of a prediction from each
+    sample when the current is taken to be wind-driven (:func:`drift_factor`)."""
+    t = frame["time"].to_numpy(dtype=float)
+    w = air_velocity(frame)
+    cs = np.vstack([np.zeros((1, 2)), np.cumsum(w, axis=0)])
+    i = np.arange(t.size)
+    j0 = np.searchsorted(t, t - window, side="left")
+    mean = (cs[i + 1] - cs[j0]) / (i + 1 - j0)[:, None]
+    out = frame.copy()
+    out["cx"], out["cy"] = k * mean[:, 0], k * mean[:, 1]
+    return out
+
+
 def _fit(model, frames, estimate, substeps, input_hold="foh", gate=5.0, prior_std=1.0):
     from ..identify import EKFIdentifier
 
@@ -263,7 +299,7 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
               current: str = "constant", estimate=ESTIMATE, estimate_wind=ESTIMATE_WIND, substeps: int = 2,
               fixed: bool = True, turning: bool = True, all_types: bool = True, progress: bool = True,
               rudder_rate: float | None = None, wind="esso-osaka-3m", by_type_prior: str = "prior",
-              prior_params: dict | None = PRIOR_PARAMS) -> EssoStudy:
+              prior_params: dict | None = PRIOR_PARAMS, current_start: str = "mean") -> EssoStudy:
     """Fit and cross-validate on the Esso Osaka runs (see the module docstring for every choice).
 
     Parameters
@@ -299,11 +335,18 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
     wind : WindForce or "esso-osaka-3m"
         Above-water geometry of the wind force (the prior of the estimated components and the value of the
         others).
+    current_start : {"mean", "wind"}
+        Start current of a held-out run's predictions: the training runs' mean current (default), or
+        wind-driven, ``k`` x the mean air velocity of the trailing :data:`DRIFT_WINDOW_S` before each start,
+        ``k`` fitted to the training runs' estimated currents on their mean air velocities
+        (:func:`drift_factor`, :func:`with_drift_current`; round 7, docs/environment.md).
     """
     from ..environment import with_environment
     from ..models import get_model
     from ..validation_horizon import dead_reckoning, horizon_prediction
 
+    if current_start not in ("mean", "wind"):
+        raise ValueError(f"current_start must be 'mean' or 'wind', got {current_start!r}")
     runs = load_runs(data_dir, types, max_runs, rudder_rate=rudder_rate)
     fold_of = assign_folds(runs, folds)
     n_folds = max(fold_of.values()) + 1
@@ -322,7 +365,10 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
     hold = dict(input_hold=input_hold, gate=gate)
 
     def record(model_name, lg, model, initial=None):
-        r = horizon_prediction(model, _frame(lg, eval_every), horizons=horizons, start_every=start_every,
+        frame = _frame(lg, eval_every)
+        if initial is not None and "k" in initial:   # wind-driven start current, per start
+            frame, initial = with_drift_current(frame, initial["k"]), None
+        r = horizon_prediction(model, frame, horizons=horizons, start_every=start_every,
                                initial=initial, name=lg.name)
         errs.setdefault((model_name, lg.run_type), []).append(r)
 
@@ -351,15 +397,21 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
         for name in s.index:
             coefs.append({"fold": k, "fit": tag.strip(" ()") or "all types", "parameter": name,
                           "value": s.loc[name, "value"], "std": s.loc[name, "std"]})
-        cc = []
+        cc, ww = [], []
         for st, f in zip(env.states_, frames):
             row = {"fold": k, "fit": tag.strip(" ()") or "all types", "run": f.attrs["name"],
                    "cx": st.cx.iloc[0], "cx_std": st.cx_std.iloc[0], "cy": st.cy.iloc[0], "cy_std": st.cy_std.iloc[0]}
             currents.append(row)
             cc.append((row["cx"], row["cy"]))
+            ww.append(air_velocity(f).mean(axis=0))
         c_mean = np.mean(cc, axis=0) if cc else (0.0, 0.0)
         if return_identifiers:
             return plain, env
+        if current_start == "wind":
+            kd = drift_factor(cc, ww)
+            coefs.append({"fold": k, "fit": tag.strip(" ()") or "all types", "parameter": "drift_k",
+                          "value": kd, "std": np.nan})
+            return plain.to_model(), env.to_model(), {"k": kd}
         return plain.to_model(), env.to_model(), {"cx": float(c_mean[0]), "cy": float(c_mean[1])}
 
     it = range(n_folds)
@@ -428,7 +480,8 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
                                "input_hold": input_hold, "gate": gate, "current": current,
                                "estimate": list(estimate), "estimate_wind": list(estimate_wind),
                                "rudder_rate": rudder_rate, "by_type_prior": by_type_prior,
-                               "prior_params": dict(prior_params or {}), "wind": getattr(wind, "to_dict", lambda: wind)()})
+                               "prior_params": dict(prior_params or {}), "current_start": current_start,
+                               "wind": getattr(wind, "to_dict", lambda: wind)()})
 
 
 def split_position_error(dt: float, meas: dict, pred: dict) -> dict:
@@ -580,6 +633,8 @@ def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shi
     ap.add_argument("--by-type-prior", default="prior", choices=("prior", "others"))
     ap.add_argument("--set", default="", help="comma-separated name=value replacing values of the lowspeed prior "
                     f"(start and prior of every fit), on top of {PRIOR_PARAMS} (dgammaR=0: the setting before)")
+    ap.add_argument("--current-start", default="mean", choices=("mean", "wind"),
+                    help="start current of held-out predictions: training mean, or wind-driven (round 7)")
     ap.add_argument("--save", help="pickle the EssoStudy here")
     a = ap.parse_args(argv)
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -595,7 +650,7 @@ def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shi
                     fit_every=a.fit_every, estimate=tuple(a.estimate.split(",")) + tuple(x for x in a.estimate_extra.split(",") if x), by_type=not a.no_by_type,
                     calm_water=() if a.no_calm_water else ("mmg",), turning=not a.no_turning,
                     all_types=not a.no_all_types, fixed=not a.no_fixed, progress=False, rudder_rate=rate, wind=wind,
-                    by_type_prior=a.by_type_prior,
+                    by_type_prior=a.by_type_prior, current_start=a.current_start,
                     prior_params={**PRIOR_PARAMS, **{k: float(v) for k, v in (x.split("=") for x in a.set.split(",") if x)}})
     print(f"settings: {res.settings | {'runs': len(res.settings['runs']), 'fold_of': '...'}}; {time.time() - t0:.0f} s")
     with pd.option_context("display.width", 200, "display.max_rows", 500, "display.float_format", "{:.3f}".format):
