@@ -199,3 +199,8 @@ def test_wind_driven_start_current():
     n_all = np.sum((t >= t[i] - 60.0) & (t <= t[i]))
     np.testing.assert_allclose(g.loc[i, ["cx", "cy"]].to_numpy(dtype=float),
                                [-0.02 * n_old / n_all, -0.02 * (n_all - n_old) / n_all], atol=1e-12)
+    from shipid.studies.esso_osaka import ESTIMATE, run_study
+
+    with pytest.raises(ValueError, match="current_start"):
+        run_study(current_start="measured")
+    assert "CrY" in ESTIMATE  # round 7's confirmed candidate T1 is the study default

@@ -18,7 +18,8 @@ Choices (made once, before looking at any held-out error, and the same for every
   manoeuvring model in gusting wind, about a third of the measured accelerations' scatter.  The identifier's
   automatic defaults were not used (on these runs they diverge, as the issue reports);
 * estimated coefficients :data:`ESTIMATE` (hull, thrust ahead and astern, astern side force, rudder
-  lift and its hull interaction aH, tR -- the last two chosen by cross-validation in session 6) and,
+  lift and its hull interaction aH, tR -- the last two chosen by cross-validation in session 6 -- and the
+  cross-flow factor CrY, chosen by cross-validation in session 9) and,
   with wind, :data:`ESTIMATE_WIND`; prior = ``esso-osaka-prior`` with :data:`PRIOR_PARAMS` (the
   side-dependent flow straightening, chosen by cross-validation in session 7) and 100 % prior std;
 * current: constant per run (reset at each run), estimated with prior std 0.05 m/s; in prediction the
@@ -58,7 +59,10 @@ DUPLICATES = ("turn_cut_14-Sep-2020_15_58_08",)
 #: pre-registered rule (round 3, candidate Q3: leave-one-run-out chosen-scope mean of the 30 s medians
 #: 0.2780 against 0.2793 m); with them ``f_alpha``, ``aH`` and ``tR`` are not separately identifiable
 #: (they scatter over the folds; docs/environment.md) -- read them as a group, not one by one.
-ESTIMATE = ("X0F", "X0A", "Yv", "Yr", "Nv", "Nr", "CD", "k0", "CTa0", "YPa", "NPa", "f_alpha", "aH", "tR")
+#: ``CrY`` (the yaw-rate weighting of the cross-flow sway force) was added in session 9 by the pre-registered
+#: round 7 (candidate T1: 8-fold mean 0.28228 against G1's 0.28981, leave-one-run-out chosen-scope mean
+#: 0.26546 against 0.27080; docs/environment.md).
+ESTIMATE = ("X0F", "X0A", "Yv", "Yr", "Nv", "Nr", "CD", "k0", "CTa0", "YPa", "NPa", "f_alpha", "aH", "tR", "CrY")
 ESTIMATE_WIND = ("wX1", "wY1", "wN1", "wN2")
 #: Values replacing the ``esso-osaka-prior`` set's in every ``lowspeed`` fit of the study: the MMG standard
 #: method's side-dependent flow straightening at the KVLCC2's published split (gamma_R 0.640 / 0.395 for
