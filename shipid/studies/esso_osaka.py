@@ -23,7 +23,8 @@ Choices (made once, before looking at any held-out error, and the same for every
   with wind, :data:`ESTIMATE_WIND`; prior = ``esso-osaka-prior`` with :data:`PRIOR_PARAMS` (the
   side-dependent flow straightening, chosen by cross-validation in session 7) and 100 % prior std;
 * current: constant per run (reset at each run), estimated with prior std 0.05 m/s; in prediction the
-  held-out run starts with the training runs' mean current;
+  held-out run starts with the training runs' mean current (a wind-driven start current,
+  ``current_start="wind"``, was round 7's candidate D1: not kept);
 * EKF inputs: the identifier's defaults, first-order hold and a 5-sigma innovation gate -- chosen by 8-fold
   cross-validation against the held inputs without gating the study used before (docs/environment.md);
   a constant current per run was preferred to a random walk by the same cross-validation;
@@ -32,9 +33,10 @@ Choices (made once, before looking at any held-out error, and the same for every
 * options scored as pre-registered candidates and not kept (docs/environment.md, "Session 6"): a rudder
   rate limit (``rudder_rate``), other extra estimated coefficients, 1 Hz fits, the aft wind geometry
   (``wind``), per-type fits on the other types' posterior (``by_type_prior="others"``); in sessions 7 and 8
-  the cross-flow factors ``CrY``, ``CrN``, a wake falling with drift, the side force and yaw moment of the
-  propeller turning ahead (``YPf``, ``NPf``) and a rudder neutral angle (``delta0``) (rounds 4-6,
-  docs/environment.md).  The defaults are the chosen settings.
+  the cross-flow factor ``CrN`` (with ``CrY``), a wake falling with drift, the side force and yaw moment of the
+  propeller turning ahead (``YPf``, ``NPf``) and a rudder neutral angle (``delta0``) (rounds 4-6), in
+  session 9 the wind-driven start current (round 7; docs/environment.md).  The defaults are the chosen
+  settings.
 """
 from __future__ import annotations
 
