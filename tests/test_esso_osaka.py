@@ -57,6 +57,14 @@ def test_study_fast_mode():
                             "lowspeed + wind + current fitted by type"}
     assert (h.n_starts > 0).all()
     assert all(f["success"] for fold in res.fits.values() for f in fold.values())
+    # round 7's floor diagnosis: its "fold mean" case is the study's own protocol, so it reproduces it
+    from shipid.studies.esso_osaka import start_current_floor
+
+    fl = start_current_floor(res).set_index(["start", "run_type", "seconds"]).position_error_median_m
+    env = h[h.model == "lowspeed + wind + current fitted"].set_index(["run_type", "seconds"]).position_error_median_m
+    for (kind, sec), v in env.items():
+        assert fl[("fold mean", kind, sec)] == pytest.approx(v, rel=1e-9)
+        assert np.isfinite([fl[(c, kind, sec)] for c in ("zero", "own (oracle)", "smoothed start")]).all()
     t10 = res.table(10.0)
     # on held-out runs the fitted environment-aware model predicts 10 s better than dead reckoning
     assert t10.loc["lowspeed + wind + current fitted", "random"] < t10.loc["dead reckoning", "random"]
@@ -204,3 +212,22 @@ def test_wind_driven_start_current():
     with pytest.raises(ValueError, match="current_start"):
         run_study(current_start="measured")
     assert "CrY" in ESTIMATE  # round 7's confirmed candidate T1 is the study default
+
+
+def test_current_vs_wind_projects_on_the_mean_air_velocity():
+    import pandas as pd
+
+    from shipid.studies.esso_osaka import EssoStudy, current_vs_wind
+
+    class Run:
+        def __init__(self, name, speed, came_from):
+            self.name, self.run_type = name, "turning"
+            self.data = pd.DataFrame({"wind_speed_true": [speed] * 3, "wind_dir_true": [came_from] * 3})
+
+    # wind from x's direction (blows to -x) at 2 m/s; the current (-0.01, 0.004) m/s (mean of the two folds)
+    # is 0.01 downwind and (wx cy - wy cx)/|w| = -0.004 across
+    cur = pd.DataFrame({"fold": [0, 1], "fit": "all types", "run": "a", "cx": [-0.011, -0.009], "cy": [0.004, 0.004]})
+    st = EssoStudy(horizon=pd.DataFrame(), coefficients=pd.DataFrame(), currents=cur, turning=pd.DataFrame())
+    r = current_vs_wind(st, runs=[Run("a", 2.0, 0.0), Run("b", 1.0, 0.0)]).iloc[0]
+    assert len(current_vs_wind(st, runs=[Run("b", 1.0, 0.0)])) == 0  # no current estimated for it
+    assert (r.c_down, r.c_cross, r.ratio) == pytest.approx((0.01, -0.004, 0.005))

@@ -50,7 +50,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-__all__ = ["run_study", "drift_factor", "with_drift_current", "air_velocity", "EssoStudy", "load_runs", "error_diagnosis", "residual_accelerations", "split_position_error", "PRIOR_PARAMS", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
+__all__ = ["run_study", "current_vs_wind", "start_current_floor", "drift_factor", "with_drift_current", "air_velocity", "EssoStudy", "load_runs", "error_diagnosis", "residual_accelerations", "split_position_error", "PRIOR_PARAMS", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
 
 #: Where the shared data set lives relative to the repository root.
 DATA_DIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "esso_osaka_frt"
@@ -564,6 +564,61 @@ def error_diagnosis(study: "EssoStudy", run_type: str = "zigzag", horizon: float
                          "d_r": float(err["r"][-1]), "r_end": float(meas["r"][-1]), "v_end": float(meas["v"][-1]),
                          "t_v": first(err["v"], 0.02), "t_r": first(err["r"], 0.01), "t_u": first(err["u"], 0.03),
                          "t_psi": first(err["psi"], 5.0)})
+    return pd.DataFrame(rows)
+
+
+def current_vs_wind(study: "EssoStudy", data_dir=DATA_DIR, runs=None) -> pd.DataFrame:
+    """Per run: the current estimated for it by the all-types fits that trained on it (mean over those folds)
+    and its components along (``c_down`` = c.w/|w|) and across (``c_cross`` = (wx cy - wy cx)/|w|) the run's mean
+    air velocity ``wx, wy`` (where the true wind blows to; :func:`air_velocity`), with ``ratio`` = ``c_down`` /
+    |w| (round 7's diagnosis: a current driven down the wind)."""
+    c = study.currents[study.currents.fit == "all types"].groupby("run")[["cx", "cy"]].mean()
+    rows = []
+    for lg in load_runs(data_dir) if runs is None else runs:
+        if lg.name not in c.index:
+            continue
+        w = air_velocity(lg.data).mean(axis=0)
+        cx, cy = c.loc[lg.name]
+        W = float(np.hypot(*w))
+        down, cross = (cx * w[0] + cy * w[1]) / W, (-cx * w[1] + cy * w[0]) / W
+        rows.append({"run": lg.name, "run_type": lg.run_type, "wx": w[0], "wy": w[1], "cx": cx, "cy": cy,
+                     "c_down": down, "c_cross": cross, "ratio": down / W})
+    return pd.DataFrame(rows)
+
+
+def start_current_floor(study: "EssoStudy", model: str = "lowspeed + wind + current fitted", data_dir=DATA_DIR,
+                        horizons=(10.0, 30.0, 60.0)) -> pd.DataFrame:
+    """Median position error [m] per run type and horizon of the fold models (as :func:`run_study`) with the
+    held-out run started from: the fold's mean current (``"fold mean"``, the study's protocol), zero
+    current, the run's **own** current as estimated by the folds that trained on it (``"own (oracle)"``: it
+    uses the run's data, a floor, not a predictor), and the fold mean with the measured start ``u, v, r``
+    replaced by a 2 s quadratic Savitzky-Golay fit (``"smoothed start"``: what the start state's noise costs)."""
+    from scipy.signal import savgol_filter
+
+    from ..validation_horizon import horizon_prediction
+
+    own = study.currents[study.currents.fit == "all types"].groupby("run")[["cx", "cy"]].mean()
+    fold_of, every = study.settings["fold_of"], study.settings["eval_every"]
+    errs: dict = {}
+    for lg in load_runs(data_dir):
+        if lg.name not in fold_of:
+            continue
+        k = fold_of[lg.name]
+        m = study.models[k][model]
+        fm = {n: float(v) for n, v in _fold_current(study, k).items()}
+        sm = lg.data.copy()
+        for s in ("u", "v", "r"):
+            sm[s] = savgol_filter(sm[s].to_numpy(dtype=float), 21, 2)
+        cases = {"fold mean": (lg.data, fm), "zero": (lg.data, {"cx": 0.0, "cy": 0.0}),
+                 "own (oracle)": (lg.data, {n: float(v) for n, v in own.loc[lg.name].items()}),
+                 "smoothed start": (sm, fm)}
+        for case, (d, init) in cases.items():
+            r = horizon_prediction(m, d.iloc[::every].reset_index(drop=True), horizons=horizons,
+                                   start_every=study.settings["start_every"], initial=init)
+            errs.setdefault((case, lg.run_type), []).append(r.position_error)
+    rows = [{"start": case, "run_type": kind, "seconds": float(H),
+             "position_error_median_m": float(np.nanmedian(np.concatenate(v)[:, j]))}
+            for (case, kind), v in errs.items() for j, H in enumerate(horizons)]
     return pd.DataFrame(rows)
 
 
