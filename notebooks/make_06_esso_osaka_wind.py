@@ -64,5 +64,15 @@ if HAVE_DATA:
         display(res.table(H).round(3))
     display(res.currents.round(4))
     display(res.goals().round(3))"""),
+    md("""## 4. Do the estimated currents follow the wind?
+
+Each training run gets its own constant current in the fit. Projected on the run's mean air velocity
+(where the true wind blows to), the estimated current pointed downwind in 27 of the 32 runs in the full
+study (about 0.65 % of the wind speed): partly a wind-driven drift, partly a per-run absorber of
+unmodelled force. A held-out run starts with the training runs' mean current; starting it with a
+wind-driven current instead helped the turning runs and hurt the zigzags (round 7,
+docs/environment.md), so the mean stays."""),
+    code("""if HAVE_DATA:
+    display(es.current_vs_wind(res, folder).round(4))"""),
 ]
 Path(__file__).with_name("06_esso_osaka_wind.ipynb").write_text(nbf.writes(nb), encoding="utf-8")

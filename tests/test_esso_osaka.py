@@ -57,6 +57,14 @@ def test_study_fast_mode():
                             "lowspeed + wind + current fitted by type"}
     assert (h.n_starts > 0).all()
     assert all(f["success"] for fold in res.fits.values() for f in fold.values())
+    # round 7's floor diagnosis: its "fold mean" case is the study's own protocol, so it reproduces it
+    from shipid.studies.esso_osaka import start_current_floor
+
+    fl = start_current_floor(res).set_index(["start", "run_type", "seconds"]).position_error_median_m
+    env = h[h.model == "lowspeed + wind + current fitted"].set_index(["run_type", "seconds"]).position_error_median_m
+    for (kind, sec), v in env.items():
+        assert fl[("fold mean", kind, sec)] == pytest.approx(v, rel=1e-9)
+        assert np.isfinite([fl[(c, kind, sec)] for c in ("zero", "own (oracle)", "smoothed start")]).all()
     t10 = res.table(10.0)
     # on held-out runs the fitted environment-aware model predicts 10 s better than dead reckoning
     assert t10.loc["lowspeed + wind + current fitted", "random"] < t10.loc["dead reckoning", "random"]
@@ -170,3 +178,56 @@ def test_residual_accelerations_recover_a_missing_side_force():
         A = np.vstack([np.concatenate([df["Jv_" + c], df["Jr_" + c]]) for c in ("YPf", "NPf")]).T
         b = np.linalg.lstsq(A, np.concatenate([df.ev, df.er]), rcond=None)[0]
         np.testing.assert_allclose(b, expect, atol=0.03 * 0.002)
+
+
+def test_wind_driven_start_current():
+    """Round 7's candidate D1: the drift factor is the least-squares k of c = k w over runs, and each
+    start's current is k x the mean air velocity of the trailing window (causal)."""
+    import pandas as pd
+
+    from shipid.studies.esso_osaka import air_velocity, drift_factor, with_drift_current
+
+    rng = np.random.default_rng(3)
+    w = rng.normal(0.0, 1.5, (12, 2))
+    assert drift_factor(0.007 * w, w) == pytest.approx(0.007, rel=1e-12)
+    c = 0.007 * w + rng.normal(0.0, 0.001, w.shape)
+    assert abs(drift_factor(c, w) - 0.007) < 3 * 0.001 / np.sqrt(np.sum(w * w))
+    assert drift_factor(np.zeros((2, 2)), np.zeros((2, 2))) == 0.0
+    # wind from north (dir 0) at 2 m/s blows towards -x; from east (+pi/2) towards -y
+    t = np.arange(0.0, 200.0, 0.5)
+    f = pd.DataFrame({"time": t, "wind_speed_true": 2.0, "wind_dir_true": np.where(t < 100.0, 0.0, np.pi / 2)})
+    np.testing.assert_allclose(air_velocity(f)[[0, -1]], [[-2.0, 0.0], [0.0, -2.0]], atol=1e-12)
+    g = with_drift_current(f, 0.01, window=60.0)
+    assert list(f.columns) == ["time", "wind_speed_true", "wind_dir_true"]  # not modified in place
+    np.testing.assert_allclose(g[["cx", "cy"]].to_numpy()[[0, 150, -1]], [[-0.02, 0.0], [-0.02, 0.0], [0.0, -0.02]],
+                               atol=1e-12)
+    # half-way through the change of direction the trailing minute holds both winds equally
+    i = int(np.searchsorted(t, 130.0))
+    n_old = np.sum((t >= t[i] - 60.0) & (t < 100.0))
+    n_all = np.sum((t >= t[i] - 60.0) & (t <= t[i]))
+    np.testing.assert_allclose(g.loc[i, ["cx", "cy"]].to_numpy(dtype=float),
+                               [-0.02 * n_old / n_all, -0.02 * (n_all - n_old) / n_all], atol=1e-12)
+    from shipid.studies.esso_osaka import ESTIMATE, run_study
+
+    with pytest.raises(ValueError, match="current_start"):
+        run_study(current_start="measured")
+    assert "CrY" in ESTIMATE  # round 7's confirmed candidate T1 is the study default
+
+
+def test_current_vs_wind_projects_on_the_mean_air_velocity():
+    import pandas as pd
+
+    from shipid.studies.esso_osaka import EssoStudy, current_vs_wind
+
+    class Run:
+        def __init__(self, name, speed, came_from):
+            self.name, self.run_type = name, "turning"
+            self.data = pd.DataFrame({"wind_speed_true": [speed] * 3, "wind_dir_true": [came_from] * 3})
+
+    # wind from x's direction (blows to -x) at 2 m/s; the current (-0.01, 0.004) m/s (mean of the two folds)
+    # is 0.01 downwind and (wx cy - wy cx)/|w| = -0.004 across
+    cur = pd.DataFrame({"fold": [0, 1], "fit": "all types", "run": "a", "cx": [-0.011, -0.009], "cy": [0.004, 0.004]})
+    st = EssoStudy(horizon=pd.DataFrame(), coefficients=pd.DataFrame(), currents=cur, turning=pd.DataFrame())
+    r = current_vs_wind(st, runs=[Run("a", 2.0, 0.0), Run("b", 1.0, 0.0)]).iloc[0]
+    assert len(current_vs_wind(st, runs=[Run("b", 1.0, 0.0)])) == 0  # no current estimated for it
+    assert (r.c_down, r.c_cross, r.ratio) == pytest.approx((0.01, -0.004, 0.005))

@@ -18,11 +18,13 @@ Choices (made once, before looking at any held-out error, and the same for every
   manoeuvring model in gusting wind, about a third of the measured accelerations' scatter.  The identifier's
   automatic defaults were not used (on these runs they diverge, as the issue reports);
 * estimated coefficients :data:`ESTIMATE` (hull, thrust ahead and astern, astern side force, rudder
-  lift and its hull interaction aH, tR -- the last two chosen by cross-validation in session 6) and,
+  lift and its hull interaction aH, tR -- the last two chosen by cross-validation in session 6 -- and the
+  cross-flow factor CrY, chosen by cross-validation in session 9) and,
   with wind, :data:`ESTIMATE_WIND`; prior = ``esso-osaka-prior`` with :data:`PRIOR_PARAMS` (the
   side-dependent flow straightening, chosen by cross-validation in session 7) and 100 % prior std;
 * current: constant per run (reset at each run), estimated with prior std 0.05 m/s; in prediction the
-  held-out run starts with the training runs' mean current;
+  held-out run starts with the training runs' mean current (a wind-driven start current,
+  ``current_start="wind"``, was round 7's candidate D1: not kept);
 * EKF inputs: the identifier's defaults, first-order hold and a 5-sigma innovation gate -- chosen by 8-fold
   cross-validation against the held inputs without gating the study used before (docs/environment.md);
   a constant current per run was preferred to a random walk by the same cross-validation;
@@ -31,9 +33,10 @@ Choices (made once, before looking at any held-out error, and the same for every
 * options scored as pre-registered candidates and not kept (docs/environment.md, "Session 6"): a rudder
   rate limit (``rudder_rate``), other extra estimated coefficients, 1 Hz fits, the aft wind geometry
   (``wind``), per-type fits on the other types' posterior (``by_type_prior="others"``); in sessions 7 and 8
-  the cross-flow factors ``CrY``, ``CrN``, a wake falling with drift, the side force and yaw moment of the
-  propeller turning ahead (``YPf``, ``NPf``) and a rudder neutral angle (``delta0``) (rounds 4-6,
-  docs/environment.md).  The defaults are the chosen settings.
+  the cross-flow factor ``CrN`` (with ``CrY``), a wake falling with drift, the side force and yaw moment of the
+  propeller turning ahead (``YPf``, ``NPf``) and a rudder neutral angle (``delta0``) (rounds 4-6), in
+  session 9 the wind-driven start current (round 7; docs/environment.md).  The defaults are the chosen
+  settings.
 """
 from __future__ import annotations
 
@@ -47,7 +50,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-__all__ = ["run_study", "EssoStudy", "load_runs", "error_diagnosis", "residual_accelerations", "split_position_error", "PRIOR_PARAMS", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
+__all__ = ["run_study", "current_vs_wind", "start_current_floor", "drift_factor", "with_drift_current", "air_velocity", "EssoStudy", "load_runs", "error_diagnosis", "residual_accelerations", "split_position_error", "PRIOR_PARAMS", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
 
 #: Where the shared data set lives relative to the repository root.
 DATA_DIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "esso_osaka_frt"
@@ -58,7 +61,10 @@ DUPLICATES = ("turn_cut_14-Sep-2020_15_58_08",)
 #: pre-registered rule (round 3, candidate Q3: leave-one-run-out chosen-scope mean of the 30 s medians
 #: 0.2780 against 0.2793 m); with them ``f_alpha``, ``aH`` and ``tR`` are not separately identifiable
 #: (they scatter over the folds; docs/environment.md) -- read them as a group, not one by one.
-ESTIMATE = ("X0F", "X0A", "Yv", "Yr", "Nv", "Nr", "CD", "k0", "CTa0", "YPa", "NPa", "f_alpha", "aH", "tR")
+#: ``CrY`` (the yaw-rate weighting of the cross-flow sway force) was added in session 9 by the pre-registered
+#: round 7 (candidate T1: 8-fold mean 0.28228 against G1's 0.28981, leave-one-run-out chosen-scope mean
+#: 0.26546 against 0.27080; docs/environment.md).
+ESTIMATE = ("X0F", "X0A", "Yv", "Yr", "Nv", "Nr", "CD", "k0", "CTa0", "YPa", "NPa", "f_alpha", "aH", "tR", "CrY")
 ESTIMATE_WIND = ("wX1", "wY1", "wN1", "wN2")
 #: Values replacing the ``esso-osaka-prior`` set's in every ``lowspeed`` fit of the study: the MMG standard
 #: method's side-dependent flow straightening at the KVLCC2's published split (gamma_R 0.640 / 0.395 for
@@ -190,6 +196,42 @@ class EssoStudy:
         return "\n".join(out)
 
 
+#: Trailing window [s] of the measured true wind behind a held-out start's wind-driven current
+#: (``current_start="wind"``; fixed with the round-7 candidate list, docs/environment.md).
+DRIFT_WINDOW_S = 60.0
+
+
+def air_velocity(frame) -> np.ndarray:
+    """``(N, 2)`` earth-fixed velocity of the air [m/s] (where the true wind blows *to*) of a frame with
+    ``wind_speed_true`` and ``wind_dir_true`` (direction it comes from, measured like the heading)."""
+    ws = frame["wind_speed_true"].to_numpy(dtype=float)
+    wd = frame["wind_dir_true"].to_numpy(dtype=float)
+    return np.column_stack([-ws * np.cos(wd), -ws * np.sin(wd)])
+
+
+def drift_factor(currents, winds) -> float:
+    """Least-squares ``k`` of ``c = k w`` over runs: per-run currents ``(n, 2)`` [m/s] on the runs' mean air
+    velocities ``(n, 2)`` (a current driven down the wind, proportional to it, no intercept)."""
+    c, w = np.asarray(currents, dtype=float), np.asarray(winds, dtype=float)
+    den = float(np.sum(w * w))
+    return float(np.sum(c * w) / den) if den > 0 else 0.0
+
+
+def with_drift_current(frame: pd.DataFrame, k: float, window: float = DRIFT_WINDOW_S) -> pd.DataFrame:
+    """``frame`` with columns ``cx, cy`` = ``k`` x the mean air velocity over the trailing ``window`` s up
+    to each sample (causal; shorter at the run's start): the start current of a prediction from each
+    sample when the current is taken to be wind-driven (:func:`drift_factor`)."""
+    t = frame["time"].to_numpy(dtype=float)
+    w = air_velocity(frame)
+    cs = np.vstack([np.zeros((1, 2)), np.cumsum(w, axis=0)])
+    i = np.arange(t.size)
+    j0 = np.searchsorted(t, t - window, side="left")
+    mean = (cs[i + 1] - cs[j0]) / (i + 1 - j0)[:, None]
+    out = frame.copy()
+    out["cx"], out["cy"] = k * mean[:, 0], k * mean[:, 1]
+    return out
+
+
 def _fit(model, frames, estimate, substeps, input_hold="foh", gate=5.0, prior_std=1.0):
     from ..identify import EKFIdentifier
 
@@ -263,7 +305,7 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
               current: str = "constant", estimate=ESTIMATE, estimate_wind=ESTIMATE_WIND, substeps: int = 2,
               fixed: bool = True, turning: bool = True, all_types: bool = True, progress: bool = True,
               rudder_rate: float | None = None, wind="esso-osaka-3m", by_type_prior: str = "prior",
-              prior_params: dict | None = PRIOR_PARAMS) -> EssoStudy:
+              prior_params: dict | None = PRIOR_PARAMS, current_start: str = "mean") -> EssoStudy:
     """Fit and cross-validate on the Esso Osaka runs (see the module docstring for every choice).
 
     Parameters
@@ -299,11 +341,18 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
     wind : WindForce or "esso-osaka-3m"
         Above-water geometry of the wind force (the prior of the estimated components and the value of the
         others).
+    current_start : {"mean", "wind"}
+        Start current of a held-out run's predictions: the training runs' mean current (default), or
+        wind-driven, ``k`` x the mean air velocity of the trailing :data:`DRIFT_WINDOW_S` before each start,
+        ``k`` fitted to the training runs' estimated currents on their mean air velocities
+        (:func:`drift_factor`, :func:`with_drift_current`; round 7, docs/environment.md).
     """
     from ..environment import with_environment
     from ..models import get_model
     from ..validation_horizon import dead_reckoning, horizon_prediction
 
+    if current_start not in ("mean", "wind"):
+        raise ValueError(f"current_start must be 'mean' or 'wind', got {current_start!r}")
     runs = load_runs(data_dir, types, max_runs, rudder_rate=rudder_rate)
     fold_of = assign_folds(runs, folds)
     n_folds = max(fold_of.values()) + 1
@@ -322,7 +371,10 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
     hold = dict(input_hold=input_hold, gate=gate)
 
     def record(model_name, lg, model, initial=None):
-        r = horizon_prediction(model, _frame(lg, eval_every), horizons=horizons, start_every=start_every,
+        frame = _frame(lg, eval_every)
+        if initial is not None and "k" in initial:   # wind-driven start current, per start
+            frame, initial = with_drift_current(frame, initial["k"]), None
+        r = horizon_prediction(model, frame, horizons=horizons, start_every=start_every,
                                initial=initial, name=lg.name)
         errs.setdefault((model_name, lg.run_type), []).append(r)
 
@@ -351,15 +403,21 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
         for name in s.index:
             coefs.append({"fold": k, "fit": tag.strip(" ()") or "all types", "parameter": name,
                           "value": s.loc[name, "value"], "std": s.loc[name, "std"]})
-        cc = []
+        cc, ww = [], []
         for st, f in zip(env.states_, frames):
             row = {"fold": k, "fit": tag.strip(" ()") or "all types", "run": f.attrs["name"],
                    "cx": st.cx.iloc[0], "cx_std": st.cx_std.iloc[0], "cy": st.cy.iloc[0], "cy_std": st.cy_std.iloc[0]}
             currents.append(row)
             cc.append((row["cx"], row["cy"]))
+            ww.append(air_velocity(f).mean(axis=0))
         c_mean = np.mean(cc, axis=0) if cc else (0.0, 0.0)
         if return_identifiers:
             return plain, env
+        if current_start == "wind":
+            kd = drift_factor(cc, ww)
+            coefs.append({"fold": k, "fit": tag.strip(" ()") or "all types", "parameter": "drift_k",
+                          "value": kd, "std": np.nan})
+            return plain.to_model(), env.to_model(), {"k": kd}
         return plain.to_model(), env.to_model(), {"cx": float(c_mean[0]), "cy": float(c_mean[1])}
 
     it = range(n_folds)
@@ -428,7 +486,8 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
                                "input_hold": input_hold, "gate": gate, "current": current,
                                "estimate": list(estimate), "estimate_wind": list(estimate_wind),
                                "rudder_rate": rudder_rate, "by_type_prior": by_type_prior,
-                               "prior_params": dict(prior_params or {}), "wind": getattr(wind, "to_dict", lambda: wind)()})
+                               "prior_params": dict(prior_params or {}), "current_start": current_start,
+                               "wind": getattr(wind, "to_dict", lambda: wind)()})
 
 
 def split_position_error(dt: float, meas: dict, pred: dict) -> dict:
@@ -508,6 +567,61 @@ def error_diagnosis(study: "EssoStudy", run_type: str = "zigzag", horizon: float
     return pd.DataFrame(rows)
 
 
+def current_vs_wind(study: "EssoStudy", data_dir=DATA_DIR, runs=None) -> pd.DataFrame:
+    """Per run: the current estimated for it by the all-types fits that trained on it (mean over those folds)
+    and its components along (``c_down`` = c.w/|w|) and across (``c_cross`` = (wx cy - wy cx)/|w|) the run's mean
+    air velocity ``wx, wy`` (where the true wind blows to; :func:`air_velocity`), with ``ratio`` = ``c_down`` /
+    |w| (round 7's diagnosis: a current driven down the wind)."""
+    c = study.currents[study.currents.fit == "all types"].groupby("run")[["cx", "cy"]].mean()
+    rows = []
+    for lg in load_runs(data_dir) if runs is None else runs:
+        if lg.name not in c.index:
+            continue
+        w = air_velocity(lg.data).mean(axis=0)
+        cx, cy = c.loc[lg.name]
+        W = float(np.hypot(*w))
+        down, cross = (cx * w[0] + cy * w[1]) / W, (-cx * w[1] + cy * w[0]) / W
+        rows.append({"run": lg.name, "run_type": lg.run_type, "wx": w[0], "wy": w[1], "cx": cx, "cy": cy,
+                     "c_down": down, "c_cross": cross, "ratio": down / W})
+    return pd.DataFrame(rows)
+
+
+def start_current_floor(study: "EssoStudy", model: str = "lowspeed + wind + current fitted", data_dir=DATA_DIR,
+                        horizons=(10.0, 30.0, 60.0)) -> pd.DataFrame:
+    """Median position error [m] per run type and horizon of the fold models (as :func:`run_study`) with the
+    held-out run started from: the fold's mean current (``"fold mean"``, the study's protocol), zero
+    current, the run's **own** current as estimated by the folds that trained on it (``"own (oracle)"``: it
+    uses the run's data, a floor, not a predictor), and the fold mean with the measured start ``u, v, r``
+    replaced by a 2 s quadratic Savitzky-Golay fit (``"smoothed start"``: what the start state's noise costs)."""
+    from scipy.signal import savgol_filter
+
+    from ..validation_horizon import horizon_prediction
+
+    own = study.currents[study.currents.fit == "all types"].groupby("run")[["cx", "cy"]].mean()
+    fold_of, every = study.settings["fold_of"], study.settings["eval_every"]
+    errs: dict = {}
+    for lg in load_runs(data_dir):
+        if lg.name not in fold_of:
+            continue
+        k = fold_of[lg.name]
+        m = study.models[k][model]
+        fm = {n: float(v) for n, v in _fold_current(study, k).items()}
+        sm = lg.data.copy()
+        for s in ("u", "v", "r"):
+            sm[s] = savgol_filter(sm[s].to_numpy(dtype=float), 21, 2)
+        cases = {"fold mean": (lg.data, fm), "zero": (lg.data, {"cx": 0.0, "cy": 0.0}),
+                 "own (oracle)": (lg.data, {n: float(v) for n, v in own.loc[lg.name].items()}),
+                 "smoothed start": (sm, fm)}
+        for case, (d, init) in cases.items():
+            r = horizon_prediction(m, d.iloc[::every].reset_index(drop=True), horizons=horizons,
+                                   start_every=study.settings["start_every"], initial=init)
+            errs.setdefault((case, lg.run_type), []).append(r.position_error)
+    rows = [{"start": case, "run_type": kind, "seconds": float(H),
+             "position_error_median_m": float(np.nanmedian(np.concatenate(v)[:, j]))}
+            for (case, kind), v in errs.items() for j, H in enumerate(horizons)]
+    return pd.DataFrame(rows)
+
+
 def residual_accelerations(study: "EssoStudy", candidates=("YPf", "NPf", "delta0", "CrY", "CrN"),
                            model: str = "lowspeed + wind + current fitted", data_dir=DATA_DIR,
                            every: int = 2, window: int = 21, runs=None) -> pd.DataFrame:
@@ -580,6 +694,8 @@ def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shi
     ap.add_argument("--by-type-prior", default="prior", choices=("prior", "others"))
     ap.add_argument("--set", default="", help="comma-separated name=value replacing values of the lowspeed prior "
                     f"(start and prior of every fit), on top of {PRIOR_PARAMS} (dgammaR=0: the setting before)")
+    ap.add_argument("--current-start", default="mean", choices=("mean", "wind"),
+                    help="start current of held-out predictions: training mean, or wind-driven (round 7)")
     ap.add_argument("--save", help="pickle the EssoStudy here")
     a = ap.parse_args(argv)
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -595,7 +711,7 @@ def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shi
                     fit_every=a.fit_every, estimate=tuple(a.estimate.split(",")) + tuple(x for x in a.estimate_extra.split(",") if x), by_type=not a.no_by_type,
                     calm_water=() if a.no_calm_water else ("mmg",), turning=not a.no_turning,
                     all_types=not a.no_all_types, fixed=not a.no_fixed, progress=False, rudder_rate=rate, wind=wind,
-                    by_type_prior=a.by_type_prior,
+                    by_type_prior=a.by_type_prior, current_start=a.current_start,
                     prior_params={**PRIOR_PARAMS, **{k: float(v) for k, v in (x.split("=") for x in a.set.split(",") if x)}})
     print(f"settings: {res.settings | {'runs': len(res.settings['runs']), 'fold_of': '...'}}; {time.time() - t0:.0f} s")
     with pd.option_context("display.width", 200, "display.max_rows", 500, "display.float_format", "{:.3f}".format):
