@@ -35,8 +35,10 @@ Choices (made once, before looking at any held-out error, and the same for every
   (``wind``), per-type fits on the other types' posterior (``by_type_prior="others"``); in sessions 7 and 8
   the cross-flow factor ``CrN`` (with ``CrY``), a wake falling with drift, the side force and yaw moment of the
   propeller turning ahead (``YPf``, ``NPf``) and a rudder neutral angle (``delta0``) (rounds 4-6), in
-  session 9 the wind-driven start current (round 7; docs/environment.md).  The defaults are the chosen
-  settings.
+  session 9 the wind-driven start current (round 7; docs/environment.md), in session 10 rudder stall at
+  24.1 deg (``lowspeed``'s ``kstall``), a side-dependent rudder normal force (``dfalpha``) and the wake's
+  side-dependent fall with drift estimated (``C2p``, ``C2m``) (round 8: 8-fold means 0.3017, 0.2873, 0.2964
+  against 0.2823; docs/environment.md).  The defaults are the chosen settings.
 """
 from __future__ import annotations
 
