@@ -231,3 +231,66 @@ def test_current_vs_wind_projects_on_the_mean_air_velocity():
     r = current_vs_wind(st, runs=[Run("a", 2.0, 0.0), Run("b", 1.0, 0.0)]).iloc[0]
     assert len(current_vs_wind(st, runs=[Run("b", 1.0, 0.0)])) == 0  # no current estimated for it
     assert (r.c_down, r.c_cross, r.ratio) == pytest.approx((0.01, -0.004, 0.005))
+
+
+def test_anemometer_check_recovers_a_sensor_offset_and_gain():
+    """Round 8's data check (docs/environment.md, session 10): a synthetic turning run whose apparent wind is
+    measured by an anemometer turned by 20 deg with gain 0.9, the logged true wind converted from it with the
+    ship's motion as the logs do; the per-run coefficient of the logged air velocity on the ship's velocity is
+    1 - 0.9 e^{i 20 deg}, and 0 for a correct sensor."""
+    from types import SimpleNamespace
+
+    import pandas as pd
+
+    from shipid.environment.wind import true_wind_from_apparent
+    from shipid.studies.esso_osaka import anemometer_check
+
+    rng = np.random.default_rng(8)
+    t = np.arange(0.0, 600.0, 0.1)
+    psi = 0.05 * t
+    u, v = np.full(t.size, 0.3), np.full(t.size, -0.02)
+    W = (-1.2 + 0.5j) + 0.02 * (rng.normal(size=t.size) + 1j * rng.normal(size=t.size))  # air velocity, earth
+    Vb = u + 1j * v
+    A = (W - Vb * np.exp(1j * psi)) * np.exp(-1j * psi)             # apparent air velocity, body axes
+    runs = []
+    for name, g in (("offset", 0.9 * np.exp(1j * np.radians(20.0))), ("correct", 1.0)):
+        Am = g * A
+        ws, wd = true_wind_from_apparent(np.abs(Am), np.angle(-Am), psi, u, v)
+        data = pd.DataFrame({"time": t, "psi": psi, "u": u, "v": v, "wind_speed_true": ws, "wind_dir_true": wd})
+        runs.append(SimpleNamespace(name=name, run_type="turning", data=data))
+    a = anemometer_check(runs=runs).set_index("run")
+    m = 1.0 - 0.9 * np.exp(1j * np.radians(20.0))
+    assert a.loc["offset", "m_re"] == pytest.approx(m.real, abs=0.01)
+    assert a.loc["offset", "m_im"] == pytest.approx(m.imag, abs=0.01)
+    assert abs(a.loc["correct", "m_re"]) < 0.01 and abs(a.loc["correct", "m_im"]) < 0.01
+
+
+def test_path_relative_error_of_a_perfect_model_is_zero_and_the_path_is_measured():
+    """path_relative_error (round 8): a run simulated by the model that predicts it has no error (below 0.1 %
+    of the path: integration steps), and the path is the distance the logged positions cover in the horizon."""
+    from types import SimpleNamespace
+
+    import pandas as pd
+
+    from shipid.models import get_model
+    from shipid.simulate import simulate
+    from shipid.studies.esso_osaka import EssoStudy, path_relative_error
+
+    m = get_model("lowspeed")
+    t = np.arange(0.0, 80.0, 0.1)
+    U = np.column_stack([np.radians(10.0) * np.sin(2 * np.pi * t / 40.0), np.full(t.size, 10.0)])
+    X = np.asarray(simulate(m, np.array([0, 0, 0, 0.3, 0, 0]), t, U).x)
+    data = pd.DataFrame({"time": t, "x": X[:, 0], "y": X[:, 1], "psi": np.angle(np.exp(1j * X[:, 2])), "u": X[:, 3],
+                         "v": X[:, 4], "r": X[:, 5], "delta": U[:, 0], "n": U[:, 1]})
+    run = SimpleNamespace(name="synthetic", run_type="zigzag", data=data)
+    study = EssoStudy(horizon=pd.DataFrame(), coefficients=pd.DataFrame(),
+                      currents=pd.DataFrame({"fold": [0], "fit": ["all types"], "cx": [0.0], "cy": [0.0]}),
+                      turning=pd.DataFrame(), models={0: {"m": m}}, settings={"fold_of": {"synthetic": 0}, "eval_every": 2})
+    p = path_relative_error(study, model="m", runs=[run])
+    assert len(p) >= 9 and (p.n == 10.0).all()
+    assert (p.error / p.path).max() < 1e-3    # the 0.2 s RK4 steps of the prediction against simulate()'s
+    i = p.index[0]
+    d = data.iloc[::2]
+    seg = d[d.time <= 30.0 + 1e-9]
+    assert p.loc[i, "path"] == pytest.approx(np.sum(np.hypot(np.diff(seg.x), np.diff(seg.y))), rel=1e-9)
+    assert 0.25 * 30.0 < p.loc[i, "path"] < 0.35 * 30.0

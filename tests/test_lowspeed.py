@@ -29,7 +29,7 @@ def test_registered_with_esso_particulars(ls):
 #: The MMG standard method's side-dependent terms at the KVLCC2's published values (Yasukawa & Yoshimura
 #: 2015, Table 2): gamma_R 0.640 / 0.395 for beta_R > 0 / < 0 and the wake falling with beta_P.
 MMG_ASYMMETRIC = {"dgammaR": 0.1225, "C1": 2.0, "C2p": 1.6, "C2m": 1.1, "xP": -0.48,
-                  "YPf": 0.002, "NPf": -0.001, "delta0": 0.03}
+                  "YPf": 0.002, "NPf": -0.001, "delta0": 0.03, "dfalpha": 0.15, "kstall": 1.0 / np.sin(np.radians(24.0))}
 
 
 @pytest.mark.parametrize("terms", ["prior", "asymmetric"])
@@ -134,6 +134,36 @@ def test_ahead_propeller_side_force_and_rudder_neutral_angle(ls):
     for n, u in ((10.0, 0.3), (-8.0, -0.1)):
         np.testing.assert_allclose(md.rhs(0.0, [0, 0, 0, u, 0.02, 0.01], [0.13, n]),
                                    ls.rhs(0.0, [0, 0, 0, u, 0.02, 0.01], [0.10, n]), rtol=1e-12, atol=1e-15)
+
+
+def test_side_dependent_rudder_force_and_stall(ls):
+    """dfalpha (F_N + dfalpha |F_N|) and kstall (sin alpha_R levelling off at 1/kstall): defaults off and
+    exact, the formulas when on, and a force that stays finite at rest."""
+    p = ls.params_series()
+    assert p["dfalpha"] == p["kstall"] == 0.0
+    P = ls.particulars
+    x = [0, 0, 0, 0.3, 0.02, -0.01]
+    for d in (0.35, -0.35, 0.05):
+        f0 = ls.forces(x, [d, 12.0])
+        sa = f0["u_R"] * np.sin(d) - f0["v_R"] * np.cos(d)
+        UR = np.hypot(f0["u_R"], f0["v_R"])
+        assert f0["F_N"] == pytest.approx(0.5 * P.rho * P.A_R * p["f_alpha"] * UR * sa, rel=1e-12)
+        fs = ls.with_params({"dfalpha": 0.2}).forces(x, [d, 12.0])
+        assert fs["F_N"] == pytest.approx(f0["F_N"] * (1.2 if f0["F_N"] > 0 else 0.8), rel=1e-12)
+        k = 1.0 / np.sin(np.radians(24.0))
+        fk = ls.with_params({"kstall": k}).forces(x, [d, 12.0])
+        s = sa / UR
+        assert fk["F_N"] == pytest.approx(f0["F_N"] / (1.0 + (k * s) ** 8) ** 0.125, rel=1e-12)
+        for key in ("X_H", "Y_H", "N_H", "X_P", "Y_P", "N_P", "T", "u_R", "v_R"):
+            assert fs[key] == f0[key] and fk[key] == f0[key]
+    # the plateau: beyond the stall angle the normal force hardly grows, below it hardly changes
+    k = 1.0 / np.sin(np.radians(24.0))
+    fn = [ls.with_params({"kstall": k}).forces([0, 0, 0, 0.3, 0, 0], [np.radians(a), 12.0])["F_N"] for a in (5, 24, 40)]
+    fn0 = [ls.forces([0, 0, 0, 0.3, 0, 0], [np.radians(a), 12.0])["F_N"] for a in (5, 24, 40)]
+    assert fn[0] == pytest.approx(fn0[0], rel=1e-4)
+    assert fn[2] / fn[1] < 1.1 < fn0[2] / fn0[1]
+    at_rest = ls.with_params({"kstall": k, "dfalpha": 0.2}).rhs(0.0, [0, 0, 0, 0, 0, 0], [0.3, 0.0])
+    assert np.all(np.isfinite(at_rest))
 
 
 def test_rudder_force_reverses_in_reversed_flow(ls):

@@ -31,13 +31,14 @@ PARAM_NAMES = (
     "tR", "aH", "xH", "gammaR", "lR", "eps", "kappa", "f_alpha",
     "dgammaR", "xP", "C1", "C2p", "C2m",
     "YPf", "NPf", "delta0",
+    "dfalpha", "kstall",
 )
 
 #: Names of the values returned by :func:`forces`, in order.
 FORCE_KEYS = ("X_H", "Y_H", "N_H", "X_P", "Y_P", "N_P", "X_R", "Y_R", "N_R", "T", "F_N", "u_R", "v_R", "U")
 
 #: Number of constants of :func:`derived` read by :func:`forces` (the last 7 are eq. (4)'s, as in ``mmg``).
-N_FORCE_CONSTS = 43
+N_FORCE_CONSTS = 45
 
 # Gauss-Legendre nodes and weights of the cross-flow integrals on [-1/2, 1/2] (24 nodes)
 _s, _w = np.polynomial.legendre.leggauss(24)
@@ -75,7 +76,7 @@ def derived(p, P):
     """Constants ``c`` of the equations for one parameter set (everything that depends only on the
     parameters and the particulars).
 
-    ``p``: the 39 parameters in :data:`PARAM_NAMES` order (floats, arrays, complex);
+    ``p``: the 41 parameters in :data:`PARAM_NAMES` order (floats, arrays, complex);
     ``P``: the particulars ``(lpp, draught, rho, D_p, H_R, A_R, x_R, displacement, x_G, kzz)`` (as
     ``mmg``).  The first :data:`N_FORCE_CONSTS` are those of :func:`forces`, the last 7 those of eq. (4)
     (``1/Mx, Mx, My, B, C/det, B/det, My/det``, the layout of :func:`shipid.models._mmg_equations.derived`,
@@ -83,7 +84,8 @@ def derived(p, P):
     """
     L, d, rho, Dp, H_R, A_R, x_R, disp, x_G, kzz = P[0], P[1], P[2], P[3], P[4], P[5], P[6], P[7], P[8], P[9]
     (X0F, X0A, Xvv, Xvr, Yv, Yr, Nv, Nr, CD, CrY, CrN, mx, my, Jz, tP, wP0, k0, k1, k2, CTa0, CTa1, YPa, NPa,
-     tR, aH, xH, gammaR, lR, eps, kappa, f_alpha, dgammaR, xP, C1, C2p, C2m, YPf, NPf, delta0) = p[:39]
+     tR, aH, xH, gammaR, lR, eps, kappa, f_alpha, dgammaR, xP, C1, C2p, C2m, YPf, NPf, delta0,
+     dfalpha, kstall) = p[:41]
     q = 0.5 * rho * L * d
     m = rho * disp
     q2 = 0.5 * rho * L * L * d
@@ -101,6 +103,7 @@ def derived(p, P):
         0.5 * rho * A_R * f_alpha, -(1.0 - tR), -(1.0 + aH), -(x_R + aH * xH) * L,       # rudder forces
         dgammaR, xP * L, -C1, 0.5 * (C2p + C2m) - 1.0, 0.5 * (C2p - C2m),               # MMG eqs. (16), (26)
         q * Dp * Dp * YPf, q * L * Dp * Dp * NPf, delta0,                                # ahead side force, neutral angle
+        dfalpha, kstall ** 8,                                                            # side-dependent lift, stall
         1.0 / Mx, Mx, My, B, C / det, B / det, My / det,                                 # eq. (4)
     )
 
@@ -110,7 +113,7 @@ def forces(uu, v, r, delta, n, c):
     (L, q, qL, hX0F, hX0A, Xvv, Xvr, Yv, Yr, Nv, Nr, CD, CrYL, CrNL,
      wP0, rhoD2, k0D2, k1D, k2, CTa0D2, CTa1D, cYP, cNP, tP,
      c8, kappa, eta, one_m_eta, eps, gammaR, lRL, cF, cXR, cYR, cNR,
-     dgammaR, xPL, mC1, c2A, c2D, cYPf, cNPf, delta0) = c[:N_FORCE_CONSTS]
+     dgammaR, xPL, mC1, c2A, c2D, cYPf, cNPf, delta0, dfalpha, kS8) = c[:N_FORCE_CONSTS]
     U = sqrt(uu * uu + v * v)
     au = absf(uu)
     # hull: resistance blended ahead/astern, linear terms, Kose's cross-flow integrals (Gauss-Legendre)
@@ -152,7 +155,14 @@ def forces(uu, v, r, delta, n, c):
     UR = sqrt(uR * uR + vR * vR)
     # rudder neutral angle delta0: the rudder acts as if at delta - delta0 (default 0)
     sd, cd = sin(delta - delta0), cos(delta - delta0)
-    FN = cF * UR * (uR * sd - vR * cd)
+    sa = uR * sd - vR * cd          # U_R sin(alpha_R)
+    # stall (default off, kstall = 0): sin(alpha_R) levels off at 1/kstall = sin(alpha_stall), smoothly,
+    # sin a / (1 + (kstall sin a)^8)^(1/8); the 1e-12 m^2/s^2 keeps it defined at rest (U_R = 0)
+    gS = (1.0 + kS8 * (sa * sa / (UR * UR + 1e-12)) ** 4) ** -0.125
+    FN0 = cF * UR * sa * gS
+    # side-dependent normal force (default off): f_alpha (1 + dfalpha) for F_N > 0 (rudder to starboard
+    # in flow from ahead), f_alpha (1 - dfalpha) for F_N < 0
+    FN = FN0 + dfalpha * absf(FN0)
     return (XH, YH, NH, XP, YP, NP, cXR * FN * sd, cYR * FN * cd, cNR * FN * cd, T, FN, uR, vR, U)
 
 

@@ -56,6 +56,17 @@ astern propeller sends its race forward, away from the rudder.  ``X_R = -(1 - tR
 single-screw ship runs straight is not zero, because the propeller race meets the rudder asymmetrically
 (and a logged angle may carry an offset); the two cannot be told apart from free-running data.
 
+Two more rudder terms, both off by default (``dfalpha = kstall = 0`` reproduce the equations without
+them exactly): a **side-dependent normal force**, ``F_N + dfalpha |F_N|`` (``f_alpha (1 + dfalpha)`` when
+the force pushes to port, i.e. ``F_N > 0``, rudder to starboard in flow from ahead, ``f_alpha (1 -
+dfalpha)`` the other way: the propeller race of a single screw meets the two sides of the rudder
+differently), and **stall**: ``sin alpha_R`` in ``F_N = 1/2 rho A_R f_alpha U_R^2 sin alpha_R`` is
+replaced by ``sin alpha_R / (1 + (kstall sin alpha_R)^8)^(1/8)``, a smooth plateau at ``1/kstall =
+sin alpha_stall``.  A 3 m model's rudder works at a chord Reynolds number of a few 1e4, where a NACA 0012
+section stalls near 10-11 deg (Sheldahl & Klimas 1981, SAND80-2114: the drag jumps between 10 and 11 deg
+at Re 1.6e5, the lowest they tabulate; 14-16 deg at 3.6e5-1e6); with Prandtl's lifting line a rudder of
+aspect ratio Lambda reaches a section angle alpha_2D at the geometric angle alpha_2D (1 + 2/Lambda).
+
 Motion: eq. (4) of Yasukawa & Yoshimura (2015), as in ``mmg``.  All coefficients are
 non-dimensional with ``1/2 rho L d`` (forces, per velocity squared) and ``1/2 rho L^2 d`` (moments);
 added masses as in ``mmg``; the model is Froude-scalable (``lpp=``, :meth:`LowSpeedModel.scaled`).

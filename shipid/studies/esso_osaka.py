@@ -35,8 +35,10 @@ Choices (made once, before looking at any held-out error, and the same for every
   (``wind``), per-type fits on the other types' posterior (``by_type_prior="others"``); in sessions 7 and 8
   the cross-flow factor ``CrN`` (with ``CrY``), a wake falling with drift, the side force and yaw moment of the
   propeller turning ahead (``YPf``, ``NPf``) and a rudder neutral angle (``delta0``) (rounds 4-6), in
-  session 9 the wind-driven start current (round 7; docs/environment.md).  The defaults are the chosen
-  settings.
+  session 9 the wind-driven start current (round 7; docs/environment.md), in session 10 rudder stall at
+  24.1 deg (``lowspeed``'s ``kstall``), a side-dependent rudder normal force (``dfalpha``) and the wake's
+  side-dependent fall with drift estimated (``C2p``, ``C2m``) (round 8: 8-fold means 0.3017, 0.2873, 0.2964
+  against 0.2823; docs/environment.md).  The defaults are the chosen settings.
 """
 from __future__ import annotations
 
@@ -50,7 +52,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-__all__ = ["run_study", "current_vs_wind", "start_current_floor", "drift_factor", "with_drift_current", "air_velocity", "EssoStudy", "load_runs", "error_diagnosis", "residual_accelerations", "split_position_error", "PRIOR_PARAMS", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
+__all__ = ["run_study", "anemometer_check", "path_relative_error", "current_vs_wind", "start_current_floor", "drift_factor", "with_drift_current", "air_velocity", "EssoStudy", "load_runs", "error_diagnosis", "residual_accelerations", "split_position_error", "PRIOR_PARAMS", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
 
 #: Where the shared data set lives relative to the repository root.
 DATA_DIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "esso_osaka_frt"
@@ -619,6 +621,61 @@ def start_current_floor(study: "EssoStudy", model: str = "lowspeed + wind + curr
     rows = [{"start": case, "run_type": kind, "seconds": float(H),
              "position_error_median_m": float(np.nanmedian(np.concatenate(v)[:, j]))}
             for (case, kind), v in errs.items() for j, H in enumerate(horizons)]
+    return pd.DataFrame(rows)
+
+
+def anemometer_check(data_dir=DATA_DIR, runs=None) -> pd.DataFrame:
+    """A physics check of the logged wind against the ship's own motion (round 8, docs/environment.md).
+
+    The logged true wind is the apparent wind converted with the logged ``psi, u, v``.  If the anemometer
+    had a constant direction offset ``phi0`` or gain ``s`` (``s e^{i phi0}`` times the apparent air velocity,
+    complex, body axes), the logged true air velocity ``W_log`` (earth, complex, where the wind blows to)
+    would be ``s e^{i phi0} W + (1 - s e^{i phi0}) V``, ``V`` the ship's velocity over ground: a term that
+    follows the ship.  Per run, the complex least-squares coefficient ``m`` of ``W_log`` on ``V`` (both less
+    their means) estimates ``1 - s e^{i phi0}`` (0 for a correct sensor; a 10 deg offset gives ``|m|`` 0.17)
+    if the real wind does not follow the ship.  Columns: ``run``, ``run_type``, ``m_re``, ``m_im``,
+    ``wind_std``, ``speed_std`` [m/s] (the scatter of ``W_log`` and of ``V``)."""
+    rows = []
+    for lg in load_runs(data_dir) if runs is None else runs:
+        d = lg.data
+        w = air_velocity(d) @ np.array([1.0, 1j])
+        V = (d.u.to_numpy(dtype=float) + 1j * d.v.to_numpy(dtype=float)) * np.exp(1j * d.psi.to_numpy(dtype=float))
+        w, V = w - w.mean(), V - V.mean()
+        m = np.vdot(V, w) / np.vdot(V, V)
+        rows.append({"run": lg.name, "run_type": lg.run_type, "m_re": float(m.real), "m_im": float(m.imag),
+                     "wind_std": float(np.sqrt(np.mean(np.abs(w) ** 2))), "speed_std": float(np.sqrt(np.mean(np.abs(V) ** 2)))})
+    return pd.DataFrame(rows)
+
+
+def path_relative_error(study: "EssoStudy", model: str = "lowspeed + wind + current fitted", horizon: float = 30.0,
+                        data_dir=DATA_DIR, runs=None, start_every: float = 5.0) -> pd.DataFrame:
+    """Per start of every held-out run: the ``horizon`` s position error of the fold model that did not see
+    the run (all-types fit, started with that fit's mean current, as :func:`run_study`) beside the path the
+    ship measured in that time (sum of the distances between the samples) and the median propeller rate.
+    Columns ``run``, ``run_type``, ``error``, ``path`` [m], ``n`` [rps]; ``error / path`` is the error per
+    metre sailed, which compares run types of different speeds (round 8, docs/environment.md)."""
+    from ..validation_horizon import horizon_prediction
+
+    fold_of = study.settings["fold_of"]
+    every = study.settings["eval_every"]
+    rows = []
+    for lg in load_runs(data_dir) if runs is None else runs:
+        k = fold_of[lg.name]
+        m = study.models[k][model]
+        cur = _fold_current(study, k)
+        d = _frame(lg, every)
+        init = {"cx": float(cur.cx), "cy": float(cur.cy)} if "cx" in m.state_names else None
+        r = horizon_prediction(m, d, horizons=(horizon,), start_every=start_every, initial=init)
+        t = d["time"].to_numpy(dtype=float)
+        x, y, n = d.x.to_numpy(dtype=float), d.y.to_numpy(dtype=float), d.n.to_numpy(dtype=float)
+        s = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(x), np.diff(y)))])
+        for i, t0 in enumerate(r.start_times):
+            e = r.position_error[i, 0]
+            k0, k1 = int(np.searchsorted(t, t0)), int(np.searchsorted(t, t0 + horizon))
+            if np.isnan(e) or k1 >= t.size:
+                continue
+            rows.append({"run": lg.name, "run_type": lg.run_type, "error": float(e), "path": float(s[k1] - s[k0]),
+                         "n": float(np.median(n[k0:k1 + 1]))})
     return pd.DataFrame(rows)
 
 
