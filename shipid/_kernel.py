@@ -369,12 +369,15 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
                         rd = R[b, sel[d_]]
                         for i in range(nz):
                             W[d_, i] -= Kt[d_, i] * rd
-                    for i in range(nz):
-                        for c_ in range(cnt):
+                    # (channel outermost: consecutive updates hit different rows, so they do not wait on
+                    # each other; each entry still sums its channels in order, the same result to the bit)
+                    for c_ in range(cnt):
+                        for i in range(nz):
                             kci = Kt[c_, i]
                             wci = W[c_, i]
                             for j in range(i + 1):
                                 P[i, j] -= kci * PH[c_, j] + wci * Kt[c_, j]
+                    for i in range(nz):
                         for j in range(i):
                             P[j, i] = P[i, j]
                 else:
@@ -432,10 +435,11 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
         for i in range(nx, nz):
             zn[i] = z[i]
         # P_next = F P F^T with F = [[Ftop], [0 I]] + Q (P is exactly symmetric, so is P_next)
-        for i in range(nx):  # M = top rows of F P (nx, nz), a row of P at a time
-            for j in range(nz):
+        for i in range(nx):  # M = top rows of F P (nx, nz), a row of P at a time (for each, the rows of M in
+            for j in range(nz):  # turn: independent updates; each entry sums in the same order)
                 M[i, j] = 0.0
-            for m in range(nz):
+        for m in range(nz):
+            for i in range(nx):
                 f = Ftop[i, m]
                 for j in range(nz):
                     M[i, j] += f * P[m, j]
