@@ -362,10 +362,12 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
                     for d_ in range(cnt):
                         for i in range(nz):
                             W[d_, i] = PH[d_, i]
-                        for c_ in range(cnt):
+                    for c_ in range(cnt):  # (rows innermost-but-one, as below)
+                        for d_ in range(cnt):
                             sdc = S0[d_, c_]
                             for i in range(nz):
                                 W[d_, i] -= sdc * Kt[c_, i]
+                    for d_ in range(cnt):
                         rd = R[b, sel[d_]]
                         for i in range(nz):
                             W[d_, i] -= Kt[d_, i] * rd
@@ -840,10 +842,12 @@ def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps
         for i in range(nz):  # Lam = F^T A: its lower triangle (a symmetric product), mirrored
             for j in range(i + 1):
                 Lam[i, j] = A[i, j] if i >= nx else 0.0
-            for m in range(nx):
+        for m in range(nx):  # (rows innermost-but-one: independent updates, each entry summed in order)
+            for i in range(nz):
                 f = Fk[m, i]
                 for j in range(i + 1):
                     Lam[i, j] += f * A[m, j]
+        for i in range(nz):
             for j in range(i):
                 Lam[j, i] = Lam[i, j]
 
