@@ -48,3 +48,14 @@ def test_runs_into_reused_buffers_equal_fresh_ones(kcs_truth, kcs_logs):
     for k, v in kept.items():
         assert np.array_equal(getattr(again, k), v, equal_nan=True), k
         assert not np.shares_memory(getattr(again, k), getattr(other, k))
+
+
+def test_the_pool_stays_within_its_budget_and_keeps_buffers_in_use():
+    n = E._POOL_ARRAY_BYTES // 8 // 2
+    held = [E._stored_empty((n,)) for _ in range(2 * E._POOL_BYTES // E._POOL_ARRAY_BYTES + 2)]
+    keep = held[0]
+    del held
+    gc.collect()
+    E._stored_empty((n + 1,))  # a new size: beyond the budget the oldest free buffers are dropped
+    assert sum(buf.nbytes for buf in E._pool) <= E._POOL_BYTES + E._POOL_ARRAY_BYTES
+    assert any(np.shares_memory(keep, buf) for buf in E._pool)  # the one still in use stays

@@ -804,12 +804,12 @@ def _take(n: int) -> np.ndarray:
     buf = np.empty(n, dtype=np.uint8)
     _pool.append(buf)
     total = sum(b.nbytes for b in _pool)
-    for old in list(_pool[:-1]):  # drop the oldest free buffers beyond the budget
-        if total <= _POOL_BYTES:
-            break
-        if sys.getrefcount(old) == _FREE + 1:  # (+1: the loop over the copy of the list)
-            _pool.remove(old)
-            total -= old.nbytes
+    i = 0
+    while total > _POOL_BYTES and i < len(_pool) - 1:  # drop the oldest free buffers beyond the budget
+        if sys.getrefcount(_pool[i]) == _FREE - 1:  # (-1: no loop variable holds it here)
+            total -= _pool.pop(i).nbytes
+        else:
+            i += 1
     return buf
 
 

@@ -3,6 +3,7 @@ learning in :meth:`EKFIdentifier.fit`, learned attributes end in ``_``)."""
 from __future__ import annotations
 
 import warnings
+from dataclasses import replace
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -348,6 +349,7 @@ class EKFIdentifier:
                 factors *= f
                 qx = self._process_noise(sig, meas_idx, dt)
                 self._setup.update(sig=sig, qx=qx)
+        out0 = prob0 = None  # (pass 1 holds them through ``first``, if at all)
         res = resolution_std(arrays)
         self.noise_ = pd.DataFrame({"second_difference": sig_data, "resolution": res, "innovation_factor": factors,
                                     "used": sig, "n_frozen": n_frozen}, index=meas)
@@ -377,6 +379,9 @@ class EKFIdentifier:
                 self.pass_messages_.append(f"pass {k + 1}: {out.message[0]} (filter stopped there, smoother skipped)")
                 break
             zs, var_x, Ps0 = self._smooth(out, prob)
+            # the stored filter (what the smoother read: ~3.5 KB per sample of a 22-state log) is not kept, so
+            # the next pass can reuse its memory (ekf._stored_empty); output_ keeps innovations and diagnostics
+            out = replace(out, z_post=None, P_post=None, z_prior=None, P_prior=None, F=None)
             good = (prob, out, zs, var_x, Ps0)
             theta_s = zs[0, 0, nx:].copy()
             history.append(theta_s * scale)
