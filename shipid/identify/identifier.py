@@ -610,24 +610,9 @@ class EKFIdentifier:
                              "try other noise levels or method='rk4')")
         if not self.success_:
             warnings.warn(f"EKF identification: {self.message_}", RuntimeWarning, stacklevel=3)
-        # per-log smoothed states and innovations
-        self.states_, self.innovations_ = [], []
-        start = 0
-        for a in s["arrays"]:
-            n = a.t.size
-            sl = slice(start, start + n)
-            X = zs[0, sl, :nx]
-            SD = np.sqrt(np.clip(var_x[0, sl], 0, None))
-            # each table built at once (column by column, pandas copies its block at every insertion)
-            names = list(model.state_names)
-            df = pd.DataFrame(np.column_stack([a.t, X, SD]), columns=["time", *names, *(f"{m}_std" for m in names)])
-            df.attrs["name"] = a.name
-            self.states_.append(df)
-            inn = pd.DataFrame(np.column_stack([a.t, out.innov[0, sl], out.S_diag[0, sl]]),
-                               columns=["time", *s["meas"], *(f"{m}_S" for m in s["meas"])])
-            inn.attrs["name"] = a.name
-            self.innovations_.append(inn)
-            start += n
+        # per-log smoothed states and innovations: tables built when first read (states_, innovations_)
+        self._tables = (zs[0, :, :nx], var_x[0], out.innov[0], out.S_diag[0])
+        self.__dict__.pop("_tables_built", None)
         notes = []
         hook = getattr(model, "identifiability_notes", None)
         if hook is not None:
@@ -691,6 +676,46 @@ class EKFIdentifier:
         return res
 
     # ----------------------------------------------------------- after fitting
+    @property
+    def states_(self) -> list:
+        """Per log: the smoothed ship states and their standard deviations (``time``, each state, each
+        ``<state>_std``), a DataFrame named (``attrs["name"]``) after its log."""
+        return self._built_tables()[0]
+
+    @property
+    def innovations_(self) -> list:
+        """Per log: the filter's innovations and their predicted variances (``time``, each measured channel,
+        each ``<channel>_S``; NaN where not measured), a DataFrame named after its log."""
+        return self._built_tables()[1]
+
+    def _built_tables(self):
+        """The tables of :attr:`states_` and :attr:`innovations_`, built at the first read (~1.5 ms for a
+        6000-sample log, a sixth of a compiled fit's own Python work)."""
+        built = self.__dict__.get("_tables_built")
+        if built is None:
+            if "_tables" not in self.__dict__:
+                raise AttributeError("states_/innovations_: this EKFIdentifier is not fitted yet")
+            X_all, var_all, innov, S_diag = self._tables
+            s = self._setup
+            names = list(self.model.state_names)
+            built = ([], [])
+            start = 0
+            for a in s["arrays"]:
+                sl = slice(start, start + a.t.size)
+                SD = np.sqrt(np.clip(var_all[sl], 0, None))
+                # each table built at once (column by column, pandas copies its block at every insertion)
+                df = pd.DataFrame(np.column_stack([a.t, X_all[sl], SD]),
+                                  columns=["time", *names, *(f"{m}_std" for m in names)])
+                df.attrs["name"] = a.name
+                built[0].append(df)
+                inn = pd.DataFrame(np.column_stack([a.t, innov[sl], S_diag[sl]]),
+                                   columns=["time", *s["meas"], *(f"{m}_S" for m in s["meas"])])
+                inn.attrs["name"] = a.name
+                built[1].append(inn)
+                start += a.t.size
+            self._tables_built = built
+        return built
+
     def _check_fitted(self):
         if not hasattr(self, "coef_"):
             raise NotFittedError("this EKFIdentifier is not fitted yet: call fit(logs) first")
