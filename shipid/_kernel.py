@@ -148,17 +148,24 @@ def tangent(method, t, x, ua, um, ub, p, P, c, cols, h, scale, xn, Fx, Fp, w):
         for i in range(nx):
             for j in range(nx):
                 M[i, j] = (1.0 if i == j else 0.0) + 0.5 * (h * A[i, j])
+        # row updates (the inner loops run along the rows of M and Be; each entry sums over a in order)
         for i in range(nx):
             for j in range(nx):
-                s = 0.0
-                for a in range(nx):
-                    s += (h * A[i, a]) * M[a, j]
-                Fx[i, j] = (1.0 if i == j else 0.0) + s
+                Kx[i, j] = 0.0
             for j in range(ne):
-                s = 0.0
-                for a in range(nx):
-                    s += M[i, a] * Be[a, j]
-                Fp[i, j] = h * s * scale[j]
+                Kp[i, j] = 0.0
+            for a in range(nx):
+                f = h * A[i, a]
+                for j in range(nx):
+                    Kx[i, j] += f * M[a, j]
+            for a in range(nx):
+                f = M[i, a]
+                for j in range(ne):
+                    Kp[i, j] += f * Be[a, j]
+            for j in range(nx):
+                Fx[i, j] = (1.0 if i == j else 0.0) + Kx[i, j]
+            for j in range(ne):
+                Fp[i, j] = h * Kp[i, j] * scale[j]
         return
     # exact RK4 tangent: K_s = A_s (I + a_s h K_{s-1}) for the state, A_s a_s h K_{s-1} + B_s for p
     for i in range(nx):
