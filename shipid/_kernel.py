@@ -915,7 +915,8 @@ def filter_functions(model, notice: bool = True):
     out = _cache.get(key)
     if out is None:
         funcs = _jit.rebind(eq, ns, jit=True, tag=tag)
-        out = _cache[key] = _jit.rebind(FILTER, {**ns, **funcs}, jit=True, tag=tag, fastmath=FASTMATH, inline=INLINE)
+        out = _cache[key] = _jit.rebind(FILTER, {**ns, **funcs}, jit=True, tag=tag, fastmath=FASTMATH, inline=INLINE,
+                                        error_model="numpy")
     return out
 
 
@@ -926,6 +927,9 @@ _cache: dict = {}
 #: an empty cache).  The model's equations and wrappers are not inlined: no measurable gain, and
 #: inlining the equations themselves would let the filter's fastmath flags change their rounding.
 INLINE = frozenset({"cholesky", "chol_solve", "mat_mul", "rk4_rest", "tangent", "cross_interval", "ship_variances"})
+#: The filter and smoother compile with numba's ``error_model="numpy"`` (a division by zero gives inf/NaN, as
+#: on the numpy path, instead of raising: no check per division; smoother ~0.1 us per sample faster, results
+#: identical to the bit on the bench log).
 #: numba's fastmath flags of the filter and smoother: sums may be reassociated and fused (so that the
 #: loops vectorise); not "nnan"/"ninf", which would break the NaN-based divergence checks.
 FASTMATH = {"reassoc", "contract"}

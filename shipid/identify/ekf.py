@@ -630,7 +630,7 @@ def bf_smooth(out: EKFOutput, R: np.ndarray, meas_idx, nx: int, chunk: int = 256
         raise ValueError("bf_smooth needs an EKF run with store=True")
     R = np.ascontiguousarray(R, dtype=float)
     acc = np.isfinite(out.innov) & ~out.gated
-    fns = _jit.compiled(_kernel.SMOOTHER, fastmath=_kernel.FASTMATH, inline=_kernel.INLINE)
+    fns = _jit.compiled(_kernel.SMOOTHER, fastmath=_kernel.FASTMATH, inline=_kernel.INLINE, error_model="numpy")
     B, N, nz = out.z_post.shape
     nm = R.shape[1]
     # the rows of the stored P_prior at the measured states (all of them, in channel order, when compact)
@@ -879,7 +879,7 @@ def _run_compiled(prob, store: bool, nis_limit: float, store_dtype=np.float64, c
 
 def _smooth_compiled(out):
     """:func:`rts_smooth` compiled (:mod:`shipid._kernel`), or ``None`` when compilation is off."""
-    fns = _jit.compiled(_kernel.SMOOTHER, fastmath=_kernel.FASTMATH, inline=_kernel.INLINE)
+    fns = _jit.compiled(_kernel.SMOOTHER, fastmath=_kernel.FASTMATH, inline=_kernel.INLINE, error_model="numpy")
     if fns is None:
         return None
     c = lambda a: np.ascontiguousarray(a, dtype=float)  # noqa: E731
