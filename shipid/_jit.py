@@ -63,7 +63,7 @@ def disabled():
 
 
 def rebind(functions: dict, namespace: dict, jit: bool = False, tag: str = "", fastmath=False,
-           inline=frozenset()) -> dict:
+           inline=frozenset(), error_model: str = "python") -> dict:
     """The ``functions`` (name -> function, in dependency order) with their globals overridden.
 
     Each function is rebuilt from its own code object with its module's globals updated by
@@ -77,6 +77,8 @@ def rebind(functions: dict, namespace: dict, jit: bool = False, tag: str = "", f
     that numba inlines into their callers (``inline="always"``) -- small helpers called once per sample
     with many array arguments, whose call (each array passed as its ~9 fields, reference counts
     adjusted) costs more than their arithmetic; the results are the same, compiling takes longer.
+    ``error_model``: numba's (``"numpy"``: a division by zero gives inf/NaN as in numpy instead of
+    raising, so a division needs no check; the kernel's divergence checks catch the NaN).
     """
     if jit:
         _import_numba()
@@ -90,7 +92,8 @@ def rebind(functions: dict, namespace: dict, jit: bool = False, tag: str = "", f
         new = types.FunctionType(fn.__code__, g, fn.__name__, fn.__defaults__, fn.__closure__)
         new.__qualname__, new.__doc__ = fn.__qualname__ + tag, fn.__doc__
         if jit:
-            new = _numba.njit(cache=True, fastmath=fastmath, inline="always" if name in inline else "never")(new)
+            new = _numba.njit(cache=True, fastmath=fastmath, inline="always" if name in inline else "never",
+                              error_model=error_model)(new)
         ns[name] = out[name] = new
     return out
 
@@ -107,7 +110,7 @@ def _import_numba():
 
 
 def compiled(functions: dict, namespace: dict | None = None, tag: str = "", fastmath=False,
-             inline=frozenset()) -> dict | None:
+             inline=frozenset(), error_model: str = "python") -> dict | None:
     """numba-compiled ``functions`` with globals overridden by ``namespace`` (see :func:`rebind`; built
     once per ``functions`` dict), or ``None`` when compilation is not :func:`enabled`."""
     if not _HAVE_NUMBA or _ENV_OFF or _off[0]:
@@ -115,5 +118,6 @@ def compiled(functions: dict, namespace: dict | None = None, tag: str = "", fast
     out = _compiled.get(id(functions))
     if out is None:
         out = _compiled[id(functions)] = (functions, rebind(functions, namespace or {}, jit=True, tag=tag,
-                                                                fastmath=fastmath, inline=inline))
+                                                                fastmath=fastmath, inline=inline,
+                                                                error_model=error_model))
     return out[1]
