@@ -287,6 +287,11 @@ def test_path_relative_error_of_a_perfect_model_is_zero_and_the_path_is_measured
                       currents=pd.DataFrame({"fold": [0], "fit": ["all types"], "cx": [0.0], "cy": [0.0]}),
                       turning=pd.DataFrame(), models={0: {"m": m}}, settings={"fold_of": {"synthetic": 0}, "eval_every": 2})
     p = path_relative_error(study, model="m", runs=[run])
+    # error_diagnosis shares the held-out prediction: a perfect model's errors stay below every threshold
+    from shipid.studies.esso_osaka import error_diagnosis
+    e = error_diagnosis(study, model="m", runs=[run])
+    assert len(e) == len(p) and (e.error < 1e-3 * 0.35 * 30.0).all() and e.t_v.isna().all() and e.t_psi.isna().all()
+    assert np.allclose(e.error, p.error, rtol=0, atol=1e-12)
     assert len(p) >= 9 and (p.n == 10.0).all()
     assert (p.error / p.path).max() < 1e-3    # the 0.2 s RK4 steps of the prediction against simulate()'s
     i = p.index[0]

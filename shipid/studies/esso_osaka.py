@@ -517,9 +517,22 @@ def _fold_current(study: "EssoStudy", k) -> pd.Series:
     return c[(c.fold == k) & (c.fit == "all types")][["cx", "cy"]].mean()
 
 
+def _held_out_prediction(study: "EssoStudy", lg, model: str, horizon: float, start_every: float):
+    """Run ``lg`` (its evaluation frame) and its open-loop ``horizon`` s predictions by the fold model of
+    ``study`` that did not see it, started with that fold's mean current: ``(frame, HorizonResult, model)``."""
+    from ..validation_horizon import horizon_prediction
+
+    k = study.settings["fold_of"][lg.name]
+    m = study.models[k][model]
+    cur = _fold_current(study, k)
+    d = _frame(lg, study.settings["eval_every"])
+    init = {"cx": float(cur.cx), "cy": float(cur.cy)} if "cx" in m.state_names else None
+    return d, horizon_prediction(m, d, horizons=(horizon,), start_every=start_every, initial=init), m
+
+
 def error_diagnosis(study: "EssoStudy", run_type: str = "zigzag", horizon: float = 30.0,
                     model: str = "lowspeed + wind + current fitted", data_dir=DATA_DIR,
-                    start_every: float = 5.0) -> pd.DataFrame:
+                    start_every: float = 5.0, runs=None) -> pd.DataFrame:
     """Per start of the held-out runs of ``run_type``: what the ``horizon`` s position error is made of.
 
     Each run is predicted by the fold model of ``study`` that did not see it (all-types fit, started with
@@ -527,19 +540,11 @@ def error_diagnosis(study: "EssoStudy", run_type: str = "zigzag", horizon: float
     :func:`split_position_error` parts ``e_heading``, ``e_velocity``, ``e_u``, ``e_v``; the errors at the
     horizon (predicted − measured) ``d_psi_deg``, ``d_u``, ``d_v``, ``d_r``; the measured ``r_end``, ``v_end``
     (whose signs tell a port from a starboard turn); and ``t_v``, ``t_r``, ``t_u``, ``t_psi``: the first time
-    [s] the error of v exceeds 0.02 m/s, of r 0.01 rad/s, of u 0.03 m/s, of heading 5 deg (NaN: never)."""
-    from ..validation_horizon import horizon_prediction
-
-    fold_of = study.settings["fold_of"]
-    every = study.settings["eval_every"]
+    [s] the error of v exceeds 0.02 m/s, of r 0.01 rad/s, of u 0.03 m/s, of heading 5 deg (NaN: never).
+    ``runs``: the logs (``name``, ``run_type``, ``data``; default the ``run_type`` runs of ``data_dir``)."""
     rows = []
-    for lg in load_runs(data_dir, (run_type,)):
-        k = fold_of[lg.name]
-        m = study.models[k][model]
-        cur = _fold_current(study, k)
-        d = _frame(lg, every)
-        init = {"cx": float(cur.cx), "cy": float(cur.cy)} if "cx" in m.state_names else None
-        r = horizon_prediction(m, d, horizons=(horizon,), start_every=start_every, initial=init)
+    for lg in load_runs(data_dir, (run_type,)) if runs is None else runs:
+        d, r, m = _held_out_prediction(study, lg, model, horizon, start_every)
         X, tt = r.tracks["x"], r.tracks["t"]
         dt = tt[1] - tt[0]
         kh = int(round(horizon / dt))
@@ -654,18 +659,9 @@ def path_relative_error(study: "EssoStudy", model: str = "lowspeed + wind + curr
     ship measured in that time (sum of the distances between the samples) and the median propeller rate.
     Columns ``run``, ``run_type``, ``error``, ``path`` [m], ``n`` [rps]; ``error / path`` is the error per
     metre sailed, which compares run types of different speeds (round 8, docs/environment.md)."""
-    from ..validation_horizon import horizon_prediction
-
-    fold_of = study.settings["fold_of"]
-    every = study.settings["eval_every"]
     rows = []
     for lg in load_runs(data_dir) if runs is None else runs:
-        k = fold_of[lg.name]
-        m = study.models[k][model]
-        cur = _fold_current(study, k)
-        d = _frame(lg, every)
-        init = {"cx": float(cur.cx), "cy": float(cur.cy)} if "cx" in m.state_names else None
-        r = horizon_prediction(m, d, horizons=(horizon,), start_every=start_every, initial=init)
+        d, r, _ = _held_out_prediction(study, lg, model, horizon, start_every)
         t = d["time"].to_numpy(dtype=float)
         x, y, n = d.x.to_numpy(dtype=float), d.y.to_numpy(dtype=float), d.n.to_numpy(dtype=float)
         s = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(x), np.diff(y)))])
