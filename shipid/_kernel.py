@@ -643,22 +643,28 @@ def rts_batch(zf, Pf, zp, Pp, F, zs, Ps):
             Ps[b] = np.nan
 
 
+def rows_times(A, i, i2, B, nz, row, row2):
+    """``row = A[i] B``, ``row2 = A[i2] B`` (B: nz x nz), two rows at a time: each entry sums over B's rows in
+    order, and consecutive updates hit different entries."""
+    for j in range(nz):
+        row[j] = 0.0
+        row2[j] = 0.0
+    for m in range(nz):
+        f = A[i, m]
+        f2 = A[i2, m]
+        for j in range(nz):
+            bmj = B[m, j]
+            row[j] += f * bmj
+            row2[j] += f2 * bmj
+
+
 def ship_variances(Pfk, Lam, nx, nz, rows, n, row, row2, out):
     """``out[i] = Pf_ii - (Pf_i Lam) . Pf_i`` (the smoothed variance) for the ship rows ``rows[:n]``, two
     rows at a time (an odd last row is computed twice)."""
     for a_ in range(0, n, 2):
         i = rows[a_]
         i2 = rows[min(a_ + 1, n - 1)]
-        for j in range(nz):
-            row[j] = 0.0
-            row2[j] = 0.0
-        for m in range(nz):
-            f = Pfk[i, m]
-            f2 = Pfk[i2, m]
-            for j in range(nz):
-                lmj = Lam[m, j]
-                row[j] += f * lmj
-                row2[j] += f2 * lmj
+        rows_times(Pfk, i, i2, Lam, nz, row, row2)
         s = 0.0
         s2 = 0.0
         for j in range(nz):
@@ -770,20 +776,11 @@ def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps
             chol_solve(L, cnt, Kt, nz, a)
             chol_solve(L, cnt, Si, cnt, a2)
             for c_ in range(0, cnt, 2):  # LKt = (Lam K)^T = K^T Lam (Lam symmetric), two rows at a time
-                c2 = min(c_ + 1, cnt - 1)  # (an odd last row is computed twice, the second copy in row2)
+                c2 = min(c_ + 1, cnt - 1)  # (an odd last row is computed twice)
+                rows_times(Kt, c_, c2, Lam, nz, row, row2)
                 for i in range(nz):
-                    LKt[c_, i] = 0.0
-                    row2[i] = 0.0
-                for j in range(nz):
-                    kcj = Kt[c_, j]
-                    kc2 = Kt[c2, j]
-                    for i in range(nz):
-                        lji = Lam[j, i]
-                        LKt[c_, i] += kcj * lji
-                        row2[i] += kc2 * lji
-                if c2 != c_:
-                    for i in range(nz):
-                        LKt[c2, i] = row2[i]
+                    LKt[c_, i] = row[i]
+                    LKt[c2, i] = row2[i]
             # ship-state variances Pf_ii - (Pf_i Lam) . Pf_i; the rows of Pf at the accepted measured states
             # are R K^T (H Pf = H Pp - (S - R) K^T = R K^T for the optimal gain), so there Pf_i Lam = R_c
             # (K^T Lam)_c, a row already computed: only the other rows need the product
@@ -869,7 +866,7 @@ def bf_batch(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps0
             Ps0[b] = np.nan
 
 
-SMOOTHER = {"cholesky": cholesky, "chol_solve": chol_solve, "ship_variances": ship_variances, "rts_member": rts_member, "rts_batch": rts_batch, "bf_member": bf_member,
+SMOOTHER = {"cholesky": cholesky, "chol_solve": chol_solve, "rows_times": rows_times, "ship_variances": ship_variances, "rts_member": rts_member, "rts_batch": rts_batch, "bf_member": bf_member,
             "bf_batch": bf_batch}
 
 
@@ -926,7 +923,7 @@ _cache: dict = {}
 #: (kcs-response, 22 states; same results to the bit), for ~2.5 s more compile time (17.8 -> 20.2 s with
 #: an empty cache).  The model's equations and wrappers are not inlined: no measurable gain, and
 #: inlining the equations themselves would let the filter's fastmath flags change their rounding.
-INLINE = frozenset({"cholesky", "chol_solve", "mat_mul", "rk4_rest", "tangent", "cross_interval", "ship_variances"})
+INLINE = frozenset({"cholesky", "chol_solve", "mat_mul", "rk4_rest", "tangent", "cross_interval", "ship_variances", "rows_times"})
 #: The filter and smoother compile with numba's ``error_model="numpy"`` (a division by zero gives inf/NaN, as
 #: on the numpy path, instead of raising: no check per division; smoother ~0.1 us per sample faster, results
 #: identical to the bit on the bench log).
