@@ -234,7 +234,7 @@ def test_current_vs_wind_projects_on_the_mean_air_velocity():
 
 
 def test_anemometer_check_recovers_a_sensor_offset_and_gain():
-    """Round 8's data check (docs/environment.md, session 10): a synthetic turning run whose apparent wind is
+    """Round 8's data check (docs/environment.md, session 9): a synthetic turning run whose apparent wind is
     measured by an anemometer turned by 20 deg with gain 0.9, the logged true wind converted from it with the
     ship's motion as the logs do; the per-run coefficient of the logged air velocity on the ship's velocity is
     1 - 0.9 e^{i 20 deg}, and 0 for a correct sensor."""

@@ -35,7 +35,7 @@ Choices (made once, before looking at any held-out error, and the same for every
   (``wind``), per-type fits on the other types' posterior (``by_type_prior="others"``); in sessions 7 and 8
   the cross-flow factor ``CrN`` (with ``CrY``), a wake falling with drift, the side force and yaw moment of the
   propeller turning ahead (``YPf``, ``NPf``) and a rudder neutral angle (``delta0``) (rounds 4-6), in
-  session 9 the wind-driven start current (round 7; docs/environment.md), in session 10 rudder stall at
+  session 9 the wind-driven start current (round 7; docs/environment.md), in session 9 rudder stall at
   24.1 deg (``lowspeed``'s ``kstall``), a side-dependent rudder normal force (``dfalpha``) and the wake's
   side-dependent fall with drift estimated (``C2p``, ``C2m``) (round 8: 8-fold means 0.3017, 0.2873, 0.2964
   against 0.2823; docs/environment.md).  The defaults are the chosen settings.
@@ -517,6 +517,12 @@ def _fold_current(study: "EssoStudy", k) -> pd.Series:
     return c[(c.fold == k) & (c.fit == "all types")][["cx", "cy"]].mean()
 
 
+def _run_currents(study: "EssoStudy") -> pd.DataFrame:
+    """Per run (index): the current (``cx``, ``cy``) estimated for it by the all-types fits that trained on it,
+    mean over those folds."""
+    return study.currents[study.currents.fit == "all types"].groupby("run")[["cx", "cy"]].mean()
+
+
 def _held_out_prediction(study: "EssoStudy", lg, model: str, horizon: float, start_every: float):
     """Run ``lg`` (its evaluation frame) and its open-loop ``horizon`` s predictions by the fold model of
     ``study`` that did not see it, started with that fold's mean current: ``(frame, HorizonResult, model)``."""
@@ -579,7 +585,7 @@ def current_vs_wind(study: "EssoStudy", data_dir=DATA_DIR, runs=None) -> pd.Data
     and its components along (``c_down`` = c.w/|w|) and across (``c_cross`` = (wx cy - wy cx)/|w|) the run's mean
     air velocity ``wx, wy`` (where the true wind blows to; :func:`air_velocity`), with ``ratio`` = ``c_down`` /
     |w| (round 7's diagnosis: a current driven down the wind)."""
-    c = study.currents[study.currents.fit == "all types"].groupby("run")[["cx", "cy"]].mean()
+    c = _run_currents(study)
     rows = []
     for lg in load_runs(data_dir) if runs is None else runs:
         if lg.name not in c.index:
@@ -604,7 +610,7 @@ def start_current_floor(study: "EssoStudy", model: str = "lowspeed + wind + curr
 
     from ..validation_horizon import horizon_prediction
 
-    own = study.currents[study.currents.fit == "all types"].groupby("run")[["cx", "cy"]].mean()
+    own = _run_currents(study)
     fold_of, every = study.settings["fold_of"], study.settings["eval_every"]
     errs: dict = {}
     for lg in load_runs(data_dir):
