@@ -27,6 +27,7 @@ __all__ = ["RUNS", "TRAIN", "TEST", "RUDDER_SIGN", "MEASURED_README", "START", "
            "LORO_VARIANTS", "REFINE_VARIANTS", "REFINE_VARIANTS_2", "leave_one_run_out_refinements",
            "RECIPE_VARIANTS_6", "LORO_RULE_6", "RECIPE_VARIANTS_7", "LORO_RULE_7",
            "RECIPE_VARIANTS_8", "LORO_RULE_8", "RECIPE_VARIANTS_9", "LORO_RULE_9", "RECIPE_VARIANTS_10", "LORO_RULE_10",
+           "RECIPE_VARIANTS_11", "LORO_RULE_11",
            "leave_one_run_out_recipes"]
 
 RUNS = ("tc_35", "tc_-35", "zz_10", "zz_-10", "zz_20", "zz_-20")
@@ -260,6 +261,34 @@ LORO_RULE_10 = LORO_RULE_9
 #: Outcome (session 9; left-out tc_35 / tc_-35 / zz_10 / zz_-10, worst): weight 0.1 0.693 / 0.363 / 0.183 /
 #: 0.945, **0.945** (round 9's numbers to the last digit); 0.3 1.298 / 0.980 / 0.334 / 1.048, 1.298; 0.5 1.563 /
 #: 1.363 / 0.351 / 1.044, 1.563; 1 1.755 / 1.885 / 0.373 / 1.019, 1.885.  The default weight 0.1 stays.
+
+
+#: Session 10 (issue 12): the rudder's standard MMG terms.  After round 9 the worst leave-one-run-out fold of
+#: ``mmg`` is zz_-10 (0.945 goal tolerances: its overshoots predicted from the two turns and zz_10), i.e. the
+#: yaw checking of a zigzag, which the MMG standard sets through the rudder's force and where it acts; the
+#: recipe estimates the hull terms, R0 and C_2 but holds every rudder term at its published KVLCC2 value
+#: (Yasukawa & Yoshimura 2015, Table 3).  Disclosed: the hold-out of round 9's default missed one goal, the
+#: zz_-20 second overshoot (+3.03 deg against 3), and that result is known when this list is written; the list
+#: is the rudder's standard terms as a naval architect frees them, in their usual groups, each added alone to
+#: the default, and the rule below -- leave-one-run-out within the training runs -- decides, not the hold-out.
+#: Candidates, fixed and committed before any fold ran: the default; the rudder-hull interaction aH, xH (the
+#: hull's share of the rudder force and its point of action: 0.312, -0.464); the rudder's effective
+#: longitudinal position lR in the flow straightening (-0.710); the rudder inflow's wake ratio and propeller-race
+#: factor eps, kappa (1.09, 0.50); the resistance terms of the turn Xvv, Xvr, Xrr (the speed lost in a turn
+#: sets the tactical diameter).
+_EST_11 = ["Yv", "Yr", "Nv", "Nr", "Yvvr", "Nvvr", "Nrrr", "R0", "C2p", "C2m"]  # the default after round 9
+RECIPE_VARIANTS_11 = {
+    "default": {"fit": {}, "refine": {"mode": "metrics"}},
+    "aH, xH estimated": {"fit": {"estimate": _EST_11 + ["aH", "xH"]}, "refine": {"mode": "metrics"}},
+    "lR estimated": {"fit": {"estimate": _EST_11 + ["lR"]}, "refine": {"mode": "metrics"}},
+    "eps, kappa estimated": {"fit": {"estimate": _EST_11 + ["eps", "kappa"]}, "refine": {"mode": "metrics"}},
+    "Xvv, Xvr, Xrr estimated": {"fit": {"estimate": _EST_11 + ["Xvv", "Xvr", "Xrr"]},
+                                "refine": {"mode": "metrics"}},
+}
+#: The rule of :data:`RECIPE_VARIANTS_11`, fixed with it (before any fold ran): :data:`LORO_RULE_9` (worst fold,
+#: lower than this round's default by more than 0.01, success in every fold; the zz+-20 files are not read; if
+#: the default changes, the hold-out runs once afterwards with the CLI defaults and does not feed back).
+LORO_RULE_11 = LORO_RULE_9
 
 
 def leave_one_run_out_recipes(runs: dict[str, TrialLog], name: str = "mmg", variants=None, train=TRAIN,
