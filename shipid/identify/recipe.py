@@ -112,8 +112,10 @@ AUTO_REFINE = "metrics"
 #: non-linear hull derivatives, the resistance and the side-dependent wake correction C_2 (beta_P > 0, < 0:
 #: the propeller's wake, hence thrust and rudder inflow, differs between turns to port and starboard; chosen
 #: by leave-one-run-out within the KVLCC2 training runs, session 9: worst fold 0.945 against 1.823 without;
-#: studies.kvlcc2.RECIPE_VARIANTS_9); the other rudder/propeller interaction coefficients stay published.
-DEFAULT_ESTIMATE = {"mmg": ["Yv", "Yr", "Nv", "Nr", "Yvvr", "Nvvr", "Nrrr", "R0", "C2p", "C2m"]}
+#: studies.kvlcc2.RECIPE_VARIANTS_9) and the rudder-hull interaction aH, xH (the hull's share of the rudder
+#: force and its point of action, which set a zigzag's yaw checking; session 10, same rule: worst fold 0.767
+#: against 0.945 without; RECIPE_VARIANTS_11); the other rudder/propeller coefficients stay published.
+DEFAULT_ESTIMATE = {"mmg": ["Yv", "Yr", "Nv", "Nr", "Yvvr", "Nvvr", "Nrrr", "R0", "C2p", "C2m", "aH", "xH"]}
 #: Parameters held at their start value by default.  ``response-nl``: the asymmetry terms b0, c0 (the EKF
 #: does not identify them from turns and zigzags at one rpm: docs/validation.md).
 DEFAULT_FIXED = {"response-nl": ["b0", "c0"]}
