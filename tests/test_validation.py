@@ -181,7 +181,14 @@ def test_cli_validate_writes_the_json_list(tmp_path, capsys):
     assert [d["manoeuvre"] for d in doc] == ["zigzag", "turning"]
     assert set(doc[0]["rmse"]) >= {"u", "v", "r", "psi", "x", "y"}
     assert doc[1]["measured"]["tactical_diameter_L"] > 0 and doc[1]["predicted"]["tactical_diameter_L"] > 0
-    assert "wrote" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "wrote" in printed
+    # each log's line labels the replay's differences and the closed-loop standard manoeuvre's (what the goals
+    # judge) apart, with the numbers of the JSON
+    turn = next(ln for ln in printed.splitlines() if ln.startswith(doc[1]["name"] + ": turning"))
+    for label, key in (("replay", "difference"), ("closed-loop", "standard_difference")):
+        assert f"{label}: " in turn
+        assert f"dtactical_diameter_L={doc[1][key]['tactical_diameter_L']:+.3f}" in turn.split(f"{label}: ")[1]
 
 
 def _bad_cases(tmp_path):

@@ -80,9 +80,13 @@ def _line(d: dict) -> str:
             parts.append(f"rmse_{k}={rm[k]:.3g}")
     if d.get("track_rmse_m") is not None:
         parts.append(f"track={d['track_rmse_m']:.3g} m")
-    for k, v in d["difference"].items():
-        if k in ("advance_L", "tactical_diameter_L", "overshoot1_deg", "overshoot2_deg") and v is not None:
-            parts.append(f"d{k}={v:+.3f}")
+    # predicted - measured: of the replay (the logged rudder), and of the model's own closed-loop standard
+    # manoeuvre (its rudder law; what the ITTC/IMO goals judge) -- labelled, so the two are not confused
+    for label, key in (("replay", "difference"), ("closed-loop", "standard_difference")):
+        diffs = [f"d{k}={v:+.3f}" for k, v in (d.get(key) or {}).items()
+                 if k in ("advance_L", "tactical_diameter_L", "overshoot1_deg", "overshoot2_deg") and v is not None]
+        if diffs:
+            parts.append(f"{label}: " + " ".join(diffs))
     return " ".join(parts)
 
 
