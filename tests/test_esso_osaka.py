@@ -318,7 +318,7 @@ def test_refine_on_windows_recovers_a_coefficient_with_each_runs_current():
     runs, cur = [], [{"cx": 0.02, "cy": 0.0}, {"cx": -0.01, "cy": 0.015}]
     for j, (kind, T) in enumerate((("zigzag", 80.0), ("turning", 160.0))):
         t = np.round(np.arange(0.0, T, 0.1), 9)
-        delta = np.radians(20.0) * np.sign(np.sin(2 * np.pi * np.floor(2 * t) / 2 / (25.0 + 10 * j)))  # 0.5 s steps
+        delta = np.radians(20.0) * np.sign(np.sin(2 * np.pi * np.floor(t) / (25.0 + 10 * j)))  # changes on whole seconds
         U = np.column_stack([delta, np.full(t.size, 10.0)])
         X = np.asarray(simulate(truth, np.array([0, 0, 0, 0.3, 0, 0, cur[j]["cx"], cur[j]["cy"]]), t, U).x)
         data = pd.DataFrame({"time": t, "x": X[:, 0], "y": X[:, 1], "psi": np.angle(np.exp(1j * X[:, 2])),
@@ -333,3 +333,10 @@ def test_refine_on_windows_recovers_a_coefficient_with_each_runs_current():
     w = np.asarray(mean.log_weights)
     assert w.size == 5 + 13 and w[:5].sum() == pytest.approx(w[5:].sum()) and w.sum() == pytest.approx(w.size)
     assert own.log_weights is None
+    # in_sample_errors judges models on the runs they were fitted on, each with its own current: the truth and
+    # the refined model predict these runs to integration accuracy, the start model does not
+    from shipid.studies.esso_osaka import in_sample_errors
+
+    e = in_sample_errors({"truth": truth, "refined": own.to_model(), "start": start}, runs, cur)
+    med = e.groupby("model").position_error.max()
+    assert len(e) == 3 * (5 + 13) and med["truth"] < 1e-3 and med["refined"] < 5e-3 and med["start"] > 0.1
