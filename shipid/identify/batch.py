@@ -96,7 +96,10 @@ def prediction_windows(model: Model, logs, horizon: float, every: float, *, samp
     batch) and its heading unwrapped from the start.  Refine with
     ``OutputErrorRefiner(model, ...).fit(windows, x0=x0)``: every window starts at its measured state, the
     cost is the open-loop prediction error over ``horizon`` s, as :func:`shipid.validation_horizon.horizon_prediction`
-    judges it.
+    judges it (which holds the inputs between samples: pass ``input_hold="zoh"`` to match it).  The start
+    states are measured, not estimated: their noise enters the estimate (negligible when it is small against
+    what the window's error is made of), and overlapping windows make the residuals correlated, so the
+    refiner's formal standard deviations are too small (the synthetic test in ``tests/test_batch.py``).
 
     ``logs``: TrialLogs or DataFrames with ``time``, the measured states and the model's inputs.
     ``initial``: values of the states the logs do not measure (e.g. a fitted current ``{"cx": .., "cy": ..}``),
