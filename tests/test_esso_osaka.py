@@ -299,3 +299,44 @@ def test_path_relative_error_of_a_perfect_model_is_zero_and_the_path_is_measured
     seg = d[d.time <= 30.0 + 1e-9]
     assert p.loc[i, "path"] == pytest.approx(np.sum(np.hypot(np.diff(seg.x), np.diff(seg.y))), rel=1e-9)
     assert 0.25 * 30.0 < p.loc[i, "path"] < 0.35 * 30.0
+
+
+def test_refine_on_windows_recovers_a_coefficient_with_each_runs_current():
+    """Round 9's refinement (``refine_on_windows``) on two synthetic runs of ``lowspeed`` + a constant current,
+    each run with its own current: from Nr 30 % off it recovers Nr with the runs' own currents; with
+    ``current="mean"`` every window starts with the mean current; ``balance`` weighs each run type the same."""
+    from types import SimpleNamespace
+
+    import pandas as pd
+
+    from shipid.environment import with_environment
+    from shipid.models import get_model
+    from shipid.simulate import simulate
+    from shipid.studies.esso_osaka import refine_on_windows
+
+    truth = with_environment(get_model("lowspeed"), current="constant")
+    runs, cur = [], [{"cx": 0.02, "cy": 0.0}, {"cx": -0.01, "cy": 0.015}]
+    for j, (kind, T) in enumerate((("zigzag", 80.0), ("turning", 160.0))):
+        t = np.round(np.arange(0.0, T, 0.1), 9)
+        delta = np.radians(20.0) * np.sign(np.sin(2 * np.pi * np.floor(t) / (25.0 + 10 * j)))  # changes on whole seconds
+        U = np.column_stack([delta, np.full(t.size, 10.0)])
+        X = np.asarray(simulate(truth, np.array([0, 0, 0, 0.3, 0, 0, cur[j]["cx"], cur[j]["cy"]]), t, U).x)
+        data = pd.DataFrame({"time": t, "x": X[:, 0], "y": X[:, 1], "psi": np.angle(np.exp(1j * X[:, 2])),
+                             "u": X[:, 3], "v": X[:, 4], "r": X[:, 5], "delta": U[:, 0], "n": U[:, 1]})
+        runs.append(SimpleNamespace(name=kind, run_type=kind, data=data))
+    nr = float(truth.params_series()["Nr"])
+    start = truth.with_params({"Nr": 1.3 * nr})
+    own = refine_on_windows(start, runs, cur, estimate=("Nr",), max_nfev=20)
+    assert own.coef_["Nr"] == pytest.approx(nr, rel=2e-3) and own.cost_ < 1e-3 * own.cost_start_
+    mean = refine_on_windows(start, runs, cur, estimate=("Nr",), max_nfev=2, current="mean", balance=True)
+    assert np.allclose(mean.x0_[["cx", "cy"]].to_numpy(), [0.005, 0.0075])
+    w = np.asarray(mean.log_weights)
+    assert w.size == 5 + 13 and w[:5].sum() == pytest.approx(w[5:].sum()) and w.sum() == pytest.approx(w.size)
+    assert own.log_weights is None
+    # in_sample_errors judges models on the runs they were fitted on, each with its own current: the truth and
+    # the refined model predict these runs to integration accuracy, the start model does not
+    from shipid.studies.esso_osaka import in_sample_errors
+
+    e = in_sample_errors({"truth": truth, "refined": own.to_model(), "start": start}, runs, cur)
+    med = e.groupby("model").position_error.max()
+    assert len(e) == 3 * (5 + 13) and med["truth"] < 1e-3 and med["refined"] < 5e-3 and med["start"] > 0.1

@@ -30,7 +30,7 @@ from .diagnostics import identifiability
 from .identifier import NotFittedError
 from .result import FitResult, _inputs, diagnostics_to_json, fitted_ship, software_versions
 
-__all__ = ["OutputErrorRefiner", "identifiable_subset", "FTOL"]
+__all__ = ["OutputErrorRefiner", "identifiable_subset", "prediction_windows", "FTOL"]
 
 #: Relative cost-change tolerance of the refinement's ``least_squares`` (``ftol``, with ``xtol`` the same): it stops
 #: when a step lowers the cost by less than this fraction.  It also sets :func:`identifiable_subset`'s threshold.
@@ -83,6 +83,69 @@ def identifiable_subset(J, cost: float, ftol: float = FTOL):
     s_keep = np.linalg.svd(J[:, keep], compute_uv=False) if keep.size else np.array([])
     return keep, held, {"threshold": thr, "singular_values": s_all.tolist(), "condition": cond2(s_all),
                         "condition_kept": cond2(s_keep)}
+
+
+def prediction_windows(model: Model, logs, horizon: float, every: float, *, sample_every: int = 1, initial=None):
+    """Slice long logs into open-loop prediction windows for :class:`OutputErrorRefiner` (multiple shooting).
+
+    Whole-log output error is meaningless on logs minutes long in gusting wind (a replay drifts off after a
+    minute whatever the coefficients); what a user predicts is ``horizon`` seconds from a measured state.
+    Each window starts at a measured sample every ``every`` s, is ``horizon`` s long (windows that would run
+    past the log's end, or over a gap in its sampling, are left out), keeps every ``sample_every``-th sample,
+    has its time counted from 0 (so all windows share one time grid and the refiner simulates them as one
+    batch) and its heading unwrapped from the start.  Refine with
+    ``OutputErrorRefiner(model, ...).fit(windows, x0=x0)``: every window starts at its measured state, the
+    cost is the open-loop prediction error over ``horizon`` s, as :func:`shipid.validation_horizon.horizon_prediction`
+    judges it (which holds the inputs between samples: pass ``input_hold="zoh"`` to match it).  The start
+    states are measured, not estimated: their noise enters the estimate (negligible when it is small against
+    what the window's error is made of), and overlapping windows make the residuals correlated, so the
+    refiner's formal standard deviations are too small (the synthetic test in ``tests/test_batch.py``).
+
+    ``logs``: TrialLogs or DataFrames with ``time``, the measured states and the model's inputs.
+    ``initial``: values of the states the logs do not measure (e.g. a fitted current ``{"cx": .., "cy": ..}``),
+    one dict for all logs or a list with one dict per log; others start at 0.
+    Returns ``(windows, x0)``: DataFrames (``attrs["name"]`` = ``"<log>@<start time>s"``, ``attrs["log"]`` the
+    log's index) and their start states, arrays of shape ``(model.nx,)``.
+    """
+    if isinstance(logs, pd.DataFrame) or hasattr(logs, "data"):
+        logs = [logs]
+    logs = list(logs)
+    if not (horizon > 0 and every > 0 and int(sample_every) >= 1):
+        raise ValueError(f"horizon and every must be positive [s], sample_every >= 1; got {horizon}, {every}, "
+                         f"{sample_every}")
+    inits = initial if isinstance(initial, (list, tuple)) else [initial] * len(logs)
+    if len(inits) != len(logs):
+        raise ValueError(f"initial: expected one dict per log ({len(logs)}), got {len(inits)}")
+    windows, x0s = [], []
+    for li, (lg, init) in enumerate(zip(logs, inits)):
+        df = lg if isinstance(lg, pd.DataFrame) else lg.data
+        name = getattr(lg, "name", None) or df.attrs.get("name", f"log{li}")
+        unknown = sorted(set(init or {}) - set(model.state_names))
+        if unknown:
+            raise ValueError(f"initial: model '{model.name}' has no state(s) {unknown}")
+        t = df["time"].to_numpy(dtype=float)
+        if t.size < 3:
+            continue
+        dt = float(np.median(np.diff(t)))
+        n_h, step = int(round(horizon / dt)), max(1, int(round(every / dt)))
+        grid = np.arange(0, n_h + 1, int(sample_every))
+        rel = np.round(grid * dt, 9)  # one shared grid (exactly equal arrays: one batch)
+        for k in range(0, t.size - n_h, step):
+            rows = df.iloc[k + grid]
+            if not np.allclose(rows["time"].to_numpy(dtype=float) - t[k], grid * dt, atol=0.25 * dt):
+                continue  # a gap in the sampling
+            w = rows.reset_index(drop=True).copy()
+            w["time"] = rel
+            if "psi" in w:
+                w["psi"] = np.unwrap(w["psi"].to_numpy(dtype=float))
+            x0 = np.array([float(w[s].iloc[0]) if s in w.columns else float((init or {}).get(s, 0.0))
+                           for s in model.state_names])
+            if not np.all(np.isfinite(x0)):
+                continue
+            w.attrs["name"], w.attrs["log"] = f"{name}@{t[k]:g}s", li
+            windows.append(w)
+            x0s.append(x0)
+    return windows, x0s
 
 
 class OutputErrorRefiner:
