@@ -333,6 +333,15 @@ def test_refine_on_windows_recovers_a_coefficient_with_each_runs_current():
     w = np.asarray(mean.log_weights)
     assert w.size == 5 + 13 and w[:5].sum() == pytest.approx(w[5:].sum()) and w.sum() == pytest.approx(w.size)
     assert own.log_weights is None
+    # round 10's options: a held coefficient keeps the start model's value while the others are refined; the
+    # position-only cost and the robust loss reach the refiner
+    held = refine_on_windows(start.with_params({"Yv": 1.1 * float(truth.params_series()["Yv"])}), runs, cur,
+                             estimate=("Nr", "Yv"), hold=("Yv",), channels=("x", "y"), loss="soft_l1", max_nfev=20)
+    assert held.estimated_ == ["Nr"] and held.channels_ == ["x", "y"] and held.loss == "soft_l1"
+    assert held.coef_["Yv"] == pytest.approx(1.1 * float(truth.params_series()["Yv"]), rel=1e-12)
+    assert held.coef_["Nr"] != pytest.approx(1.3 * nr, rel=1e-3)
+    with pytest.raises(ValueError, match="hold"):
+        refine_on_windows(start, runs, cur, estimate=("Nr",), hold=("aH",))
     # in_sample_errors judges models on the runs they were fitted on, each with its own current: the truth and
     # the refined model predict these runs to integration accuracy, the start model does not
     from shipid.studies.esso_osaka import in_sample_errors

@@ -148,6 +148,17 @@ def prediction_windows(model: Model, logs, horizon: float, every: float, *, samp
     return windows, x0s
 
 
+#: The robust losses of ``scipy.optimize.least_squares``: ``z -> (rho(z), rho'(z))`` of the squared scaled
+#: residual ``z`` (as scipy defines them; the cost is ``0.5 * f_scale**2 * sum(rho(z))``).
+_ROBUST_RHO = {
+    "linear": lambda z: (z, np.ones_like(z)),
+    "soft_l1": lambda z: (2.0 * (np.sqrt(1.0 + z) - 1.0), 1.0 / np.sqrt(1.0 + z)),
+    "huber": lambda z: (np.where(z <= 1.0, z, 2.0 * np.sqrt(z) - 1.0), np.where(z <= 1.0, 1.0, 1.0 / np.sqrt(np.maximum(z, 1.0)))),
+    "cauchy": lambda z: (np.log1p(z), 1.0 / (1.0 + z)),
+    "arctan": lambda z: (np.arctan(z), 1.0 / (1.0 + z**2)),
+}
+
+
 class OutputErrorRefiner:
     """Output-error (simulation-error) least-squares refinement.
 
@@ -202,12 +213,22 @@ class OutputErrorRefiner:
         solve up to ``max_nfev`` evaluations); a held one is released when its cost gradient points into
         the allowed side.  The held ones are listed in ``at_bound_`` and in the result's settings and
         have no standard deviation (like the identifiable subset's).
+    loss : {"linear", "soft_l1", "huber", "cauchy", "arctan"}
+        Loss of the normalised residuals, as ``scipy.optimize.least_squares``' (default ``"linear"``,
+        least squares).  A robust loss (e.g. ``"soft_l1"``) lets a few large residuals (a gust, a glitch)
+        pull the fit less; ``f_scale`` is the normalised residual where it turns from quadratic to linear
+        (1: at one ``meas_std``).  ``cost_``, ``cost_start_`` are then that loss's cost, and the covariance is
+        the Gauss-Newton one of the robust cost (``least_squares``' modified Jacobian) times the raw
+        residuals' variance (conservative when there are outliers).
+    f_scale : float
+        Soft margin of the robust loss in normalised residuals (default 1).
     """
 
     def __init__(self, model: Model, *, estimate=None, channels=None, meas_std=None, max_nfev: int = 30,
                  substeps: int = 1, jacobian: str = "fd", log_weights=None,
                  extra_residuals=None, input_hold: str = "foh", estimate_x0=False,
-                 hold_unresolved: bool = False, sign_bounds: bool = False):
+                 hold_unresolved: bool = False, sign_bounds: bool = False, loss: str = "linear",
+                 f_scale: float = 1.0):
         self.model = model
         self.estimate = estimate
         self.channels = channels
@@ -221,6 +242,8 @@ class OutputErrorRefiner:
         self.estimate_x0 = estimate_x0
         self.hold_unresolved = hold_unresolved
         self.sign_bounds = sign_bounds
+        self.loss = loss
+        self.f_scale = f_scale
 
     def fit(self, logs, start=None, x0=None) -> "OutputErrorRefiner":
         """Refine on ``logs``; ``start`` may be a fitted :class:`EKFIdentifier` whose
@@ -240,6 +263,16 @@ class OutputErrorRefiner:
             raise ValueError(f"jacobian must be 'fd' or 'tangent', got {self.jacobian!r}")
         if self.input_hold not in ("foh", "zoh"):
             raise ValueError(f"input_hold must be 'foh' or 'zoh', got {self.input_hold!r}")
+        if self.loss not in _ROBUST_RHO:
+            raise ValueError(f"loss must be one of {tuple(_ROBUST_RHO)}, got {self.loss!r}")
+        if not (np.isfinite(self.f_scale) and self.f_scale > 0):
+            raise ValueError(f"f_scale must be finite and > 0, got {self.f_scale!r}")
+        fs2 = float(self.f_scale) ** 2
+        rho = _ROBUST_RHO[self.loss]
+
+        def cost_of(f):  # least_squares' cost: 0.5 * f_scale^2 * sum(rho((f / f_scale)^2))
+            return float(0.5 * fs2 * np.sum(rho(f**2 / fs2)[0]))
+
         model = self.model
         arrays, meas = prepare_logs(model, logs)
         # time of each log's last measured sample (logs padded onto a common grid are NaN after it)
@@ -452,7 +485,7 @@ class OutputErrorRefiner:
                               f"{info['condition']:.3g} -> {info['condition_kept']:.3g})", UserWarning, stacklevel=2)
         def solve(free_now):
             return least_squares(fun, th0[free_now], jac=jac, method="trf", max_nfev=self.max_nfev, x_scale=1.0,
-                                 ftol=FTOL, xtol=FTOL)
+                                 ftol=FTOL, xtol=FTOL, loss=self.loss, f_scale=self.f_scale)
 
         sol = solve(free)
         nfev = int(sol.nfev)
@@ -464,7 +497,7 @@ class OutputErrorRefiner:
         self.at_bound_ = []
         cost_start = None
         if side.any():
-            cost_start = float(0.5 * np.sum(fun(th0[free]) ** 2))  # before the active set moves th0
+            cost_start = cost_of(fun(th0[free]))  # before the active set moves th0
             free_all, fixed = free.copy(), []
             for _ in range(2 * int((side != 0).sum()) + 1):
                 th_now = full(sol.x)
@@ -472,7 +505,8 @@ class OutputErrorRefiner:
                 if not viol and fixed:
                     th0[:] = th_now
                     free = np.array(fixed)
-                    g = jac(th0[free]).T @ fun(th0[free])  # d cost / d th of the fixed ones
+                    f_now = fun(th0[free])
+                    g = jac(th0[free]).T @ (rho(f_now**2 / fs2)[1] * f_now)  # d cost / d th of the fixed ones
                     nfev += 1
                     release = [i for i, gi in zip(fixed, g) if gi * side[i] > 0]
                     if not release:
@@ -540,7 +574,7 @@ class OutputErrorRefiner:
         self.estimated_ = names
         self.channels_ = chans
         self.cost_ = float(sol.cost)
-        self.cost_start_ = cost_start if cost_start is not None else float(0.5 * np.sum(fun(th0[free]) ** 2))
+        self.cost_start_ = cost_start if cost_start is not None else cost_of(fun(th0[free]))
         self.rms_normalised_residual_ = float(np.sqrt(s2))
         finite = bool(np.all(np.isfinite(sol.x)) and np.isfinite(sol.cost))
         capped = finite and bool(np.any(np.abs(sol.fun) >= 1e6))  # a replay still diverges at the end
@@ -584,7 +618,7 @@ class OutputErrorRefiner:
             coef_std={k: float(v) for k, v in self.coef_std_.items()}, cov=self.cov_.copy(), diagnostics=diag,
             inputs=_inputs(self.logs_), method="output-error",
             settings={"estimated": self.estimated_, "channels": self.channels_, "max_nfev": self.max_nfev,
-                      "input_hold": self.input_hold,
+                      "input_hold": self.input_hold, "loss": self.loss, "f_scale": float(self.f_scale),
                       "estimate_x0": list(self.x0_std_.columns),
                       "log_weights": None if self.log_weights is None else [float(w) for w in self.log_weights],
                       "extra_residuals": self.extra_residuals is not None,
