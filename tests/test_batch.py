@@ -318,3 +318,22 @@ def test_robust_loss_resists_a_few_outliers():
         OutputErrorRefiner(start, loss="l1", **kw).fit([lg], x0=[x0])
     with pytest.raises(ValueError, match="f_scale"):
         OutputErrorRefiner(start, f_scale=0.0, **kw).fit([lg], x0=[x0])
+
+
+@pytest.mark.parametrize("loss", ["linear", "soft_l1", "huber", "cauchy", "arctan"])
+def test_robust_loss_table_matches_scipy(loss):
+    """The refiner's own copy of scipy's losses (used for ``cost_start_`` and the sign-bound active set's
+    gradient) gives scipy's cost: ``least_squares`` on residuals that do not depend on x reports the cost at
+    x0.  And rho' is the derivative of rho."""
+    from scipy.optimize import least_squares
+
+    from shipid.identify.batch import _ROBUST_RHO
+
+    f = np.array([0.1, -0.7, 1.0, 2.5, -6.0])
+    fs = 0.8
+    sol = least_squares(lambda x: f + 0.0 * x[0], [0.0], loss=loss, f_scale=fs, max_nfev=1)
+    z = f**2 / fs**2
+    assert 0.5 * fs**2 * np.sum(_ROBUST_RHO[loss](z)[0]) == pytest.approx(sol.cost, rel=1e-12)
+    h = 1e-6
+    num = (_ROBUST_RHO[loss](z + h)[0] - _ROBUST_RHO[loss](z - h)[0]) / (2 * h)
+    assert np.allclose(_ROBUST_RHO[loss](z)[1], num, rtol=1e-5)
