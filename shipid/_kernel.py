@@ -119,14 +119,15 @@ def rk4_rest(t, x, um, ub, c, h, k1, k2, k3, k4, xs, xn):
         xn[i] = x[i] + h / 6 * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i])
 
 
-def tangent(method, t, x, ua, um, ub, p, P, c, cols, h, scale, xn, Fx, Fp, w):
+def tangent(method, t, x, ua, um, ub, p, P, c, cols, h, scale, xn, Fx, Fp, k1, k2, k3, k4, xs, A, Bp, Kx, Kp, Kxs,
+            Kps, M, Be):
     """One step of the discrete map and its tangent: ``xn``, ``Fx (nx, nx)``, ``Fp (nx, ne)`` (the
     parameter columns ``cols``, multiplied by ``scale``).  ``method``: 0 RK4 with the second-order
     Taylor tangent at the step start (:func:`shipid.integrate.rk4_step_taylor_tangent`), 1 RK4 with
     its exact tangent (:func:`~shipid.integrate.rk4_step_tangent`), 2 Euler.  Stage inputs ``ua`` (start),
     ``um`` (middle), ``ub`` (end) as :func:`shipid.integrate._stage_inputs`; ``c = k_consts(p, P)``;
-    ``w``: work arrays (see :func:`_work`)."""
-    k1, k2, k3, k4, xs, A, Bp, Ax, Kx, Kp, Kxs, Kps, M, Be = w
+    ``k1 .. Be``: work arrays (see :func:`_work`; passed one by one, not as a tuple: unpacking a tuple of arrays
+    at every step costs an atomic reference count per array)."""
     nx = x.shape[0]
     ne = cols.shape[0]
     k_rhs(t, x, ua, c, k1)
@@ -222,42 +223,6 @@ def _work(nx, n_par, ne):
             np.zeros((nx, nx)), np.zeros((nx, ne)), np.zeros((nx, nx)), np.zeros((nx, ne)))
 
 
-def cross_interval(method, t0, x, u0, u1, foh, n, p, P, c, cols, h, scale, xn, Fx, Fp, Ax, Ap, tmpx, tmpp,
-                   ua, ub, um, w):
-    """Cross one sample interval in ``n`` steps of length ``h`` (as ``ekf._cross_interval``): step ``i``
-    starts at ``t0 + i h``; under first-order hold (``foh``) its end inputs are ``(1 - w) u0 + w u1`` at
-    ``w = i/n, (i+1)/n`` (the last one ``u1`` itself), else ``u0`` throughout.  ``xn``, ``Fx``, ``Fp``
-    receive the end state and the interval's transition (parameter columns scaled)."""
-    nx = x.shape[0]
-    ne = cols.shape[0]
-    nu = u0.shape[0]
-    ua[:] = u0
-    for i in range(n):
-        for j in range(nu):
-            if not foh:
-                ub[j] = u0[j]
-            elif i == n - 1:
-                ub[j] = u1[j]
-            else:
-                wt = (i + 1) / n
-                ub[j] = (1.0 - wt) * u0[j] + wt * u1[j]
-            um[j] = 0.5 * (ua[j] + ub[j]) if foh else ua[j]
-        ti = t0 + i * h if i else t0
-        if i > 0:
-            x[:] = xn
-        # the first step's tangent is the interval's, later ones (Ax, Ap) are chained onto it; one call
-        # site, as tangent is inlined (compile time)
-        tangent(method, ti, x, ua, um, ub, p, P, c, cols, h, scale, xn, Fx if i == 0 else Ax, Fp if i == 0 else Ap, w)
-        if i > 0:
-            mat_mul(Ax, Fp, tmpp)
-            for r in range(nx):
-                for j in range(ne):
-                    Fp[r, j] = tmpp[r, j] + Ap[r, j]
-            mat_mul(Ax, Fx, tmpx)
-            Fx[:, :] = tmpx
-        ua[:] = ub
-
-
 def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, R, z0, P0, p_base, est_idx, scale,
                meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store, compact,
                z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated,
@@ -288,7 +253,7 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
     ub = np.empty(nu)
     um = np.empty(nu)
     M = np.empty((nx, nz))
-    w = _work(nx, n_par, ne)
+    k1, k2, k3, k4, xs, A, Bp, _, Kx, Kp, Kxs, Kps, Mt, Be = _work(nx, n_par, ne)
     sel = np.empty(nm, dtype=np.int64)
     run = np.zeros(nm, dtype=np.int64)
     S = np.empty((nm, nm))
@@ -432,11 +397,47 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
             for j in range(ne):
                 p[est_idx[j]] = z[nx + j] * scale[j]
             c = k_consts(p, Pk)
+            # cross the interval in n steps of length h (as ``ekf._cross_interval``): step i starts at t_k + i h;
+            # under first-order hold (``foh``) its end inputs are (1 - w) U_k + w U_k+1 at w = i/n, (i+1)/n (the
+            # last one U_k+1 itself), else U_k throughout; xn, Fx, Fp receive the end state and the interval's
+            # transition (parameter columns scaled).  (Written here, on elements: array views or a tuple of
+            # work arrays made at every step would each cost atomic reference counts, ~1/4 of the step.)
             n = nsteps[b, k]
-            h = (t[b, k + 1] - t[b, k]) / n
-            x[:] = z[:nx]
-            cross_interval(method, t[b, k], x, U[b, k], U[b, k + 1], foh, n, p, Pk, c, est_idx, h, scale,
-                           xn, Fx, Fp, Ax, Ap, tmpx, tmpp, ua, ub, um, w)
+            t0 = t[b, k]
+            h = (t[b, k + 1] - t0) / n
+            for j in range(nx):
+                x[j] = z[j]
+            for j in range(nu):
+                ua[j] = U[b, k, j]
+            for i in range(n):
+                for j in range(nu):
+                    if not foh:
+                        ub[j] = U[b, k, j]
+                    elif i == n - 1:
+                        ub[j] = U[b, k + 1, j]
+                    else:
+                        wt = (i + 1) / n
+                        ub[j] = (1.0 - wt) * U[b, k, j] + wt * U[b, k + 1, j]
+                    um[j] = 0.5 * (ua[j] + ub[j]) if foh else ua[j]
+                ti = t0 + i * h if i else t0
+                if i > 0:
+                    for j in range(nx):
+                        x[j] = xn[j]
+                # the first step's tangent is the interval's, later ones (Ax, Ap) are chained onto it; one call
+                # site, as tangent is inlined (compile time)
+                tangent(method, ti, x, ua, um, ub, p, Pk, c, est_idx, h, scale, xn, Fx if i == 0 else Ax,
+                        Fp if i == 0 else Ap, k1, k2, k3, k4, xs, A, Bp, Kx, Kp, Kxs, Kps, Mt, Be)
+                if i > 0:
+                    mat_mul(Ax, Fp, tmpp)
+                    for r in range(nx):
+                        for j in range(ne):
+                            Fp[r, j] = tmpp[r, j] + Ap[r, j]
+                    mat_mul(Ax, Fx, tmpx)
+                    for r in range(nx):
+                        for j in range(nx):
+                            Fx[r, j] = tmpx[r, j]
+                for j in range(nu):
+                    ua[j] = ub[j]
         for i in range(nx):
             zn[i] = x_reset[b, k + 1, i] if rs else xn[i]
             for j in range(nz):
@@ -511,7 +512,7 @@ def ekf_batch(t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, R, z
 def rk4_replay(t, U, x0, p, Pk, nsteps, foh, X):
     """Open-loop RK4 of every member from ``x0 (B, nx)`` over the sample times ``t (nt,)`` under the
     inputs ``U (B, nt, nu)`` with parameters ``p (1 or B, np)``, ``nsteps (nt-1,)`` steps per interval,
-    the input hold of :func:`cross_interval`, into ``X (B, nt, nx)`` -- the map of
+    the input hold of :func:`ekf_member`, into ``X (B, nt, nx)`` -- the map of
     :func:`shipid.integrate.rk4_map` (stage inputs start, middle, middle, end).  Returns the number of
     members whose state became non-finite (they are left unfinished; the caller decides)."""
     B, nx = x0.shape
@@ -531,7 +532,8 @@ def rk4_replay(t, U, x0, p, Pk, nsteps, foh, X):
         for k in range(nt - 1):
             n = nsteps[k]
             h = (t[k + 1] - t[k]) / n
-            ua[:] = U[b, k]
+            for j in range(nu):  # (element by element here and below: an array view made per sample costs an
+                ua[j] = U[b, k, j]  # atomic reference count when compiled)
             for i in range(n):
                 for j in range(nu):
                     if not foh:
@@ -549,14 +551,15 @@ def rk4_replay(t, U, x0, p, Pk, nsteps, foh, X):
             for m in range(nx):
                 if not math.isfinite(x[m]):
                     ok = False
-            X[b, k + 1] = x
+            for m in range(nx):
+                X[b, k + 1, m] = x[m]
             if not ok:
                 bad += 1
                 break
     return bad
 
 
-FILTER = {"cholesky": cholesky, "chol_solve": chol_solve, "mat_mul": mat_mul, "rk4_rest": rk4_rest, "tangent": tangent, "_work": _work, "cross_interval": cross_interval,
+FILTER = {"cholesky": cholesky, "chol_solve": chol_solve, "mat_mul": mat_mul, "rk4_rest": rk4_rest, "tangent": tangent, "_work": _work,
           "ekf_member": ekf_member, "ekf_batch": ekf_batch, "rk4_replay": rk4_replay}
 
 
@@ -923,7 +926,7 @@ _cache: dict = {}
 #: (kcs-response, 22 states; same results to the bit), for ~2.5 s more compile time (17.8 -> 20.2 s with
 #: an empty cache).  The model's equations and wrappers are not inlined: no measurable gain, and
 #: inlining the equations themselves would let the filter's fastmath flags change their rounding.
-INLINE = frozenset({"cholesky", "chol_solve", "mat_mul", "rk4_rest", "tangent", "cross_interval", "ship_variances", "rows_times"})
+INLINE = frozenset({"cholesky", "chol_solve", "mat_mul", "rk4_rest", "tangent", "ship_variances", "rows_times"})
 #: The filter and smoother compile with numba's ``error_model="numpy"`` (a division by zero gives inf/NaN, as
 #: on the numpy path, instead of raising: no check per division; smoother ~0.1 us per sample faster, results
 #: identical to the bit on the bench log).
