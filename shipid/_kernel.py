@@ -30,6 +30,7 @@ import hashlib
 import inspect
 import math
 import re
+import types
 import warnings
 
 import numpy as np
@@ -895,10 +896,12 @@ def _source_hash(functions: dict) -> str:
 _hashes: dict = {}
 
 
-def filter_functions(model, notice: bool = True):
+def filter_functions(model, notice: bool = True, refcount: bool = False):
     """The compiled filter for ``model`` (a dict of numba functions), or ``None`` when compilation is
     off (:func:`shipid._jit.enabled`) or the model declares no equations (then, with ``notice``, a
-    one-line notice, once per model class)."""
+    one-line notice, once per model class).  The model's equations that allocate no array are compiled
+    without reference counting (:func:`_refcount_free`); with ``refcount`` (or once that build failed to
+    compile, :func:`call`) all of them are reference counted (a separate build and disk cache)."""
     if not _jit.enabled():
         return None
     eq = getattr(model, "_equations", None)
@@ -911,15 +914,68 @@ def filter_functions(model, notice: bool = True):
         return None
     ns = model._equations_namespace()
     tag = "__" + re.sub(r"\W", "_", model.name) + "_" + _source_hash({**eq, **ns})
-    key = ("filter", id(eq), tag)
+    base = ("filter", id(eq), tag)
+    refcount = refcount or base in _refcounted
+    key = base + (refcount,)
     out = _cache.get(key)
     if out is None:
-        funcs = _jit.rebind(eq, ns, jit=True, tag=tag)
+        tag += "_rc" if refcount else ""
+        funcs = _jit.rebind(eq, ns, jit=True, tag=tag,
+                            no_refcount=frozenset() if refcount else _refcount_free(eq, ns))
         out = _cache[key] = _jit.rebind(FILTER, {**ns, **funcs}, jit=True, tag=tag, fastmath=FASTMATH, inline=INLINE,
                                         error_model="numpy")
+        _base_of[id(out)] = base
     return out
 
 
+def call(model, fns, name, *args):
+    """``fns[name](*args)`` for ``fns = filter_functions(model)``.  Should that build not compile (an
+    equation compiled without reference counting allocates after all: numba refuses it), the model's
+    reference-counted build runs instead, now and from then on (same results, slower)."""
+    try:
+        return fns[name](*args)
+    except _jit.compile_errors():
+        base = _base_of.get(id(fns))
+        if base is None or base in _refcounted:
+            raise
+        _refcounted.add(base)
+        return filter_functions(model, refcount=True)[name](*args)
+
+
+#: Names whose use allocates an array (an equation that uses one is compiled with reference counting).
+_ALLOCATING = frozenset({
+    "empty", "zeros", "ones", "full", "array", "asarray", "ascontiguousarray", "copy", "empty_like", "zeros_like",
+    "ones_like", "full_like", "concatenate", "stack", "vstack", "hstack", "column_stack", "arange", "linspace", "eye",
+    "identity", "diag", "outer", "dot", "tile", "repeat", "append", "astype", "flatten", "ravel", "reshape", "sort",
+    "argsort", "unique", "where", "cumsum", "cumprod", "transpose", "broadcast_to"})
+
+
+def _refcount_free(eq: dict, ns: dict) -> frozenset:
+    """Names of the model's equations (``Model._equations``, in dependency order) compiled without numba's
+    reference counting (:func:`shipid._jit.rebind`'s ``no_refcount``): not ``k_consts`` (it returns a new
+    array), no allocating name (:data:`_ALLOCATING`) among the names their code uses, and calling only
+    equations of the set that qualify themselves (none that the model's namespace provides, compiled
+    elsewhere).  Array arithmetic allocates without a name; numba refuses to compile it without reference
+    counting, and :func:`call` then falls back.  Why: ``k_rhs``/``k_jac`` run ~5 times per filter step and
+    4 times per replay step with array arguments; their atomic reference counts cost ~7 % of a compiled
+    fit (kcs-response)."""
+    free: set = set()
+    for name, fn in eq.items():
+        if name == "k_consts" or name in ns or not isinstance(fn, types.FunctionType):
+            continue
+        names, codes = set(), [fn.__code__]
+        while codes:
+            code = codes.pop()
+            names.update(code.co_names)
+            codes.extend(c for c in code.co_consts if isinstance(c, types.CodeType))
+        if names & _ALLOCATING or any(n != name and (n in ns or (n in eq and n not in free)) for n in names):
+            continue
+        free.add(name)
+    return frozenset(free)
+
+
+_refcounted: set = set()  # base keys of filter builds whose reference-count-free equations did not compile
+_base_of: dict = {}
 _cache: dict = {}
 #: The kernel's helpers that numba inlines into their callers (``_jit.rebind``'s ``inline``): called once
 #: or more per sample with up to ~25 array arguments, their calls cost ~0.6 us of a ~4 us filter step
@@ -958,8 +1014,9 @@ def replay_compiled(model, x0, t, U, p, nsteps, foh: bool):
     x0 = f64(x0)
     X = np.empty((x0.shape[0], len(t), x0.shape[1]))
     try:
-        bad = fns["rk4_replay"](f64(t), f64(U), x0, f64(np.atleast_2d(p)), f64(model._kernel_constants()),
-                                np.ascontiguousarray(nsteps, dtype=np.int64), bool(foh), X)
+        args = (f64(t), f64(U), x0, f64(np.atleast_2d(p)), f64(model._kernel_constants()),
+                np.ascontiguousarray(nsteps, dtype=np.int64), bool(foh), X)
+        bad = call(model, fns, "rk4_replay", *args) if _jit.enabled() else fns["rk4_replay"](*args)
     except (ArithmeticError, ValueError):  # the interpreter's float maths raises where numpy gives inf/NaN
         return None
     return None if bad else X

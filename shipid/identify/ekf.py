@@ -861,8 +861,8 @@ def _run_compiled(prob, store: bool, nis_limit: float, store_dtype=np.float64, c
     div = np.zeros(B, dtype=np.bool_)
     div_at = np.full(B, -1, dtype=np.int64)
     d2_at = np.full(B, np.nan)
-    fns["ekf_batch"](
-        t, f64(prob.U), Y, fin, fin.any(axis=(0, 2)), reset, f64(prob.x_reset), f64(prob.P_reset), f64(prob.q), dtq,
+    _kernel.call(
+        prob.model, fns, "ekf_batch", t, f64(prob.U), Y, fin, fin.any(axis=(0, 2)), reset, f64(prob.x_reset), f64(prob.P_reset), f64(prob.q), dtq,
         nsteps, f64(prob.R), f64(prob.z0), f64(prob.P0), f64(prob.p_base),
         np.ascontiguousarray(prob.est_idx, dtype=np.int64), f64(prob.scale),
         np.ascontiguousarray(prob.meas_idx, dtype=np.int64), f64(prob.model._kernel_constants()), nx,
