@@ -227,9 +227,12 @@ def _work(nx, n_par, ne):
 def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, R, z0, P0, p_base, est_idx, scale,
                meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store, compact,
                z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated,
-               div, div_at, d2_at):
+               div, div_at, d2_at, gains, Kst, ast, Sist):
     """The filter over the samples of batch member ``b`` (arrays as in :func:`shipid.identify.ekf._run_compiled`; what a
-    diverged member does not compute is set NaN)."""
+    diverged member does not compute is set NaN).  With ``gains`` the update's ``K^T``, ``S^-1 e`` and ``S^-1`` at the
+    accepted channels are stored (``Kst (B, N, nm, nz)``, ``ast (B, N, nm)``, ``Sist (B, N, nm, nm)``, rows and
+    columns in channel order; other entries are not written) for the smoother, which then need not solve for them
+    again (:func:`bf_member`; the same numbers: it solved the same system the same way)."""
     N = t.shape[1]
     nz = z0.shape[1]
     ne = nz - nx
@@ -265,6 +268,8 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
     W = np.empty((nm, nz))
     e = np.empty(nm)
     a = np.empty(nm)
+    a2 = np.empty(nm)
+    Si = np.empty((nm, nm))
     dz = np.empty(nz)
     zg = z0[b].copy()  # the last good posterior (before any update: the initial condition)
     Pg = P0[b].copy()
@@ -319,6 +324,19 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
                             Kt[i, j] = PH[i, j]
                         a[i] = e[i]
                     chol_solve(L, cnt, Kt, nz, a)
+                    if gains:  # (what bf_member would solve for again: S^-1 as it does, then all three stored)
+                        for i in range(cnt):
+                            for j in range(cnt):
+                                Si[i, j] = 1.0 if i == j else 0.0
+                            a2[i] = 0.0
+                        chol_solve(L, cnt, Si, cnt, a2)
+                        for c_ in range(cnt):
+                            r_ = sel[c_]
+                            ast[b, k, r_] = a[c_]
+                            for j in range(nz):
+                                Kst[b, k, r_, j] = Kt[c_, j]
+                            for d_ in range(cnt):
+                                Sist[b, k, r_, sel[d_]] = Si[c_, d_]
                     for i in range(cnt):
                         ld += 2.0 * math.log(L[i, i])
                         d2 += e[i] * a[i]
@@ -502,12 +520,13 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
 
 def ekf_batch(t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, R, z0, P0, p_base, est_idx, scale,
               meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store, compact,
-              z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated, div, div_at, d2_at):
+              z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated, div, div_at, d2_at,
+              gains, Kst, ast, Sist):
     for b in range(t.shape[0]):
         ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, R, z0, P0, p_base, est_idx, scale,
                    meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store, compact,
                    z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated,
-                   div, div_at, d2_at)
+                   div, div_at, d2_at, gains, Kst, ast, Sist)
 
 
 def rk4_replay(t, U, x0, p, Pk, nsteps, foh, X):
@@ -678,7 +697,7 @@ def ship_variances(Pfk, Lam, nx, nz, rows, n, row, row2, out):
         out[i2] = Pfk[i2, i2] - s2
 
 
-def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps0):
+def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps0, gains, Kst, ast, Sist):
     """Bryson-Frazier (adjoint) form of the same smoother for one member, without inverting ``Pp`` and
     without the full smoothed covariance at every sample: the adjoint ``lam`` (nz) and ``Lam`` (nz, nz)
     run backwards, ``zs_k = zf_k + Pf_k lam_k`` and ``Ps_k = Pf_k - Pf_k Lam_k Pf_k``, of which the
@@ -689,7 +708,9 @@ def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps
     the transition from k-1: ``lam = F^T lam~``, ``Lam = F^T Lam~ F`` (its lower triangle, mirrored), with the
     transition's parameter rows the identity (the random walks; a reset's ship rows are zero).  Only
     the ship rows of ``F`` and the rows ``pp_rows`` of ``Pp`` (those at the measured states, channel
-    ``j`` in row ``pp_rows[j]``) are read, so the compact storage of the filter serves."""
+    ``j`` in row ``pp_rows[j]``) are read, so the compact storage of the filter serves.  With ``gains``
+    the filter's stored ``K^T``, ``S^-1 e`` and ``S^-1`` (:func:`ekf_member`) are read instead of solving
+    for them (``Pp`` is then not read)."""
     N, nz = zf.shape
     nr = Pf.shape[1]  # rows of Pf stored: all, or the ship rows (compact="ship": no parameter means, no Ps0)
     nm = meas_idx.shape[0]
@@ -743,7 +764,6 @@ def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps
                     Ps0[j, i] = v
             break
         # ---- back through the update at sample k
-        Ppk = Pp[k]
         cnt = 0
         for j in range(nm):
             if acc[k, j]:
@@ -762,14 +782,22 @@ def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps
                 nv += 1
         if cnt == 0:
             ship_variances(Pfk, Lam, nx, nz, vrows, nv, row, row2, var_x[k])
-        if cnt > 0:
+        if cnt > 0 and gains:  # the filter's
+            for c_ in range(cnt):
+                r_ = sel[c_]
+                a[c_] = ast[k, r_]
+                for i in range(nz):
+                    Kt[c_, i] = Kst[k, r_, i]
+                for d_ in range(cnt):
+                    Si[c_, d_] = Sist[k, r_, sel[d_]]
+        elif cnt > 0:
             for c_ in range(cnt):
                 r_ = pp_rows[sel[c_]]
                 e[c_] = innov[k, sel[c_]]
                 for i in range(nz):
-                    Kt[c_, i] = Ppk[r_, i]
+                    Kt[c_, i] = Pp[k, r_, i]
                 for d_ in range(cnt):
-                    S[c_, d_] = Ppk[r_, meas_idx[sel[d_]]]
+                    S[c_, d_] = Pp[k, r_, meas_idx[sel[d_]]]
                     Si[c_, d_] = 1.0 if c_ == d_ else 0.0
                 S[c_, c_] += R[sel[c_]]
             cholesky(S, cnt, L)  # positive definite: the filter factorised the same S at this sample
@@ -779,6 +807,7 @@ def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps
                 a2[i] = 0.0
             chol_solve(L, cnt, Kt, nz, a)
             chol_solve(L, cnt, Si, cnt, a2)
+        if cnt > 0:
             for c_ in range(0, cnt, 2):  # LKt = (Lam K)^T = K^T Lam (Lam symmetric), two rows at a time
                 c2 = min(c_ + 1, cnt - 1)  # (an odd last row is computed twice)
                 rows_times(Kt, c_, c2, Lam, nz, row, row2)
@@ -860,10 +889,12 @@ def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps
                 Lam[j, i] = Lam[i, j]
 
 
-def bf_batch(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps0):
+def bf_batch(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps0, gains, Kst, ast, Sist):
     for b in range(zf.shape[0]):
         if np.isfinite(zf[b, -1]).all():
-            bf_member(zf[b], Pf[b], Pp[b], pp_rows, F[b], innov[b], acc[b], R[b], meas_idx, nx, zs[b], var_x[b], Ps0[b])
+            bg = b if gains else 0
+            bf_member(zf[b], Pf[b], Pp[b], pp_rows, F[b], innov[b], acc[b], R[b], meas_idx, nx, zs[b], var_x[b], Ps0[b],
+                      gains, Kst[bg], ast[bg], Sist[bg])
         else:  # a member that stopped at its divergence: nothing to smooth
             zs[b] = np.nan
             var_x[b] = np.nan

@@ -74,11 +74,18 @@ def _compare(prob, nis_limit=1e6):
     bf_small = bf_smooth(small, prob.R, prob.meas_idx, nx)
     with _jit.disabled():
         bf_small0 = bf_smooth(small0, prob.R, prob.meas_idx, nx)
+    # the compiled filter keeps its gains for the smoother, which then reads them instead of solving for them:
+    # the same numbers to the bit (solved alike from the same numbers); the numpy filter keeps none
+    assert small.gains is not None and small0.gains is None
+    for a, b in zip(bf_small, bf_smooth(replace(small, gains=None), prob.R, prob.meas_idx, nx)):
+        np.testing.assert_array_equal(a, b, err_msg="smoother from the stored gains")
     # the ship-row storage (the identifier's, param_walk=0): the same ship means and variances
     ship = run_ekf(prob, store=True, nis_limit=nis_limit, compact="ship")
     with _jit.disabled():
         ship0 = run_ekf(prob, store=True, nis_limit=nis_limit, compact="ship")
     bs, bs0 = bf_smooth(ship, prob.R, prob.meas_idx, nx), _numpy(lambda: bf_smooth(ship0, prob.R, prob.meas_idx, nx))
+    for a, b in zip(bs, bf_smooth(replace(ship, gains=None), prob.R, prob.meas_idx, nx)):
+        np.testing.assert_array_equal(a, b, err_msg="smoother from the stored gains (ship rows)")
     for out_, b_, what in ((ship, bs, "compiled"), (ship0, bs0, "numpy")):
         assert out_.compact == "ship"
         _close(out_.P_post, slow.P_post[:, :, :nx], "ship rows of P_post, " + what)

@@ -381,7 +381,7 @@ class EKFIdentifier:
             zs, var_x, Ps0 = self._smooth(out, prob)
             # the stored filter (what the smoother read: ~3.5 KB per sample of a 22-state log) is not kept, so
             # the next pass can reuse its memory (ekf._stored_empty); output_ keeps innovations and diagnostics
-            out = replace(out, z_post=None, P_post=None, z_prior=None, P_prior=None, F=None)
+            out = replace(out, z_post=None, P_post=None, z_prior=None, P_prior=None, F=None, gains=None)
             good = (prob, out, zs, var_x, Ps0)
             theta_s = zs[0, 0, nx:].copy()
             history.append(theta_s * scale)
