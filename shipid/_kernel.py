@@ -120,6 +120,22 @@ def rk4_rest(t, x, um, ub, c, h, k1, k2, k3, k4, xs, xn):
         xn[i] = x[i] + h / 6 * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i])
 
 
+def hold_inputs(U, b, k, i, n, foh, ua, ub, um):
+    """The inputs of step ``i`` of the ``n`` that cross interval ``k`` of member ``b`` (``ua``: its start
+    inputs): under first-order hold (``foh``) the end inputs ``ub`` are ``(1 - w) U_k + w U_k+1`` at
+    ``w = (i+1)/n`` (the last one ``U_k+1`` itself) and the middle ones ``um`` their mean with ``ua``; else
+    ``U_k`` throughout (the filter's interval crossing and the replay; as ``ekf._cross_interval``)."""
+    for j in range(ua.shape[0]):
+        if not foh:
+            ub[j] = U[b, k, j]
+        elif i == n - 1:
+            ub[j] = U[b, k + 1, j]
+        else:
+            wt = (i + 1) / n
+            ub[j] = (1.0 - wt) * U[b, k, j] + wt * U[b, k + 1, j]
+        um[j] = 0.5 * (ua[j] + ub[j]) if foh else ua[j]
+
+
 def tangent(method, t, x, ua, um, ub, p, P, c, cols, h, scale, xn, Fx, Fp, k1, k2, k3, k4, xs, A, Bp, Kx, Kp, Kxs,
             Kps, M, Be):
     """One step of the discrete map and its tangent: ``xn``, ``Fx (nx, nx)``, ``Fp (nx, ne)`` (the
@@ -416,11 +432,10 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
             for j in range(ne):
                 p[est_idx[j]] = z[nx + j] * scale[j]
             c = k_consts(p, Pk)
-            # cross the interval in n steps of length h (as ``ekf._cross_interval``): step i starts at t_k + i h;
-            # under first-order hold (``foh``) its end inputs are (1 - w) U_k + w U_k+1 at w = i/n, (i+1)/n (the
-            # last one U_k+1 itself), else U_k throughout; xn, Fx, Fp receive the end state and the interval's
-            # transition (parameter columns scaled).  (Written here, on elements: array views or a tuple of
-            # work arrays made at every step would each cost atomic reference counts, ~1/4 of the step.)
+            # cross the interval in n steps of length h (as ``ekf._cross_interval``): step i starts at t_k + i h,
+            # its inputs as :func:`hold_inputs`; xn, Fx, Fp receive the end state and the interval's transition
+            # (parameter columns scaled).  (Written here, on elements: array views or a tuple of work arrays made
+            # at every step would each cost atomic reference counts, ~1/4 of the step.)
             n = nsteps[b, k]
             t0 = t[b, k]
             h = (t[b, k + 1] - t0) / n
@@ -429,15 +444,7 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
             for j in range(nu):
                 ua[j] = U[b, k, j]
             for i in range(n):
-                for j in range(nu):
-                    if not foh:
-                        ub[j] = U[b, k, j]
-                    elif i == n - 1:
-                        ub[j] = U[b, k + 1, j]
-                    else:
-                        wt = (i + 1) / n
-                        ub[j] = (1.0 - wt) * U[b, k, j] + wt * U[b, k + 1, j]
-                    um[j] = 0.5 * (ua[j] + ub[j]) if foh else ua[j]
+                hold_inputs(U, b, k, i, n, foh, ua, ub, um)
                 ti = t0 + i * h if i else t0
                 if i > 0:
                     for j in range(nx):
@@ -555,15 +562,7 @@ def rk4_replay(t, U, x0, p, Pk, nsteps, foh, X):
             for j in range(nu):  # (element by element here and below: an array view made per sample costs an
                 ua[j] = U[b, k, j]  # atomic reference count when compiled)
             for i in range(n):
-                for j in range(nu):
-                    if not foh:
-                        ub[j] = U[b, k, j]
-                    elif i == n - 1:
-                        ub[j] = U[b, k + 1, j]
-                    else:
-                        wt = (i + 1) / n
-                        ub[j] = (1.0 - wt) * U[b, k, j] + wt * U[b, k + 1, j]
-                    um[j] = 0.5 * (ua[j] + ub[j]) if foh else ua[j]
+                hold_inputs(U, b, k, i, n, foh, ua, ub, um)
                 ti = t[k] + i * h if i else t[k]
                 k_rhs(ti, x, ua, c, k1)
                 rk4_rest(ti, x, um, ub, c, h, k1, k2, k3, k4, xs, x)  # in place: x[m] is read before written
@@ -579,7 +578,8 @@ def rk4_replay(t, U, x0, p, Pk, nsteps, foh, X):
     return bad
 
 
-FILTER = {"cholesky": cholesky, "chol_solve": chol_solve, "mat_mul": mat_mul, "rk4_rest": rk4_rest, "tangent": tangent, "_work": _work,
+FILTER = {"cholesky": cholesky, "chol_solve": chol_solve, "mat_mul": mat_mul, "rk4_rest": rk4_rest,
+          "hold_inputs": hold_inputs, "tangent": tangent, "_work": _work,
           "ekf_member": ekf_member, "ekf_batch": ekf_batch, "rk4_replay": rk4_replay}
 
 
@@ -1013,7 +1013,7 @@ _cache: dict = {}
 #: (kcs-response, 22 states; same results to the bit), for ~2.5 s more compile time (17.8 -> 20.2 s with
 #: an empty cache).  The model's equations and wrappers are not inlined: no measurable gain, and
 #: inlining the equations themselves would let the filter's fastmath flags change their rounding.
-INLINE = frozenset({"cholesky", "chol_solve", "mat_mul", "rk4_rest", "tangent", "ship_variances", "rows_times"})
+INLINE = frozenset({"cholesky", "chol_solve", "mat_mul", "rk4_rest", "hold_inputs", "tangent", "ship_variances", "rows_times"})
 #: The filter and smoother compile with numba's ``error_model="numpy"`` (a division by zero gives inf/NaN, as
 #: on the numpy path, instead of raising: no check per division; smoother ~0.1 us per sample faster, results
 #: identical to the bit on the bench log).
