@@ -63,7 +63,7 @@ def disabled():
 
 
 def rebind(functions: dict, namespace: dict, jit: bool = False, tag: str = "", fastmath=False,
-           inline=frozenset(), error_model: str = "python") -> dict:
+           inline=frozenset(), error_model: str = "python", no_refcount=frozenset()) -> dict:
     """The ``functions`` (name -> function, in dependency order) with their globals overridden.
 
     Each function is rebuilt from its own code object with its module's globals updated by
@@ -79,6 +79,11 @@ def rebind(functions: dict, namespace: dict, jit: bool = False, tag: str = "", f
     adjusted) costs more than their arithmetic; the results are the same, compiling takes longer.
     ``error_model``: numba's (``"numpy"``: a division by zero gives inf/NaN as in numpy instead of
     raising, so a division needs no check; the kernel's divergence checks catch the NaN).
+    ``no_refcount``: names compiled without numba's reference counting of arrays (its private ``_nrt=False``
+    option): functions that neither allocate nor return a new array (numba refuses to compile one that does,
+    a typing error), called many times per sample with array arguments, whose atomic reference counts
+    (``NRT_incref``/``NRT_decref``, at entry and at each slice) would cost more than their arithmetic.  The
+    results are the same to the bit.
     """
     if jit:
         _import_numba()
@@ -93,9 +98,15 @@ def rebind(functions: dict, namespace: dict, jit: bool = False, tag: str = "", f
         new.__qualname__, new.__doc__ = fn.__qualname__ + tag, fn.__doc__
         if jit:
             new = _numba.njit(cache=True, fastmath=fastmath, inline="always" if name in inline else "never",
-                              error_model=error_model)(new)
+                              error_model=error_model, **({"_nrt": False} if name in no_refcount else {}))(new)
         ns[name] = out[name] = new
     return out
+
+
+def compile_errors() -> tuple:
+    """The exceptions numba raises when it cannot compile a function (typing or lowering), for a caller that
+    has a fallback."""
+    return (_import_numba().core.errors.NumbaError,)
 
 
 def _import_numba():

@@ -30,6 +30,7 @@ import hashlib
 import inspect
 import math
 import re
+import types
 import warnings
 
 import numpy as np
@@ -119,14 +120,31 @@ def rk4_rest(t, x, um, ub, c, h, k1, k2, k3, k4, xs, xn):
         xn[i] = x[i] + h / 6 * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i])
 
 
-def tangent(method, t, x, ua, um, ub, p, P, c, cols, h, scale, xn, Fx, Fp, w):
+def hold_inputs(U, b, k, i, n, foh, ua, ub, um):
+    """The inputs of step ``i`` of the ``n`` that cross interval ``k`` of member ``b`` (``ua``: its start
+    inputs): under first-order hold (``foh``) the end inputs ``ub`` are ``(1 - w) U_k + w U_k+1`` at
+    ``w = (i+1)/n`` (the last one ``U_k+1`` itself) and the middle ones ``um`` their mean with ``ua``; else
+    ``U_k`` throughout (the filter's interval crossing and the replay; as ``ekf._cross_interval``)."""
+    for j in range(ua.shape[0]):
+        if not foh:
+            ub[j] = U[b, k, j]
+        elif i == n - 1:
+            ub[j] = U[b, k + 1, j]
+        else:
+            wt = (i + 1) / n
+            ub[j] = (1.0 - wt) * U[b, k, j] + wt * U[b, k + 1, j]
+        um[j] = 0.5 * (ua[j] + ub[j]) if foh else ua[j]
+
+
+def tangent(method, t, x, ua, um, ub, p, P, c, cols, h, scale, xn, Fx, Fp, k1, k2, k3, k4, xs, A, Bp, Kx, Kp, Kxs,
+            Kps, M, Be):
     """One step of the discrete map and its tangent: ``xn``, ``Fx (nx, nx)``, ``Fp (nx, ne)`` (the
     parameter columns ``cols``, multiplied by ``scale``).  ``method``: 0 RK4 with the second-order
     Taylor tangent at the step start (:func:`shipid.integrate.rk4_step_taylor_tangent`), 1 RK4 with
     its exact tangent (:func:`~shipid.integrate.rk4_step_tangent`), 2 Euler.  Stage inputs ``ua`` (start),
     ``um`` (middle), ``ub`` (end) as :func:`shipid.integrate._stage_inputs`; ``c = k_consts(p, P)``;
-    ``w``: work arrays (see :func:`_work`)."""
-    k1, k2, k3, k4, xs, A, Bp, Ax, Kx, Kp, Kxs, Kps, M, Be = w
+    ``k1 .. Be``: work arrays (see :func:`_work`; passed one by one, not as a tuple: unpacking a tuple of arrays
+    at every step costs an atomic reference count per array)."""
     nx = x.shape[0]
     ne = cols.shape[0]
     k_rhs(t, x, ua, c, k1)
@@ -222,48 +240,15 @@ def _work(nx, n_par, ne):
             np.zeros((nx, nx)), np.zeros((nx, ne)), np.zeros((nx, nx)), np.zeros((nx, ne)))
 
 
-def cross_interval(method, t0, x, u0, u1, foh, n, p, P, c, cols, h, scale, xn, Fx, Fp, Ax, Ap, tmpx, tmpp,
-                   ua, ub, um, w):
-    """Cross one sample interval in ``n`` steps of length ``h`` (as ``ekf._cross_interval``): step ``i``
-    starts at ``t0 + i h``; under first-order hold (``foh``) its end inputs are ``(1 - w) u0 + w u1`` at
-    ``w = i/n, (i+1)/n`` (the last one ``u1`` itself), else ``u0`` throughout.  ``xn``, ``Fx``, ``Fp``
-    receive the end state and the interval's transition (parameter columns scaled)."""
-    nx = x.shape[0]
-    ne = cols.shape[0]
-    nu = u0.shape[0]
-    ua[:] = u0
-    for i in range(n):
-        for j in range(nu):
-            if not foh:
-                ub[j] = u0[j]
-            elif i == n - 1:
-                ub[j] = u1[j]
-            else:
-                wt = (i + 1) / n
-                ub[j] = (1.0 - wt) * u0[j] + wt * u1[j]
-            um[j] = 0.5 * (ua[j] + ub[j]) if foh else ua[j]
-        ti = t0 + i * h if i else t0
-        if i > 0:
-            x[:] = xn
-        # the first step's tangent is the interval's, later ones (Ax, Ap) are chained onto it; one call
-        # site, as tangent is inlined (compile time)
-        tangent(method, ti, x, ua, um, ub, p, P, c, cols, h, scale, xn, Fx if i == 0 else Ax, Fp if i == 0 else Ap, w)
-        if i > 0:
-            mat_mul(Ax, Fp, tmpp)
-            for r in range(nx):
-                for j in range(ne):
-                    Fp[r, j] = tmpp[r, j] + Ap[r, j]
-            mat_mul(Ax, Fx, tmpx)
-            Fx[:, :] = tmpx
-        ua[:] = ub
-
-
 def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, R, z0, P0, p_base, est_idx, scale,
                meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store, compact,
                z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated,
-               div, div_at, d2_at):
+               div, div_at, d2_at, gains, Kst, ast, Sist):
     """The filter over the samples of batch member ``b`` (arrays as in :func:`shipid.identify.ekf._run_compiled`; what a
-    diverged member does not compute is set NaN)."""
+    diverged member does not compute is set NaN).  With ``gains`` the update's ``K^T``, ``S^-1 e`` and ``S^-1`` at the
+    accepted channels are stored (``Kst (B, N, nm, nz)``, ``ast (B, N, nm)``, ``Sist (B, N, nm, nm)``, rows and
+    columns in channel order; other entries are not written) for the smoother, which then need not solve for them
+    again (:func:`bf_member`; the same numbers: it solved the same system the same way)."""
     N = t.shape[1]
     nz = z0.shape[1]
     ne = nz - nx
@@ -288,7 +273,7 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
     ub = np.empty(nu)
     um = np.empty(nu)
     M = np.empty((nx, nz))
-    w = _work(nx, n_par, ne)
+    k1, k2, k3, k4, xs, A, Bp, _, Kx, Kp, Kxs, Kps, Mt, Be = _work(nx, n_par, ne)
     sel = np.empty(nm, dtype=np.int64)
     run = np.zeros(nm, dtype=np.int64)
     S = np.empty((nm, nm))
@@ -299,6 +284,8 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
     W = np.empty((nm, nz))
     e = np.empty(nm)
     a = np.empty(nm)
+    a2 = np.empty(nm)
+    Si = np.empty((nm, nm))
     dz = np.empty(nz)
     zg = z0[b].copy()  # the last good posterior (before any update: the initial condition)
     Pg = P0[b].copy()
@@ -353,6 +340,19 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
                             Kt[i, j] = PH[i, j]
                         a[i] = e[i]
                     chol_solve(L, cnt, Kt, nz, a)
+                    if gains:  # (what bf_member would solve for again: S^-1 as it does, then all three stored)
+                        for i in range(cnt):
+                            for j in range(cnt):
+                                Si[i, j] = 1.0 if i == j else 0.0
+                            a2[i] = 0.0
+                        chol_solve(L, cnt, Si, cnt, a2)
+                        for c_ in range(cnt):
+                            r_ = sel[c_]
+                            ast[b, k, r_] = a[c_]
+                            for j in range(nz):
+                                Kst[b, k, r_, j] = Kt[c_, j]
+                            for d_ in range(cnt):
+                                Sist[b, k, r_, sel[d_]] = Si[c_, d_]
                     for i in range(cnt):
                         ld += 2.0 * math.log(L[i, i])
                         d2 += e[i] * a[i]
@@ -432,11 +432,38 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
             for j in range(ne):
                 p[est_idx[j]] = z[nx + j] * scale[j]
             c = k_consts(p, Pk)
+            # cross the interval in n steps of length h (as ``ekf._cross_interval``): step i starts at t_k + i h,
+            # its inputs as :func:`hold_inputs`; xn, Fx, Fp receive the end state and the interval's transition
+            # (parameter columns scaled).  (Written here, on elements: array views or a tuple of work arrays made
+            # at every step would each cost atomic reference counts, ~1/4 of the step.)
             n = nsteps[b, k]
-            h = (t[b, k + 1] - t[b, k]) / n
-            x[:] = z[:nx]
-            cross_interval(method, t[b, k], x, U[b, k], U[b, k + 1], foh, n, p, Pk, c, est_idx, h, scale,
-                           xn, Fx, Fp, Ax, Ap, tmpx, tmpp, ua, ub, um, w)
+            t0 = t[b, k]
+            h = (t[b, k + 1] - t0) / n
+            for j in range(nx):
+                x[j] = z[j]
+            for j in range(nu):
+                ua[j] = U[b, k, j]
+            for i in range(n):
+                hold_inputs(U, b, k, i, n, foh, ua, ub, um)
+                ti = t0 + i * h if i else t0
+                if i > 0:
+                    for j in range(nx):
+                        x[j] = xn[j]
+                # the first step's tangent is the interval's, later ones (Ax, Ap) are chained onto it; one call
+                # site, as tangent is inlined (compile time)
+                tangent(method, ti, x, ua, um, ub, p, Pk, c, est_idx, h, scale, xn, Fx if i == 0 else Ax,
+                        Fp if i == 0 else Ap, k1, k2, k3, k4, xs, A, Bp, Kx, Kp, Kxs, Kps, Mt, Be)
+                if i > 0:
+                    mat_mul(Ax, Fp, tmpp)
+                    for r in range(nx):
+                        for j in range(ne):
+                            Fp[r, j] = tmpp[r, j] + Ap[r, j]
+                    mat_mul(Ax, Fx, tmpx)
+                    for r in range(nx):
+                        for j in range(nx):
+                            Fx[r, j] = tmpx[r, j]
+                for j in range(nu):
+                    ua[j] = ub[j]
         for i in range(nx):
             zn[i] = x_reset[b, k + 1, i] if rs else xn[i]
             for j in range(nz):
@@ -500,18 +527,19 @@ def ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, 
 
 def ekf_batch(t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, R, z0, P0, p_base, est_idx, scale,
               meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store, compact,
-              z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated, div, div_at, d2_at):
+              z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated, div, div_at, d2_at,
+              gains, Kst, ast, Sist):
     for b in range(t.shape[0]):
         ekf_member(b, t, U, Y, fin, any_k, reset, x_reset, P_reset, q, dtq, nsteps, R, z0, P0, p_base, est_idx, scale,
                    meas_idx, Pk, nx, method, foh, gate, gate_run, nis_limit, store, compact,
                    z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated,
-                   div, div_at, d2_at)
+                   div, div_at, d2_at, gains, Kst, ast, Sist)
 
 
 def rk4_replay(t, U, x0, p, Pk, nsteps, foh, X):
     """Open-loop RK4 of every member from ``x0 (B, nx)`` over the sample times ``t (nt,)`` under the
     inputs ``U (B, nt, nu)`` with parameters ``p (1 or B, np)``, ``nsteps (nt-1,)`` steps per interval,
-    the input hold of :func:`cross_interval`, into ``X (B, nt, nx)`` -- the map of
+    the input hold of :func:`ekf_member`, into ``X (B, nt, nx)`` -- the map of
     :func:`shipid.integrate.rk4_map` (stage inputs start, middle, middle, end).  Returns the number of
     members whose state became non-finite (they are left unfinished; the caller decides)."""
     B, nx = x0.shape
@@ -531,17 +559,10 @@ def rk4_replay(t, U, x0, p, Pk, nsteps, foh, X):
         for k in range(nt - 1):
             n = nsteps[k]
             h = (t[k + 1] - t[k]) / n
-            ua[:] = U[b, k]
+            for j in range(nu):  # (element by element here and below: an array view made per sample costs an
+                ua[j] = U[b, k, j]  # atomic reference count when compiled)
             for i in range(n):
-                for j in range(nu):
-                    if not foh:
-                        ub[j] = U[b, k, j]
-                    elif i == n - 1:
-                        ub[j] = U[b, k + 1, j]
-                    else:
-                        wt = (i + 1) / n
-                        ub[j] = (1.0 - wt) * U[b, k, j] + wt * U[b, k + 1, j]
-                    um[j] = 0.5 * (ua[j] + ub[j]) if foh else ua[j]
+                hold_inputs(U, b, k, i, n, foh, ua, ub, um)
                 ti = t[k] + i * h if i else t[k]
                 k_rhs(ti, x, ua, c, k1)
                 rk4_rest(ti, x, um, ub, c, h, k1, k2, k3, k4, xs, x)  # in place: x[m] is read before written
@@ -549,14 +570,16 @@ def rk4_replay(t, U, x0, p, Pk, nsteps, foh, X):
             for m in range(nx):
                 if not math.isfinite(x[m]):
                     ok = False
-            X[b, k + 1] = x
+            for m in range(nx):
+                X[b, k + 1, m] = x[m]
             if not ok:
                 bad += 1
                 break
     return bad
 
 
-FILTER = {"cholesky": cholesky, "chol_solve": chol_solve, "mat_mul": mat_mul, "rk4_rest": rk4_rest, "tangent": tangent, "_work": _work, "cross_interval": cross_interval,
+FILTER = {"cholesky": cholesky, "chol_solve": chol_solve, "mat_mul": mat_mul, "rk4_rest": rk4_rest,
+          "hold_inputs": hold_inputs, "tangent": tangent, "_work": _work,
           "ekf_member": ekf_member, "ekf_batch": ekf_batch, "rk4_replay": rk4_replay}
 
 
@@ -674,7 +697,7 @@ def ship_variances(Pfk, Lam, nx, nz, rows, n, row, row2, out):
         out[i2] = Pfk[i2, i2] - s2
 
 
-def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps0):
+def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps0, gains, Kst, ast, Sist):
     """Bryson-Frazier (adjoint) form of the same smoother for one member, without inverting ``Pp`` and
     without the full smoothed covariance at every sample: the adjoint ``lam`` (nz) and ``Lam`` (nz, nz)
     run backwards, ``zs_k = zf_k + Pf_k lam_k`` and ``Ps_k = Pf_k - Pf_k Lam_k Pf_k``, of which the
@@ -685,7 +708,9 @@ def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps
     the transition from k-1: ``lam = F^T lam~``, ``Lam = F^T Lam~ F`` (its lower triangle, mirrored), with the
     transition's parameter rows the identity (the random walks; a reset's ship rows are zero).  Only
     the ship rows of ``F`` and the rows ``pp_rows`` of ``Pp`` (those at the measured states, channel
-    ``j`` in row ``pp_rows[j]``) are read, so the compact storage of the filter serves."""
+    ``j`` in row ``pp_rows[j]``) are read, so the compact storage of the filter serves.  With ``gains``
+    the filter's stored ``K^T``, ``S^-1 e`` and ``S^-1`` (:func:`ekf_member`) are read instead of solving
+    for them (``Pp`` is then not read)."""
     N, nz = zf.shape
     nr = Pf.shape[1]  # rows of Pf stored: all, or the ship rows (compact="ship": no parameter means, no Ps0)
     nm = meas_idx.shape[0]
@@ -739,7 +764,6 @@ def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps
                     Ps0[j, i] = v
             break
         # ---- back through the update at sample k
-        Ppk = Pp[k]
         cnt = 0
         for j in range(nm):
             if acc[k, j]:
@@ -758,14 +782,22 @@ def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps
                 nv += 1
         if cnt == 0:
             ship_variances(Pfk, Lam, nx, nz, vrows, nv, row, row2, var_x[k])
-        if cnt > 0:
+        if cnt > 0 and gains:  # the filter's
+            for c_ in range(cnt):
+                r_ = sel[c_]
+                a[c_] = ast[k, r_]
+                for i in range(nz):
+                    Kt[c_, i] = Kst[k, r_, i]
+                for d_ in range(cnt):
+                    Si[c_, d_] = Sist[k, r_, sel[d_]]
+        elif cnt > 0:
             for c_ in range(cnt):
                 r_ = pp_rows[sel[c_]]
                 e[c_] = innov[k, sel[c_]]
                 for i in range(nz):
-                    Kt[c_, i] = Ppk[r_, i]
+                    Kt[c_, i] = Pp[k, r_, i]
                 for d_ in range(cnt):
-                    S[c_, d_] = Ppk[r_, meas_idx[sel[d_]]]
+                    S[c_, d_] = Pp[k, r_, meas_idx[sel[d_]]]
                     Si[c_, d_] = 1.0 if c_ == d_ else 0.0
                 S[c_, c_] += R[sel[c_]]
             cholesky(S, cnt, L)  # positive definite: the filter factorised the same S at this sample
@@ -775,6 +807,7 @@ def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps
                 a2[i] = 0.0
             chol_solve(L, cnt, Kt, nz, a)
             chol_solve(L, cnt, Si, cnt, a2)
+        if cnt > 0:
             for c_ in range(0, cnt, 2):  # LKt = (Lam K)^T = K^T Lam (Lam symmetric), two rows at a time
                 c2 = min(c_ + 1, cnt - 1)  # (an odd last row is computed twice)
                 rows_times(Kt, c_, c2, Lam, nz, row, row2)
@@ -856,10 +889,12 @@ def bf_member(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps
                 Lam[j, i] = Lam[i, j]
 
 
-def bf_batch(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps0):
+def bf_batch(zf, Pf, Pp, pp_rows, F, innov, acc, R, meas_idx, nx, zs, var_x, Ps0, gains, Kst, ast, Sist):
     for b in range(zf.shape[0]):
         if np.isfinite(zf[b, -1]).all():
-            bf_member(zf[b], Pf[b], Pp[b], pp_rows, F[b], innov[b], acc[b], R[b], meas_idx, nx, zs[b], var_x[b], Ps0[b])
+            bg = b if gains else 0
+            bf_member(zf[b], Pf[b], Pp[b], pp_rows, F[b], innov[b], acc[b], R[b], meas_idx, nx, zs[b], var_x[b], Ps0[b],
+                      gains, Kst[bg], ast[bg], Sist[bg])
         else:  # a member that stopped at its divergence: nothing to smooth
             zs[b] = np.nan
             var_x[b] = np.nan
@@ -892,10 +927,12 @@ def _source_hash(functions: dict) -> str:
 _hashes: dict = {}
 
 
-def filter_functions(model, notice: bool = True):
+def filter_functions(model, notice: bool = True, refcount: bool = False):
     """The compiled filter for ``model`` (a dict of numba functions), or ``None`` when compilation is
     off (:func:`shipid._jit.enabled`) or the model declares no equations (then, with ``notice``, a
-    one-line notice, once per model class)."""
+    one-line notice, once per model class).  The model's equations that allocate no array are compiled
+    without reference counting (:func:`_refcount_free`); with ``refcount`` (or once that build failed to
+    compile, :func:`call`) all of them are reference counted (a separate build and disk cache)."""
     if not _jit.enabled():
         return None
     eq = getattr(model, "_equations", None)
@@ -908,22 +945,75 @@ def filter_functions(model, notice: bool = True):
         return None
     ns = model._equations_namespace()
     tag = "__" + re.sub(r"\W", "_", model.name) + "_" + _source_hash({**eq, **ns})
-    key = ("filter", id(eq), tag)
+    base = ("filter", id(eq), tag)
+    refcount = refcount or base in _refcounted
+    key = base + (refcount,)
     out = _cache.get(key)
     if out is None:
-        funcs = _jit.rebind(eq, ns, jit=True, tag=tag)
+        tag += "_rc" if refcount else ""
+        funcs = _jit.rebind(eq, ns, jit=True, tag=tag,
+                            no_refcount=frozenset() if refcount else _refcount_free(eq, ns))
         out = _cache[key] = _jit.rebind(FILTER, {**ns, **funcs}, jit=True, tag=tag, fastmath=FASTMATH, inline=INLINE,
                                         error_model="numpy")
+        _base_of[id(out)] = base
     return out
 
 
+def call(model, fns, name, *args):
+    """``fns[name](*args)`` for ``fns = filter_functions(model)``.  Should that build not compile (an
+    equation compiled without reference counting allocates after all: numba refuses it), the model's
+    reference-counted build runs instead, now and from then on (same results, slower)."""
+    try:
+        return fns[name](*args)
+    except _jit.compile_errors():
+        base = _base_of.get(id(fns))
+        if base is None or base in _refcounted:
+            raise
+        _refcounted.add(base)
+        return filter_functions(model, refcount=True)[name](*args)
+
+
+#: Names whose use allocates an array (an equation that uses one is compiled with reference counting).
+_ALLOCATING = frozenset({
+    "empty", "zeros", "ones", "full", "array", "asarray", "ascontiguousarray", "copy", "empty_like", "zeros_like",
+    "ones_like", "full_like", "concatenate", "stack", "vstack", "hstack", "column_stack", "arange", "linspace", "eye",
+    "identity", "diag", "outer", "dot", "tile", "repeat", "append", "astype", "flatten", "ravel", "reshape", "sort",
+    "argsort", "unique", "where", "cumsum", "cumprod", "transpose", "broadcast_to"})
+
+
+def _refcount_free(eq: dict, ns: dict) -> frozenset:
+    """Names of the model's equations (``Model._equations``, in dependency order) compiled without numba's
+    reference counting (:func:`shipid._jit.rebind`'s ``no_refcount``): not ``k_consts`` (it returns a new
+    array), no allocating name (:data:`_ALLOCATING`) among the names their code uses, and calling only
+    equations of the set that qualify themselves (none that the model's namespace provides, compiled
+    elsewhere).  Array arithmetic allocates without a name; numba refuses to compile it without reference
+    counting, and :func:`call` then falls back.  Why: ``k_rhs``/``k_jac`` run ~5 times per filter step and
+    4 times per replay step with array arguments; their atomic reference counts cost ~7 % of a compiled
+    fit (kcs-response)."""
+    free: set = set()
+    for name, fn in eq.items():
+        if name == "k_consts" or name in ns or not isinstance(fn, types.FunctionType):
+            continue
+        names, codes = set(), [fn.__code__]
+        while codes:
+            code = codes.pop()
+            names.update(code.co_names)
+            codes.extend(c for c in code.co_consts if isinstance(c, types.CodeType))
+        if names & _ALLOCATING or any(n != name and (n in ns or (n in eq and n not in free)) for n in names):
+            continue
+        free.add(name)
+    return frozenset(free)
+
+
+_refcounted: set = set()  # base keys of filter builds whose reference-count-free equations did not compile
+_base_of: dict = {}
 _cache: dict = {}
 #: The kernel's helpers that numba inlines into their callers (``_jit.rebind``'s ``inline``): called once
 #: or more per sample with up to ~25 array arguments, their calls cost ~0.6 us of a ~4 us filter step
 #: (kcs-response, 22 states; same results to the bit), for ~2.5 s more compile time (17.8 -> 20.2 s with
 #: an empty cache).  The model's equations and wrappers are not inlined: no measurable gain, and
 #: inlining the equations themselves would let the filter's fastmath flags change their rounding.
-INLINE = frozenset({"cholesky", "chol_solve", "mat_mul", "rk4_rest", "tangent", "cross_interval", "ship_variances", "rows_times"})
+INLINE = frozenset({"cholesky", "chol_solve", "mat_mul", "rk4_rest", "hold_inputs", "tangent", "ship_variances", "rows_times"})
 #: The filter and smoother compile with numba's ``error_model="numpy"`` (a division by zero gives inf/NaN, as
 #: on the numpy path, instead of raising: no check per division; smoother ~0.1 us per sample faster, results
 #: identical to the bit on the bench log).
@@ -955,8 +1045,9 @@ def replay_compiled(model, x0, t, U, p, nsteps, foh: bool):
     x0 = f64(x0)
     X = np.empty((x0.shape[0], len(t), x0.shape[1]))
     try:
-        bad = fns["rk4_replay"](f64(t), f64(U), x0, f64(np.atleast_2d(p)), f64(model._kernel_constants()),
-                                np.ascontiguousarray(nsteps, dtype=np.int64), bool(foh), X)
+        args = (f64(t), f64(U), x0, f64(np.atleast_2d(p)), f64(model._kernel_constants()),
+                np.ascontiguousarray(nsteps, dtype=np.int64), bool(foh), X)
+        bad = call(model, fns, "rk4_replay", *args) if _jit.enabled() else fns["rk4_replay"](*args)
     except (ArithmeticError, ValueError):  # the interpreter's float maths raises where numpy gives inf/NaN
         return None
     return None if bad else X

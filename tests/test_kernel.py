@@ -74,11 +74,18 @@ def _compare(prob, nis_limit=1e6):
     bf_small = bf_smooth(small, prob.R, prob.meas_idx, nx)
     with _jit.disabled():
         bf_small0 = bf_smooth(small0, prob.R, prob.meas_idx, nx)
+    # the compiled filter keeps its gains for the smoother, which then reads them instead of solving for them:
+    # the same numbers to the bit (solved alike from the same numbers); the numpy filter keeps none
+    assert small.gains is not None and small0.gains is None
+    for a, b in zip(bf_small, bf_smooth(replace(small, gains=None), prob.R, prob.meas_idx, nx)):
+        np.testing.assert_array_equal(a, b, err_msg="smoother from the stored gains")
     # the ship-row storage (the identifier's, param_walk=0): the same ship means and variances
     ship = run_ekf(prob, store=True, nis_limit=nis_limit, compact="ship")
     with _jit.disabled():
         ship0 = run_ekf(prob, store=True, nis_limit=nis_limit, compact="ship")
     bs, bs0 = bf_smooth(ship, prob.R, prob.meas_idx, nx), _numpy(lambda: bf_smooth(ship0, prob.R, prob.meas_idx, nx))
+    for a, b in zip(bs, bf_smooth(replace(ship, gains=None), prob.R, prob.meas_idx, nx)):
+        np.testing.assert_array_equal(a, b, err_msg="smoother from the stored gains (ship rows)")
     for out_, b_, what in ((ship, bs, "compiled"), (ship0, bs0, "numpy")):
         assert out_.compact == "ship"
         _close(out_.P_post, slow.P_post[:, :, :nx], "ship rows of P_post, " + what)
@@ -189,6 +196,33 @@ def test_models_without_compiled_equations_fall_back_with_one_notice(kcs_truth):
         assert _kernel.filter_functions(model) is None
     msgs = [str(w.message) for w in rec]
     assert len(msgs) == 1 and "plain-kcs" in msgs[0] and "numpy path" in msgs[0]
+
+
+def test_equations_without_reference_counting_and_the_fallback(kcs_problem, monkeypatch):
+    """The equations that allocate nothing run without numba's reference counting (k_consts, which returns a
+    new array, and equations calling helpers compiled elsewhere keep it); should a build not compile that way
+    (here: k_consts forced into it, which numba refuses), the reference-counted build runs instead, with the
+    same results to the bit, and is used from then on."""
+    for name, kept in (("kcs-response", {"k_consts"}), ("response-nl", {"k_consts"}),
+                       ("mmg", {"k_consts", "k_jac", "rhs_one", "rhs_rows"})):
+        model = get_model(name)
+        ns = model._equations_namespace()
+        assert set(model._equations) - _kernel._refcount_free(model._equations, ns) - set(ns) == kept, name
+    ref = run_ekf(kcs_problem, store=False)
+
+    class Forced(type(kcs_problem.model)):
+        name = "kcs-forced-refcount-free"  # (its own build and disk cache: numba's cache key has no _nrt flag)
+
+    prob = replace(kcs_problem, model=Forced(kcs_problem.model.params))
+    monkeypatch.setattr(_kernel, "_cache", {})
+    monkeypatch.setattr(_kernel, "_refcounted", set())
+    monkeypatch.setattr(_kernel, "_base_of", {})
+    monkeypatch.setattr(_kernel, "_refcount_free", lambda eq, ns: frozenset(eq) - set(ns))
+    out = run_ekf(prob, store=False)
+    assert len(_kernel._refcounted) == 1  # the first build did not compile: the fallback ran
+    for f in ("z_final", "P_final", "innov", "loglik"):
+        np.testing.assert_array_equal(getattr(out, f), getattr(ref, f), err_msg=f)
+    np.testing.assert_array_equal(run_ekf(prob, store=False).z_final, ref.z_final)  # (the fallback, again)
 
 
 @pytest.mark.parametrize("name", ["kcs-response", "response-nl"])

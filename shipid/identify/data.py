@@ -61,7 +61,8 @@ def prepare_logs(model: Model, logs) -> tuple[list[LogArrays], list[str]]:
     if not logs:
         raise ValueError("no logs given: pass one or more trial logs to fit")
     frames = [_frame(lg) for lg in logs]
-    meas = [s for s in model.state_names if any(s in f.columns and f[s].notna().any() for f, _ in frames)]
+    # (on the column's array: pandas' Series.notna costs ~25 us a column)
+    meas = [s for s in model.state_names if any(s in f.columns and pd.notna(f[s].to_numpy()).any() for f, _ in frames)]
     if not meas:
         raise ValueError(
             f"none of the logs measures a state of model '{model.name}' ({', '.join(model.state_names)})"

@@ -126,7 +126,10 @@ class EKFOutput:
     ``P_prior`` holds only its rows at the measured states (B, N, nm, nz) and ``F``
     its ship-state rows (B, N, nx, nz) (``run_ekf(compact=True)``); ``"ship"``: in
     addition ``P_post`` holds only its ship-state rows (B, N, nx, nz)
-    (``run_ekf(compact="ship")``).
+    (``run_ekf(compact="ship")``).  ``gains``: with compact storage on the compiled path, the
+    filter's ``(K^T (B, N, nm, nz), S^-1 e (B, N, nm), S^-1 (B, N, nm, nm))`` at the accepted channels
+    (rows and columns in channel order; entries of other channels undefined), which
+    :func:`bf_smooth` reads instead of solving for them again; else None.
 
     A member that diverged at sample ``kd`` was not computed further: its
     ``z_post/P_post/F`` from ``kd`` on and ``z_prior/P_prior/innov/S_diag/nis`` after
@@ -151,6 +154,7 @@ class EKFOutput:
     gated: np.ndarray
     n_gated: np.ndarray
     compact: bool | str = False
+    gains: tuple | None = None
 
 
 def _divergence_message(k: int, tk: float, d2: float) -> str:
@@ -161,7 +165,7 @@ def _divergence_message(k: int, tk: float, d2: float) -> str:
 
 
 def _output(stored, z_final, P_final, innov, S_diag, nis, logdet, gated, diverged, diverged_at, message,
-            compact=False) -> EKFOutput:
+            compact=False, gains=None) -> EKFOutput:
     """The :class:`EKFOutput` of a run (both paths): ``stored`` is ``(z_post, P_post, z_prior, P_prior, F)``
     or None (``store=False``); the innovation log-likelihood is summed over the samples with accepted
     measurements from the per-sample ``nis`` and ``logdet`` (``log det S``), ``-inf`` for a diverged member."""
@@ -172,7 +176,8 @@ def _output(stored, z_final, P_final, innov, S_diag, nis, logdet, gated, diverge
     return EKFOutput(z_post=z_post, P_post=P_post, z_prior=z_prior, P_prior=P_prior, F=F, z_final=z_final,
                      P_final=P_final, innov=innov, S_diag=S_diag, loglik=loglik, nis=nis, diverged=diverged,
                      diverged_at=diverged_at, message=message, gated=gated, n_gated=gated.sum(axis=1),
-                     compact=compact if (compact and stored is not None) else False)
+                     compact=compact if (compact and stored is not None) else False,
+                     gains=gains if (compact and stored is not None) else None)
 
 
 def _index_or_slice(idx, n: int):
@@ -638,8 +643,11 @@ def bf_smooth(out: EKFOutput, R: np.ndarray, meas_idx, nx: int, chunk: int = 256
     if fns is not None:
         c = lambda a: np.ascontiguousarray(a, dtype=float)  # noqa: E731
         zs, var_x, Ps0 = np.empty((B, N, nz)), np.empty((B, N, nx)), np.empty((B, nz, nz))
+        gains = out.gains is not None and out.compact
+        Kst, ast, Sist = out.gains if gains else (np.empty((1, 1, 1, 1)), np.empty((1, 1, 1)), np.empty((1, 1, 1, 1)))
         fns["bf_batch"](c(out.z_post), c(out.P_post), c(out.P_prior), pp_rows, c(out.F), c(out.innov), acc, R,
-                        np.ascontiguousarray(meas_idx, dtype=np.int64), int(nx), zs, var_x, Ps0)
+                        np.ascontiguousarray(meas_idx, dtype=np.int64), int(nx), zs, var_x, Ps0, gains, c(Kst), c(ast),
+                        c(Sist))
         return zs, var_x, Ps0
     zs, var_x, Ps0 = np.full((B, N, nz), np.nan), np.full((B, N, nx), np.nan), np.full((B, nz, nz), np.nan)
     good = np.flatnonzero(np.isfinite(out.z_post[:, -1]).all(axis=1))
@@ -852,7 +860,12 @@ def _run_compiled(prob, store: bool, nis_limit: float, store_dtype=np.float64, c
         P_post = _stored_empty((B, N, nx if compact == "ship" else nz, nz), store_dtype)
         P_prior = _stored_empty((B, N, nm, nz) if compact else (B, N, nz, nz), store_dtype)
         Fs = _stored_empty((B, N, nx, nz) if compact else (B, N, nz, nz), store_dtype)
+    gains = bool(store and compact)  # the update's gains, for the smoother (EKFOutput.gains)
+    if gains:
+        Kst, ast, Sist = _stored_empty((B, N, nm, nz)), _stored_empty((B, N, nm)), _stored_empty((B, N, nm, nm))
     else:
+        Kst, ast, Sist = np.empty((1, 1, 1, 1)), np.empty((1, 1, 1)), np.empty((1, 1, 1, 1))
+    if not store:
         z_post = z_prior = np.empty((1, 1, nz))
         P_post = P_prior = Fs = np.empty((1, 1, nz, nz))
     z_fin, P_fin = np.empty((B, nz)), np.empty((B, nz, nz))
@@ -861,19 +874,20 @@ def _run_compiled(prob, store: bool, nis_limit: float, store_dtype=np.float64, c
     div = np.zeros(B, dtype=np.bool_)
     div_at = np.full(B, -1, dtype=np.int64)
     d2_at = np.full(B, np.nan)
-    fns["ekf_batch"](
-        t, f64(prob.U), Y, fin, fin.any(axis=(0, 2)), reset, f64(prob.x_reset), f64(prob.P_reset), f64(prob.q), dtq,
+    _kernel.call(
+        prob.model, fns, "ekf_batch", t, f64(prob.U), Y, fin, fin.any(axis=(0, 2)), reset, f64(prob.x_reset), f64(prob.P_reset), f64(prob.q), dtq,
         nsteps, f64(prob.R), f64(prob.z0), f64(prob.P0), f64(prob.p_base),
         np.ascontiguousarray(prob.est_idx, dtype=np.int64), f64(prob.scale),
         np.ascontiguousarray(prob.meas_idx, dtype=np.int64), f64(prob.model._kernel_constants()), nx,
         _kernel.METHODS[prob.method], prob.input_hold == "foh", -1.0 if prob.gate is None else float(prob.gate),
         int(prob.gate_run), float(nis_limit), bool(store), bool(compact),
-        z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated, div, div_at, d2_at)
+        z_post, P_post, z_prior, P_prior, Fs, z_fin, P_fin, innov, S_diag, nis, logdet, gated, div, div_at, d2_at,
+        gains, Kst, ast, Sist)
     message = ["ok"] * B
     for b in np.flatnonzero(div):
         message[b] = _divergence_message(int(div_at[b]), t[b, div_at[b]], d2_at[b])
     return _output((z_post, P_post, z_prior, P_prior, Fs) if store else None, z_fin, P_fin, innov, S_diag, nis,
-                   logdet, gated, div, div_at, message, compact)
+                   logdet, gated, div, div_at, message, compact, (Kst, ast, Sist) if gains else None)
 
 
 

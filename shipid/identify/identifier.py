@@ -381,7 +381,7 @@ class EKFIdentifier:
             zs, var_x, Ps0 = self._smooth(out, prob)
             # the stored filter (what the smoother read: ~3.5 KB per sample of a 22-state log) is not kept, so
             # the next pass can reuse its memory (ekf._stored_empty); output_ keeps innovations and diagnostics
-            out = replace(out, z_post=None, P_post=None, z_prior=None, P_prior=None, F=None)
+            out = replace(out, z_post=None, P_post=None, z_prior=None, P_prior=None, F=None, gains=None)
             good = (prob, out, zs, var_x, Ps0)
             theta_s = zs[0, 0, nx:].copy()
             history.append(theta_s * scale)
@@ -594,7 +594,8 @@ class EKFIdentifier:
         self.meas_std_ = pd.Series(s["sig"] * np.sqrt(r_mult), index=s["meas"], name="meas_std")
         self.process_std_ = pd.Series(np.sqrt(s["qx"] * q_mult), index=list(model.state_names), name="process_std")
         self.loglik_ = float(out.loglik[0])
-        self.history_ = pd.DataFrame(history, columns=est)
+        # (from one array: ~6x cheaper than from a list of rows; an empty history as before)
+        self.history_ = pd.DataFrame(np.array(history) if history else history, columns=est)
         self.equations_used_for_start_ = used_eq
         self.success_ = not bool(out.diverged[0])
         self.message_ = "converged" if self.success_ else self.pass_messages_[-1].split(": ", 1)[1]
