@@ -97,10 +97,22 @@ def rebind(functions: dict, namespace: dict, jit: bool = False, tag: str = "", f
         new = types.FunctionType(fn.__code__, g, fn.__name__, fn.__defaults__, fn.__closure__)
         new.__qualname__, new.__doc__ = fn.__qualname__ + tag, fn.__doc__
         if jit:
+            nrt = {"_nrt": False} if name in no_refcount and _has_nrt_option() else {}
             new = _numba.njit(cache=True, fastmath=fastmath, inline="always" if name in inline else "never",
-                              error_model=error_model, **({"_nrt": False} if name in no_refcount else {}))(new)
+                              error_model=error_model, **nrt)(new)
         ns[name] = out[name] = new
     return out
+
+
+def _has_nrt_option() -> bool:
+    """Whether this numba knows the private ``_nrt`` target option (0.68 does).  A numba without it would
+    reject the option at the first call (a KeyError, not a compile error :func:`compile_errors` names), so
+    ``no_refcount`` then compiles with reference counting: slower, same results."""
+    try:
+        from numba.core.cpu import CPUTargetOptions
+    except ImportError:
+        return False
+    return hasattr(CPUTargetOptions, "_nrt")
 
 
 def compile_errors() -> tuple:

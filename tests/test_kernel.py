@@ -225,6 +225,25 @@ def test_equations_without_reference_counting_and_the_fallback(kcs_problem, monk
     np.testing.assert_array_equal(run_ekf(prob, store=False).z_final, ref.z_final)  # (the fallback, again)
 
 
+def test_no_refcount_without_numbas_private_option(monkeypatch):
+    """``_nrt`` is a private numba option (0.68 has it).  A numba without it would reject the option at the
+    first call with a KeyError, which no fallback catches: ``rebind`` then compiles with reference counting."""
+    def add_into(out, a, b):
+        for i in range(out.shape[0]):
+            out[i] = a[i] + b[i]
+
+    a, b = np.arange(3.0), np.ones(3)
+    for known in (True, False):
+        monkeypatch.setattr(_jit, "_has_nrt_option", lambda: known)
+        f = _jit.rebind({"add_into": add_into}, {}, jit=True, tag=f"_nrt_test_{known}",
+                        no_refcount={"add_into"})["add_into"]
+        assert f.targetoptions.get("_nrt", True) is not known
+        out = np.empty(3)
+        f(out, a, b)
+        np.testing.assert_array_equal(out, a + b)
+    assert _jit._has_nrt_option() in (True, False)
+
+
 @pytest.mark.parametrize("name", ["kcs-response", "response-nl"])
 def test_linear_equation_error_start_equals_the_iterated_one(name, kcs_logs):
     """Models linear in their parameters take one least-squares solve for the start values; it lands
