@@ -2,6 +2,7 @@
 zigzag rudder (a located-event feedback law), and a sampled zero-order-hold wrapper for synthetic logs."""
 from __future__ import annotations
 
+import bisect
 import math
 from typing import Sequence
 
@@ -62,7 +63,11 @@ class _RudderLaw(InputLaw):
 
     @property
     def stops(self) -> tuple:
-        return tuple(sorted(set(self._stops)))
+        # read at every integration step: sorted once per change of the list
+        cached = self.__dict__.get("_stops_sorted")
+        if cached is None or cached[0] != len(self._stops):
+            cached = self._stops_sorted = (len(self._stops), tuple(sorted(set(self._stops))))
+        return cached[1]
 
     def _n(self, t):
         if isinstance(self.n, RampSchedule):
@@ -160,21 +165,22 @@ class ZigzagRudder(_RudderLaw):
         """Rudder at scalar time ``t``."""
         if t < self.te:
             return np.zeros(self.batch)
-        k = int(np.searchsorted(self._hist_t, t, side="right")) - 1
+        k = bisect.bisect_right(self._hist_t, t) - 1  # (the history is in time order)
         d0, cmd = self._hist[k]
         lim = self.rate * (t - self._hist_t[k])
-        return d0 + np.clip(cmd - d0, -lim, lim)
+        return d0 + np.minimum(np.maximum(cmd - d0, -lim), lim)  # np.clip's values, without its overhead
 
     def inputs(self, t, x):
         return self._pack_now(self._delta(t), t)
 
     def event(self, t, x):
-        if np.all(np.asarray(t) < self.te):
+        scalar = np.ndim(t) == 0
+        if (t < self.te) if scalar else np.all(np.asarray(t) < self.te):
             return np.full(self.batch, -1.0)
         if self.psi0 is None:  # first evaluation at the execute (te is a step boundary / stop)
             self.psi0 = np.array(x[..., self.ipsi], dtype=float)
         g = np.sign(self._hist[-1][1]) * (x[..., self.ipsi] - self.psi0) - self.lev
-        return np.where(np.asarray(t) < self.te, -1.0, g)
+        return g if scalar else np.where(np.asarray(t) < self.te, -1.0, g)  # (scalar t >= te here)
 
     def on_event(self, t, x, mask):
         d = self._delta(t)
