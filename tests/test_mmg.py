@@ -17,6 +17,8 @@ integration accuracy, and separately measures what each difference does:
 """
 from __future__ import annotations
 
+import contextlib
+
 import inspect
 import math
 import sys
@@ -257,6 +259,28 @@ def test_compiled_and_numpy_complex_step_jacobians_agree(kvlcc2):
             np.testing.assert_allclose(fast, ref, rtol=1e-13, atol=1e-13 * np.abs(ref).max())
             np.testing.assert_allclose(one, ref[1], rtol=1e-13, atol=1e-13 * np.abs(ref).max())
             np.testing.assert_allclose(bcast, ref_b, rtol=1e-13, atol=1e-13 * np.abs(ref).max())
+
+
+def test_jacobian_of_selected_parameter_columns(kvlcc2):
+    """``jac_p(..., columns=)`` computes only those columns (the equation-error start asks for the estimated
+    ones): equal to the bit to the full Jacobian's columns, compiled (when numba is on) and numpy, shared and
+    per-member parameters; a model without its own column path slices the full one."""
+    rng = np.random.default_rng(6)
+    x, u = MMGModel.sample_point(rng, batch=(5,))
+    full = kvlcc2.scaled(320.0)
+    pb = full.params * (1 + 0.05 * rng.normal(size=(5, full.np)))
+    cols = np.array([full.param_index(n) for n in ("Nr", "Yv", "aH", "C2p", "delta0")])
+    paths = [_jit.disabled] + ([contextlib.nullcontext] if _jit.enabled() else [])
+    for path in paths:
+        with path():
+            for p in (full.params, pb):
+                ref = full.jac_p(0.0, x, u, p)
+                got = full.jac_p(0.0, x, u, p, columns=cols)
+                assert got.shape == (5, 6, cols.size)
+                np.testing.assert_array_equal(got, ref[..., cols])
+    kcs = get_model("kcs-response")
+    xk, uk = np.zeros((3, 6)) + [0, 0, 0, 1.0, 0.01, 0.002], np.zeros((3, 2)) + [0.1, 10.0]
+    np.testing.assert_array_equal(kcs.jac_p(0.0, xk, uk, columns=[3, 0]), kcs.jac_p(0.0, xk, uk)[..., [3, 0]])
 
 
 def test_particulars_and_dimensional_conversion(kvlcc2):

@@ -135,7 +135,7 @@ def equation_error_fit(
     # natural scale of each coefficient: the size that makes its term as large as the
     # derivative it explains, std(dx_i/dt) / rms(d f_i / d theta_j); used for coefficients
     # that start at zero, where a relative prior means nothing
-    Jall = model.jac_p(T, X, U, p0)[:, :, est_idx]
+    Jall = model.jac_p(T, X, U, p0, columns=est_idx)
     natural = np.full(est_idx.size, np.nan)
     for j in range(est_idx.size):
         cands = [np.std(dX[:, i]) / np.sqrt(np.mean(Jall[:, i, j] ** 2)) for i in use
@@ -158,7 +158,7 @@ def equation_error_fit(
         if Jp_est is None:
             p = p0.copy()
             p[est_idx] = theta
-            Jp_est = model.jac_p(T, X, U, p)[:, :, est_idx]
+            Jp_est = model.jac_p(T, X, U, p, columns=est_idx)
         J = -(Jp_est[:, use] * w[None, :, None]).reshape(-1, est_idx.size)  # (n * nuse, ne)
         return np.vstack([J, np.diag(regularisation * np.sqrt(T.size) / prior_std)])
 

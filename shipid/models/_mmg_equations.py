@@ -200,22 +200,24 @@ def cs_columns(xc, uc, pc, Pc, c, h, which, cols, out):
 X_COLS = np.arange(2, 6)
 
 
-def jacobians(x, u, p, P, h, which):
+def jacobians(x, u, p, P, h, which, pcols):
     """Complex-step Jacobians of the rates of N samples (used compiled, with complex-safe globals).
 
     ``x (N, 6)``, ``u (N, 2)`` real; ``p (Np, 39)`` real with Np = 1 (shared) or N; ``P`` the
     particulars (see :func:`derived`); ``h`` the step; ``which``: 0 -> d/dx (N, 6, 6), 1 -> d/du
-    (N, 6, 2), 2 -> d/dp (N, 6, 39).  Exact to rounding (no subtraction).
+    (N, 6, 2), 2 -> d/dp (N, 6, 39), of which only the parameter columns ``pcols`` (int array) are
+    computed (the others are 0).  Exact to rounding (no subtraction).
     """
     N = x.shape[0]
     xc, uc, pc = x.astype(np.complex128), u.astype(np.complex128), p.astype(np.complex128)
     Pc = P.astype(np.complex128)
-    cols = X_COLS if which == 0 else np.arange(2 if which == 1 else p.shape[1])
-    out = np.zeros((N, 6, 6 if which == 0 else cols.shape[0]))
+    cols = X_COLS if which == 0 else (np.arange(2) if which == 1 else pcols)
+    out = np.zeros((N, 6, 6 if which == 0 else (2 if which == 1 else p.shape[1])))
     c = derived(pc[0], Pc)
     if which == 2 and p.shape[0] == 1:
         # shared parameters: the perturbed constants are derived once per column, not once per sample
-        for j in range(cols.shape[0]):
+        for jj in range(cols.shape[0]):
+            j = cols[jj]
             pc[0, j] += 1j * h
             cj = derived(pc[0], Pc)
             pc[0, j] -= 1j * h

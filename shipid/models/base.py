@@ -247,9 +247,16 @@ class Model:
         """``d rhs / d x``, shape ``(..., nx, nx)``."""
         return self._jac_x(t, as_batch(x), as_batch(u), self._p(params))
 
-    def jac_p(self, t, x, u, params=None) -> np.ndarray:
-        """``d rhs / d params``, shape ``(..., nx, np)``."""
-        return self._jac_p(t, as_batch(x), as_batch(u), self._p(params))
+    def jac_p(self, t, x, u, params=None, columns=None) -> np.ndarray:
+        """``d rhs / d params``, shape ``(..., nx, np)``; with ``columns`` (parameter indices) only those
+        columns, shape ``(..., nx, len(columns))`` (a model whose Jacobian costs per column computes no
+        other, e.g. ``mmg``'s complex step)."""
+        if columns is None:
+            return self._jac_p(t, as_batch(x), as_batch(u), self._p(params))
+        return self._jac_p_columns(t, as_batch(x), as_batch(u), self._p(params), np.asarray(columns, dtype=np.int64))
+
+    def _jac_p_columns(self, t, x, u, p, columns):
+        return self._jac_p(t, x, u, p)[..., columns]
 
     def jac_u(self, t, x, u, params=None) -> np.ndarray:
         """``d rhs / d u``, shape ``(..., nx, nu)``."""

@@ -442,29 +442,34 @@ class ShipEquationsModel(DerivedConstants, Model):
     # ------------------------------------------------------------- Jacobians
     _H_CS = 1e-30
 
-    def _cstep(self, t, x, u, p, which: str):
-        """Complex-step Jacobian of ``_rhs`` w.r.t. ``which`` in one vectorised call."""
+    def _cstep(self, t, x, u, p, which: str, cols=None):
+        """Complex-step Jacobian of ``_rhs`` w.r.t. ``which`` in one vectorised call (only the columns
+        ``cols``, when given)."""
         args = {"x": x, "u": u, "p": p}
         base = args[which]
         k = base.shape[-1]
-        pert = base[..., None, :] + 1j * self._H_CS * np.eye(k)
+        pert = base[..., None, :] + 1j * self._H_CS * (np.eye(k) if cols is None else np.eye(k)[cols])
         a = {w: (pert if w == which else arr[..., None, :]) for w, arr in args.items()}
         f = self._rhs(t, a["x"], a["u"], a["p"])  # (..., k, nx)
         J = np.imag(f) / self._H_CS
         return np.swapaxes(J, -1, -2)
 
-    def _jacobian(self, t, x, u, p, which: int):
-        """Complex-step Jacobian (exact to rounding): compiled when numba is enabled, else numpy."""
+    def _jacobian(self, t, x, u, p, which: int, pcols=None):
+        """Complex-step Jacobian (exact to rounding): compiled when numba is enabled, else numpy.
+        ``pcols``: only these parameter columns (``which`` = 2), in that order."""
         real = x.dtype.kind == "f" and u.dtype.kind == "f" and p.dtype.kind == "f"
         fast = self._compiled(cs=True) if real else None
         if fast is None:
-            return self._cstep(t, x, u, p, "xup"[which])
+            return self._cstep(t, x, u, p, "xup"[which], pcols)
         lead = batch_shape(x, u, p)
         N = int(np.prod(lead))
         X = np.broadcast_to(x, lead + (6,)).reshape(N, 6)
         U = np.broadcast_to(u, lead + (2,)).reshape(N, 2)
         P = p[None] if p.ndim == 1 else np.broadcast_to(p, lead + p.shape[-1:]).reshape(N, -1)
-        J = fast["jacobians"](X, U, P, np.array(self._particulars_tuple()), self._H_CS, which)
+        cols = np.arange(P.shape[1]) if pcols is None else np.asarray(pcols, dtype=np.int64)
+        J = fast["jacobians"](X, U, P, np.array(self._particulars_tuple()), self._H_CS, which, cols)
+        if pcols is not None:
+            J = J[..., cols]
         return J.reshape(lead + J.shape[1:])
 
     def _jac_x(self, t, x, u, p):
@@ -475,6 +480,9 @@ class ShipEquationsModel(DerivedConstants, Model):
 
     def _jac_p(self, t, x, u, p):
         return self._jacobian(t, x, u, p, 2)
+
+    def _jac_p_columns(self, t, x, u, p, columns):
+        return self._jacobian(t, x, u, p, 2, columns)
 
     # the compiled EKF kernel (shipid._kernel) uses the same equations (subclasses set
     # ``_equations = <equations module>.KERNEL``)
