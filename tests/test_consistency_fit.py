@@ -243,7 +243,24 @@ def test_cli_inconsistent_fit_exits_3_with_one_warning_and_strict_json(tmp_path,
     assert len(lines) == 1 and "opposite sign" in lines[0] and "sign convention" in lines[0]
     text = out.read_text()
     assert "NaN" not in text and "Infinity" not in text
-    assert json.loads(text)["diagnostics"]["consistency"]["consistent"] is False
+    doc = json.loads(text)
+    assert doc["diagnostics"]["consistency"]["consistent"] is False
+    # the verdict is the EKF stage's: after a refinement the warning says so (the coefficient values it quotes
+    # are that stage's, not the refined ones in the printed table)
+    assert ("its EKF stage, before the refinement" in lines[0]) == (doc["method"] != "ekf")
+
+
+def test_inconsistency_warning_names_the_ekf_stage_after_a_refinement():
+    from shipid.commands.identify import _inconsistency_warning
+
+    verdict = {"consistent": False, "channels": {"r": {}}, "reasons": ["coefficient c3 = 4 +- 0.1 is 11 times the "
+                                                                      "model's value 0.3: channel 'r' in the wrong units?"]}
+    plain, staged = _inconsistency_warning(verdict), _inconsistency_warning(verdict, refined=True)
+    assert plain.startswith("warning: the fit is not consistent with its noise model in channel(s) r: ")
+    assert "EKF stage" not in plain
+    assert staged.startswith("warning: the fit is not consistent with its noise model in channel(s) r (its EKF stage, "
+                             "before the refinement: coefficient values quoted here are that stage's")
+    assert "c3 = 4" in staged and staged.endswith("(exit status 3).")
 
 
 def test_cli_diverged_fit_exits_4_and_refinement_from_it_fails(tmp_path, capsys, kcs_truth, kcs_logs):

@@ -225,7 +225,7 @@ def _fit(args) -> int:
         return EXIT_DIVERGED
     verdict = ident.diagnostics_.get("consistency", {})
     if not verdict.get("consistent", True):
-        print(_inconsistency_warning(verdict), file=sys.stderr)
+        print(_inconsistency_warning(verdict, refined=result.method != "ekf"), file=sys.stderr)
     damping = result.diagnostics.get("damping") or {}
     for reason in damping.get("reasons", []):
         print(f"warning: {reason} (result JSON: diagnostics.damping)", file=sys.stderr)
@@ -238,15 +238,19 @@ def _fit(args) -> int:
 EXIT_INCONSISTENT, EXIT_DIVERGED = 3, 4
 
 
-def _inconsistency_warning(verdict: dict) -> str:
-    """One plain warning for an inconsistent fit: the channels, the findings, the likely causes."""
+def _inconsistency_warning(verdict: dict, refined: bool = False) -> str:
+    """One plain warning for an inconsistent fit: the channels, the findings, the likely causes.  ``refined``:
+    the verdict is the EKF stage's and a refinement followed, so the coefficient values the findings quote are
+    the EKF stage's, not the refined ones printed above (said, so that the two are not confused)."""
     from ..identify.diagnostics import likely_causes
 
     reasons = verdict.get("reasons", [])
     chans = [c for c in verdict.get("channels", {}) if any(f"'{c}'" in r for r in reasons)]
     where = f" in channel(s) {', '.join(chans)}" if chans else ""
     causes = likely_causes(reasons)
-    return (f"warning: the fit is not consistent with its noise model{where}: " + "; ".join(reasons)
+    stage = (" (its EKF stage, before the refinement: coefficient values quoted here are that stage's, the "
+             "refined ones are in the table above)") if refined else ""
+    return (f"warning: the fit is not consistent with its noise model{where}{stage}: " + "; ".join(reasons)
             + (f". Likely causes: {causes}." if causes else ".") + " Do not use these coefficients before the cause "
             "is found (exit status 3).")
 
