@@ -198,25 +198,21 @@ def _fit(args) -> int:
     for lg in logs:
         if lg.missing or lg.dropouts:
             print(f"note: {lg.summary()}", file=sys.stderr)
+    extra = None
     if args.wind or args.current:
-        # wind/current models: the EKF alone (the recipe's staged starts and refinement are not wired
-        # for the environment wrappers yet)
+        # wind/current parts around the ship model: the recipe with the base model's defaults, not refined
         from ..environment.cli import environment_model
-        from ..identify import EKFIdentifier
 
         model, extra = environment_model(model, logs, wind=args.wind, current=args.current)
-        ident = EKFIdentifier(model, estimate=_names(args.estimate) or None, fixed=_fixed(args, model),
-                              n_passes=args.passes, tune_noise=args.tune_noise, progress=progress_on(args),
-                              meas_std=meas_std, **extra)
-        fit = _lib_errors(lambda: ident.fit(logs))
-    else:
-        recipe = _lib_errors(lambda: fit_logs(
-            logs, model, lpp=args.lpp, estimate=_names(args.estimate) or None, fixed=_fixed(args, model),
-            start=args.start, neutral=not args.no_neutral, dt=_dt(args), max_drift_deg=_max_drift(args),
-            refine=None if args.refine == "none" else args.refine, metric_weight=args.metric_weight,
-            n_passes=args.passes, max_nfev=args.max_nfev, hold_unresolved=not args.refine_all,
-            sign_bounds=args.sign_bounds, physical_damping=not args.no_physical_damping, tune_noise=args.tune_noise, progress=progress_on(args), meas_std=meas_std, log=print))
-        fit, ident = recipe, recipe.ekf
+    recipe = _lib_errors(lambda: fit_logs(
+        logs, model, lpp=args.lpp, estimate=_names(args.estimate) or None, fixed=_fixed(args, model),
+        start=args.start, neutral=not args.no_neutral, dt=_dt(args), max_drift_deg=_max_drift(args),
+        refine=None if args.refine == "none" else args.refine, metric_weight=args.metric_weight,
+        n_passes=args.passes, max_nfev=args.max_nfev, hold_unresolved=not args.refine_all,
+        sign_bounds=args.sign_bounds, physical_damping=not args.no_physical_damping, tune_noise=args.tune_noise,
+        progress=progress_on(args), meas_std=meas_std, ekf_options=extra, start_defaults=args.params is None,
+        log=print))
+    fit, ident = recipe, recipe.ekf
     result = fit.result()
     result.to_json(out, force=args.force)
     _print_result(result)

@@ -142,7 +142,8 @@ def _horizon_results(args, horizons, logs) -> list:
     from ..validation import resolve_model
     from ..validation_horizon import horizon_prediction
 
-    model, _ = resolve_model(args.result)
+    model, result = resolve_model(args.result)
+    initial = _current_start(model, result)
     out = []
     for lg in logs:
         if not {"x", "y", "psi"} <= set(getattr(lg, "data", lg).columns):
@@ -150,8 +151,23 @@ def _horizon_results(args, horizons, logs) -> list:
                   file=sys.stderr)
             out.append((None, lg))
             continue
-        out.append((horizon_prediction(model, lg, horizons=horizons, start_every=args.start_every), lg))
+        out.append((horizon_prediction(model, lg, horizons=horizons, start_every=args.start_every,
+                                       initial=initial), lg))
     return out
+
+
+def _current_start(model, result):
+    """The start current of the predictions of a model with current states: the fit's ``current_start`` (the
+    mean of its logs' estimated currents; said on stderr), else zero (said too); None for other models."""
+    if "cx" not in model.state_names:
+        return None
+    start = (getattr(result, "settings", None) or {}).get("current_start")
+    if start is None:
+        print("note: the result carries no start current; the predictions start with no current", file=sys.stderr)
+        return None
+    print(f"note: predictions start with the fit's current cx = {start['cx']:.4g}, cy = {start['cy']:.4g} m/s "
+          f"({start.get('reason', 'from the fit')})", file=sys.stderr)
+    return {"cx": float(start["cx"]), "cy": float(start["cy"])}
 
 
 def _report(args) -> int:

@@ -115,7 +115,42 @@ AUTO_REFINE = "metrics"
 #: studies.kvlcc2.RECIPE_VARIANTS_9) and the rudder-hull interaction aH, xH (the hull's share of the rudder
 #: force and its point of action, which set a zigzag's yaw checking; session 10, same rule: worst fold 0.767
 #: against 0.945 without; RECIPE_VARIANTS_11); the other rudder/propeller coefficients stay published.
-DEFAULT_ESTIMATE = {"mmg": ["Yv", "Yr", "Nv", "Nr", "Yvvr", "Nvvr", "Nrrr", "R0", "C2p", "C2m", "aH", "xH"]}
+#: ``lowspeed``: the hull's resistance, linear sway/yaw and cross-flow terms, the four-quadrant propeller's thrust
+#: and astern side force, the rudder's normal force and its hull interaction (the Esso Osaka study's list, each
+#: addition since session 5 chosen there by pre-registered cross-validation: aH, tR in round 3, CrY in round 7;
+#: docs/environment.md).  f_alpha, aH, tR are not separately identifiable on those runs: read them as a group.
+DEFAULT_ESTIMATE = {"mmg": ["Yv", "Yr", "Nv", "Nr", "Yvvr", "Nvvr", "Nrrr", "R0", "C2p", "C2m", "aH", "xH"],
+                    "lowspeed": ["X0F", "X0A", "Yv", "Yr", "Nv", "Nr", "CD", "k0", "CTa0", "YPa", "NPa", "f_alpha",
+                                 "aH", "tR", "CrY"]}
+#: Parameters of a model's wind part (``with_environment(..., wind=...)``, ``shipid fit --wind``) estimated by
+#: default: the leading Fourier components of Fujiwara's surge force, side force and yaw moment (the Esso Osaka
+#: study's set since session 5; the others stay at the regression's values from the above-water geometry).
+DEFAULT_ESTIMATE_WIND = ["wX1", "wY1", "wN1", "wN2"]
+#: Start values that replace a model's default set (only when the caller gives no parameters of its own).
+#: ``lowspeed``: the MMG standard method's side-dependent flow straightening at the KVLCC2's published split
+#: (gamma_R 0.640 / 0.395, Yasukawa & Yoshimura 2015: +-0.1225 about the prior's 0.5), chosen by the Esso Osaka
+#: study's pre-registered round 4 (leave-one-run-out 0.2708 against 0.2780 m; docs/environment.md).
+DEFAULT_START = {"lowspeed": {"dgammaR": 0.1225}}
+#: Start of the EKF stage per model (default: the identifier's equation-error start).  ``lowspeed``: the
+#: (prior) parameter set itself, which is also the prior mean (100 % std), as in every Esso Osaka study number.
+DEFAULT_INIT = {"lowspeed": "model"}
+#: Sampling step [s] per model, replacing step 2's time-constant rule.  ``lowspeed``: 2 s (0.5 Hz) with two RK4
+#: substeps per interval, the Esso Osaka study's setting fixed before any held-out error (at these runs' 0.1-0.5
+#: m/s the fastest time constant is 5-100 s); every cross-validated number of docs/environment.md used it.
+DEFAULT_SAMPLING_S = {"lowspeed": 2.0}
+DEFAULT_SUBSTEPS = {"lowspeed": 2}
+#: Process noise per model (state -> std per sqrt(s), SI) at the length it was set for, Froude-scaled to the
+#: logs' Lpp (x, y as L^0.75, psi as L^-0.25, u, v as L^0.25, r as L^-0.75: a velocity per sqrt of a time).
+#: ``lowspeed``: the Esso Osaka study's values at 3 m, set by hand before any held-out error (the identifier's
+#: default, a tenth of the measurement noise per sample, gave unusable fits there).
+DEFAULT_PROCESS_STD = {"lowspeed": (3.0, {"x": 0.005, "y": 0.005, "psi": 0.002, "u": 0.003, "v": 0.003, "r": 0.002})}
+_FROUDE_EXP = {"x": 0.75, "y": 0.75, "psi": -0.25, "u": 0.25, "v": 0.25, "r": -0.75}
+#: Step 3 (rudder neutral angle) per model (default on).  ``lowspeed``: off -- the Esso Osaka study scored a
+#: rudder neutral angle in its pre-registered round 6 and did not keep it (8-fold 0.2951-0.2975 against 0.28981).
+DEFAULT_NEUTRAL = {"lowspeed": False}
+#: Models for which ``refine="auto"`` means no refinement: ``lowspeed`` -- the Esso Osaka study's windowed
+#: output-error refinement (rounds 9 and 10) kept nothing, and the metric refinement was chosen on one other hull.
+NO_AUTO_REFINE = ("lowspeed",)
 #: Parameters held at their start value by default.  ``response-nl``: the asymmetry terms b0, c0 (the EKF
 #: does not identify them from turns and zigzags at one rpm: docs/validation.md).
 DEFAULT_FIXED = {"response-nl": ["b0", "c0"]}
@@ -166,6 +201,9 @@ class RecipeFit:
         """The :class:`~shipid.identify.result.FitResult` of the last stage, its settings holding the recipe."""
         res = self.final.result()
         res.settings["recipe"] = [dict(s) for s in self.steps]
+        start = current_start(self.ekf)
+        if start is not None:
+            res.settings["current_start"] = start
         if self.metric_weight is not None:
             res.settings["metric_weight"] = float(self.metric_weight)
         if self.refiner is not None:
@@ -187,6 +225,22 @@ class RecipeFit:
 
     def summary(self) -> str:
         return "\n".join(f"recipe: {s['step']}: {s['value']} -- {s['reason']}" for s in self.steps)
+
+
+def current_start(ekf):
+    """The start current for predictions of a log the fit has not seen: the mean of the fitted logs' smoothed
+    current at their first sample (``{"cx", "cy", "n_logs", "reason"}``), or None for a model without current
+    states.  As the Esso Osaka study predicts its held-out runs (``current_start="mean"``)."""
+    states = getattr(ekf, "states_", None)
+    if not states or "cx" not in getattr(ekf.model, "state_names", ()):
+        return None
+    c = np.array([[float(st["cx"].iloc[0]), float(st["cy"].iloc[0])] for st in states])
+    c = c[np.all(np.isfinite(c), axis=1)]
+    if not c.size:
+        return None
+    return {"cx": float(c[:, 0].mean()), "cy": float(c[:, 1].mean()), "n_logs": int(len(c)),
+            "reason": f"mean of the {len(c)} fitted logs' estimated current at their start: the start current of "
+                      "an open-loop prediction of a log the fit has not seen"}
 
 
 # ----------------------------------------------------------------------------- the steps
@@ -267,7 +321,9 @@ def choose_sampling(model, logs, samples_per_tau: int | None = None) -> tuple[in
     try:
         from ..manoeuvres import steady_rps
 
-        U = _approach_speed(logs)
+        U, speed_why = _speed_scale(logs)  # the approach speed, or the median speed of logs that start from rest
+        if not U > 0:
+            raise ValueError(speed_why)
         n = float(steady_rps(model, U)[0]) if "n" in model.input_names else 0.0
         x = np.zeros(model.nx)
         x[model.state_index("u")] = U
@@ -284,9 +340,9 @@ def choose_sampling(model, logs, samples_per_tau: int | None = None) -> tuple[in
     except (ValueError, np.linalg.LinAlgError) as exc:
         return 1, f"every sample (log step {dt_log:.3g} s): the model's time constants are unknown ({exc})"
     k = max(1, int(math.floor(tau / samples_per_tau / dt_log + 1e-9)))
-    return k, (f"every {k}. sample ({k * dt_log:.3g} s): fastest time constant of the start model at the logs' "
-               f"approach speed {U:.3g} m/s is {tau:.3g} s, >= {samples_per_tau} steps per time constant, "
-               f"log step {dt_log:.3g} s")
+    return k, (f"every {k}. sample ({k * dt_log:.3g} s): fastest time constant of the start model at "
+               f"{speed_why} of the logs, {U:.3g} m/s, is {tau:.3g} s, >= {samples_per_tau} steps per time "
+               f"constant, log step {dt_log:.3g} s")
 
 
 def linear_sway_yaw(model) -> bool:
@@ -333,7 +389,7 @@ def linear_window(log, max_drift_deg: float = LINEAR_DRIFT_DEG):
                     sha256=log.sha256, rows=log.rows[:end], units_in=log.units_in,
                     notes=list(log.notes) + [f"samples from t = {log.time[end]:.4g} s on left out: drift angle "
                                              f"{beta[end]:.3g} deg above {max_drift_deg:g} deg (fit recipe, linear range)"],
-                    fmt=log.fmt)
+                    fmt=log.fmt, meas_std=getattr(log, "meas_std", None))
 
 
 def _every(log, k: int):
@@ -344,7 +400,8 @@ def _every(log, k: int):
 
     return TrialLog(log.data.iloc[::k].reset_index(drop=True), name=log.name, ship=log.ship, path=log.path,
                     sha256=log.sha256, rows=log.rows[::k], units_in=log.units_in,
-                    notes=list(log.notes) + [f"every {k}. sample (fit recipe)"], fmt=log.fmt)
+                    notes=list(log.notes) + [f"every {k}. sample (fit recipe)"], fmt=log.fmt,
+                    meas_std=getattr(log, "meas_std", None))
 
 
 def _head(log, n: int):
@@ -352,7 +409,8 @@ def _head(log, n: int):
     from ..logs import TrialLog
 
     return TrialLog(log.data.iloc[:n].reset_index(drop=True), name=log.name, ship=log.ship, path=log.path,
-                    sha256=log.sha256, rows=log.rows[:n], units_in=log.units_in, notes=list(log.notes), fmt=log.fmt)
+                    sha256=log.sha256, rows=log.rows[:n], units_in=log.units_in, notes=list(log.notes), fmt=log.fmt,
+                    meas_std=getattr(log, "meas_std", None))
 
 
 def common_grid(logs, dt: float) -> list:
@@ -489,7 +547,7 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
              max_drift_deg="auto", refine: str | None = "auto", metric_weight: float | None = None,
              n_passes: int = 2, max_nfev: int = 60, tune_noise: bool = False, progress: bool = False,
              meas_std=None, ekf_options=None, hold_unresolved: bool = True, sign_bounds: bool = False,
-             physical_damping: bool = True, log=None) -> RecipeFit:
+             physical_damping: bool = True, start_defaults: bool = True, log=None) -> RecipeFit:
     """Fit ``model`` to ``logs`` with the project's recipe (module docstring: steps 1-6).
 
     Parameters
@@ -516,7 +574,14 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
     sign_bounds : bool  step 6 keeps the model's dissipative coefficients <= 0 (:func:`refine_fit`; default False)
     physical_damping : bool  step 6 keeps the model's own sway and yaw damping negative along the logs
         (:func:`refine_fit`; default True)
+    start_defaults : bool  apply :data:`DEFAULT_START` to the start model (default); False when the caller's
+        ``params`` or model are the start it wants (``shipid fit --params``)
     log : callable, optional  called with one line per step as it happens (e.g. ``print``)
+
+    Models with wind and/or current (:func:`shipid.environment.with_environment`) take the defaults of their
+    base model (estimate list, start, sampling, noise) plus :data:`DEFAULT_ESTIMATE_WIND` for a wind part; their
+    EKF stage is not refined.  Measurement noise: ``meas_std``, else the sensor noise the logs' format declares
+    (``TrialLog.meas_std``, e.g. the ``esso-frt`` schema's), else the identifier's estimate from the data.
 
     Returns
     -------
@@ -534,12 +599,29 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
                          max_drift_deg=max_drift_deg, refine=refine, metric_weight=metric_weight, n_passes=n_passes,
                          max_nfev=max_nfev, tune_noise=tune_noise, progress=progress, meas_std=meas_std,
                          ekf_options=ekf_options, hold_unresolved=hold_unresolved, sign_bounds=sign_bounds,
-                         physical_damping=physical_damping, log=log)
+                         physical_damping=physical_damping, start_defaults=start_defaults, log=log)
+
+
+def _froude_process_std(name: str, L: float):
+    """:data:`DEFAULT_PROCESS_STD` of model ``name`` Froude-scaled to length ``L`` (None: no default)."""
+    if name not in DEFAULT_PROCESS_STD:
+        return None
+    L0, std = DEFAULT_PROCESS_STD[name]
+    return {k: v * (L / L0) ** _FROUDE_EXP[k] for k, v in std.items()}
+
+
+def _declared_meas_std(logs):
+    """The sensor noise the logs' format declares (``TrialLog.meas_std``) when every log declares the same, else
+    None (the identifier then estimates it from the data)."""
+    decl = [dict(getattr(lg, "meas_std", None) or {}) for lg in logs]
+    if not decl or not decl[0] or any(d != decl[0] for d in decl[1:]):
+        return None
+    return decl[0]
 
 
 def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free_neutral, estimate_neutral, dt,
               max_drift_deg, refine, metric_weight, n_passes, max_nfev, tune_noise, progress, meas_std, ekf_options,
-              hold_unresolved, sign_bounds, physical_damping, log) -> RecipeFit:
+              hold_unresolved, sign_bounds, physical_damping, start_defaults, log) -> RecipeFit:
     from .identifier import EKFIdentifier
 
     logs = list(logs)
@@ -558,10 +640,25 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
 
     L = _lpp_of(logs, lpp)
     m0, why = _start_model(model, params, L)
-    name = m0.name
+    # a model with wind/current parts takes its base ship model's defaults
+    env = getattr(m0, "base", None) is not None and hasattr(m0, "identifier_settings")
+    name = m0.base.name if env else m0.name
     step("ship", {"lpp": L}, f"the logs' particulars; start: {why}")
+    if start_defaults and name in DEFAULT_START:
+        m0 = m0.with_params(DEFAULT_START[name])
+        step("start values (model default)", dict(DEFAULT_START[name]), f"{name}'s recipe default (DEFAULT_START; "
+             "chosen by cross-validation, see its note)")
+    ekf_opts = dict(ekf_options or {})
     # sampling step
-    if dt == "auto":
+    if dt == "auto" and name in DEFAULT_SAMPLING_S:
+        dt_log = max(float(np.median(np.diff(lg.time))) for lg in logs if lg.time.size > 1)
+        k = max(1, int(round(DEFAULT_SAMPLING_S[name] / dt_log)))
+        reason = (f"every {k}. sample ({k * dt_log:.3g} s): {name}'s recipe step {DEFAULT_SAMPLING_S[name]:g} s "
+                  f"(DEFAULT_SAMPLING_S), log step {dt_log:.3g} s")
+        if name in DEFAULT_SUBSTEPS and "substeps" not in ekf_opts:
+            ekf_opts["substeps"] = DEFAULT_SUBSTEPS[name]
+            reason += f", {DEFAULT_SUBSTEPS[name]} RK4 substeps per interval"
+    elif dt == "auto":
         k, reason = choose_sampling(m0, logs)
     elif dt is None:
         k, reason = 1, "every sample (asked)"
@@ -612,6 +709,11 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         step("linear range", drift, why_drift)
     # estimated / fixed
     est = list(estimate) if estimate is not None else DEFAULT_ESTIMATE.get(name)
+    if estimate is None and est is not None and env and getattr(m0, "wind", None) is not None:
+        est = est + [w for w in DEFAULT_ESTIMATE_WIND if w in m0.param_names]
+    if estimate is None and est is not None:
+        step("estimated", list(est), f"{name}'s recipe default (DEFAULT_ESTIMATE"
+             + (" + DEFAULT_ESTIMATE_WIND" if env and getattr(m0, "wind", None) is not None else "") + ")")
     fix: dict = {}
     if isinstance(fixed, dict):
         fix.update({k2: float(v) for k2, v in fixed.items()})
@@ -628,6 +730,9 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
             step("a8", 0.0, f"the propeller rate is constant ({np.mean(n_all):.4g} rps) in every log: "
                             "a1, a8, a9 are collinear, a8 fixed at 0")
     free_in_refine: list[str] = []
+    if "delta0" in m0.param_names and neutral and not DEFAULT_NEUTRAL.get(name, True) and "delta0" not in fix:
+        neutral = False
+        step("neutral rudder angle", None, f"off for {name} (DEFAULT_NEUTRAL: not kept by cross-validation)")
     if "delta0" in m0.param_names and neutral and "delta0" not in fix:
         try:
             d0, n_logs = neutral_rudder_angle(used)
@@ -669,7 +774,22 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
              + f" ({seed.message_}); the non-linear terms start at 0")
     else:
         step("start values", "as built", why)
-    ekf_opts = dict(ekf_options or {})
+    if name in DEFAULT_INIT and "init" not in ekf_opts:
+        ekf_opts["init"] = DEFAULT_INIT[name]
+        step("EKF start", DEFAULT_INIT[name], f"{name}'s recipe default (DEFAULT_INIT): the start model's values")
+    # noise levels: measurement (given > the logs' declared sensor noise > the identifier's estimate), process
+    if meas_std is None:
+        meas_std = _declared_meas_std(logs)
+        step("measurement noise", meas_std, "the logs' format declares its sensors' noise (schema meas_std)"
+             if meas_std is not None else "estimated from the data by the identifier (no --meas-std, none declared)")
+    else:
+        step("measurement noise", dict(meas_std), "asked")
+    proc = _froude_process_std(name, L)
+    if proc is not None:
+        ekf_opts["process_std"] = {**proc, **dict(ekf_opts.get("process_std") or {})}
+        step("process noise", {k2: float(f"{v:.4g}") for k2, v in ekf_opts["process_std"].items()},
+             f"{name}'s recipe default (DEFAULT_PROCESS_STD) at Lpp {DEFAULT_PROCESS_STD[name][0]:g} m, "
+             f"Froude-scaled to {L:g} m" + ("; current states from the environment model" if env else ""))
     ekf = EKFIdentifier(m0, estimate=est, fixed=fix or None, n_passes=n_passes, tune_noise=tune_noise,
                         progress=progress, meas_std=meas_std, **ekf_opts).fit(used)
     step("EKF", ekf.message_, f"{len(ekf.estimated_)} parameters estimated, {n_passes} passes")
@@ -682,7 +802,14 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         step("EKF", ekf.message_, f"refitted without innovation gating: with the default gate the filter failed ({first})")
     fit = RecipeFit(ekf=ekf, steps=steps, logs=used, free_in_refine=free_in_refine, lpp=L)
     mode = refine
-    if mode == "auto":
+    if env and mode not in (None, "none", "auto"):
+        raise ValueError(f"refine={refine!r}: the refinement is not available for models with wind or current "
+                         "parts yet; use refine=None (shipid fit: --refine none)")
+    if mode == "auto" and (env or name in NO_AUTO_REFINE):
+        mode = None
+        step("refinement", "none", "models with wind/current parts are not refined" if env else
+             f"{name}: none by default (NO_AUTO_REFINE: its study's refinements kept nothing)")
+    elif mode == "auto":
         kinds = _kinds(logs, L)
         mode = AUTO_REFINE if {"turning", "zigzag"} <= kinds else None
         step("refinement", mode or "none", f"turning circles and zigzags among the logs: {AUTO_REFINE} at metric "

@@ -178,6 +178,7 @@ def read_log(
     log = _finish(t, ch, where=where, name=name, ship=ship_obj, path=p, sha256=sha, inputs=inputs,
                    interpolate_inputs=interpolate_inputs, required=required, min_samples=min_samples,
                    unit_checks=unit_checks, units_in=units_in, notes=notes, fmt=sch.fmt)
+    log.meas_std = dict(sch.meas_std)
     if consistency_checks:
         _run_consistency(log)
     return log

@@ -143,7 +143,7 @@ class TrialLog:
     def __init__(self, data: pd.DataFrame, *, name: str, ship: ShipParticulars | None = None, path: Path | None = None,
                  sha256: str | None = None, rows: np.ndarray | None = None, missing: dict | None = None,
                  dropouts: list | None = None, units_in: dict | None = None, notes: list | None = None,
-                 fmt: str = "arrays", sources: dict | None = None):
+                 fmt: str = "arrays", sources: dict | None = None, meas_std: dict | None = None):
         self.data = data
         self.name = name
         self.ship = ship
@@ -157,6 +157,9 @@ class TrialLog:
         self.fmt = fmt
         #: channel -> the file column it was read from (e.g. ``"column 7 'r_angvelo [rad/s]'"``)
         self.sources = dict(sources or {})
+        #: channel -> the sensor's noise standard deviation [SI] declared by the log's format
+        #: (:attr:`shipid.logs.Schema.meas_std`); empty when the format declares none
+        self.meas_std = dict(meas_std or {})
         #: :class:`shipid.logs.consistency.ConsistencyResult` when read_log ran the checks, else None
         self.consistency = None
 
@@ -283,7 +286,7 @@ class TrialLog:
             dropouts = [(float(t[k]), float(t[k + 1])) for k in np.flatnonzero(d > 3.0 * med)]
         return TrialLog(data.reset_index(drop=True), name=self.name, ship=self.ship, path=self.path,
                         sha256=self.sha256, rows=rows, missing=missing, dropouts=dropouts, units_in=self.units_in,
-                        notes=[*self.notes, note], fmt=self.fmt, sources=self.sources)
+                        notes=[*self.notes, note], fmt=self.fmt, sources=self.sources, meas_std=self.meas_std)
 
     def window(self, t_start: float | None = None, t_end: float | None = None) -> "TrialLog":
         """The samples with ``t_start <= time <= t_end`` [s] (None = open end), every channel kept.

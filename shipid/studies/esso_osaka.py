@@ -57,6 +57,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..logs.schema import PRESETS
+
 __all__ = ["run_study", "refine_on_windows", "in_sample_errors", "REFINE_DEFAULTS", "REFINE_CANDIDATES", "anemometer_check", "path_relative_error", "current_vs_wind", "start_current_floor", "drift_factor", "with_drift_current", "air_velocity", "EssoStudy", "load_runs", "error_diagnosis", "residual_accelerations", "split_position_error", "PRIOR_PARAMS", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
 
 #: Where the shared data set lives relative to the repository root.
@@ -80,7 +82,8 @@ ESTIMATE_WIND = ("wX1", "wY1", "wN1", "wN2")
 #: chosen-scope mean 0.2708 vs 0.2780; docs/environment.md).  ``run_study(prior_params={})`` is the setting
 #: before.
 PRIOR_PARAMS = {"dgammaR": 0.1225}
-MEAS_STD = {"x": 0.01, "y": 0.01, "psi": 0.003, "u": 0.01, "v": 0.01, "r": 0.003}
+#: Measurement noise of the fits: the ``esso-frt`` format's sensor noise (one copy, in the log adapter).
+MEAS_STD = dict(PRESETS["esso-frt"].meas_std)
 PROCESS_STD = {"x": 0.005, "y": 0.005, "psi": 0.002, "u": 0.003, "v": 0.003, "r": 0.002}
 
 
