@@ -643,6 +643,9 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
     # a model with wind/current parts takes its base ship model's defaults
     env = getattr(m0, "base", None) is not None and hasattr(m0, "identifier_settings")
     name = m0.base.name if env else m0.name
+    if env and refine not in (None, "none", "auto"):
+        raise ValueError(f"refine={refine!r}: the refinement is not available for models with wind or current "
+                         "parts yet; use refine=None (shipid fit: --refine none)")
     step("ship", {"lpp": L}, f"the logs' particulars; start: {why}")
     if start_defaults and name in DEFAULT_START:
         m0 = m0.with_params(DEFAULT_START[name])
@@ -802,9 +805,6 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         step("EKF", ekf.message_, f"refitted without innovation gating: with the default gate the filter failed ({first})")
     fit = RecipeFit(ekf=ekf, steps=steps, logs=used, free_in_refine=free_in_refine, lpp=L)
     mode = refine
-    if env and mode not in (None, "none", "auto"):
-        raise ValueError(f"refine={refine!r}: the refinement is not available for models with wind or current "
-                         "parts yet; use refine=None (shipid fit: --refine none)")
     if mode == "auto" and (env or name in NO_AUTO_REFINE):
         mode = None
         step("refinement", "none", "models with wind/current parts are not refined" if env else

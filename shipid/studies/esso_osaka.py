@@ -57,6 +57,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..identify.recipe import DEFAULT_ESTIMATE, DEFAULT_ESTIMATE_WIND, DEFAULT_PROCESS_STD, DEFAULT_START
 from ..logs.schema import PRESETS
 
 __all__ = ["run_study", "refine_on_windows", "in_sample_errors", "REFINE_DEFAULTS", "REFINE_CANDIDATES", "anemometer_check", "path_relative_error", "current_vs_wind", "start_current_floor", "drift_factor", "with_drift_current", "air_velocity", "EssoStudy", "load_runs", "error_diagnosis", "residual_accelerations", "split_position_error", "PRIOR_PARAMS", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
@@ -73,18 +74,21 @@ DUPLICATES = ("turn_cut_14-Sep-2020_15_58_08",)
 #: ``CrY`` (the yaw-rate weighting of the cross-flow sway force) was added in session 9 by the pre-registered
 #: round 7 (candidate T1: 8-fold mean 0.28228 against G1's 0.28981, leave-one-run-out chosen-scope mean
 #: 0.26546 against 0.27080; docs/environment.md).
-ESTIMATE = ("X0F", "X0A", "Yv", "Yr", "Nv", "Nr", "CD", "k0", "CTa0", "YPa", "NPa", "f_alpha", "aH", "tR", "CrY")
-ESTIMATE_WIND = ("wX1", "wY1", "wN1", "wN2")
+#: (One copy: the fit recipe's lowspeed default, ``shipid.identify.recipe.DEFAULT_ESTIMATE``, which ``shipid fit``
+#: uses.)
+ESTIMATE = tuple(DEFAULT_ESTIMATE["lowspeed"])
+ESTIMATE_WIND = tuple(DEFAULT_ESTIMATE_WIND)
 #: Values replacing the ``esso-osaka-prior`` set's in every ``lowspeed`` fit of the study: the MMG standard
 #: method's side-dependent flow straightening at the KVLCC2's published split (gamma_R 0.640 / 0.395 for
 #: beta_R > 0 / < 0, Yasukawa & Yoshimura 2015: +-0.1225 about the prior's 0.5), chosen in session 7 by the
 #: pre-registered round 4 (candidate G1: 8-fold mean of the 30 s medians 0.2898 vs 0.2922, leave-one-run-out
 #: chosen-scope mean 0.2708 vs 0.2780; docs/environment.md).  ``run_study(prior_params={})`` is the setting
 #: before.
-PRIOR_PARAMS = {"dgammaR": 0.1225}
+PRIOR_PARAMS = dict(DEFAULT_START["lowspeed"])  # (one copy: the recipe's lowspeed start default)
 #: Measurement noise of the fits: the ``esso-frt`` format's sensor noise (one copy, in the log adapter).
 MEAS_STD = dict(PRESETS["esso-frt"].meas_std)
-PROCESS_STD = {"x": 0.005, "y": 0.005, "psi": 0.002, "u": 0.003, "v": 0.003, "r": 0.002}
+#: Process noise of the fits at 3 m (one copy: the recipe's lowspeed default, Froude-scaled there to other lengths).
+PROCESS_STD = dict(DEFAULT_PROCESS_STD["lowspeed"][1])
 
 
 #: Froude-scaled IMO minimum steering-gear rate (2.32 deg/s at full scale, A.751(18)) for the 3 m model
