@@ -126,3 +126,24 @@ def test_refinement_of_environment_models_is_refused_before_fitting(tmp_path, ca
     err = capsys.readouterr().err
     assert rc == 2 and "not available for models with wind or current" in err and "--refine none" in err
     assert not (tmp_path / "f.json").exists()
+
+
+@pytest.mark.slow
+def test_recipe_loro_reaches_the_study_numbers():
+    """Leave-one-run-out through the product's path (`shipid fit` defaults on the files as the CLI reads them,
+    `shipid validate --horizon` from the fit's mean current; :func:`recipe_loro`): the medians of the 30 s
+    position error per run type are the study's (docs/environment.md: 0.243 / 0.430 / 0.184 / 0.205 m), so issue
+    13's goals hold for a user's fit as they do for the study's -- met on turning, random, berthing (<= 0.3 /
+    0.3 / 0.6 m), missed on zigzag (0.432 m, band: the measured value +-0.01 m, a regression check)."""
+    from shipid.studies.esso_osaka import recipe_loro
+
+    _esso("turning", 1)
+    df = recipe_loro(DATA)
+    assert len(df.run.unique()) == 32 and df.success.all() and df.n_blowups.sum() == 0
+    med = {k: float(np.median(np.concatenate(g.errors.to_list())))
+           for k, g in df[df.seconds == 30.0].groupby("run_type")}
+    assert med["turning"] <= 0.3 and med["random"] <= 0.3 and med["berthing"] <= 0.6  # goals met
+    measured = {"turning": 0.244, "zigzag": 0.432, "random": 0.184, "berthing": 0.206}  # session 11
+    for k, v in measured.items():
+        assert med[k] == pytest.approx(v, abs=0.01), (k, med[k])
+    assert med["zigzag"] > 0.3  # goal missed (said in docs/environment.md)

@@ -60,7 +60,7 @@ import pandas as pd
 from ..identify.recipe import DEFAULT_ESTIMATE, DEFAULT_ESTIMATE_WIND, DEFAULT_PROCESS_STD, DEFAULT_START
 from ..logs.schema import PRESETS
 
-__all__ = ["run_study", "refine_on_windows", "in_sample_errors", "REFINE_DEFAULTS", "REFINE_CANDIDATES", "anemometer_check", "path_relative_error", "current_vs_wind", "start_current_floor", "drift_factor", "with_drift_current", "air_velocity", "EssoStudy", "load_runs", "error_diagnosis", "residual_accelerations", "split_position_error", "PRIOR_PARAMS", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
+__all__ = ["run_study", "refine_on_windows", "in_sample_errors", "REFINE_DEFAULTS", "REFINE_CANDIDATES", "anemometer_check", "path_relative_error", "current_vs_wind", "start_current_floor", "drift_factor", "with_drift_current", "air_velocity", "EssoStudy", "load_runs", "recipe_loro", "error_diagnosis", "residual_accelerations", "split_position_error", "PRIOR_PARAMS", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
 
 #: Where the shared data set lives relative to the repository root.
 DATA_DIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "esso_osaka_frt"
@@ -839,6 +839,53 @@ def residual_accelerations(study: "EssoStudy", candidates=("YPf", "NPf", "delta0
             block["Jv_" + c], block["Jr_" + c] = J[:, 4, j], J[:, 5, j]
         rows.append(pd.DataFrame(block))
     return pd.concat(rows, ignore_index=True) if rows else pd.DataFrame()
+
+
+#: The study's chosen scope of the fit for a left-out run of each type (docs/environment.md): the training runs of
+#: its own type, except zigzags, fitted on all types (only six zigzag training runs).
+CHOSEN_SCOPE = {"turning": "type", "zigzag": "all", "random": "type", "berthing": "type"}
+
+
+def recipe_loro(data_dir=DATA_DIR, *, types=RUN_TYPES, horizons=(10.0, 30.0, 60.0), start_every: float = 5.0,
+                scope=None) -> pd.DataFrame:
+    """Leave-one-run-out through the product's path, as a user runs it: ``shipid fit --schema esso-frt --model
+    lowspeed --wind --current`` (:func:`shipid.identify.fit_logs` with its defaults, on the files as read by the
+    CLI) on the training runs of the chosen scope (:data:`CHOSEN_SCOPE`, or ``scope`` per type), then `shipid
+    validate --horizon`'s prediction of the left-out run at full rate, from its measured states and the fit's
+    mean current.  One row per left-out run and horizon (median / p90 position error, starts, blow-ups)."""
+    from ..environment import with_environment
+    from ..identify.recipe import fit_logs
+    from ..logs import read_log
+    from ..models import get_model
+    from ..validation_horizon import horizon_prediction
+
+    scope = {**CHOSEN_SCOPE, **dict(scope or {})}
+    runs = []
+    for kind in types:
+        for f in sorted(glob.glob(str(Path(data_dir) / kind / "*.csv"))):
+            if Path(f).stem in DUPLICATES:
+                continue
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", UserWarning)
+                lg = read_log(f, schema="esso-frt")
+            runs.append((kind, lg))
+    rows = []
+    for kind, held in runs:
+        train = [lg for k2, lg in runs if lg is not held and (scope[kind] == "all" or k2 == kind)]
+        model = with_environment(get_model("lowspeed"), wind="esso-osaka-3m", current="constant")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            fit = fit_logs(train, model, ekf_options=model.identifier_settings())
+            cs = fit.result().settings["current_start"]
+            h = horizon_prediction(fit.to_model(), held, horizons=horizons, start_every=start_every,
+                                   initial={"cx": cs["cx"], "cy": cs["cy"]}, name=held.name)
+        for j, H in enumerate(h.horizons):
+            pe = h.position_error[:, j]
+            ok = ~np.isnan(pe)
+            rows.append({"run": held.name, "run_type": kind, "seconds": float(H), "n_train": len(train),
+                         "success": bool(fit.success), "n_starts": int(ok.sum()),
+                         "n_blowups": int(np.isinf(pe[ok]).sum()), "errors": pe[ok]})
+    return pd.DataFrame(rows)
 
 
 def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shipid.studies.esso_osaka
