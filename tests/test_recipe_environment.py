@@ -147,3 +147,27 @@ def test_recipe_loro_reaches_the_study_numbers():
     for k, v in measured.items():
         assert med[k] == pytest.approx(v, abs=0.01), (k, med[k])
     assert med["zigzag"] > 0.3  # goal missed (said in docs/environment.md)
+
+
+def test_runs_with_the_propeller_astern_are_not_standard_manoeuvres():
+    """Standard-manoeuvre metrics (and `shipid validate`'s measured/closed-loop comparison) are for turning
+    circles and zigzags at the approach's engine setting: a run whose propeller goes astern after the execute
+    (berthing, random runs) is said not to be one, instead of being read as a zigzag (it was, before)."""
+    from shipid.manoeuvres import detect_manoeuvre, metrics
+
+    d = np.radians(np.concatenate([np.zeros(10), np.full(40, 20.0), np.full(50, -20.0)]))
+    assert detect_manoeuvre(d) == "zigzag"
+    assert detect_manoeuvre(d, n=np.full(100, 10.0)) == "zigzag"
+    n = np.concatenate([np.full(60, 10.0), np.full(40, -5.0)])
+    with pytest.raises(ValueError, match=r"not a standard manoeuvre: the propeller runs astern after the execute "
+                                         r"\(n from -5 to 10\).*--horizon"):
+        detect_manoeuvre(d, n=n)
+    n[:5] = -5.0  # astern before the execute only (e.g. stopping at the start): still a manoeuvre
+    n[60:] = 10.0
+    assert detect_manoeuvre(d, n=n) == "zigzag"
+    (f,) = _esso("berthing", 1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        lg = read_log(f, schema="esso-frt")
+    with pytest.raises(ValueError, match="not a standard manoeuvre"):
+        metrics(lg)

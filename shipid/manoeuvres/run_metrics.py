@@ -14,14 +14,27 @@ from .turning import turning_metrics
 from .zigzag import zigzag_metrics
 
 
-def detect_manoeuvre(delta, threshold_deg: float = 2.0) -> str:
+def detect_manoeuvre(delta, threshold_deg: float = 2.0, n=None) -> str:
     """``"zigzag"`` when the rudder goes both ways from its initial value by more than ``threshold_deg``
-    after the execute, else ``"turning"``."""
-    d = np.degrees(np.asarray(delta, dtype=float) - float(np.asarray(delta)[0]))
+    after the execute, else ``"turning"``.  With the propeller rate ``n``, a run whose propeller runs astern
+    after the execute is not a standard manoeuvre (berthing, operator-driven random runs; ITTC 7.5-04-02-01's
+    turning circles and zigzags keep the approach's engine setting): ValueError, which says so."""
+    delta = np.asarray(delta, dtype=float)
+    d = np.degrees(delta - float(delta[0]))
     up, down = d.max() > threshold_deg, d.min() < -threshold_deg
     if not (up or down):
         raise ValueError("no manoeuvre: the rudder never moves more than "
                          f"{threshold_deg} deg from its initial value")
+    if n is not None:
+        k = int(np.flatnonzero(np.abs(d) > threshold_deg)[0])
+        na = np.asarray(n, dtype=float)[k:]
+        na = na[np.isfinite(na)]
+        if na.size:
+            if na.min() < 0.0:
+                raise ValueError(f"not a standard manoeuvre: the propeller runs astern after the execute (n from "
+                                 f"{na.min():.3g} to {na.max():.3g}); turning and zigzag metrics need a constant "
+                                 "rate ahead (berthing or random runs: judge them by open-loop prediction, "
+                                 "--horizon)")
     return "zigzag" if (up and down) else "turning"
 
 
@@ -92,7 +105,9 @@ def metrics(data, *, lpp: float | None = None, kind: str = "auto", reference_off
     if np.nanmax(np.abs(np.diff(psi))) > 1.0 and np.nanmax(np.abs(psi)) > 2 * math.pi + 1:
         raise ValueError(f"{label}: column 'psi' jumps by more than 1 rad between samples and exceeds 2 pi; "
                          "it looks like degrees -- convert to radians")
-    kind = detect_manoeuvre(sub["delta"].to_numpy(float)) if kind == "auto" else kind
+    if kind == "auto":
+        kind = detect_manoeuvre(sub["delta"].to_numpy(float),
+                                n=sub["n"].to_numpy(float) if "n" in sub.columns else None)
     if kind == "turning":  # positions and speed must be present on the samples used
         sub = sub.dropna(subset=[c for c in ("x", "y", "u") if c in sub.columns])
     t = sub["time"].to_numpy(float)
