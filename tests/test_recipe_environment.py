@@ -171,3 +171,19 @@ def test_runs_with_the_propeller_astern_are_not_standard_manoeuvres():
         lg = read_log(f, schema="esso-frt")
     with pytest.raises(ValueError, match="not a standard manoeuvre"):
         metrics(lg)
+
+
+def test_a_turn_with_a_brief_opposite_correction_is_a_turn():
+    """A turning circle whose operator corrects briefly to the other side (the Esso Osaka turning runs: up to 8 %
+    of the time beyond half the largest deflection) is a turn; a zigzag holds both sides (27 % or more)."""
+    from shipid.manoeuvres import detect_manoeuvre
+
+    turn = np.radians(np.concatenate([np.zeros(10), np.full(5, -20.0), np.full(95, 35.0)]))
+    assert detect_manoeuvre(turn) == "turning"
+    zz = np.radians(np.concatenate([np.zeros(10), np.full(30, 20.0), np.full(30, -20.0), np.full(30, 20.0)]))
+    assert detect_manoeuvre(zz) == "zigzag"
+    for f in _esso("turning", 12):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            lg = read_log(f, schema="esso-frt")
+        assert detect_manoeuvre(lg["delta"], n=lg["n"]) == "turning", f.name
