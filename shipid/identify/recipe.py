@@ -134,10 +134,11 @@ DEFAULT_START = {"lowspeed": {"dgammaR": 0.1225}}
 #: Start of the EKF stage per model (default: the identifier's equation-error start).  ``lowspeed``: the
 #: (prior) parameter set itself, which is also the prior mean (100 % std), as in every Esso Osaka study number.
 DEFAULT_INIT = {"lowspeed": "model"}
-#: Sampling step [s] per model, replacing step 2's time-constant rule.  ``lowspeed``: 2 s (0.5 Hz) with two RK4
-#: substeps per interval, the Esso Osaka study's setting fixed before any held-out error (at these runs' 0.1-0.5
-#: m/s the fastest time constant is 5-100 s); every cross-validated number of docs/environment.md used it.
-DEFAULT_SAMPLING_S = {"lowspeed": 2.0}
+#: Sampling step per model as ``(Lpp [m], step [s])``, Froude-scaled to the logs' Lpp (times as sqrt(L)), replacing
+#: step 2's time-constant rule.  ``lowspeed``: 2 s (0.5 Hz) at 3 m with two RK4 substeps per interval, the Esso
+#: Osaka study's setting fixed before any held-out error (at these runs' 0.1-0.5 m/s the fastest time constant is
+#: 5-100 s); every cross-validated number of docs/environment.md used it.
+DEFAULT_SAMPLING_S = {"lowspeed": (3.0, 2.0)}
 DEFAULT_SUBSTEPS = {"lowspeed": 2}
 #: Process noise per model (state -> std per sqrt(s), SI) at the length it was set for, Froude-scaled to the
 #: logs' Lpp (x, y as L^0.75, psi as L^-0.25, u, v as L^0.25, r as L^-0.75: a velocity per sqrt of a time).
@@ -655,9 +656,11 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
     # sampling step
     if dt == "auto" and name in DEFAULT_SAMPLING_S:
         dt_log = max(float(np.median(np.diff(lg.time))) for lg in logs if lg.time.size > 1)
-        k = max(1, int(round(DEFAULT_SAMPLING_S[name] / dt_log)))
-        reason = (f"every {k}. sample ({k * dt_log:.3g} s): {name}'s recipe step {DEFAULT_SAMPLING_S[name]:g} s "
-                  f"(DEFAULT_SAMPLING_S), log step {dt_log:.3g} s")
+        L0, h0 = DEFAULT_SAMPLING_S[name]
+        h = h0 * math.sqrt(L / L0)
+        k = max(1, int(round(h / dt_log)))
+        reason = (f"every {k}. sample ({k * dt_log:.3g} s): {name}'s recipe step {h0:g} s at Lpp {L0:g} m "
+                  f"(DEFAULT_SAMPLING_S), Froude-scaled to {h:.3g} s at {L:g} m, log step {dt_log:.3g} s")
         if name in DEFAULT_SUBSTEPS and "substeps" not in ekf_opts:
             ekf_opts["substeps"] = DEFAULT_SUBSTEPS[name]
             reason += f", {DEFAULT_SUBSTEPS[name]} RK4 substeps per interval"
