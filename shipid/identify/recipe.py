@@ -137,7 +137,9 @@ DEFAULT_INIT = {"lowspeed": "model"}
 #: Sampling step per model as ``(Lpp [m], step [s])``, Froude-scaled to the logs' Lpp (times as sqrt(L)), replacing
 #: step 2's time-constant rule.  ``lowspeed``: 2 s (0.5 Hz) at 3 m with two RK4 substeps per interval, the Esso
 #: Osaka study's setting fixed before any held-out error (at these runs' 0.1-0.5 m/s the fastest time constant is
-#: 5-100 s); every cross-validated number of docs/environment.md used it.
+#: 5-100 s); every cross-validated number of docs/environment.md used it.  Set for low-speed runs (Froude numbers
+#: 0.02-0.09): at service speed (the MARIN KVLCC2 runs, Fn 0.142: 20.7 s at 320 m) it is coarse; pass ``dt``
+#: (``--dt``) there.
 DEFAULT_SAMPLING_S = {"lowspeed": (3.0, 2.0)}
 DEFAULT_SUBSTEPS = {"lowspeed": 2}
 #: Process noise per model (state -> std per sqrt(s), SI) at the length it was set for, Froude-scaled to the
