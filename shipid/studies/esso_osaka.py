@@ -60,7 +60,7 @@ import pandas as pd
 from ..identify.recipe import DEFAULT_ESTIMATE, DEFAULT_ESTIMATE_WIND, DEFAULT_PROCESS_STD, DEFAULT_START
 from ..logs.schema import PRESETS
 
-__all__ = ["run_study", "refine_on_windows", "in_sample_errors", "REFINE_DEFAULTS", "REFINE_CANDIDATES", "anemometer_check", "path_relative_error", "current_vs_wind", "start_current_floor", "drift_factor", "with_drift_current", "air_velocity", "EssoStudy", "load_runs", "recipe_loro", "error_diagnosis", "residual_accelerations", "split_position_error", "PRIOR_PARAMS", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
+__all__ = ["run_study", "refine_on_windows", "in_sample_errors", "REFINE_DEFAULTS", "REFINE_CANDIDATES", "anemometer_check", "path_relative_error", "current_vs_wind", "start_current_floor", "drift_factor", "with_drift_current", "air_velocity", "EssoStudy", "load_runs", "recipe_loro", "RECIPE_CANDIDATES_11", "error_diagnosis", "residual_accelerations", "split_position_error", "PRIOR_PARAMS", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
 
 #: Where the shared data set lives relative to the repository root.
 DATA_DIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "esso_osaka_frt"
@@ -846,15 +846,25 @@ def residual_accelerations(study: "EssoStudy", candidates=("YPf", "NPf", "delta0
 CHOSEN_SCOPE = {"turning": "type", "zigzag": "all", "random": "type", "berthing": "type"}
 
 
+#: Session 11, round 11 (pre-registered in docs/environment.md before any ran): options of :func:`recipe_loro`.
+#: N1: the identifier's likelihood-based noise tuning (the fits' consistency verdict says the innovations are
+#: 0.2-0.45 of what the a-priori noise levels predict); S1: the recipe's time-constant sampling rule (25 steps per
+#: fastest time constant at the training runs' median speed) instead of the fixed 2 s.
+RECIPE_CANDIDATES_11 = {"N1": {"fit_options": {"tune_noise": True}}, "S1": {"sampling": "rule"}}
+
+
 def recipe_loro(data_dir=DATA_DIR, *, types=RUN_TYPES, horizons=(10.0, 30.0, 60.0), start_every: float = 5.0,
-                scope=None) -> pd.DataFrame:
+                scope=None, fit_options=None, sampling: str = "default") -> pd.DataFrame:
     """Leave-one-run-out through the product's path, as a user runs it: ``shipid fit --schema esso-frt --model
     lowspeed --wind --current`` (:func:`shipid.identify.fit_logs` with its defaults, on the files as read by the
     CLI) on the training runs of the chosen scope (:data:`CHOSEN_SCOPE`, or ``scope`` per type), then `shipid
     validate --horizon`'s prediction of the left-out run at full rate, from its measured states and the fit's
-    mean current.  One row per left-out run and horizon (median / p90 position error, starts, blow-ups)."""
+    mean current.  One row per left-out run and horizon (median / p90 position error, starts, blow-ups).
+    ``fit_options``: further keyword arguments of :func:`~shipid.identify.fit_logs`; ``sampling="rule"``: the
+    recipe's time-constant rule (:func:`~shipid.identify.recipe.choose_sampling`) instead of the model's default
+    step."""
     from ..environment import with_environment
-    from ..identify.recipe import fit_logs
+    from ..identify.recipe import choose_sampling, fit_logs
     from ..logs import read_log
     from ..models import get_model
     from ..validation_horizon import horizon_prediction
@@ -875,7 +885,12 @@ def recipe_loro(data_dir=DATA_DIR, *, types=RUN_TYPES, horizons=(10.0, 30.0, 60.
         model = with_environment(get_model("lowspeed"), wind="esso-osaka-3m", current="constant")
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            fit = fit_logs(train, model, ekf_options=model.identifier_settings())
+            opts = dict(fit_options or {})
+            if sampling == "rule":
+                opts["dt"] = choose_sampling(model, train)[0]
+            elif sampling != "default":
+                raise ValueError(f"sampling={sampling!r}: use 'default' or 'rule'")
+            fit = fit_logs(train, model, ekf_options=model.identifier_settings(), **opts)
             cs = fit.result().settings["current_start"]
             h = horizon_prediction(fit.to_model(), held, horizons=horizons, start_every=start_every,
                                    initial={"cx": cs["cx"], "cy": cs["cy"]}, name=held.name)
