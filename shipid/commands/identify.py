@@ -37,7 +37,8 @@ def register(sub) -> None:
                    choices=("auto", "none", "output-error", "metrics"),
                    help="refinement after the EKF: 'output-error', 'metrics' (output error + the training runs' own "
                         "standard-manoeuvre metrics), 'none'; default 'auto' = metrics when the logs hold turning "
-                        "circles and zigzags, else none; a bare --refine means output-error")
+                        "circles and zigzags, else none (lowspeed and models with --wind/--current: none; they cannot "
+                        "be refined yet); a bare --refine means output-error")
     p.add_argument("--metric-weight", type=float, default=None, metavar="W",
                    help="weight of the metric residuals of the 'metrics' refinement (default 0.1, chosen by "
                         "leave-one-run-out on the KVLCC2 training runs)")
@@ -53,7 +54,8 @@ def register(sub) -> None:
                    help="do not constrain the refinement when the refined model's own sway or yaw damping is positive "
                         "along the logged states (default: solve again with d(dv/dt)/dv, d(dr/dt)/dr <= -0.02 U/L there)")
     p.add_argument("--dt", default="auto", metavar="auto|K",
-                   help="use every K-th sample; default auto: >= 25 steps per fastest time constant of the model (mmg: 50)")
+                   help="use every K-th sample; default auto: >= 25 steps per fastest time constant of the model (mmg: 50; "
+                        "lowspeed: 2 s at 3 m, Froude-scaled)")
     p.add_argument("--max-drift", default="auto", metavar="auto|DEG|none",
                    help="models linear in v and r (kcs-response): use each log until its drift angle first exceeds "
                         "DEG (default auto: 10 deg for such models, every sample for the others; none: every sample)")
@@ -68,7 +70,8 @@ def register(sub) -> None:
                    help="estimate a uniform earth-fixed current as two extra states (bare --current: constant)")
     p.add_argument("--meas-std", action="append", metavar="CH=STD",
                    help="measurement noise standard deviation per channel in SI units (m, rad, m/s, rad/s), "
-                        "e.g. psi=0.002,r=0.0005; default: estimated from the data")
+                        "e.g. psi=0.002,r=0.0005; default: the sensor noise the logs' schema declares (esso-frt does), "
+                        "else estimated from the data")
     add_progress_option(p)
     p.set_defaults(handler=_fit)
 
