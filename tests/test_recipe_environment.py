@@ -187,3 +187,30 @@ def test_a_turn_with_a_brief_opposite_correction_is_a_turn():
             warnings.simplefilter("ignore", UserWarning)
             lg = read_log(f, schema="esso-frt")
         assert detect_manoeuvre(lg["delta"], n=lg["n"]) == "turning", f.name
+
+
+def test_model_default_start_applies_to_names_not_to_a_callers_model(monkeypatch):
+    """``DEFAULT_START`` (lowspeed: dgammaR 0.1225) replaces the default set's value when the model is named;
+    a model object the caller built is the start the caller wants (unless ``start_defaults=True``)."""
+    from shipid.identify import recipe
+    from shipid.models import get_model
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake_sampling(model, logs):  # records the start model of step 2 and stops the fit there
+        seen.append(float(model.params[model.param_index("dgammaR")]))
+        raise Stop
+
+    monkeypatch.setattr(recipe, "DEFAULT_SAMPLING_S", {})
+    monkeypatch.setattr(recipe, "choose_sampling", fake_sampling)
+    t = np.arange(100) * 0.1
+    lg = TrialLog.from_arrays(t, name="a", ship={"lpp": 3.0}, x=t * 0.2, y=0 * t, psi=0 * t, u=0 * t + 0.2,
+                              v=0 * t, r=0 * t, delta=0 * t, n=0 * t + 10)
+    own = get_model("lowspeed").with_params({"dgammaR": 0.05})
+    for model, kw in (("lowspeed", {}), (own, {}), (own, {"start_defaults": True})):
+        with pytest.raises(Stop):
+            recipe.fit_logs([lg], model, **kw)
+    assert seen == [0.1225, 0.05, 0.1225]

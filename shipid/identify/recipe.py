@@ -550,7 +550,7 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
              max_drift_deg="auto", refine: str | None = "auto", metric_weight: float | None = None,
              n_passes: int = 2, max_nfev: int = 60, tune_noise: bool = False, progress: bool = False,
              meas_std=None, ekf_options=None, hold_unresolved: bool = True, sign_bounds: bool = False,
-             physical_damping: bool = True, start_defaults: bool = True, log=None) -> RecipeFit:
+             physical_damping: bool = True, start_defaults: bool | None = None, log=None) -> RecipeFit:
     """Fit ``model`` to ``logs`` with the project's recipe (module docstring: steps 1-6).
 
     Parameters
@@ -577,8 +577,9 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
     sign_bounds : bool  step 6 keeps the model's dissipative coefficients <= 0 (:func:`refine_fit`; default False)
     physical_damping : bool  step 6 keeps the model's own sway and yaw damping negative along the logs
         (:func:`refine_fit`; default True)
-    start_defaults : bool  apply :data:`DEFAULT_START` to the start model (default); False when the caller's
-        ``params`` or model are the start it wants (``shipid fit --params``)
+    start_defaults : bool, optional  apply :data:`DEFAULT_START` to the start model; default: when ``model`` is
+        a name and ``params`` None (a model object or given parameters are the start the caller wants; ``shipid
+        fit`` passes True unless ``--params`` is given)
     log : callable, optional  called with one line per step as it happens (e.g. ``print``)
 
     Models with wind and/or current (:func:`shipid.environment.with_environment`) take the defaults of their
@@ -650,6 +651,8 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         raise ValueError(f"refine={refine!r}: the refinement is not available for models with wind or current "
                          "parts yet; use refine=None (shipid fit: --refine none)")
     step("ship", {"lpp": L}, f"the logs' particulars; start: {why}")
+    if start_defaults is None:
+        start_defaults = isinstance(model, str) and params is None
     if start_defaults and name in DEFAULT_START:
         m0 = m0.with_params(DEFAULT_START[name])
         step("start values (model default)", dict(DEFAULT_START[name]), f"{name}'s recipe default (DEFAULT_START; "

@@ -890,7 +890,7 @@ def recipe_loro(data_dir=DATA_DIR, *, types=RUN_TYPES, horizons=(10.0, 30.0, 60.
                 opts["dt"] = choose_sampling(model, train)[0]
             elif sampling != "default":
                 raise ValueError(f"sampling={sampling!r}: use 'default' or 'rule'")
-            fit = fit_logs(train, model, ekf_options=model.identifier_settings(), **opts)
+            fit = fit_logs(train, model, ekf_options=model.identifier_settings(), start_defaults=True, **opts)
             cs = fit.result().settings["current_start"]
             h = horizon_prediction(fit.to_model(), held, horizons=horizons, start_every=start_every,
                                    initial={"cx": cs["cx"], "cy": cs["cy"]}, name=held.name)
