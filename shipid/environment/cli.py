@@ -67,7 +67,8 @@ def true_wind_at_edge(logs, *, what: str, say: bool = False) -> list:
             continue
         lack = [c for c in APPARENT_WIND if c not in cols]
         path = getattr(lg, "path", None)
-        where = f"`{path.name}`" if path is not None else f"log '{getattr(lg, 'name', None) or '?'}'"
+        name = getattr(lg, "name", None) or data.attrs.get("name", "?")
+        where = f"`{path.name}`" if path is not None else f"log '{name}'"
         if not lack:
             add_true_wind(data)
             converted.append(lg)

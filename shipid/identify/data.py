@@ -116,8 +116,8 @@ def measured_states(model: Model, frame: pd.DataFrame, initial: dict | None = No
     if unknown:
         raise ValueError(f"initial: model '{model.name}' has no state(s) {unknown}")
     n = len(frame)
-    return np.column_stack([frame[s].to_numpy(dtype=float) if s in frame.columns else np.full(n, float(init.get(s, 0.0)))
-                            for s in model.state_names])
+    return np.column_stack([frame[s].to_numpy(dtype=float) if s in frame.columns
+                            else np.full(n, float(init.get(s, 0.0))) for s in model.state_names])
 
 
 def resolution_std(logs: list[LogArrays]) -> np.ndarray:
