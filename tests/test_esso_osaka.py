@@ -149,11 +149,15 @@ def test_cli_validate_converts_an_apparent_wind_only_log_at_the_edge(tmp_path, c
     assert hashlib.sha256(app.read_bytes()).hexdigest() == sha  # the user's file is not touched
 
     # Tolerance from the data's own agreement: the converted true wind differs from the logged one by
-    # eps = max |w_conv - w_true| / |w_true| (wind vectors; 6.5e-4 on this cut, median 5.8e-5).  The wind
-    # force is quadratic in the wind, so it changes by ~2 eps relative, and each horizon number by at most
-    # ~2 eps times the whole wind's effect on it (wind switched off); a median or p90 moves by no more than
-    # the per-start errors do.  Allowed: 4 eps x that effect (factor 2 for the coefficients' dependence on
-    # the wind angle).  Measured on this cut: at most 0.74 eps x the effect (30 s heading, 2.1e-3 deg).
+    # eps = max |w_conv - w_true| / |w_true| (wind vectors; 6.5e-4 on this cut, median 5.8e-5; the same
+    # relative to the apparent wind).  The wind force |w_A|^2 C(angle) then changes by at most
+    # (2 + 5) eps relative: 2 eps from the square of the speed, 5 eps from the angle (C is a Fourier series
+    # of degree 5 in it, wX5/wY5, and by Bernstein's inequality such a series changes by at most 5 x its
+    # largest value per radian).  Each start's predicted position (heading) moves by about that fraction of
+    # the wind's whole displacement of it (the prediction with the wind switched off), a start's error by
+    # no more than its prediction, a median or p90 by no more than the largest start's error.  Allowed:
+    # 7 eps x the largest displacement at that horizon.  Measured: up to 1.9 eps x it (heading, 30 s:
+    # 3.2e-3 deg), positions 0.11 eps x it (9e-6 m).
     lg = read_log(orig, schema="esso-frt", consistency_checks=False).data
     conv = lg.drop(columns=["wind_speed_true", "wind_dir_true"])
     add_true_wind(conv)
@@ -162,14 +166,21 @@ def test_cli_validate_converts_an_apparent_wind_only_log_at_the_edge(tmp_path, c
     eps = float(np.max(np.abs(w_conv - w_true) / np.abs(w_true)))
     assert 0 < eps < 2e-3, eps  # the logged apparent wind is the conversion of the true wind (docs: 6e-5 median)
     model, _ = resolve_model(res)
-    calm = horizon_prediction(model, lg.assign(wind_speed_true=0.0), horizons=(10.0, 30.0)).summary()
-    keys = ("position_error_median_m", "position_error_p90_m", "heading_error_median_deg")
-    for a, b, c in zip(hz[orig], hz[app], calm):
+    assert "cx" not in model.state_names  # no start current: the library calls below start as validate does
+    X = {w: horizon_prediction(model, f, horizons=(10.0, 30.0)).tracks["x"]
+         for w, f in (("wind", lg), ("calm", lg.assign(wind_speed_true=0.0)))}
+    dt = float(np.median(np.diff(lg.time)))
+    ix, iy, ip = (model.state_index(s) for s in ("x", "y", "psi"))
+    for a, b in zip(hz[orig], hz[app]):
         assert a["seconds"] == b["seconds"] and a["n_starts"] == b["n_starts"] > 0 and b["n_blowups"] == 0
-        for k in keys:
-            effect = abs(c[k] - a[k])
-            assert effect > 0.01 * a[k], (k, effect)  # the wind matters here: the check is not empty
-            assert abs(b[k] - a[k]) <= 4 * eps * effect, (a["seconds"], k, a[k], b[k], eps, effect)
+        kh = int(round(a["seconds"] / dt))
+        d = X["wind"][:, kh] - X["calm"][:, kh]
+        moved = {"position_error_median_m": np.max(np.hypot(d[:, ix], d[:, iy])),
+                 "position_error_p90_m": np.max(np.hypot(d[:, ix], d[:, iy])),
+                 "heading_error_median_deg": np.degrees(np.max(np.abs(d[:, ip])))}
+        assert moved["position_error_median_m"] > 0.01  # the wind moves the predictions: the check is not empty
+        for k, m in moved.items():
+            assert abs(b[k] - a[k]) <= 7 * eps * m, (a["seconds"], k, a[k], b[k], eps, m)
 
     # neither true nor apparent wind: the house error (exit 2, one line naming the file and the columns)
     assert main(["validate", str(res), str(none), "--schema", "esso-frt", "--horizon", "10", "--no-closed-loop",
