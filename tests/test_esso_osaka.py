@@ -156,7 +156,7 @@ def test_cli_validate_converts_an_apparent_wind_only_log_at_the_edge(tmp_path, c
     # largest value per radian).  Each start's predicted position (heading) moves by about that fraction of
     # the wind's whole displacement of it (the prediction with the wind switched off), a start's error by
     # no more than its prediction, a median or p90 by no more than the largest start's error.  Allowed:
-    # 7 eps x the largest displacement at that horizon.  Measured: up to 1.9 eps x it (heading, 30 s:
+    # 7 eps x the largest displacement at that horizon.  Measured: up to 2.0 eps x it (heading, 30 s:
     # 3.2e-3 deg), positions 0.11 eps x it (9e-6 m).
     lg = read_log(orig, schema="esso-frt", consistency_checks=False).data
     conv = lg.drop(columns=["wind_speed_true", "wind_dir_true"])
@@ -167,14 +167,16 @@ def test_cli_validate_converts_an_apparent_wind_only_log_at_the_edge(tmp_path, c
     assert 0 < eps < 2e-3, eps  # the logged apparent wind is the conversion of the true wind (docs: 6e-5 median)
     model, _ = resolve_model(res)
     assert "cx" not in model.state_names  # no start current: the library calls below start as validate does
-    X = {w: horizon_prediction(model, f, horizons=(10.0, 30.0)).tracks["x"]
+    r = {w: horizon_prediction(model, f, horizons=(10.0, 30.0))
          for w, f in (("wind", lg), ("calm", lg.assign(wind_speed_true=0.0)))}
     dt = float(np.median(np.diff(lg.time)))
     ix, iy, ip = (model.state_index(s) for s in ("x", "y", "psi"))
-    for a, b in zip(hz[orig], hz[app]):
+    for j, (a, b) in enumerate(zip(hz[orig], hz[app])):
         assert a["seconds"] == b["seconds"] and a["n_starts"] == b["n_starts"] > 0 and b["n_blowups"] == 0
         kh = int(round(a["seconds"] / dt))
-        d = X["wind"][:, kh] - X["calm"][:, kh]
+        counted = ~np.isnan(r["wind"].position_error[:, j])  # the starts that reach this horizon
+        assert counted.sum() == a["n_starts"]
+        d = r["wind"].tracks["x"][counted, kh] - r["calm"].tracks["x"][counted, kh]
         moved = {"position_error_median_m": np.max(np.hypot(d[:, ix], d[:, iy])),
                  "position_error_p90_m": np.max(np.hypot(d[:, ix], d[:, iy])),
                  "heading_error_median_deg": np.degrees(np.max(np.abs(d[:, ip])))}
