@@ -190,11 +190,10 @@ def horizon_prediction(model: Model, log, *, horizons=DEFAULT_HORIZONS, start_ev
     U = np.column_stack([df[n].to_numpy(dtype=float) for n in model.input_names]) if model.nu else np.zeros((t.size, 0))
     if model.nu and "delta" in model.input_names:
         U[:, model.input_index("delta")] *= rudder_sign
-    meas = {s: df[s].to_numpy(dtype=float) for s in model.state_names if s in df.columns}
-    init = dict(initial or {})
-    unknown = sorted(set(init) - set(model.state_names))
-    if unknown:
-        raise ValueError(f"initial: model '{model.name}' has no state(s) {unknown}")
+    from .identify.data import measured_states
+
+    states = measured_states(model, df, initial)  # measured, else from `initial` (ValueError: unknown names)
+    meas = {s: states[:, i] for i, s in enumerate(model.state_names) if s in df.columns}
     nH = int(round(H.max() / dt))
     step = max(1, int(round(start_every / dt)))
     fin_state = np.all([np.isfinite(meas[s]) for s in meas], axis=0)
@@ -204,9 +203,7 @@ def horizon_prediction(model: Model, log, *, horizons=DEFAULT_HORIZONS, start_ev
     nH_eff = int(min(nH, t.size - 1))
     if starts.size == 0 or nH_eff < 1:
         raise ValueError(f"log '{name}': no start with a complete measured state (or the log is too short)")
-    X0 = np.zeros((starts.size, model.nx))
-    for i, s in enumerate(model.state_names):
-        X0[:, i] = meas[s][starts] if s in meas else init.get(s, 0.0)
+    X0 = states[starts]
     # inputs of each start over the longest horizon (held at the last finite value past the end)
     idx = np.minimum(starts[:, None] + np.arange(nH_eff + 1)[None, :], t.size - 1)
     Ub = U[idx]

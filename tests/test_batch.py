@@ -257,6 +257,29 @@ def test_prediction_windows_slice_logs_at_measured_states():
         prediction_windows(model, [lg], 20.0, 10.0, initial={"cx": 0.0})
 
 
+def test_measured_states_takes_the_log_then_initial_then_zero():
+    """The one helper behind the open-loop starts of ``prediction_windows`` and ``horizon_prediction``:
+    a measured channel wins over ``initial``, an unmeasured state comes from ``initial`` or is 0, and a
+    name in ``initial`` that is not a state is refused."""
+    import pandas as pd
+
+    from shipid.environment import with_environment
+    from shipid.identify.data import measured_states
+
+    model = with_environment(get_model("lowspeed"), current="constant")   # states x y psi u v r cx cy
+    f = pd.DataFrame({"time": [0.0, 0.1, 0.2], "x": [1.0, 2.0, 3.0], "y": 0.5, "psi": [0.1, np.nan, 0.3],
+                      "u": 0.2, "v": 0.0, "r": -0.01, "delta": 0.0})
+    X = measured_states(model, f, {"cx": 0.03, "u": 9.0})
+    assert X.shape == (3, model.nx) and X.dtype == float
+    np.testing.assert_array_equal(X[:, model.state_index("x")], [1.0, 2.0, 3.0])
+    assert np.isnan(X[1, model.state_index("psi")])                    # a missing sample stays missing
+    np.testing.assert_array_equal(X[:, model.state_index("u")], 0.2)   # measured: initial does not override
+    np.testing.assert_array_equal(X[:, model.state_index("cx")], 0.03)
+    np.testing.assert_array_equal(X[:, model.state_index("cy")], 0.0)
+    with pytest.raises(ValueError, match=r"initial: model 'with-environment' has no state\(s\) \['wx', 'zz'\]"):
+        measured_states(model, f, {"zz": 1.0, "wx": 0.0, "cy": 0.0})
+
+
 def test_windowed_refinement_recovers_the_truth():
     """A long noisy log of a known truth, a start model with c1, c3 20-25 % off: refined on 20 s open-loop
     windows every 10 s (position and heading), the coefficients come back to the truth within 0.5 %

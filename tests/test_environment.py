@@ -254,3 +254,27 @@ def test_apparent_only_log_gets_the_true_wind_at_the_edge():
     environment_model(get_model("lowspeed"), [df], wind="esso-osaka-3m")
     np.testing.assert_allclose(df["wind_speed_true"], Vt, rtol=1e-10)
     np.testing.assert_allclose(np.angle(np.exp(1j * (df["wind_dir_true"] - dt))), 0.0, atol=1e-10)
+
+
+def test_a_schemas_wind_columns_are_optional_but_a_mapped_column_is_not(tmp_path):
+    """A run logged without (some of) the wind columns the esso-frt schema maps reads, with a note, and
+    lacks those channels; a wind column the caller maps by columns= must be there."""
+    import pandas as pd
+
+    from shipid.logs import LogError, read_log
+
+    n = 60
+    t = np.arange(n) * 0.1
+    df = pd.DataFrame({"t [s]": t, "x_position_mid [m]": 0.3 * t, "u_velo [m/s]": 0.3, "y_position_mid [m]": 0.0,
+                       "vm_velo [m/s]": 0.0, "psi_hat [rad]": 0.0, "r_angvelo [rad/s]": 0.0, "n_prop [rps]": 8.0,
+                       "delta_rudder [rad]": 0.0, "wind_velo_relative_mid [m/s]": 1.2,
+                       "wind_dir_relative_mid [rad]": 0.5})
+    f = tmp_path / "apparent.csv"
+    df.to_csv(f, index=False)
+    lg = read_log(f, schema="esso-frt", consistency_checks=False)
+    assert {"wind_speed_rel", "wind_dir_rel"} <= set(lg.data.columns)
+    assert not {"wind_speed_true", "wind_dir_true"} & set(lg.data.columns)
+    assert any("optional channel(s) not in the file: wind_speed_true ('wind_velo_true'), wind_dir_true "
+               "('wind_dir_true')" in s for s in lg.notes)
+    with pytest.raises(LogError, match="columns maps 'wind_speed_true' to 'anemometer' but the header has no such"):
+        read_log(f, schema="esso-frt", columns={"wind_speed_true": "anemometer"}, consistency_checks=False)

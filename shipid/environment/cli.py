@@ -2,12 +2,13 @@
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
-from .model import with_environment
+from .model import WIND_INPUTS, with_environment
 from .wind import WindForce, true_wind_from_apparent
 
-__all__ = ["environment_model", "wind_geometry", "add_true_wind"]
+__all__ = ["environment_model", "wind_geometry", "add_true_wind", "true_wind_at_edge"]
 
 
 def wind_geometry(spec: str, logs=()) -> WindForce:
@@ -36,17 +37,49 @@ def environment_model(model, logs, *, wind=None, current=None):
     """``(model with environment, identifier keyword arguments)`` for the fit command."""
     geom = wind_geometry(wind, logs) if wind else None
     if geom is not None:
-        for lg in logs:
-            data = getattr(lg, "data", lg)
-            miss = [c for c in ("wind_speed_true", "wind_dir_true") if c not in data.columns]
-            if miss and {"wind_speed_rel", "wind_dir_rel", "psi", "u", "v"} <= set(data.columns):
-                add_true_wind(data)  # converted at the edge (in memory; the file is not touched)
-                miss = []
-            if miss:
-                raise ValueError(f"--wind: log '{getattr(lg, 'name', '?')}' has no channel(s) {miss}; read it with a "
-                                 "schema that maps the wind columns (e.g. --schema esso-frt) or --columns")
+        true_wind_at_edge(logs, what="--wind", say=True)
     env = with_environment(model, wind=geom, current=current)
     return env, env.identifier_settings()
+
+
+#: What :func:`add_true_wind` converts from: the apparent wind and the ship's heading and velocities.
+APPARENT_WIND = ("wind_speed_rel", "wind_dir_rel", "psi", "u", "v")
+
+
+def true_wind_at_edge(logs, *, what: str, say: bool = False) -> list:
+    """Give every log (TrialLog or DataFrame) the true-wind channels ``wind_speed_true, wind_dir_true``
+    a wind-aware model takes: a log that has only the apparent wind is converted in memory
+    (:func:`add_true_wind`; its file is not touched), with one line on stderr per log when ``say``.
+    Returns the logs converted.
+
+    Raises
+    ------
+    ValueError
+        ``what: `FILE` has no channel(s) [...]``: neither the true wind nor what the conversion
+        needs, with the missing channels and how to map them.
+    """
+    converted = []
+    for lg in logs:
+        data = getattr(lg, "data", lg)
+        cols = set(data.columns)
+        miss = [c for c in WIND_INPUTS if c not in cols]
+        if not miss:
+            continue
+        lack = [c for c in APPARENT_WIND if c not in cols]
+        path = getattr(lg, "path", None)
+        name = getattr(lg, "name", None) or data.attrs.get("name", "?")
+        where = f"`{path.name}`" if path is not None else f"log '{name}'"
+        if not lack:
+            add_true_wind(data)
+            converted.append(lg)
+            if say:
+                print(f"note: {where}: true wind converted from the apparent wind (wind_speed_rel, wind_dir_rel) "
+                      "with the logged psi, u, v as the motion over ground (in memory; the file is unchanged)",
+                      file=sys.stderr)
+            continue
+        raise ValueError(f"{what}: {where} has no channel(s) {miss}, nor {lack} to convert from; use "
+                         "--schema esso-frt or --columns wind_speed_true=COL,wind_dir_true=COL (or the _rel pair)")
+    return converted
 
 
 def add_true_wind(frame) -> None:

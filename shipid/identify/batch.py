@@ -25,7 +25,7 @@ from scipy.optimize import least_squares
 
 from ..models.base import Model
 from ..simulate import simulate
-from .data import noise_std_from_data, prepare_logs
+from .data import measured_states, noise_std_from_data, prepare_logs
 from .diagnostics import identifiability
 from .identifier import NotFittedError
 from .result import FitResult, _inputs, diagnostics_to_json, fitted_ship, software_versions
@@ -120,9 +120,7 @@ def prediction_windows(model: Model, logs, horizon: float, every: float, *, samp
     for li, (lg, init) in enumerate(zip(logs, inits)):
         df = lg if isinstance(lg, pd.DataFrame) else lg.data
         name = getattr(lg, "name", None) or df.attrs.get("name", f"log{li}")
-        unknown = sorted(set(init or {}) - set(model.state_names))
-        if unknown:
-            raise ValueError(f"initial: model '{model.name}' has no state(s) {unknown}")
+        X = measured_states(model, df, init)  # the start state at each sample (ValueError: unknown initial)
         t = df["time"].to_numpy(dtype=float)
         if t.size < 3:
             continue
@@ -138,8 +136,7 @@ def prediction_windows(model: Model, logs, horizon: float, every: float, *, samp
             w["time"] = rel
             if "psi" in w:
                 w["psi"] = np.unwrap(w["psi"].to_numpy(dtype=float))
-            x0 = np.array([float(w[s].iloc[0]) if s in w.columns else float((init or {}).get(s, 0.0))
-                           for s in model.state_names])
+            x0 = X[k].copy()
             if not np.all(np.isfinite(x0)):
                 continue
             w.attrs["name"], w.attrs["log"] = f"{name}@{t[k]:g}s", li

@@ -13,7 +13,7 @@ import pandas as pd
 
 from ..models.base import Model
 
-__all__ = ["LogArrays", "prepare_logs", "noise_std_from_data", "resolution_std", "frozen_mask"]
+__all__ = ["LogArrays", "prepare_logs", "measured_states", "noise_std_from_data", "resolution_std", "frozen_mask"]
 
 
 @dataclass
@@ -96,6 +96,28 @@ def prepare_logs(model: Model, logs) -> tuple[list[LogArrays], list[str]]:
         ])
         out.append(LogArrays(name=name, t=t, U=U, Y=Y, meta=meta))
     return out, meas
+
+
+def measured_states(model: Model, frame: pd.DataFrame, initial: dict | None = None) -> np.ndarray:
+    """The model's state at every sample of ``frame``, for open-loop starts from the measurement.
+
+    A state the frame has as a column is its measured channel; any other is its value in ``initial``
+    (states the log does not measure, e.g. a fitted current ``{"cx": .., "cy": ..}``), else 0.  Returns
+    an array ``(len(frame), model.nx)`` (one copy for :func:`shipid.identify.batch.prediction_windows`
+    and :func:`shipid.validation_horizon.horizon_prediction`).
+
+    Raises
+    ------
+    ValueError
+        ``initial`` names a state the model does not have.
+    """
+    init = dict(initial or {})
+    unknown = sorted(set(init) - set(model.state_names))
+    if unknown:
+        raise ValueError(f"initial: model '{model.name}' has no state(s) {unknown}")
+    n = len(frame)
+    return np.column_stack([frame[s].to_numpy(dtype=float) if s in frame.columns
+                            else np.full(n, float(init.get(s, 0.0))) for s in model.state_names])
 
 
 def resolution_std(logs: list[LogArrays]) -> np.ndarray:

@@ -7,8 +7,8 @@ from typing import Mapping, Sequence
 
 from ._text import _check_path, _decode
 from .marin import _looks_marin, _read_marin
-from .schema import (PRESETS, Schema, apply_conventions, check_frame, check_rudder_sign, check_signs, load_schema,
-                     merged)
+from .schema import (OPTIONAL_CHANNELS, PRESETS, Schema, apply_conventions, check_frame, check_rudder_sign, check_signs,
+                     load_schema, merged)
 from .ship import ShipParticulars, _as_ship, _bundled_ship, read_ship
 from .shipid_csv import _read_csv
 from .trial_log import LogError, TrialLog, _finish
@@ -158,8 +158,10 @@ def read_log(
         t, ch, where, units_in, notes = _read_marin(text, p, units or {}, marin_time)
         meta = {}
     else:
+        # a schema's wind channels may be absent from a run (not those the caller maps by columns=)
         t, ch, where, units_in, notes, meta = _read_csv(text, p, sch.columns, sch.units, required, sch.delimiter,
-                                                        skip_rows=sch.skip_rows, header=sch.header)
+                                                        skip_rows=sch.skip_rows, header=sch.header,
+                                                        optional=set(OPTIONAL_CHANNELS) - set(columns or ()))
         if ship_obj is None and isinstance(meta.get("ship"), Mapping):
             ship_obj = ShipParticulars.from_dict(meta["ship"], source=f"`{p.name}` shipid-ship line")
     unknown = sorted(set(signs or ()) - set(ch))

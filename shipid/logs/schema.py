@@ -29,7 +29,11 @@ from typing import Any, Mapping
 
 import numpy as np
 
-__all__ = ["Schema", "PRESETS", "load_schema"]
+__all__ = ["Schema", "PRESETS", "load_schema", "OPTIONAL_CHANNELS"]
+
+#: Channels a schema may map that a file of that kind need not have (the log then lacks them):
+#: the wind, logged on some runs only, apparent or true or both.
+OPTIONAL_CHANNELS = ("wind_speed_rel", "wind_dir_rel", "wind_speed_true", "wind_dir_true")
 
 _KEYS = ("name", "fmt", "columns", "units", "velocity_frame", "rudder_sign", "signs", "skip_rows", "header",
          "delimiter", "ship", "conventions", "meas_std")

@@ -22,8 +22,12 @@ from .trial_log import LogError, _convert_units, _fmt_value, _short_list, _Where
 from .units import SCHEMA, SHIP_CHANNELS
 
 def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str, str],
-              required: Sequence[str], delimiter: str | None, *, skip_rows: int = 0, header: bool = True):
+              required: Sequence[str], delimiter: str | None, *, skip_rows: int = 0, header: bool = True,
+              optional: Sequence[str] = ()):
     """Read a delimited or whitespace text table.
+
+    ``optional``: channels of ``columns`` whose column may be absent (the log then has no such
+    channel; a note says so), e.g. a schema's wind channels on a run logged without them.
 
     ``skip_rows`` lines are skipped first (a preamble); then ``#`` comment and
     blank lines; the next line is the header (``header=True``) or the first
@@ -98,6 +102,7 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
                        path=p, row=h + 1, value=header_line.strip())
     # --- map file columns to our names ---------------------------------------------
     colmap: dict[str, int] = {}   # our name -> column index
+    absent: list[str] = []        # optional channels whose column is not in the file
     taken: set[int] = set()
     for ours, theirs in columns.items():
         if isinstance(theirs, (int, np.integer)) and not isinstance(theirs, bool):
@@ -110,6 +115,9 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
             j = _find_col(str(theirs), hdr, names)
             if j is None and str(theirs).strip().isdigit() and 1 <= int(theirs) <= len(hdr):
                 j = int(theirs) - 1  # a column number given as text (CLI --column u=5)
+        if j is None and ours in optional:
+            absent.append(f"{ours} ('{theirs}')")
+            continue
         if j is None:
             raise LogError(f"`{p.name}` row {h + 1}: columns maps '{ours}' to '{theirs}' but the header has no such "
                            f"column; header: {', '.join(hdr)}", path=p, column=ours, row=h + 1, value=theirs)
@@ -197,6 +205,8 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
                        "map it with columns={'time': 'your name'}", path=p, column="time", row=h + 1)
     # unknown extra columns: keep when numeric, else ignore with a warning
     notes: list[str] = []
+    if absent:
+        notes.append(f"optional channel(s) not in the file: {', '.join(absent)}")
     if first_stamp is not None:
         notes.append(f"time given as date-time stamps; t = 0 s at {first_stamp}")
     if blank_rows:
