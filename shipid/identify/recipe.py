@@ -117,14 +117,14 @@ AUTO_REFINE = "metrics"
 #: against 0.945 without; RECIPE_VARIANTS_11); the other rudder/propeller coefficients stay published.
 #: ``lowspeed``: the hull's resistance, linear sway/yaw and cross-flow terms, the four-quadrant propeller's thrust
 #: and astern side force, the rudder's normal force and its hull interaction (the Esso Osaka study's list, each
-#: addition since session 5 chosen there by pre-registered cross-validation: aH, tR in round 3, CrY in round 7;
+#: addition to its first list chosen there by pre-registered cross-validation: aH, tR in round 3, CrY in round 7;
 #: docs/environment.md).  f_alpha, aH, tR are not separately identifiable on those runs: read them as a group.
 DEFAULT_ESTIMATE = {"mmg": ["Yv", "Yr", "Nv", "Nr", "Yvvr", "Nvvr", "Nrrr", "R0", "C2p", "C2m", "aH", "xH"],
                     "lowspeed": ["X0F", "X0A", "Yv", "Yr", "Nv", "Nr", "CD", "k0", "CTa0", "YPa", "NPa", "f_alpha",
                                  "aH", "tR", "CrY"]}
 #: Parameters of a model's wind part (``with_environment(..., wind=...)``, ``shipid fit --wind``) estimated by
 #: default: the leading Fourier components of Fujiwara's surge force, side force and yaw moment (the Esso Osaka
-#: study's set since session 5; the others stay at the regression's values from the above-water geometry).
+#: study's set; the others stay at the regression's values from the above-water geometry).
 DEFAULT_ESTIMATE_WIND = ["wX1", "wY1", "wN1", "wN2"]
 #: Start values that replace a model's default set (only when the caller gives no parameters of its own).
 #: ``lowspeed``: the MMG standard method's side-dependent flow straightening at the KVLCC2's published split
