@@ -20,6 +20,7 @@ import warnings
 import numpy as np
 import pandas as pd
 
+from .identify.data import measured_states
 from .models.base import Model
 from .models.kinematics import planar_rates
 
@@ -190,8 +191,6 @@ def horizon_prediction(model: Model, log, *, horizons=DEFAULT_HORIZONS, start_ev
     U = np.column_stack([df[n].to_numpy(dtype=float) for n in model.input_names]) if model.nu else np.zeros((t.size, 0))
     if model.nu and "delta" in model.input_names:
         U[:, model.input_index("delta")] *= rudder_sign
-    from .identify.data import measured_states
-
     states = measured_states(model, df, initial)  # measured, else from `initial` (ValueError: unknown names)
     meas = {s: states[:, i] for i, s in enumerate(model.state_names) if s in df.columns}
     nH = int(round(H.max() / dt))
