@@ -214,3 +214,37 @@ def test_model_default_start_applies_to_names_not_to_a_callers_model(monkeypatch
         with pytest.raises(Stop):
             recipe.fit_logs([lg], model, **kw)
     assert seen == [0.1225, 0.05, 0.1225]
+
+
+def test_a_start_from_rest_is_not_a_standard_manoeuvre():
+    """A standard turn or zigzag starts from a steady approach: a run whose rudder moves while the ship is still
+    at rest (every Esso Osaka turning and zigzag run: 0.01-0.36 of the speed after it) has no meaningful execute,
+    approach speed or advance (they had come out at 11-17 L of advance); the MARIN and KCS runs (1.0-2.6) pass."""
+    from shipid.manoeuvres import metrics
+
+    t = np.arange(0, 200, 0.5)
+    delta = np.radians(np.where(t >= 20.0, 35.0, 0.0))
+    r = np.where(t >= 20.0, 0.02, 0.0)
+    psi = np.cumsum(r) * 0.5
+
+    def log(u):
+        x = np.cumsum(u * np.cos(psi)) * 0.5
+        y = np.cumsum(u * np.sin(psi)) * 0.5
+        return TrialLog.from_arrays(t, name="turn", ship={"lpp": 3.0}, x=x, y=y, psi=psi, u=u, v=0 * t, r=r,
+                                    delta=delta, n=0 * t + 10)
+
+    assert metrics(log(np.full(t.size, 0.3))).manoeuvre == "turning"
+    from_rest = log(np.clip(t / 100.0, 0.0, 0.3))  # 0.2 m/s at the execute (20 s), 0.3 after: steady enough
+    assert metrics(from_rest).manoeuvre == "turning"
+    early = log(np.clip((t - 19.0) / 100.0, 0.0, 0.3))  # 0.01 m/s at the execute
+    # (the execute is where the rudder left its approach angle, the sample before the step: 19.5 s)
+    with pytest.raises(ValueError, match=r"turn: not a standard manoeuvre: the rudder moves at t = 19\.5 s at 0\.01 "
+                                         r"m/s.*a start from rest, not a steady approach"):
+        metrics(early)
+    assert metrics(early, kind="turning").manoeuvre == "turning"  # asked for: computed (the study's steady part)
+    (f,) = _esso("turning", 1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        lg = read_log(f, schema="esso-frt")
+    with pytest.raises(ValueError, match="a start from rest"):
+        metrics(lg)

@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 
 from ..simulate import SimulationResult
+from ._series import detect_execute
 from .runner import ship_info
 from .turning import turning_metrics
 from .zigzag import zigzag_metrics
@@ -52,6 +53,32 @@ def detect_manoeuvre(delta, threshold_deg: float = 2.0, n=None) -> str:
 #: on each side (a round value between the turning runs' largest, 0.08, and the zigzags' smallest, 0.27, over the
 #: 12 Esso Osaka turning and 7 zigzag runs, the 6 MARIN KVLCC2 runs and the bundled KCS logs).
 ZIGZAG_SIDE_SHARE = 0.15
+
+
+#: Smallest ratio of the speed at the rudder execute to the median speed after it in a standard manoeuvre (a steady
+#: approach, ITTC 7.5-04-02-01).  A round value between the runs that start from rest with the rudder already moving
+#: (the Esso Osaka turning and zigzag runs: 0.01-0.36) and the standard ones (MARIN KVLCC2, the bundled KCS logs:
+#: 1.00-2.6; a turn slows down after the execute, so its ratio exceeds 1).
+APPROACH_SPEED_RATIO_MIN = 0.5
+
+
+def _check_steady_approach(sub: pd.DataFrame) -> None:
+    """ValueError when the rudder execute (:func:`detect_execute`) comes before the ship is under way: its speed
+    there below :data:`APPROACH_SPEED_RATIO_MIN` of its median speed after it (a start from rest, where the execute,
+    the approach speed and every distance measured from them mean nothing)."""
+    if "u" not in sub.columns:
+        return
+    u = sub["u"].to_numpy(float)
+    U = np.hypot(u, sub["v"].to_numpy(float)) if "v" in sub.columns else np.abs(u)
+    i, te = detect_execute(sub["time"].to_numpy(float), sub["delta"].to_numpy(float))
+    after = U[i:][np.isfinite(U[i:])]
+    if not after.size or not np.isfinite(U[i]):
+        return
+    med = float(np.median(after))
+    if med > 0 and U[i] < APPROACH_SPEED_RATIO_MIN * med:
+        raise ValueError(f"not a standard manoeuvre: the rudder moves at t = {te:.3g} s at {U[i]:.2g} m/s, under half "
+                         f"the median speed after it ({med:.2g} m/s): a start from rest, not a steady approach; cut "
+                         "the log to its approach (TrialLog.window) or judge it by --horizon")
 
 
 def _frame(data) -> tuple[pd.DataFrame, Any]:
@@ -122,8 +149,12 @@ def metrics(data, *, lpp: float | None = None, kind: str = "auto", reference_off
         raise ValueError(f"{label}: column 'psi' jumps by more than 1 rad between samples and exceeds 2 pi; "
                          "it looks like degrees -- convert to radians")
     if kind == "auto":
-        kind = detect_manoeuvre(sub["delta"].to_numpy(float),
-                                n=sub["n"].to_numpy(float) if "n" in sub.columns else None)
+        try:
+            kind = detect_manoeuvre(sub["delta"].to_numpy(float),
+                                    n=sub["n"].to_numpy(float) if "n" in sub.columns else None)
+            _check_steady_approach(sub)
+        except ValueError as exc:
+            raise ValueError(f"{label}: {exc}") from None
     if kind == "turning":  # positions and speed must be present on the samples used
         sub = sub.dropna(subset=[c for c in ("x", "y", "u") if c in sub.columns])
     t = sub["time"].to_numpy(float)
