@@ -23,6 +23,12 @@ def _esso(kind: str, n: int) -> list[Path]:
     return sorted((DATA / kind).glob("*.csv"))[:n]
 
 
+def _read_esso(path: Path):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # the GNSS-freeze warnings of these runs
+        return read_log(path, schema="esso-frt")
+
+
 def test_schema_declares_sensor_noise():
     """A schema's ``meas_std`` (the facility's sensor noise, SI) is checked, kept by schema files and carried by
     the logs read with it; ``esso-frt`` declares the Esso Osaka study's values."""
@@ -38,9 +44,7 @@ def test_schema_declares_sensor_noise():
 
 def test_esso_logs_carry_the_schema_noise(tmp_path):
     (f,) = _esso("random", 1)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
-        lg = read_log(f, schema="esso-frt")
+    lg = _read_esso(f)
     assert lg.meas_std == PRESETS["esso-frt"].meas_std
     assert lg.window(lg.time[0], lg.time[50]).meas_std == lg.meas_std
     p = tmp_path / "plain.csv"
@@ -107,9 +111,7 @@ def test_cli_fit_of_wind_current_model_is_the_study_setting(tmp_path, capsys):
     err = capsys.readouterr().err
     assert rc == 0 and f"cx = {cs['cx']:.4g}" in err
     h = json.loads(val.read_text())[0]["horizon"][0]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
-        lg = read_log(test, schema="esso-frt")
+    lg = _read_esso(test)
     from shipid.validation import resolve_model
 
     model, _ = resolve_model(out)
@@ -166,11 +168,8 @@ def test_runs_with_the_propeller_astern_are_not_standard_manoeuvres():
     n[60:] = 10.0
     assert detect_manoeuvre(d, n=n) == "zigzag"
     (f,) = _esso("berthing", 1)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
-        lg = read_log(f, schema="esso-frt")
     with pytest.raises(ValueError, match="not a standard manoeuvre"):
-        metrics(lg)
+        metrics(_read_esso(f))
 
 
 def test_a_turn_with_a_brief_opposite_correction_is_a_turn():
@@ -183,9 +182,7 @@ def test_a_turn_with_a_brief_opposite_correction_is_a_turn():
     zz = np.radians(np.concatenate([np.zeros(10), np.full(30, 20.0), np.full(30, -20.0), np.full(30, 20.0)]))
     assert detect_manoeuvre(zz) == "zigzag"
     for f in _esso("turning", 12):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)
-            lg = read_log(f, schema="esso-frt")
+        lg = _read_esso(f)
         assert detect_manoeuvre(lg["delta"], n=lg["n"]) == "turning", f.name
 
 
@@ -243,8 +240,5 @@ def test_a_start_from_rest_is_not_a_standard_manoeuvre():
         metrics(early)
     assert metrics(early, kind="turning").manoeuvre == "turning"  # asked for: computed (the study's steady part)
     (f,) = _esso("turning", 1)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
-        lg = read_log(f, schema="esso-frt")
     with pytest.raises(ValueError, match="a start from rest"):
-        metrics(lg)
+        metrics(_read_esso(f))
