@@ -314,13 +314,17 @@ def _speed_scale(logs) -> tuple[float, str]:
     return float("nan"), "no log moves"
 
 
+def _log_step(logs) -> float:
+    """The coarsest of the logs' median sample steps [s]."""
+    return max(float(np.median(np.diff(lg.time))) for lg in logs if lg.time.size > 1)
+
+
 def choose_sampling(model, logs, samples_per_tau: int | None = None) -> tuple[int, str]:
     """Every how many samples of the logs the EKF uses, and why (see the module docstring, step 2);
     ``samples_per_tau`` default: :data:`DEFAULT_SAMPLES_PER_TAU` for the model, else :data:`SAMPLES_PER_TAU`."""
     if samples_per_tau is None:
         samples_per_tau = DEFAULT_SAMPLES_PER_TAU.get(model.name, SAMPLES_PER_TAU)
-    dts = [float(np.median(np.diff(lg.time))) for lg in logs if lg.time.size > 1]
-    dt_log = max(dts)
+    dt_log = _log_step(logs)
     try:
         from ..manoeuvres import steady_rps
 
@@ -647,6 +651,7 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
     # a model with wind/current parts takes its base ship model's defaults
     env = getattr(m0, "base", None) is not None and hasattr(m0, "identifier_settings")
     name = m0.base.name if env else m0.name
+    wind_part = env and getattr(m0, "wind", None) is not None
     if env and refine not in (None, "none", "auto"):
         raise ValueError(f"refine={refine!r}: the refinement is not available for models with wind or current "
                          "parts yet; use refine=None (shipid fit: --refine none)")
@@ -660,7 +665,7 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
     ekf_opts = dict(ekf_options or {})
     # sampling step
     if dt == "auto" and name in DEFAULT_SAMPLING_S:
-        dt_log = max(float(np.median(np.diff(lg.time))) for lg in logs if lg.time.size > 1)
+        dt_log = _log_step(logs)
         L0, h0 = DEFAULT_SAMPLING_S[name]
         h = h0 * math.sqrt(L / L0)
         k = max(1, int(round(h / dt_log)))
@@ -720,11 +725,11 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         step("linear range", drift, why_drift)
     # estimated / fixed
     est = list(estimate) if estimate is not None else DEFAULT_ESTIMATE.get(name)
-    if estimate is None and est is not None and env and getattr(m0, "wind", None) is not None:
-        est = est + [w for w in DEFAULT_ESTIMATE_WIND if w in m0.param_names]
     if estimate is None and est is not None:
+        if wind_part:
+            est = est + [w for w in DEFAULT_ESTIMATE_WIND if w in m0.param_names]
         step("estimated", list(est), f"{name}'s recipe default (DEFAULT_ESTIMATE"
-             + (" + DEFAULT_ESTIMATE_WIND" if env and getattr(m0, "wind", None) is not None else "") + ")")
+             + (" + DEFAULT_ESTIMATE_WIND" if wind_part else "") + ")")
     fix: dict = {}
     if isinstance(fixed, dict):
         fix.update({k2: float(v) for k2, v in fixed.items()})

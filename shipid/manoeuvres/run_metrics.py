@@ -27,8 +27,8 @@ def detect_manoeuvre(delta, threshold_deg: float = 2.0, n=None) -> str:
     if not (up or down):
         raise ValueError("no manoeuvre: the rudder never moves more than "
                          f"{threshold_deg} deg from its initial value")
+    k = int(np.flatnonzero(np.abs(d) > threshold_deg)[0])  # the first sample past the threshold
     if n is not None:
-        k = int(np.flatnonzero(np.abs(d) > threshold_deg)[0])
         na = np.asarray(n, dtype=float)[k:]
         na = na[np.isfinite(na)]
         if na.size:
@@ -41,7 +41,6 @@ def detect_manoeuvre(delta, threshold_deg: float = 2.0, n=None) -> str:
         # a zigzag holds the rudder on both sides in turn; a turning circle holds one side, with at most brief
         # corrections of the other (the Esso Osaka turning runs: up to 8 % of the time beyond half the largest
         # deflection on the other side; their zigzags and the MARIN/KCS ones: 27 % or more on each side)
-        k = int(np.flatnonzero(np.abs(d) > threshold_deg)[0])
         da = d[k:]
         half = 0.5 * float(np.abs(da).max())
         if min(np.mean(da > half), np.mean(da < -half)) >= ZIGZAG_SIDE_SHARE:

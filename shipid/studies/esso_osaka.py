@@ -859,16 +859,19 @@ def recipe_loro(data_dir=DATA_DIR, *, types=RUN_TYPES, horizons=(10.0, 30.0, 60.
     lowspeed --wind --current`` (:func:`shipid.identify.fit_logs` with its defaults, on the files as read by the
     CLI) on the training runs of the chosen scope (:data:`CHOSEN_SCOPE`, or ``scope`` per type), then `shipid
     validate --horizon`'s prediction of the left-out run at full rate, from its measured states and the fit's
-    mean current.  One row per left-out run and horizon (median / p90 position error, starts, blow-ups).
+    mean current.  One row per left-out run and horizon: the position errors of its finished starts
+    (``errors``, blow-ups as inf), their number and the blow-ups, the training runs' number, the fit's success.
     ``fit_options``: further keyword arguments of :func:`~shipid.identify.fit_logs`; ``sampling="rule"``: the
     recipe's time-constant rule (:func:`~shipid.identify.recipe.choose_sampling`) instead of the model's default
     step."""
     from ..environment import with_environment
-    from ..identify.recipe import choose_sampling, fit_logs
+    from ..identify.recipe import choose_sampling, current_start, fit_logs
     from ..logs import read_log
     from ..models import get_model
     from ..validation_horizon import horizon_prediction
 
+    if sampling not in ("default", "rule"):
+        raise ValueError(f"sampling={sampling!r}: use 'default' or 'rule'")
     scope = {**CHOSEN_SCOPE, **dict(scope or {})}
     runs = []
     for kind in types:
@@ -888,10 +891,8 @@ def recipe_loro(data_dir=DATA_DIR, *, types=RUN_TYPES, horizons=(10.0, 30.0, 60.
             opts = dict(fit_options or {})
             if sampling == "rule":
                 opts["dt"] = choose_sampling(model, train)[0]
-            elif sampling != "default":
-                raise ValueError(f"sampling={sampling!r}: use 'default' or 'rule'")
             fit = fit_logs(train, model, ekf_options=model.identifier_settings(), start_defaults=True, **opts)
-            cs = fit.result().settings["current_start"]
+            cs = current_start(fit.ekf)  # what the result JSON carries for validate (no full result needed)
             h = horizon_prediction(fit.to_model(), held, horizons=horizons, start_every=start_every,
                                    initial={"cx": cs["cx"], "cy": cs["cy"]}, name=held.name)
         for j, H in enumerate(h.horizons):
