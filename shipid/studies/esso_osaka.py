@@ -853,6 +853,20 @@ CHOSEN_SCOPE = {"turning": "type", "zigzag": "all", "random": "type", "berthing"
 RECIPE_CANDIDATES_11 = {"N1": {"fit_options": {"tune_noise": True}}, "S1": {"sampling": "rule"}}
 
 
+def _estimate_plus(*names) -> dict:
+    """:func:`recipe_loro` options estimating the recipe's default list for ``lowspeed`` with a wind part, plus
+    ``names``."""
+    from ..identify.recipe import DEFAULT_ESTIMATE, DEFAULT_ESTIMATE_WIND
+
+    return {"fit_options": {"estimate": list(DEFAULT_ESTIMATE["lowspeed"]) + list(DEFAULT_ESTIMATE_WIND) + list(names)}}
+
+
+#: Session 12, round 12 (pre-registered in docs/environment.md before any ran): one more coefficient estimated
+#: each. K1: the slope k1 of the propeller's K_T(J); L1: the rudder's yaw-rate flow-straightening lever lR;
+#: X1: the lever xH of the hull's share of the rudder force.
+RECIPE_CANDIDATES_12 = {"K1": _estimate_plus("k1"), "L1": _estimate_plus("lR"), "X1": _estimate_plus("xH")}
+
+
 def recipe_loro(data_dir=DATA_DIR, *, types=RUN_TYPES, horizons=(10.0, 30.0, 60.0), start_every: float = 5.0,
                 scope=None, fit_options=None, sampling: str = "default") -> pd.DataFrame:
     """Leave-one-run-out through the product's path, as a user runs it: ``shipid fit --schema esso-frt --model
