@@ -193,6 +193,43 @@ def test_cli_validate_converts_an_apparent_wind_only_log_at_the_edge(tmp_path, c
     assert not (tmp_path / "x.json").exists()
 
 
+
+def test_cli_sample_converts_an_apparent_wind_only_log_at_the_edge(tmp_path, capsys):
+    """`shipid sample` reads the logs as `validate` does: a wind-aware fit sampled on a copy of a measured run
+    without its true-wind columns gets the true wind converted in memory (said once on stderr), the file is
+    untouched and the samples are written; a copy with no wind at all stops with the house error (exit 2)."""
+    import hashlib
+    import json
+
+    import pandas as pd
+
+    from shipid.cli import main
+
+    raw = pd.read_csv(DATA / "random" / "random_31-Jul-2020_12_29_58.csv").iloc[:300]  # 30 s, the file's columns
+    app, none = tmp_path / "apparent_only.csv", tmp_path / "no_wind.csv"
+    true_cols = ["wind_velo_true [m/s]", "wind_dir_true [rad]"]
+    raw.drop(columns=true_cols).to_csv(app, index=False)
+    raw.drop(columns=true_cols + ["wind_velo_relative_mid [m/s]", "wind_dir_relative_mid [rad]"]).to_csv(
+        none, index=False)
+    sha = hashlib.sha256(app.read_bytes()).hexdigest()
+    res = tmp_path / "fit.json"
+    assert main(["fit", str(app), "--schema", "esso-frt", "--model", "lowspeed", "--wind", "--estimate", "Yv,Nr,wY1",
+                 "--passes", "1", "--no-progress", "-o", str(res)]) in (0, 3)
+    capsys.readouterr()
+    out = tmp_path / "s.json"
+    rc = main(["sample", str(res), str(app), "--schema", "esso-frt", "--walkers", "8", "--steps", "10", "--burn", "0",
+               "--seed", "1", "--no-progress", "-o", str(out)])
+    assert rc in (0, 1)  # 1: not converged (10 steps), written all the same
+    assert capsys.readouterr().err.count("`apparent_only.csv`: true wind converted from the apparent wind") == 1
+    assert hashlib.sha256(app.read_bytes()).hexdigest() == sha
+    doc = json.loads(out.read_text())
+    assert doc["names"] == ["Yv", "Nr", "wY1"] and np.isfinite(np.asarray(doc["samples"], dtype=float)).all()
+    assert main(["sample", str(res), str(none), "--schema", "esso-frt", "--walkers", "8", "--steps", "10",
+                 "--no-progress", "-o", str(tmp_path / "x.json")]) == 2
+    err = capsys.readouterr().err
+    assert "`no_wind.csv` has no channel(s)" in err and "Traceback" not in err
+    assert not (tmp_path / "x.json").exists()
+
 def test_rudder_rate_limit():
     """The steering-gear candidate of the study: a 40 deg step becomes a ramp at the given slew rate,
     slower changes pass unchanged, and the Froude-scaled IMO rate of the 3 m model is 2.32 sqrt(325/3)."""

@@ -109,6 +109,22 @@ def read_logs(paths, args) -> list:
     return logs
 
 
+
+def read_logs_for_result(args, model=None) -> list:
+    """The logs of ``args.logs`` for the fit result ``args.result`` (or its ``model``), read as ``shipid fit``
+    reads them (``validate``, ``report``, ``sample``); for a wind-aware model (true-wind inputs) a log with only the
+    apparent wind gets the true wind in memory, said once per log on stderr (as ``fit --wind``)."""
+    from ..environment.cli import true_wind_at_edge
+    from ..environment.model import WIND_INPUTS
+    from ..validation import resolve_model
+
+    logs = read_logs(args.logs, args)
+    model = model if model is not None else resolve_model(args.result)[0]
+    if set(WIND_INPUTS) <= set(model.input_names):
+        true_wind_at_edge(logs, what="wind-aware model", say=True)
+    return logs
+
+
 def json_and_csv_outputs(output, force: bool, inputs=()):
     """``(out.json, out.csv)`` for commands that write a JSON summary with a CSV beside it.
 

@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from ._common import add_log_options, add_progress_option, progress_on, read_logs
+from ._common import add_log_options, add_progress_option, progress_on, read_logs_for_result
 
 
 def _command(sub, name, handler, help, description, *, positional, output_help, output_metavar=None,
@@ -105,7 +105,7 @@ def _sample(args) -> int:
     out = Path(args.output)
     if out.exists() and not args.force:
         raise ValueError(f"{out}: output exists; choose another name or pass --force to overwrite it")
-    logs = read_logs(args.logs, args)
+    logs = read_logs_for_result(args)  # as validate reads them (a wind-aware fit: true wind from apparent-only logs)
     chans = [c.strip() for c in args.channels.split(",") if c.strip()] if args.channels else None
     import warnings
 

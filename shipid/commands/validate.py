@@ -10,7 +10,7 @@ import math
 import sys
 from pathlib import Path
 
-from ._common import add_log_options, add_progress_option, progress_iter, read_logs
+from ._common import add_log_options, add_progress_option, progress_iter, read_logs_for_result
 
 
 def _common(p) -> None:
@@ -97,7 +97,7 @@ def _validate(args) -> int:
 
     out = _check(args)
     horizons = _horizons(args.horizon)
-    logs = _read_logs(args)
+    logs = read_logs_for_result(args)
     vals = [v for lg in progress_iter(logs, args, "replaying logs")
             for v in validate_logs(args.result, [lg], args.lpp, closed_loop=not args.no_closed_loop,
                                    zigzag_angles=_zigzag(args))]
@@ -123,20 +123,6 @@ def _validate(args) -> int:
         print(f"shipid validate: warning: replay diverged for {', '.join(bad)}", file=sys.stderr)
         return 1
     return 0
-
-
-def _read_logs(args, model=None) -> list:
-    """The logs, read as ``shipid fit`` reads them; for a wind-aware model (true-wind inputs) a log with
-    only the apparent wind gets the true wind in memory, said once per log on stderr (as ``fit --wind``)."""
-    from ..environment.cli import true_wind_at_edge
-    from ..environment.model import WIND_INPUTS
-    from ..validation import resolve_model
-
-    logs = read_logs(args.logs, args)
-    model = model if model is not None else resolve_model(args.result)[0]
-    if set(WIND_INPUTS) <= set(model.input_names):
-        true_wind_at_edge(logs, what="wind-aware model", say=True)
-    return logs
 
 
 def _horizons(text: str) -> list[float]:
@@ -191,7 +177,7 @@ def _report(args) -> int:
 
     out = _check(args)
     model, res = resolve_model(args.result)
-    logs = _read_logs(args, model)
+    logs = read_logs_for_result(args, model)
     vals = [validate_one(model, lg, lpp=args.lpp, closed_loop=not args.no_closed_loop,
                          zigzag_angles=_zigzag(args))
             for lg in progress_iter(logs, args, "replaying logs")]
