@@ -59,6 +59,9 @@ def register(sub) -> None:
     p.add_argument("--max-drift", default="auto", metavar="auto|DEG|none",
                    help="models linear in v and r (kcs-response): use each log until its drift angle first exceeds "
                         "DEG (default auto: 10 deg for such models, every sample for the others; none: every sample)")
+    p.add_argument("--keep-repeated", action="store_true",
+                   help="fit a log even when every sample of it is in another log (a trimmed copy of the same run; "
+                        "default: dropped, as it would count that run twice)")
     p.add_argument("--no-neutral", action="store_true",
                    help="do not take the rudder neutral angle (delta0) from the straight approaches of the logs")
     p.add_argument("--start", choices=("staged", "given"), default="staged",
@@ -214,7 +217,7 @@ def _fit(args) -> int:
         n_passes=args.passes, max_nfev=args.max_nfev, hold_unresolved=not args.refine_all,
         sign_bounds=args.sign_bounds, physical_damping=not args.no_physical_damping, tune_noise=args.tune_noise,
         progress=progress_on(args), meas_std=meas_std, ekf_options=extra, start_defaults=args.params is None,
-        log=print))
+        drop_repeated=not args.keep_repeated, log=print))
     fit, ident = recipe, recipe.ekf
     result = fit.result()
     result.to_json(out, force=args.force)

@@ -53,6 +53,10 @@ switchable steps (each one recorded in the result's ``settings["recipe"]``, with
    unconstrained ``response-nl`` refinement had b1 +0.0177 and positive sway damping on 17 % of the
    states (self-excited sway in the slow part of the turns); constrained: b1 < 0, 0 % (docs/validation.md).
 
+0. **Repeated runs** (``drop_repeated=True``) -- a log whose every sample is a sample of another log (a trimmed
+   copy of the same run: :func:`shipid.logs.overlap.repeated_samples`) is dropped, as it would count that run
+   twice; logs that share only part of their samples are kept with a warning.  Recorded only when found.
+
 Only the logs passed in enter any step: held-out runs never do.
 """
 from __future__ import annotations
@@ -554,8 +558,9 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
              max_drift_deg="auto", refine: str | None = "auto", metric_weight: float | None = None,
              n_passes: int = 2, max_nfev: int = 60, tune_noise: bool = False, progress: bool = False,
              meas_std=None, ekf_options=None, hold_unresolved: bool = True, sign_bounds: bool = False,
-             physical_damping: bool = True, start_defaults: bool | None = None, log=None) -> RecipeFit:
-    """Fit ``model`` to ``logs`` with the project's recipe (module docstring: steps 1-6).
+             physical_damping: bool = True, start_defaults: bool | None = None, drop_repeated: bool = True,
+             log=None) -> RecipeFit:
+    """Fit ``model`` to ``logs`` with the project's recipe (module docstring: steps 0-6).
 
     Parameters
     ----------
@@ -607,7 +612,8 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
                          max_drift_deg=max_drift_deg, refine=refine, metric_weight=metric_weight, n_passes=n_passes,
                          max_nfev=max_nfev, tune_noise=tune_noise, progress=progress, meas_std=meas_std,
                          ekf_options=ekf_options, hold_unresolved=hold_unresolved, sign_bounds=sign_bounds,
-                         physical_damping=physical_damping, start_defaults=start_defaults, log=log)
+                         physical_damping=physical_damping, start_defaults=start_defaults,
+                         drop_repeated=drop_repeated, log=log)
 
 
 def _froude_process_std(name: str, L: float):
@@ -627,9 +633,38 @@ def _declared_meas_std(logs):
     return decl[0]
 
 
+def _repeated_runs(logs, drop: bool, step) -> list:
+    """Step 0: a log whose every sample is a sample of another (a trimmed copy of the same run) is dropped when
+    ``drop`` (it would count that run twice), else kept with a warning; logs that share part of their samples
+    (overlapping segments) are kept with a warning.  A step is recorded only when something was found."""
+    from ..logs.overlap import drop_contained, repeated_samples
+
+    if len(logs) < 2:
+        return logs
+    kept, gone = drop_contained(logs)
+    copies = "; ".join(f"all {r['samples']} samples of {r['log']} are samples of {r['in']}" for r in gone)
+    if gone and drop:
+        step("repeated runs", {"dropped": [r["log"] for r in gone]},
+             f"{copies}: a copy of a run would count that run twice (drop_repeated=False / --keep-repeated keeps it)")
+        logs = kept
+    elif gone:
+        step("repeated runs", {"kept": [r["log"] for r in gone]}, f"asked to keep them: {copies}")
+        warnings.warn(f"fit_logs: logs repeating another log are fitted twice: {copies}", UserWarning, stacklevel=4)
+    rows = repeated_samples(logs)
+    full = {frozenset((r["index"], r["in_index"])) for r in rows if r["share"] == 1.0}  # (kept copies: said above)
+    part = [r for r in rows if r["index"] < r["in_index"] and frozenset((r["index"], r["in_index"])) not in full]
+    if part:
+        shared = "; ".join(f"{r['log']} and {r['in']} share {r['shared']} samples ({r['share']:.0%} of {r['log']})"
+                           for r in part)
+        step("overlapping runs", {"kept": [r["log"] for r in part]}, f"{shared}: those samples count twice")
+        warnings.warn(f"fit_logs: logs share samples (overlapping segments of one run?): {shared}", UserWarning,
+                      stacklevel=4)
+    return logs
+
+
 def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free_neutral, estimate_neutral, dt,
               max_drift_deg, refine, metric_weight, n_passes, max_nfev, tune_noise, progress, meas_std, ekf_options,
-              hold_unresolved, sign_bounds, physical_damping, start_defaults, log) -> RecipeFit:
+              hold_unresolved, sign_bounds, physical_damping, start_defaults, drop_repeated, log) -> RecipeFit:
     from .identifier import EKFIdentifier
 
     logs = list(logs)
@@ -646,6 +681,7 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         if log is not None:
             log(f"recipe: {name}: {value} -- {reason}")
 
+    logs = _repeated_runs(logs, drop_repeated, step)
     L = _lpp_of(logs, lpp)
     m0, why = _start_model(model, params, L)
     # a model with wind/current parts takes its base ship model's defaults
