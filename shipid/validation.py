@@ -37,6 +37,7 @@ import pandas as pd
 
 from .manoeuvres import metrics as manoeuvre_metrics
 from .manoeuvres import ship_info
+from .manoeuvres import steady_turn
 from .models.base import Model
 from .simulate import SimulationResult, replay, replay_errors
 
@@ -80,6 +81,8 @@ class LogValidation:
     standard: Any = None
     standard_settings: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
+    steady_measured: Any = None
+    steady_predicted: Any = None
 
     @property
     def success(self) -> bool:
@@ -104,6 +107,17 @@ class LogValidation:
             if (mv is None or isinstance(mv, (int, float))) and (pv is None or isinstance(pv, (int, float))):
                 out[k] = None if (mv is None or pv is None) else float(pv) - float(mv)
         return out
+
+    def steady_summary(self) -> dict:
+        """The ``steady_turn`` entry: ``measured``, ``predicted`` (the replay's, over the same hold) and
+        ``difference`` (predicted - measured of the diameter, speed and time per circle); empty when none."""
+        if self.steady_measured is None:
+            return {}
+        m = self.steady_measured.to_dict()
+        p = self.steady_predicted.to_dict() if self.steady_predicted is not None else {}
+        keys = ("steady_diameter_L", "steady_speed", "time_360_s")
+        diff = {k: (p[k] - m[k] if p.get(k) is not None and m.get(k) is not None else None) for k in keys} if p else {}
+        return {"measured": m, "predicted": p, "difference": diff}
 
     def to_dict(self) -> dict:
         """JSON-able summary: ``file``, ``manoeuvre``, ``measured``, ``predicted``, ``difference``,
@@ -130,6 +144,7 @@ class LogValidation:
             "standard": ({**self.standard.to_dict(), "settings": dict(self.standard_settings)}
                          if self.standard is not None else {}),
             "standard_difference": self.difference("standard"),
+            "steady_turn": self.steady_summary(),
             "replay": {"success": bool(self.simulation.success), "message": self.simulation.message,
                        "rudder_sign": self.rudder_sign, "model_lpp": self.model_lpp,
                        "n_samples": int(self.simulation.t.size)},
@@ -242,6 +257,7 @@ def validate_one(model: Model, log, *, lpp: float | None = None, rudder_sign: fl
         res.measured = manoeuvre_metrics(log, lpp=L, name=name, rudder_deg=rud, check_deg=chk)
     except ValueError as exc:
         notes.append(f"measured metrics not available: {exc}")
+        _steady(log, sim, L, rudder_sign, res)
         return res
     if closed_loop:
         _standard(m, log, res)
@@ -263,6 +279,25 @@ def validate_one(model: Model, log, *, lpp: float | None = None, rudder_sign: fl
         notes.append(f"the replay turns to {side_p}, the log to {side_m}: the log's rudder sign convention is "
                      "probably opposite to the model's; use rudder_sign=-1 (--rudder-sign -1)")
     return res
+
+
+def _steady(log, sim, L: float, rudder_sign: float, res: LogValidation) -> None:
+    """A run that is not a standard manoeuvre but holds its rudder through a turn (a turning run started from rest):
+    the steady turn of its longest hold (:func:`~shipid.manoeuvres.run_metrics.steady_turn`), measured and in the
+    replay of the same inputs; nothing (and no note) when the run holds no turning rudder angle."""
+    try:
+        res.steady_measured = steady_turn(log, lpp=L, name=getattr(log, "name", None))
+    except ValueError:
+        return
+    if not sim.success:
+        return
+    pred = sim.to_pandas().reset_index()
+    if rudder_sign == -1:
+        pred["delta"] = -pred["delta"]
+    try:
+        res.steady_predicted = steady_turn(pred, lpp=L, name=f"replay of {getattr(log, 'name', 'log')}")
+    except ValueError as exc:
+        res.notes.append(f"steady turn of the replay not available: {exc}")
 
 
 def standard_manoeuvre(model: Model, measured, *, rudder_rate=None, lpp=None, params=None,

@@ -87,6 +87,14 @@ def _line(d: dict) -> str:
                  if k in ("advance_L", "tactical_diameter_L", "overshoot1_deg", "overshoot2_deg") and v is not None]
         if diffs:
             parts.append(f"{label}: " + " ".join(diffs))
+    st = d.get("steady_turn") or {}
+    m, p = st.get("measured") or {}, st.get("predicted") or {}
+    if m:
+        txt = (f"steady turn (rudder {m['rudder_deg']:+.1f} deg held from t = {m['hold_start']:.0f} s): "
+               + (f"D/L {m['steady_diameter_L']:.3g}" if m.get("steady_diameter_L") is not None else m["message"]))
+        if m.get("steady_diameter_L") is not None and p.get("steady_diameter_L") is not None:
+            txt += f", replay {p['steady_diameter_L']:.3g}"
+        parts.append(txt)
     return " ".join(parts)
 
 

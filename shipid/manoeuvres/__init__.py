@@ -49,7 +49,7 @@ from .laws import RampSchedule, SampledHold, TurningRudder, ZigzagRudder
 from .runner import ManoeuvreResult, ship_info, steady_rps
 from .turning import TurningMetrics, _turning_rows, turning_circle, turning_metrics, turning_sweep
 from .zigzag import ZigzagMetrics, infer_check_angle, rudder_reversals, zigzag, zigzag_metrics
-from .run_metrics import detect_manoeuvre, metrics
+from .run_metrics import SteadyTurn, detect_manoeuvre, metrics, steady_turn
 
 __all__ = [
     "TurningMetrics",
@@ -58,6 +58,8 @@ __all__ = [
     "turning_metrics",
     "zigzag_metrics",
     "metrics",
+    "steady_turn",
+    "SteadyTurn",
     "detect_manoeuvre",
     "detect_execute",
     "imo_limits",

@@ -3,6 +3,7 @@ detected from the rudder, and the turning or zigzag metrics are computed with th
 from __future__ import annotations
 
 import math
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
@@ -176,3 +177,112 @@ def metrics(data, *, lpp: float | None = None, kind: str = "auto", reference_off
         return zigzag_metrics(t, psi, delta, lpp=lpp, u=u, v=v, x=x, y=y, execute_time=execute_time,
                               switch_deg=switch_deg, check_deg=check_deg, rudder_deg=rudder_deg, reference=reference)
     raise ValueError(f"kind={kind!r}: use 'auto', 'turning' or 'zigzag'")
+
+
+#: A steady turn (:func:`steady_turn`): the rudder is "held" while it stays within :data:`HOLD_RUDDER_DEG` of the
+#: hold's first angle, which must be at least :data:`TURN_RUDDER_DEG`, and the propeller within
+#: :data:`HOLD_RPS_SHARE` of its rate there (or 0.2 rps, whichever is larger).
+HOLD_RUDDER_DEG = 1.0
+HOLD_RPS_SHARE = 0.05
+TURN_RUDDER_DEG = 5.0
+
+
+@dataclass
+class SteadyTurn:
+    """The steady turn of a run's longest rudder hold (:func:`steady_turn`).  ``hold_start``, ``hold_end`` [s]: the
+    rudder and the propeller at one setting in between; ``rudder_deg``, ``n`` that setting; ``heading_change_deg`` turned
+    during the hold; ``steady_diameter_L`` the diameter of the circle fitted to the track once the hold has turned
+    360 deg (270 when it turns less than 450), as :func:`~shipid.manoeuvres.turning.turning_metrics` defines the
+    steady diameter; ``steady_speed`` [m/s] the mean speed there; ``time_360_s`` = pi D / U, the time a full circle
+    takes at that speed."""
+
+    name: str
+    lpp: float
+    hold_start: float
+    hold_end: float
+    rudder_deg: float
+    n: float | None
+    side: str
+    heading_change_deg: float
+    steady_diameter_L: float = math.nan
+    steady_speed: float = math.nan
+    time_360_s: float = math.nan
+    success: bool = False
+    message: str = ""
+
+    def to_dict(self) -> dict:
+        return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in asdict(self).items()}
+
+
+def steady_turn(data, *, lpp: float | None = None, name: str | None = None) -> SteadyTurn:
+    """The steady turn of a run that is not a standard turning circle (a start from rest, an operator steering
+    before the hold; the Esso Osaka turning runs): the longest stretch over which the rudder stays at one angle of
+    at least :data:`TURN_RUDDER_DEG` (within :data:`HOLD_RUDDER_DEG`), ended where the propeller leaves its rate at
+    the stretch's start (:data:`HOLD_RPS_SHARE`), is taken as the turn, its start as the execute, and the steady diameter and speed are computed as for a turning circle (the approach
+    quantities -- advance, tactical diameter, speed loss -- mean nothing without a steady approach and are not
+    given).  ``success`` False (with the reason) when the hold turns less than 360 deg.
+
+    Raises ValueError when the run holds no rudder angle of :data:`TURN_RUDDER_DEG` or more, or lacks the channels
+    (time, x, y, psi, u, delta)."""
+    if isinstance(data, SimulationResult):
+        lpp = lpp if lpp is not None else getattr(data.model, "lpp", None) or ship_info(data.model).get("lpp")
+        data = data.to_pandas()
+    df, ship = _frame(data)
+    label = name or getattr(data, "name", None) or "data"
+    lpp = lpp if lpp is not None else getattr(ship, "lpp", None)
+    if lpp is None or not lpp > 0:
+        raise ValueError(f"{label}: ship length unknown; pass lpp= (or --lpp on the command line)")
+    need = ["time", "x", "y", "psi", "u", "delta"]
+    missing = [c for c in need if c not in df.columns]
+    if missing:
+        raise ValueError(f"{label}: a steady turn needs column(s) {missing}")
+    sub = df.dropna(subset=need)
+    if len(sub) < 10:
+        raise ValueError(f"{label}: fewer than 10 rows with {', '.join(need)} all present")
+    t, x, y, psi, u, delta = (sub[c].to_numpy(float) for c in need)
+    v = sub["v"].to_numpy(float) if "v" in sub.columns else None
+    i0, i1 = _longest_hold(t, delta)
+    if i0 is None:
+        raise ValueError(f"{label}: no rudder hold of at least {TURN_RUDDER_DEG:g} deg (within {HOLD_RUDDER_DEG:g} deg) "
+                         "in the run: no turn to measure")
+    n_hold = None
+    if "n" in sub.columns:
+        n = sub["n"].to_numpy(float)
+        if np.isfinite(n[i0:i1]).all():
+            n_hold = float(n[i0])
+            off = np.flatnonzero(np.abs(n[i0:i1] - n_hold) > max(HOLD_RPS_SHARE * abs(n_hold), 0.2))
+            i1 = i0 + int(off[0]) if off.size else i1  # the propeller leaves its setting: the hold ends there
+    if i1 - i0 < 10:
+        raise ValueError(f"{label}: the rudder and propeller setting holds for {i1 - i0} samples only")
+    t, x, y, psi, u, delta = (a[:i1] for a in (t, x, y, psi, u, delta))
+    v = v[:i1] if v is not None else None
+    tm = turning_metrics(t, x, y, psi, u, delta, lpp=lpp, v=v, execute_time=float(t[i0]))
+    res = SteadyTurn(name=str(label), lpp=float(lpp), hold_start=float(t[i0]), hold_end=float(t[-1]),
+                     rudder_deg=math.degrees(float(np.median(delta[i0:]))), n=n_hold, side=tm.side,
+                     heading_change_deg=tm.max_heading_change_deg)
+    if math.isfinite(tm.steady_diameter):
+        res.steady_diameter_L = tm.steady_diameter_L
+        res.steady_speed = tm.steady_speed
+        res.time_360_s = math.pi * tm.steady_diameter / tm.steady_speed if tm.steady_speed > 0 else math.nan
+        res.success = True
+        res.message = "ok" if tm.max_heading_change_deg >= 450 else "steady part from 270 deg of the hold (< 450 deg)"
+    else:
+        res.message = (f"the hold turns {tm.max_heading_change_deg:.0f} deg from t = {t[i0]:.1f} s to {t[-1]:.1f} s; "
+                       "a steady turn needs 360 deg")
+    return res
+
+
+def _longest_hold(t, delta) -> tuple:
+    """``(i0, i1)``: the samples ``i0 .. i1-1`` of the longest stretch (in time) over which the rudder stays within
+    :data:`HOLD_RUDDER_DEG` of its angle at ``i0``, that angle at least :data:`TURN_RUDDER_DEG`; ``(None, None)``
+    when there is none."""
+    tol, best, i0 = math.radians(HOLD_RUDDER_DEG), (None, None), 0
+    longest = -1.0
+    n = len(delta)
+    while i0 < n:
+        off = np.flatnonzero(np.abs(delta[i0:] - delta[i0]) > tol)
+        i1 = i0 + int(off[0]) if off.size else n
+        if abs(delta[i0]) >= math.radians(TURN_RUDDER_DEG) and t[i1 - 1] - t[i0] > longest:
+            best, longest = (i0, i1), t[i1 - 1] - t[i0]
+        i0 = i1
+    return best

@@ -221,6 +221,23 @@ def _section_summary(vals: list[LogValidation]) -> str:
                             [_f(src.get(k), "{:+.3f}" if "minus" in what else "{:.3f}") for k, _ in keys])
         out += f"<h3>{'Turning circles' if kind == 'turning' else 'Zigzags'}: metrics measured vs predicted</h3>"
         out += _table(["log", ""] + [_e(lab) for _, lab in keys], rows, left=2)
+    steady = [v for v in vals if v.steady_measured is not None]
+    if steady:
+        keys = (("steady_diameter_L", "steady diameter [L]"), ("steady_speed", "steady speed [m/s]"),
+                ("time_360_s", "time per circle [s]"))
+        rows = []
+        for v in steady:
+            st = v.steady_summary()
+            m = st["measured"]
+            for what, src in (("measured", m), ("replay", st["predicted"]), ("replay &minus; measured", st["difference"])):
+                rows.append([_e(v.log.name) if what == "measured" else "",
+                             f"{m['rudder_deg']:+.1f}&deg; from {m['hold_start']:.0f} s" if what == "measured" else "",
+                             what] + [_f((src or {}).get(k), "{:+.3f}" if "minus" in what else "{:.3f}") for k, _ in keys])
+        out += ("<h3>Steady turns of runs that are not standard manoeuvres</h3><p class=\"note\">The longest rudder "
+                "hold of each run (propeller at one rate) taken as a turn from its start: the steady diameter and speed "
+                "as for a turning circle, once the hold has turned 360&deg; (270&deg; when it turns less than 450&deg;); "
+                "the replay over the same inputs. No approach quantities: the run has no steady approach.</p>")
+        out += _table(["log", "hold", ""] + [_e(lab) for _, lab in keys], rows, left=3)
     return out
 
 
