@@ -464,7 +464,7 @@ def _log_frame(log) -> pd.DataFrame:
 
 
 def replay(model: Model, log, *, x0=None, substeps: int = 2, params=None, input_hold: str = "foh",
-           h_max: float | None = None) -> SimulationResult:
+           h_max: float | None = None, initial: dict | None = None) -> SimulationResult:
     """Simulate ``model`` with the recorded inputs of ``log`` from its initial state.
 
     Parameters
@@ -486,7 +486,15 @@ def replay(model: Model, log, *, x0=None, substeps: int = 2, params=None, input_
     h_max : float, optional
         Largest RK4 step [s] (default ``1.5 * median(dt) / substeps``): gaps in the log are crossed in
         as many steps as they need, as the EKF does.
+    initial : dict, optional
+        Start values of named states in place of the default ``x0``'s (e.g. the current ``cx``, ``cy`` of a
+        model with current states, which no log carries); not with ``x0``.
     """
+    if initial and x0 is not None:
+        raise ValueError("replay: give x0 or initial, not both")
+    bad = [k for k in (initial or {}) if k not in model.state_names]
+    if bad:
+        raise ValueError(f"initial: {bad} are not states of model '{model.name}' (states: {list(model.state_names)})")
     df = _log_frame(log)
     t = df["time"].to_numpy(dtype=float)
     missing = [n for n in model.input_names if n not in df.columns]
@@ -504,6 +512,8 @@ def replay(model: Model, log, *, x0=None, substeps: int = 2, params=None, input_
                 fin = col[np.isfinite(col)][:5]
                 if fin.size:
                     x0[i] = fin.mean()
+        for k, v in (initial or {}).items():
+            x0[model.state_index(k)] = float(v)
     if params is not None and np.ndim(params) == 2:
         x0 = np.broadcast_to(np.asarray(x0, dtype=float), (np.shape(params)[0], model.nx))
     if h_max is None:

@@ -221,7 +221,8 @@ def _for_length(model: Model, lpp: float | None, notes: list) -> Model:
 
 # ----------------------------------------------------------------------------- main
 def validate_one(model: Model, log, *, lpp: float | None = None, rudder_sign: float = 1.0,
-                 substeps: int = 2, closed_loop: bool = True, zigzag_angles=None) -> LogValidation:
+                 substeps: int = 2, closed_loop: bool = True, zigzag_angles=None,
+                 initial: dict | None = None) -> LogValidation:
     """Replay ``model`` on one TrialLog and compare; see :func:`validate`."""
     notes: list[str] = []
     name = getattr(log, "name", "log")
@@ -242,7 +243,7 @@ def validate_one(model: Model, log, *, lpp: float | None = None, rudder_sign: fl
         notes.append("logged rudder angle multiplied by -1 for the replay (opposite sign convention)")
     with warnings.catch_warnings():  # a diverging replay is reported in the notes and by success=False
         warnings.simplefilter("ignore", RuntimeWarning)
-        sim = replay(m, data, substeps=substeps)
+        sim = replay(m, data, substeps=substeps, initial=initial)
         errors = replay_errors(sim, data)
     if not sim.success:
         notes.append(f"replay: {sim.message}; no RMSE or predicted metrics")
@@ -353,15 +354,17 @@ def _standard(model: Model, log, res: LogValidation) -> None:
 
 
 def validate_logs(result_or_model, logs, lpp: float | None = None, *, rudder_sign: float = 1.0,
-                  substeps: int = 2, closed_loop: bool = True, zigzag_angles=None) -> list[LogValidation]:
+                  substeps: int = 2, closed_loop: bool = True, zigzag_angles=None,
+                  initial: dict | None = None) -> list[LogValidation]:
     """Replay a model on each log and compare; returns :class:`LogValidation` objects (see :func:`validate`)."""
     model, _ = resolve_model(result_or_model)
     return [validate_one(model, lg, lpp=lpp, rudder_sign=rudder_sign, substeps=substeps, closed_loop=closed_loop,
-                         zigzag_angles=zigzag_angles) for lg in load_logs(logs, lpp=lpp)]
+                         zigzag_angles=zigzag_angles, initial=initial) for lg in load_logs(logs, lpp=lpp)]
 
 
 def validate(result_or_model, logs, lpp: float | None = None, *, rudder_sign: float = 1.0,
-             substeps: int = 2, closed_loop: bool = True, zigzag_angles=None) -> list[dict]:
+             substeps: int = 2, closed_loop: bool = True, zigzag_angles=None,
+             initial: dict | None = None) -> list[dict]:
     """Validate a model against measured logs by replaying their recorded inputs.
 
     Parameters
@@ -386,6 +389,9 @@ def validate(result_or_model, logs, lpp: float | None = None, *, rudder_sign: fl
         Nominal rudder and check angles [deg] of the zigzag logs; either may be None.  By default both
         come from each log (the check angle from the heading deviation at its rudder reversals,
         :func:`shipid.manoeuvres.zigzag.infer_check_angle`), and the closed-loop zigzag is run with them.
+    initial : dict, optional
+        Start values of states no log carries, for the replay (:func:`shipid.simulate.replay`): e.g. a fit's
+        ``settings["current_start"]`` for a model with current states (``shipid validate`` passes it).
 
     Returns
     -------
@@ -398,4 +404,4 @@ def validate(result_or_model, logs, lpp: float | None = None, *, rudder_sign: fl
     """
     return [v.to_dict() for v in validate_logs(result_or_model, logs, lpp, rudder_sign=rudder_sign,
                                                substeps=substeps, closed_loop=closed_loop,
-                                               zigzag_angles=zigzag_angles)]
+                                               zigzag_angles=zigzag_angles, initial=initial)]

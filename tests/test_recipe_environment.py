@@ -75,7 +75,7 @@ def test_cli_fit_of_wind_current_model_is_the_study_setting(tmp_path, capsys):
     """`shipid fit --schema esso-frt --model lowspeed --wind --current` on three Esso runs estimates what the Esso
     Osaka study estimates, with the study's start, noise, sampling and substeps: the same coefficients as the
     study's own fit to 1e-9 (so the study's cross-validated errors are the CLI's); the result carries the runs'
-    mean current, and `shipid validate` starts its predictions from it."""
+    mean current, and `shipid validate` starts its replay and its predictions from it."""
     from shipid.environment import with_environment
     from shipid.models import get_model
     from shipid.studies import esso_osaka as S
@@ -119,6 +119,15 @@ def test_cli_fit_of_wind_current_model_is_the_study_setting(tmp_path, capsys):
     zero = horizon_prediction(model, lg, horizons=(30.0,)).summary()[0]
     assert h["position_error_median_m"] == pytest.approx(mine["position_error_median_m"], rel=1e-12)
     assert h["position_error_median_m"] != pytest.approx(zero["position_error_median_m"], rel=1e-6)
+    # the replay starts with the same current (session 12; it had started with none)
+    from shipid.simulate import replay, replay_errors
+
+    track = json.loads(val.read_text())[0]["track_rmse_m"]
+    with_c = replay_errors(replay(model, lg.data, initial={"cx": cs["cx"], "cy": cs["cy"]}), lg.data).loc["track", "rmse"]
+    without = replay_errors(replay(model, lg.data), lg.data).loc["track", "rmse"]
+    assert track == pytest.approx(with_c, rel=1e-12) and track != pytest.approx(without, rel=1e-6)
+    with pytest.raises(ValueError, match=r"initial: \['cz'\] are not states"):
+        replay(model, lg.data, initial={"cz": 0.0})
 
 
 def test_refinement_of_environment_models_is_refused_before_fitting(tmp_path, capsys):

@@ -100,19 +100,20 @@ def _line(d: dict) -> str:
 
 def _validate(args) -> int:
     from .._io import atomic_write_text, dumps_json
-    from ..validation import validate_logs
+    from ..validation import resolve_model, validate_one
     from .uncertainty import validate_draws
 
     out = _check(args)
     horizons = _horizons(args.horizon)
-    logs = read_logs_for_result(args)
-    vals = [v for lg in progress_iter(logs, args, "replaying logs")
-            for v in validate_logs(args.result, [lg], args.lpp, closed_loop=not args.no_closed_loop,
-                                   zigzag_angles=_zigzag(args))]
+    model, result = resolve_model(args.result)  # read once
+    logs = read_logs_for_result(args, model)
+    initial = _current_start(model, result)  # the replay and the horizon predictions start with it
+    vals = [validate_one(model, lg, lpp=args.lpp, closed_loop=not args.no_closed_loop, zigzag_angles=_zigzag(args),
+                         initial=initial) for lg in progress_iter(logs, args, "replaying logs")]
     res = [v.to_dict() for v in vals]
     validate_draws(args, args.result, vals, res)  # --draws N: intervals inside each "predicted" block
     if horizons:
-        for d, (h, _) in zip(res, _horizon_results(args, horizons, logs)):
+        for d, (h, _) in zip(res, _horizon_results(args, horizons, logs, model, initial)):
             if h is None:
                 continue
             d["horizon"] = h.summary()
@@ -145,13 +146,11 @@ def _horizons(text: str) -> list[float]:
     return out
 
 
-def _horizon_results(args, horizons, logs) -> list:
-    """``(HorizonResult, log)`` per log for ``--horizon``."""
-    from ..validation import resolve_model
+def _horizon_results(args, horizons, logs, model, initial) -> list:
+    """``(HorizonResult, log)`` per log for ``--horizon``, each prediction started with ``initial`` (the
+    fit's start current, :func:`_current_start`)."""
     from ..validation_horizon import horizon_prediction
 
-    model, result = resolve_model(args.result)
-    initial = _current_start(model, result)
     out = []
     for lg in logs:
         if not {"x", "y", "psi"} <= set(getattr(lg, "data", lg).columns):
@@ -165,15 +164,16 @@ def _horizon_results(args, horizons, logs) -> list:
 
 
 def _current_start(model, result):
-    """The start current of the predictions of a model with current states: the fit's ``current_start`` (the
-    mean of its logs' estimated currents; said on stderr), else zero (said too); None for other models."""
+    """The start current of the replay and the predictions of a model with current states: the fit's
+    ``current_start`` (the mean of its logs' estimated currents; said on stderr), else zero (said too); None for
+    other models."""
     if "cx" not in model.state_names:
         return None
     start = (getattr(result, "settings", None) or {}).get("current_start")
     if start is None:
         print("note: the result carries no start current; the predictions start with no current", file=sys.stderr)
         return None
-    print(f"note: predictions start with the fit's current cx = {start['cx']:.4g}, cy = {start['cy']:.4g} m/s "
+    print(f"note: the replay and the predictions start with the fit's current cx = {start['cx']:.4g}, cy = {start['cy']:.4g} m/s "
           f"({start.get('reason', 'from the fit')})", file=sys.stderr)
     return {"cx": float(start["cx"]), "cy": float(start["cy"])}
 
@@ -186,14 +186,15 @@ def _report(args) -> int:
     out = _check(args)
     model, res = resolve_model(args.result)
     logs = read_logs_for_result(args, model)
+    initial = _current_start(model, res)
     vals = [validate_one(model, lg, lpp=args.lpp, closed_loop=not args.no_closed_loop,
-                         zigzag_angles=_zigzag(args))
+                         zigzag_angles=_zigzag(args), initial=initial)
             for lg in progress_iter(logs, args, "replaying logs")]
     from .uncertainty import check_draws
 
     unc = {"draws": check_draws(args), "seed": args.draws_seed, "samples": args.samples} if check_draws(args) else None
     horizons = _horizons(args.horizon)
-    hz = [h for h in _horizon_results(args, horizons, logs) if h[0] is not None] if horizons else None
+    hz = [h for h in _horizon_results(args, horizons, logs, model, initial) if h[0] is not None] if horizons else None
     text = render_report(res, args.logs, title=args.title, validations=vals, uncertainty=unc, horizons=hz)
     atomic_write_text(out, text, force=args.force)
     for v in vals:
