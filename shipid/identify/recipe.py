@@ -864,7 +864,8 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         step("refinement", mode or "none", f"turning circles and zigzags among the logs: {AUTO_REFINE} at metric "
              f"weight {METRIC_WEIGHT if metric_weight is None else metric_weight:g} (chosen by "
              "leave-one-run-out within the KVLCC2 training runs, docs/validation.md)" if mode else
-             f"the logs hold {', '.join(sorted(kinds)) or 'no standard manoeuvre'} only: no refinement")
+             (f"the logs hold {' and '.join(sorted(kinds))} only: no refinement" if kinds else
+              "the logs hold no standard manoeuvre (turning circle or zigzag from a steady approach): no refinement"))
     elif mode in (None, "none"):
         mode = None
         step("refinement", "none", "asked")
