@@ -39,9 +39,9 @@ def _base(tmp_path):
 
 
 def _case_missing_column(tmp_path):
-    lines = [",".join(c for i, c in enumerate(l.split(",")) if i != 5) if not l.startswith("#") else l
+    lines = [",".join(c for i, c in enumerate(l.split(",")) if i != 8) if not l.startswith("#") else l
              for l in _base(tmp_path)]
-    return _write(tmp_path, "nov.csv", lines), ["nov.csv", "'v'", "row"]
+    return _write(tmp_path, "non.csv", lines), ["non.csv", "'n'", "row"]
 
 
 def _case_non_numeric(tmp_path):

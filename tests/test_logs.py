@@ -184,14 +184,20 @@ def test_missing_file_and_directory(tmp_path):
 
 
 def test_missing_required_column(tmp_path):
-    df = frame().drop(columns="r")
-    hdr = HEADER.replace(",r [rad/s]", "")
+    # (an input: always required; a velocity may be missing beside a logged track, tests/test_unlogged_velocities.py)
+    df = frame().drop(columns="delta")
+    hdr = HEADER.replace(",delta [rad]", "")
     p = write(tmp_path, "trial.csv", csv_text(df, header=hdr))
-    e = raises_unchanged(p, r"`trial.csv` row 1: required column 'r' not found; header has .*"
-                            r"columns=\{'r': 'your name'\}")
-    assert e.column == "r" and e.row == 1
+    e = raises_unchanged(p, r"`trial.csv` row 1: required column 'delta' not found; header has .*"
+                            r"columns=\{'delta': 'your name'\}")
+    assert e.column == "delta" and e.row == 1
     # columns= pointing at a column that does not exist
-    raises_unchanged(p, r"columns maps 'r' to 'yaw' but the header has no such column", columns={"r": "yaw"})
+    raises_unchanged(p, r"columns maps 'delta' to 'rudder' but the header has no such column",
+                     columns={"delta": "rudder"})
+    # a velocity is required when the track is not logged
+    df2 = frame().drop(columns=["r", "x"])
+    p2 = write(tmp_path, "trial2.csv", csv_text(df2, header=HEADER.replace(",r [rad/s]", "").replace(",x [m]", "")))
+    raises_unchanged(p2, r"`trial2.csv` row 1: required column 'r' not found")
 
 
 def test_non_numeric_cell(tmp_path):
@@ -841,7 +847,7 @@ def test_cli_bad_input_exit_2_one_line_file_unchanged(tmp_path, capsys, case):
 
     df = frame()
     files = {
-        "missing": (csv_text(df.drop(columns="v"), header=HEADER.replace(",v [m/s]", "")), r"column 'v' not found"),
+        "missing": (csv_text(df.drop(columns="n"), header=HEADER.replace(",n [rps]", "")), r"column 'n' not found"),
         "nonnumeric": (csv_text(df, cells={(9, "r"): "n/a?"}), r"column 'r' row 9: value 'n/a\?' is not a number"),
         "time": (csv_text(df.assign(time=np.r_[df.time[:20], df.time[19:59]])), r"column 'time' row 22: time"),
         "empty": (b"", r"file is empty"),

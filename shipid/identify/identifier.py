@@ -33,6 +33,11 @@ def _as_dict(value, names, what) -> dict:
     raise ValueError(f"{what} must be a mapping name -> value, got {type(value).__name__}")
 
 
+#: Samples of x, y, psi whose straight lines start the velocities a log does not measure
+#: (:meth:`EKFIdentifier._track_start`; 20 samples: 2 s of a 10 Hz log).
+TRACK_START_SAMPLES = 20
+
+
 class EKFIdentifier:
     """Identify model parameters from trial logs with an augmented-state EKF.
 
@@ -482,13 +487,44 @@ class EKFIdentifier:
                 slope, icpt = np.polyfit(tt, col[fin], 1)
                 if abs(slope) * np.ptp(tt) > 2.0 * s["sig"][j]:
                     x0[i] = icpt
+        for k, (val, _) in self._track_start(a).items():
+            x0[self.model.state_index(k)] = val
         return x0
+
+    def _track_start(self, a: LogArrays) -> dict:
+        """Start values and variances of velocities the log does not measure (u, v, r; a log of the track and
+        heading only) from its first samples: straight lines through the first :data:`TRACK_START_SAMPLES` finite
+        samples of x, y and psi, the slopes of x, y rotated into body axes by the heading (u = x' cos psi +
+        y' sin psi, v = -x' sin psi + y' cos psi, r = psi').  Variance: (2 x the slope's standard error from the
+        lines' residuals)^2, as a measured state starts with (2 sigma)^2.  ``{state: (value, variance)}``;
+        empty when the model lacks these states, the log measures them all, or lacks x, y, psi."""
+        s = self._setup
+        names = self.model.state_names
+        meas = {names[i]: j for j, i in enumerate(s["meas_idx"])}
+        want = [c for c in ("u", "v", "r") if c in names and c not in meas]
+        if not want or not {"x", "y", "psi"} <= set(meas):
+            return {}
+        cols = [a.Y[:, meas[c]] for c in ("x", "y", "psi")]
+        idx = np.flatnonzero(np.isfinite(cols[0]) & np.isfinite(cols[1]) & np.isfinite(cols[2]))[:TRACK_START_SAMPLES]
+        if idx.size < 5:
+            return {}
+        tt = a.t[idx] - a.t[0]
+        fits = [np.polyfit(tt, c[idx], 1, cov=True) for c in cols]
+        (xd, _), (yd, _), (rd, p0) = (f[0] for f in fits)
+        vx, vy, vr = (max(float(f[1][0, 0]), 0.0) for f in fits)
+        c, sn = np.cos(p0), np.sin(p0)
+        out = {"u": (xd * c + yd * sn, vx * c * c + vy * sn * sn), "v": (-xd * sn + yd * c, vx * sn * sn + vy * c * c),
+               "r": (rd, vr)}
+        return {k: (float(out[k][0]), 4.0 * out[k][1] + 1e-12) for k in want}
 
     def _initial_state_var(self, arrays) -> np.ndarray:
         s = self._setup
         var = np.ones(self.model.nx)
         for j, i in enumerate(s["meas_idx"]):
             var[i] = (2.0 * s["sig"][j]) ** 2
+        track = [self._track_start(a) for a in arrays]
+        for k in {k for d in track for k in d}:  # the widest of the logs' track-derived starts
+            var[self.model.state_index(k)] = max(d[k][1] for d in track if k in d)
         for k, v in _as_dict(self.initial_state_std, self.model.state_names, "initial_state_std").items():
             var[self.model.state_index(k)] = v**2
         return var

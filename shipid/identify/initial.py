@@ -124,6 +124,19 @@ def equation_error_fit(
     # which equations can be used: depend on parameters, and only on measured states
     measured_state = OK.all(axis=0)
     Jx = np.abs(model.jac_x(T[:50], X[:50], U[:50], p0)).max(axis=0)  # (nx, nx)
+    # an equation depends on a state wherever its Jacobian entry is non-zero somewhere: the logged samples set an
+    # unmeasured state to 0 and may all lie where a term vanishes (a straight approach: no rudder, no sway, no yaw),
+    # so the entries are also taken at generic points (a log without v and r had used the surge equation with
+    # v = r = 0 and started a1 at 1/200 of its value)
+    rng = np.random.default_rng(0)
+    Xg = X[:50] + rng.uniform(-1.0, 1.0, X[:50].shape) * (0.1 + np.abs(X[:50]))
+    Ug = U[:50] + rng.uniform(-1.0, 1.0, U[:50].shape) * (0.1 + np.abs(U[:50]))
+    try:
+        with np.errstate(all="ignore"):
+            Jg = np.nan_to_num(np.abs(model.jac_x(T[:50], Xg, Ug, p0)), nan=1.0, posinf=1.0).max(axis=0)
+        Jx = np.maximum(Jx, Jg)
+    except (ValueError, ArithmeticError):  # a model that refuses such a point: the logged samples decide alone
+        pass
     Jp = np.abs(model.jac_p(T[:50], X[:50], U[:50], p0)).max(axis=0)  # (nx, np)
     use = [
         i for i in range(nx)

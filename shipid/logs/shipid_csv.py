@@ -18,7 +18,7 @@ import numpy as np
 from ._text import (_DELIMS, _ISO_RE, _fast_table, _is_number, _iso_seconds, _mostly_numeric, _parse_meta,
                     _split_header, _to_float)
 from .marin import _looks_marin
-from .trial_log import LogError, _convert_units, _fmt_value, _short_list, _Where
+from .trial_log import LogError, _convert_units, _fmt_value, _short_list, _Where, required_channels
 from .units import SCHEMA, SHIP_CHANNELS
 
 def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str, str],
@@ -138,6 +138,7 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
         if len(cands) == 1:
             colmap[want] = cands[0]
             taken.add(cands[0])
+    required = required_channels(required, colmap)[0]  # (velocities may be missing beside a track; said later)
     missing_cols = [c for c in required if c not in colmap]
     if missing_cols:
         c = missing_cols[0]

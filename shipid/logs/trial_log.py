@@ -502,11 +502,29 @@ def _convert_units(arrays: dict[str, np.ndarray], units: Mapping[str, str], head
 
 
 
+#: Velocity channels a log may leave out when it logs the track and the heading (x, y, psi): the identifier's filter
+#: infers them (e.g. sea trials with GNSS positions and a gyro heading but no sway velocity).
+TRACK_VELOCITIES = ("u", "v", "r")
+
+
+def required_channels(required: Sequence[str], present) -> tuple[list, list]:
+    """``required`` less the :data:`TRACK_VELOCITIES` that ``present`` (channel names) lacks while it holds x, y and
+    psi, and a note for each one left out."""
+    have = set(present)
+    if not {"x", "y", "psi"} <= have:
+        return list(required), []
+    drop = [c for c in TRACK_VELOCITIES if c in required and c not in have]
+    return ([c for c in required if c not in drop],
+            [f"'{c}' not logged: the filter infers it from the track and heading (x, y, psi)" for c in drop])
+
+
 def _finish(t: np.ndarray, ch: dict[str, np.ndarray], *, where: _Where, name: str, ship, path, sha256,
             inputs: Sequence[str], interpolate_inputs: bool, required: Sequence[str], min_samples: int,
             unit_checks: bool, units_in: dict, notes: list, fmt: str) -> TrialLog:
     """Validate SI arrays and build the TrialLog (shared by every reader)."""
     n = t.shape[0]
+    required, unlogged = required_channels(required, ch)
+    notes = [*notes, *unlogged]
     missing_req = [c for c in required if c != "time" and c not in ch]
     if missing_req:
         raise where.error(f"required channel(s) {missing_req} missing; channels present: "
