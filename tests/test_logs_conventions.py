@@ -58,6 +58,12 @@ def _header_units(d):
     return _csv(d.rename(columns={"u": "u [km/h]", "v": "v [kph]", "n": "n [r/min]", "r": "r [deg/sec]"}))
 
 
+def _rate_of_turn(d, unit="deg/min"):
+    d = d.copy()
+    d["r"] = np.degrees(d.r) * 60   # a marine rate of turn: deg/min
+    return _csv(d.rename(columns={"r": f"r [{unit}]"}))
+
+
 def _clock_time(d, fmt="%H:%M:%S.%f", start="2024-05-01T10:00:00"):
     d = d.copy()
     d["time"] = _clock(d.time, fmt, start)
@@ -84,6 +90,7 @@ def _extra_columns(d):
 ACCEPTED = {
     "units row under the header": (_units_row, [], {}),
     "km/h, r/min, deg/sec in the header": (_header_units, [], {}),
+    "rate of turn in deg/min": (_rate_of_turn, [], {}),
     "clock time of day": (_clock_time, [], {}),
     "same date (day/month) before the clock": (lambda d: _clock_time(d, "%d/%m/%Y %H:%M:%S.%f"), [], {}),
     "clock passing midnight": (lambda d: _clock_time(d, start="2024-05-01T23:59:00"), [], {}),
@@ -185,6 +192,9 @@ REFUSED = {
                                                      r"to '02/05/2024'; write the time as seconds or as ISO 8601"),
     "units row against the header": (_units_row_conflict, r"row 2: column 'psi \[rad\]' has the unit 'rad' in "
                                                           r"the header but 'deg' in the units row"),
+    "deg/min declared as deg/s": (lambda d: _rate_of_turn(d, "deg/s"),
+                                  r"column 'r' row \d+: value -?[\d.]+ rad/s, read as deg/s, is not plausible .*check "
+                                  r"the unit declared for 'r' \(a marine rate of turn is in deg/min\)"),
     "U for u": (lambda d: _csv(d.rename(columns={"u": "U"})),
                 r"required column 'u' not found; .*\('U' is read as channel 'U', not 'u'; if it is 'u': "
                 r"--column u=U\)"),
@@ -220,3 +230,39 @@ def test_consistency_checks_do_not_compare_across_a_dropout(table, tmp_path):
     assert abs(yaw.values["bias_rad_s"]) < 1e-3 and abs(yaw.values["scale"] - 1) < 0.01
     frame = next(f for f in log.consistency.findings if f.check == "velocity_frame")
     assert frame.values["error_body"] < 0.05
+
+
+ESSO = bundled_data_dir().resolve().parents[1] / "shared" / "data" / "esso_osaka_frt" / "zigzag" / \
+    "zigzag_31-Jul-2020_13_04_24.csv"
+
+
+def test_measured_run_in_another_facilitys_units_via_a_schema_file(tmp_path, capsys):
+    """An Esso Osaka zigzag as a full-scale-style logger writes it: own column names, compass heading 0-360
+    deg, rate of turn in deg/min, rpm, rudder in degrees positive to port; a schema file maps it back."""
+    if not ESSO.is_file():
+        pytest.skip(f"measured data absent: {ESSO} (../shared/data/esso_osaka_frt)")
+    import json
+
+    e = pd.read_csv(ESSO)
+    e.columns = [c.split(" [")[0] for c in e.columns]
+    d = pd.DataFrame({"Time": e.t, "X": e.x_position_mid, "Y": e.y_position_mid,
+                      "HDG": np.degrees(e.psi_hat) % 360, "Surge": e.u_velo, "Sway": e.vm_velo,
+                      "ROT": np.degrees(e.r_angvelo) * 60, "RPM": e.n_prop * 60, "Rudder": -np.degrees(e.delta_rudder)})
+    p = tmp_path / "run.csv"
+    p.write_text(_csv(d))
+    schema = {"columns": {"time": "Time", "x": "X", "y": "Y", "psi": "HDG", "u": "Surge", "v": "Sway", "r": "ROT",
+                          "n": "RPM", "delta": "Rudder"},
+              "units": {"psi": "deg", "r": "deg/min", "n": "rpm", "delta": "deg"}, "rudder_sign": -1,
+              "ship": "esso_osaka_3m"}
+    (tmp_path / "facility.json").write_text(json.dumps(schema))
+    out = tmp_path / "si.csv"
+    rc, cap = _run(capsys, ["log", str(p), "--schema", str(tmp_path / "facility.json"), "-o", str(out)])
+    assert rc == 0, cap.err
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ref, log = read_log(ESSO, schema="esso-frt"), read_log(out)
+    for c in CH:
+        a, b = log[c], ref[c]
+        if c == "psi":   # the compass heading starts at 359.1 deg, the file's wrapped one at -0.9 deg
+            a = a - 2 * math.pi * np.round((a[0] - b[0]) / (2 * math.pi))
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12, err_msg=c)

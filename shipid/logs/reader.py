@@ -50,7 +50,7 @@ def read_log(
         column's 1-based number (``{"u": 5}``) when names are ambiguous.
     units : dict, optional
         Our channel name -> unit of the values in the file; one of s, m, rad,
-        deg, m/s, knots (kn), km/h, rad/s, deg/s, rps, rpm, Hz.  Overrides a unit in
+        deg, m/s, knots (kn), km/h, rad/s, deg/s, deg/min, rps, rpm, Hz.  Overrides a unit in
         the header.  Default: the header's bracketed unit, else SI/radians.
     fmt : {"auto", "csv", "marin"}
         File format; "auto" picks "marin" for a ``.dat`` file with the MARIN

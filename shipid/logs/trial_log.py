@@ -488,7 +488,7 @@ def _convert_units(arrays: dict[str, np.ndarray], units: Mapping[str, str], head
             col = (columns_in_file or {}).get(name, name)
             raise LogError(f"{where.label} column '{col}': unknown unit {unit!r}; use one of "
                            "s, ms, min, h, m, km, nm (nautical mile), rad, deg, m/s, knots (kn), km/h, rad/s, "
-                           "deg/s, rps, rpm, Hz",
+                           "deg/s, deg/min, rps, rpm, Hz",
                            column=name, value=unit)
         udim, factor = UNITS[key]
         if dim is not None and udim != dim:
@@ -541,7 +541,7 @@ def _finish(t: np.ndarray, ch: dict[str, np.ndarray], *, where: _Where, name: st
                           "time", i, value=t[i])
     # --- channels: finiteness, plausibility, units --------------------------------
     for c, a in ch.items():
-        _check_channel(c, a, where, unit_checks)
+        _check_channel(c, a, where, unit_checks, units_in.get(c))
     if unit_checks and "psi" in ch:
         _check_heading(t, ch, where)
     if unit_checks and ship is not None and "n" in ch and np.isfinite(ch["n"]).any():
@@ -634,7 +634,17 @@ def _deg_hint(c: str, unit: str) -> str:
     return f"pass units={{'{c}': '{unit}'}} (CLI: --units {c}={unit}) or convert"
 
 
-def _check_channel(c: str, a: np.ndarray, where: _Where, unit_checks: bool) -> None:
+def _declared_misfit(c: str, a: np.ndarray, i: int, where: _Where, declared: str, why: str) -> LogError:
+    """The unit a column was declared in (not SI) gives implausible values: say so, not "looks like deg"."""
+    dim = SHIP_CHANNELS[c]
+    tip = " (a marine rate of turn is in deg/min)" if dim == "rate" else ""
+    return where.error(f"value {_fmt_value(a[i])} {SI_UNIT[dim]}, read as {declared}, is not plausible ({why}); "
+                       f"check the unit declared for '{c}'{tip} (or unit_checks=False)", c, i, value=a[i])
+
+
+def _check_channel(c: str, a: np.ndarray, where: _Where, unit_checks: bool, declared: str | None = None) -> None:
+    """Finiteness and plausibility of one SI channel; ``declared``: the unit it was read in (when that is not
+    SI, an implausible value blames that unit rather than suggesting degrees)."""
     inf = np.isinf(a)
     if inf.any():
         i = int(np.argmax(inf))
@@ -649,14 +659,21 @@ def _check_channel(c: str, a: np.ndarray, where: _Where, unit_checks: bool) -> N
             i = int(np.nanargmax(absa))
             raise where.error(f"value {_fmt_value(a[i])} is absurd (|value| > 1e15); fix the cell", c, i, value=a[i])
         return
+    if declared is not None and unit_key(declared) == unit_key(SI_UNIT[dim]):
+        declared = None
     if unit_checks and dim == "rate" and _RATE_DEG_LIMIT < mx <= _RATE_DEG_LIMIT * 180 / math.pi:
         i = int(np.argmax(absa > _RATE_DEG_LIMIT))
+        if declared:
+            raise _declared_misfit(c, a, i, where, declared, f"|{c}| > {_RATE_DEG_LIMIT:g} rad/s is not a ship's "
+                                   "turn rate")
         raise where.error(f"value {_fmt_value(a[i])} looks like deg/s (|{c}| > {_RATE_DEG_LIMIT:g} rad/s = "
                           f"{math.degrees(_RATE_DEG_LIMIT):.0f} deg/s is not a ship's turn rate); "
                           + _deg_hint(c, "deg/s") + " (or unit_checks=False if it really is rad/s)", c, i, value=a[i])
     if unit_checks and c in _CONTROL_ANGLES + _ATTITUDE_ANGLES and math.pi / 2 < mx <= 180.0:
         i = int(np.argmax(absa > math.pi / 2))
         kind = "rudder/fin angle" if c in _CONTROL_ANGLES else "roll/pitch angle"
+        if declared:
+            raise _declared_misfit(c, a, i, where, declared, f"a {kind} beyond 90 deg")
         raise where.error(f"value {_fmt_value(a[i])} looks like degrees (a {kind} beyond 90 deg = 1.571 rad); "
                           + _deg_hint(c, "deg") + " (or unit_checks=False if it really is radians)", c, i, value=a[i])
     limit = _ABSURD[dim]
