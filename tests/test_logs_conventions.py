@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import re
 import warnings
 
 import numpy as np
@@ -181,7 +182,7 @@ def _units_row_conflict(d):
     return head + "\ns,m,m,deg,m/s,m/s,rad/s,rad,rps\n" + body
 
 
-# name -> (file text, message expected on stderr)
+# name -> (file text, message expected on stderr[, CLI options])
 REFUSED = {
     "speeds in knots, undeclared": (lambda d: _speeds(d, 1 / KN),
                                     r"are 1\.944 x the speed along the track of x, y: u, v look like knots: "
@@ -195,6 +196,9 @@ REFUSED = {
     "deg/min declared as deg/s": (lambda d: _rate_of_turn(d, "deg/s"),
                                   r"column 'r' row \d+: value -?[\d.]+ rad/s, read as deg/s, is not plausible .*check "
                                   r"the unit declared for 'r' \(a marine rate of turn is in deg/min\)"),
+    "comma delimiter given for a semicolon file": (lambda d: _csv(d, ";"),
+                                                   r"row 1: the header is one column holding semicolons \('time;x;.*"
+                                                   r"pass delimiter=';' \(CLI: --delimiter ;\)", ["--delimiter", ","]),
     "U for u": (lambda d: _csv(d.rename(columns={"u": "U"})),
                 r"required column 'u' not found; .*\('U' is read as channel 'U', not 'u'; if it is 'u': "
                 r"--column u=U\)"),
@@ -203,15 +207,14 @@ REFUSED = {
 
 @pytest.mark.parametrize("name", list(REFUSED))
 def test_unresolvable_conventions_name_the_option(name, table, tmp_path, capsys):
-    make, pattern = REFUSED[name]
+    make, pattern, *opts = REFUSED[name]
     p = tmp_path / "run.csv"
     p.write_bytes(make(table).encode())
     before = p.read_bytes()
-    rc, cap = _run(capsys, ["log", str(p), "--lpp", "4.36"])
+    rc, cap = _run(capsys, ["log", str(p), "--lpp", "4.36", *(opts[0] if opts else [])])
     assert rc == 2
     err = cap.err.strip()
     assert err.count("\n") == 0 and "Traceback" not in err and "`run.csv`" in err
-    import re
     assert re.search(pattern, err), err
     assert p.read_bytes() == before
 
@@ -266,3 +269,29 @@ def test_measured_run_in_another_facilitys_units_via_a_schema_file(tmp_path, cap
         if c == "psi":   # the compass heading starts at 359.1 deg, the file's wrapped one at -0.9 deg
             a = a - 2 * math.pi * np.round((a[0] - b[0]) / (2 * math.pi))
         np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12, err_msg=c)
+
+
+MARIN = bundled_data_dir().resolve().parents[1] / "shared" / "data" / "kvlcc2_marin" / "MARIN_FREE_KVLCC2_zz_10_m.dat"
+
+
+@pytest.mark.parametrize("opts", [["--units", "psi=rad"], ["--columns", "u=5"]])
+def test_table_options_on_a_marin_file_name_the_file_and_the_way_out(opts, capsys):
+    if not MARIN.is_file():
+        pytest.skip(f"measured data absent: {MARIN} (../shared/data/kvlcc2_marin)")
+    rc, cap = _run(capsys, ["log", str(MARIN), *opts])
+    assert rc == 2
+    assert re.search(rf"^shipid log: error: `{MARIN.name}`: {opts[0].strip('-')}= \(CLI: {opts[0]}\) does not apply "
+                     r"to a MARIN \.dat file .*pass fmt='csv' \(CLI: --format csv\)$", cap.err.strip()), cap.err
+
+
+def test_velocity_frame_earth_given_for_body_axis_velocities(capsys):
+    """--velocity-frame earth on a file whose u, v are body-axis rotated them wrongly and only warned
+    ('agree with neither'); the file's own values fit as body axes, so the message says to drop the option."""
+    tc = bundled_data_dir() / "kcs_tc_p35.csv"
+    rc, cap = _run(capsys, ["log", str(tc), "--velocity-frame", "earth"])
+    assert rc == 2
+    assert re.search(r"`kcs_tc_p35.csv`: the file's 'u' \(column 5\), 'v' \(column 6\) are body-axis \(error \d+ %\), "
+                     r"but were read as earth-fixed and rotated \(\d+ %\): drop velocity_frame='earth' "
+                     r"\(CLI: --velocity-frame body\)", cap.err), cap.err
+    rc, cap = _run(capsys, ["log", str(tc)])
+    assert rc == 0, cap.err

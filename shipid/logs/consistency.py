@@ -445,6 +445,17 @@ def _check_velocity_frame(c: _Ctx) -> None:
     if not math.isfinite(min(e_body, e_earth)):
         return
     vals = dict(error_body=e_body, error_earth=e_earth, lag_samples=lag)
+    if "(earth-fixed)" in str(c.log.units_in.get("u", "")):
+        # the reader rotated u, v as earth-fixed: do the file's own values fit as body axes?
+        fu, fv = uf * cs - vf * sn, uf * sn + vf * cs   # the file's values, un-rotated
+        integrate(fbx=fu * cs - fv * sn, fby=fu * sn + fv * cs)
+        e_file = err("fbx", "fby", lag)
+        if e_file <= _FRAME_GOOD and e_file < 0.5 * e_body:
+            c.add("error", "velocity_frame", ("u", "v"),
+                  f"the file's {uv} are body-axis (error {100 * e_file:.0f} %), but were read as earth-fixed and "
+                  f"rotated ({100 * e_body:.0f} %): drop velocity_frame='earth' (CLI: --velocity-frame body)",
+                  error_file_body=e_file, **vals)
+            return
     if e_earth <= _FRAME_GOOD and e_earth < 0.5 * e_body:
         c.add("error", "velocity_frame", ("u", "v"),
               f"{uv} agree with the earth-fixed dx/dt, dy/dt (error {100 * e_earth:.0f} %), not with body axes "

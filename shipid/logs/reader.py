@@ -154,7 +154,8 @@ def read_log(
     ship_obj = _as_ship(ship, None)
     if sch.fmt == "marin":
         if columns:
-            raise ValueError("columns= does not apply to MARIN .dat files (their columns are fixed)")
+            raise LogError(f"`{p.name}`: columns= (CLI: --columns) does not apply to a MARIN .dat file (its columns "
+                           "are fixed); to read it as a table of your own, pass fmt='csv' (CLI: --format csv)", path=p)
         t, ch, where, units_in, notes = _read_marin(text, p, units or {}, marin_time)
         meta = {}
     else:

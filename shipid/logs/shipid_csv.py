@@ -142,6 +142,12 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
     if missing_cols:
         c = missing_cols[0]
         single = " (the header is a single column: is the file comma-separated?)" if len(hdr) == 1 else ""
+        other = [d for d in (";", "\t") if d != delim and d in header_line]
+        if len(hdr) == 1 and other:   # delimiter=',' given for a semicolon/tab file
+            cli = "tab" if other[0] == "\t" else other[0]
+            raise LogError(f"`{p.name}` row {h + 1}: the header is one column holding {_DELIMS[other[0]]}s "
+                           f"({_fmt_value(header_line.strip())}); pass delimiter={other[0]!r} (CLI: --delimiter {cli})",
+                           path=p, row=h + 1, value=header_line.strip())
         if _looks_marin(header_line):
             single = " (this looks like a MARIN .dat file: pass fmt='marin')"
         near = [nm for nm in names if nm.lower() == c.lower() and nm in SHIP_CHANNELS]
