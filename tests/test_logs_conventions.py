@@ -295,3 +295,14 @@ def test_velocity_frame_earth_given_for_body_axis_velocities(capsys):
                      r"\(CLI: --velocity-frame body\)", cap.err), cap.err
     rc, cap = _run(capsys, ["log", str(tc)])
     assert rc == 0, cap.err
+
+
+def test_log_conversion_never_writes_over_its_input(table, tmp_path, capsys):
+    p = tmp_path / "run.csv"
+    p.write_text(_csv(table))
+    before = p.read_bytes()
+    (tmp_path / "link.csv").symlink_to(p)
+    for out in (p, tmp_path / "link.csv"):
+        rc, cap = _run(capsys, ["log", str(p), "--lpp", "4.36", "-o", str(out), "--force"])
+        assert rc == 2 and "would replace the input file" in cap.err, cap.err
+    assert p.read_bytes() == before
