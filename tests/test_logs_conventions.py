@@ -7,6 +7,7 @@ changed.
 from __future__ import annotations
 
 import hashlib
+import io
 import math
 import re
 import warnings
@@ -65,6 +66,14 @@ def _rate_of_turn(d, unit="deg/min"):
     return _csv(d.rename(columns={"r": f"r [{unit}]"}))
 
 
+def _speeds_kn(text):
+    """A units row (a clock format for the time, knots for u, v) under the header of ``text``, u, v in knots."""
+    d = pd.read_csv(io.StringIO(text), dtype={"time": str})
+    d["u"], d["v"] = d.u / KN, d.v / KN
+    head, body = _csv(d).split("\n", 1)
+    return head + "\nhh:mm:ss.ffffff,m,m,rad,kn,m/s,rad/s,rad,1/s\n".replace("m/s,rad/s", "kn,rad/s") + body
+
+
 def _clock_time(d, fmt="%H:%M:%S.%f", start="2024-05-01T10:00:00"):
     d = d.copy()
     d["time"] = _clock(d.time, fmt, start)
@@ -92,6 +101,7 @@ ACCEPTED = {
     "units row under the header": (_units_row, [], {}),
     "km/h, r/min, deg/sec in the header": (_header_units, [], {}),
     "rate of turn in deg/min": (_rate_of_turn, [], {}),
+    "clock time under a units row": (lambda d: _speeds_kn(_clock_time(d)), [], {}),
     "clock time of day": (_clock_time, [], {}),
     "same date (day/month) before the clock": (lambda d: _clock_time(d, "%d/%m/%Y %H:%M:%S.%f"), [], {}),
     "clock passing midnight": (lambda d: _clock_time(d, start="2024-05-01T23:59:00"), [], {}),

@@ -9,6 +9,7 @@ heading in the shipid convention, units from the header or ``units=``
 from __future__ import annotations
 
 import csv
+import re
 import warnings
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -294,6 +295,10 @@ def _cell_error(p: Path, k: int, line: str, exc: Exception) -> LogError:
     return LogError(f"`{p.name}` row {k + 1}: {what}", path=p, row=k + 1, value=line[:60])
 
 
+#: a date/clock format written where a unit would be (``hh:mm:ss.sss``, ``dd/mm/yyyy hh:mm:ss``)
+_STAMP_FORMAT_RE = re.compile(r"(?=.*[:/])[ymdhsfYMDHSF:/.\- T]+")
+
+
 def _units_row(cells: list[str], ncol: int) -> list[str | None] | None:
     """The units of a units row under the header (``s, m, [deg], (m/s), -, ...``; a blank or ``-`` cell:
     no unit), or None when ``cells`` is not one: a units row has one cell per column, no number in any
@@ -308,11 +313,13 @@ def _units_row(cells: list[str], ncol: int) -> list[str | None] | None:
             return None
         if s[:1] in "[(" and s[-1:] in "])":
             s = s[1:-1].strip()
-        if s.lower() in ("", "-", "--"):
+        if unit_key(s) in UNITS:
+            known += 1
+            out.append(s)
+        elif s.lower() in ("", "-", "--") or _STAMP_FORMAT_RE.fullmatch(s):  # no unit; a clock format (hh:mm:ss)
             out.append(None)
-            continue
-        known += unit_key(s) in UNITS
-        out.append(s)
+        else:
+            out.append(s)
     return out if known else None
 
 
