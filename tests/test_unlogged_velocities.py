@@ -71,3 +71,16 @@ def test_track_start_of_unlogged_velocities():
     assert set(st) == {"u", "v", "r"}
     assert st["u"][0] == pytest.approx(u, rel=1e-9) and st["v"][0] == pytest.approx(v, rel=1e-9)
     assert st["r"][0] == pytest.approx(0.0, abs=1e-12) and all(var > 0 for _, var in st.values())
+
+
+def test_a_speed_column_named_U_beside_a_track_is_read_and_the_mapping_is_said(tmp_path):
+    """'U' (shipid's speed over ground) is never taken for 'u' unasked; beside a logged track the log reads with
+    u not logged, and the note says how to map 'U' if it was meant as 'u'."""
+    src = [p for p in bundled_kcs_logs() if p.stem == "kcs_zz_m10"][0]
+    df = pd.read_csv(src, comment="#").rename(columns={"u [m/s]": "U [m/s]"})
+    p = tmp_path / "U.csv"
+    df.to_csv(p, index=False)
+    lg = read_log(p, lpp=4.36)
+    assert "u" not in lg.data.columns
+    assert any("the file's 'U' is read as channel 'U'; if it is 'u': --columns u=U" in n for n in lg.notes)
+    assert any("'u' not logged" in n for n in lg.notes)

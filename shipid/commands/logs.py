@@ -1,7 +1,7 @@
 """``shipid log``: check trial logs (print what was read) and convert them to the SI CSV schema."""
 from __future__ import annotations
 
-from ._common import add_log_options, read_logs
+from ._common import add_log_options, check_output_path, read_logs
 
 
 def register(sub) -> None:
@@ -23,6 +23,8 @@ def register(sub) -> None:
 def _log(args) -> int:
     if args.output and len(args.logs) != 1:
         raise ValueError(f"-o/--output converts one log; got {len(args.logs)}: give one LOG with -o")
+    if args.output:  # never over the log itself (nor the ship/schema file), even with --force
+        check_output_path(args.output, force=args.force, inputs=[*args.logs, args.ship, args.schema])
     for log in read_logs(args.logs, args):
         print(log.summary())
         if args.output:

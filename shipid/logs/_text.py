@@ -12,7 +12,8 @@ import pandas as pd
 
 from .trial_log import LogError, _Where
 
-_MISSING_TOKENS = {"", "nan", "na", "n/a", "null", "none", "-nan"}
+#: cell texts read as a missing sample (compared in lower case): blanks, NaN spellings, a dash, Excel's #N/A
+_MISSING_TOKENS = {"", "nan", "na", "n/a", "null", "none", "-nan", "-", "--", "#n/a"}
 
 _DELIMS = {",": "comma", ";": "semicolon", "\t": "tab", "whitespace": "whitespace"}
 
@@ -89,7 +90,7 @@ def _parse_meta(line: str, meta: dict, p: Path | None = None, row: int | None = 
 
 
 _NA_TOKENS = ["", "nan", "NaN", "NAN", "na", "NA", "n/a", "N/A", "null", "NULL", "Null", "none", "None", "NONE",
-              "-nan", "-NaN"]
+              "-nan", "-NaN", "-", "--", "#N/A", "#n/a"]
 
 
 # pandas < 3 parses floats with "high" precision by default (last-digit differences possible);
@@ -167,6 +168,38 @@ def _iso_seconds(cells: Sequence[str], col: str, where: _Where) -> np.ndarray:
         stamps = stamps.dt.tz_convert("UTC")
     ns = stamps.to_numpy().astype("datetime64[ns]").astype(np.int64)
     return (ns - ns[0]) * 1e-9
+
+
+#: a clock time ``HH:MM:SS[.fff]``, after an optional date in any spelling (``01/05/2024 10:00:00.1``)
+_CLOCK_RE = re.compile(r"^(?:(?P<date>\S+)[ T])?(?P<h>\d{1,2}):(?P<m>[0-5]\d):(?P<s>[0-5]\d(?:[.,]\d+)?)$")
+
+
+def _clock_seconds(cells: Sequence[str], col: str, where: _Where) -> np.ndarray:
+    """Clock times ``HH:MM:SS[.fff]`` (time-of-day loggers) -> seconds after the first.
+
+    A date before the clock time is accepted when it is written the same on every row (its day/month order
+    then does not matter); a date that changes is an error (``01/05`` may be 1 May or 5 January: ISO 8601
+    stamps say which).  A clock that steps back by more than 12 h has passed midnight: a day is added.
+    """
+    out = np.empty(len(cells))
+    date0 = None
+    for i, c in enumerate(cells):
+        s = c.strip()
+        m = _CLOCK_RE.match(s)
+        if m is None or int(m.group("h")) > 23:
+            raise where.error(f"value {s!r} is not a clock time like the first one ({cells[0].strip()!r}); fix "
+                              "the cell (every sample needs a time)", col, i, value=s)
+        if i == 0:
+            date0 = m.group("date")
+        elif m.group("date") != date0:
+            raise where.error(f"the date changes from {date0!r} to {m.group('date')!r}; write the time as seconds "
+                              "or as ISO 8601 stamps (2024-05-01T10:00:00.1): a date like 01/05 is ambiguous "
+                              "(1 May or 5 January)", col, i, value=s)
+        out[i] = int(m.group("h")) * 3600.0 + int(m.group("m")) * 60.0 + float(m.group("s").replace(",", "."))
+    d = np.diff(out)
+    if (d < -43200.0).any():
+        out[1:] += 86400.0 * np.cumsum(d < -43200.0)
+    return out - out[0]
 
 
 def _to_float(cells: Sequence[str], ours: str, col: str, where: _Where, decimal_comma: bool = False) -> np.ndarray:

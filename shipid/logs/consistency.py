@@ -163,9 +163,9 @@ class _Ctx:
         """(significant digits the file's values of ``c`` are printed with, factor file unit -> SI); judged on
         up to 256 values spread over the log.  16 = full precision."""
         if c not in self._sig:
-            from .units import UNITS
+            from .units import UNITS, unit_key
 
-            unit = str(self.log.units_in.get(c, "")).split(" (")[0].strip().lower()
+            unit = unit_key(str(self.log.units_in.get(c, "")).split(" (")[0])
             factor = UNITS.get(unit, ("", 1.0))[1]
             a = self.get(c)
             f = a[np.isfinite(a) & (a != 0)]
@@ -239,6 +239,14 @@ def _incr(a: np.ndarray, lag: int) -> np.ndarray:
     return a[lag:] - a[:-lag]
 
 
+def _segments(t: np.ndarray, dt_med: float) -> np.ndarray:
+    """Segment number of each sample, shape (n,): it steps up after each time dropout (an interval longer than 3
+    x the median ``dt_med``), so an increment over samples of one segment has ``_incr(seg, lag) == 0``.  An
+    increment across a dropout compares the heading/position change with an integral that bridged the gap by a
+    straight line: not a comparison of the channels."""
+    return np.concatenate([[0], np.cumsum(np.diff(t) > 3.0 * dt_med)])
+
+
 def _corr(a: np.ndarray, b: np.ndarray) -> float:
     ok = np.isfinite(a) & np.isfinite(b)
     if ok.sum() < 5:
@@ -258,11 +266,17 @@ def _lags(lag0: int, n: int) -> list[int]:
     return out
 
 
-def _yaw_fit(t, psi, int_r, lag):
-    """Heading increments over ``lag`` samples against those of the integral of r (``int_r``, same samples):
+def _yaw_fit(t, psi, int_r, lag, seg=None):
+    """Heading increments over ``lag`` samples against those of the integral of r (``int_r``, same samples;
+    increments across a dropout of ``seg`` (:func:`_segments`) left out):
     (unexplained fraction with r as logged, unexplained fraction with scale k and bias b fitted, k,
     b [rad/s], correlation)."""
     dpsi, dt_l, ir = _incr(psi, lag), _incr(t, lag), _incr(int_r, lag)
+    if seg is not None:
+        same = _incr(seg, lag) == 0
+        dpsi, dt_l, ir = dpsi[same], dt_l[same], ir[same]
+        if dpsi.size < 5:
+            return float("inf"), float("inf"), float("nan"), float("nan"), float("nan")
     scale = float(np.sqrt(np.mean(dpsi ** 2)))
     if scale == 0:
         return float("inf"), float("inf"), float("nan"), float("nan"), float("nan")
@@ -298,6 +312,7 @@ def _check_yaw_rate(c: _Ctx) -> None:
     st = c.stride   # on ~1024-2048 samples; the integrals at the full rate (r may be noisy)
     t_full = t[ok]
     ir_s = _cumint(t_full, r[ok])[::st]
+    seg = _segments(t_full, float(_median(np.diff(c.t))))[::st]
     t, psi, r = t_full[::st], psi[ok][::st], r[ok]
     # the heading's change, not its noise: the range of its running mean over 1/50 of the samples (a noisy
     # compass on a straight course has a range of many degrees and no turn to compare r with)
@@ -312,7 +327,7 @@ def _check_yaw_rate(c: _Ctx) -> None:
         return
     lag0 = _lag(psi.size, np.diff(psi), max(c.typical_resolution("psi"), _quantum(psi)))
     # the time scale at which r explains the heading best (short lags: noise; long: few increments)
-    fits = {lag: _yaw_fit(t, psi, ir_s, lag) for lag in _lags(lag0, psi.size)}
+    fits = {lag: _yaw_fit(t, psi, ir_s, lag, seg) for lag in _lags(lag0, psi.size)}
     lag = min(fits, key=lambda g: fits[g][1])
     e_direct, e_fit, k, bias, rho = fits[lag]
     vals = dict(rho=rho, scale=k, bias_rad_s=bias, error_direct=e_direct, error_fitted=e_fit, lag_samples=lag)
@@ -333,7 +348,7 @@ def _check_yaw_rate(c: _Ctx) -> None:
             if a is None or not np.isfinite(a[ok]).all():
                 continue
             io = _cumint(t_full, a[ok])[::st]
-            eo, rho_o = min((_yaw_fit(t, psi, io, g)[0], _yaw_fit(t, psi, io, g)[4]) for g in fits)
+            eo, rho_o = min((_yaw_fit(t, psi, io, g, seg)[0], _yaw_fit(t, psi, io, g, seg)[4]) for g in fits)
             if eo < best_e:
                 best, best_e, best_rho = other, eo, rho_o
         if best is not None and best_e <= _FIT_GOOD:
@@ -391,17 +406,26 @@ def _check_velocity_frame(c: _Ctx) -> None:
         integ.update(zip(cols, I.T))
 
     integrate(ub=u * cs - v * sn, vb=u * sn + v * cs)
+    seg = _segments(t, float(_median(np.diff(c.t))))[::st]
     t, x, y = t[::st], x[::st], y[::st]
     step = np.hypot(np.diff(x), np.diff(y))
     lag0 = _lag(x.size, step, max(c.typical_resolution("x"), c.typical_resolution("y"), _quantum(x), _quantum(y)))
 
-    def err(ke, kn, lag):
-        dx, dy = _incr(x, lag), _incr(y, lag)
-        scale = float(_median(np.hypot(dx, dy)))
+    def incr(ke, kn, lag):   # track and velocity-integral increments, none across a dropout
+        same = _incr(seg, lag) == 0
+        return tuple(_incr(a, lag)[same] for a in (x, y, integ[ke], integ[kn]))
+
+    def err(ke, kn, lag, k=1.0):
+        dx, dy, px, py = incr(ke, kn, lag)
+        scale = float(_median(np.hypot(dx, dy))) if dx.size >= 5 else 0.0
         if scale <= 0:
             return float("inf")
-        px, py = _incr(integ[ke], lag), _incr(integ[kn], lag)
-        return float(_median(np.hypot(dx - px, dy - py)) / scale)
+        return float(_median(np.hypot(dx - k * px, dy - k * py)) / scale)
+
+    def speed_scale(ke, kn, lag):   # k of track = k x velocity integral (least squares)
+        dx, dy, px, py = incr(ke, kn, lag)
+        den = float(np.sum(px * px + py * py))
+        return float(np.sum(dx * px + dy * py)) / den if den > 0 else float("nan")
 
     lags = _lags(lag0, x.size)
     body = {lag: err("ub", "vb", lag) for lag in lags}
@@ -421,6 +445,17 @@ def _check_velocity_frame(c: _Ctx) -> None:
     if not math.isfinite(min(e_body, e_earth)):
         return
     vals = dict(error_body=e_body, error_earth=e_earth, lag_samples=lag)
+    if "(earth-fixed)" in str(c.log.units_in.get("u", "")):
+        # the reader rotated u, v as earth-fixed: do the file's own values fit as body axes?
+        fu, fv = uf * cs - vf * sn, uf * sn + vf * cs   # the file's values, un-rotated
+        integrate(fbx=fu * cs - fv * sn, fby=fu * sn + fv * cs)
+        e_file = err("fbx", "fby", lag)
+        if e_file <= _FRAME_GOOD and e_file < 0.5 * e_body:
+            c.add("error", "velocity_frame", ("u", "v"),
+                  f"the file's {uv} are body-axis (error {100 * e_file:.0f} %), but were read as earth-fixed and "
+                  f"rotated ({100 * e_body:.0f} %): drop velocity_frame='earth' (CLI: --velocity-frame body)",
+                  error_file_body=e_file, **vals)
+            return
     if e_earth <= _FRAME_GOOD and e_earth < 0.5 * e_body:
         c.add("error", "velocity_frame", ("u", "v"),
               f"{uv} agree with the earth-fixed dx/dt, dy/dt (error {100 * e_earth:.0f} %), not with body axes "
@@ -432,9 +467,35 @@ def _check_velocity_frame(c: _Ctx) -> None:
               f"{uv} look swapped: (v, u) fit the track (error {100 * e_swap:.0f} %), (u, v) do not "
               f"({100 * e_body:.0f} %): map u and v to each other's column", error_swapped=e_swap, **vals)
         return
+    # u, v that fit the track up to a factor: a unit left undeclared (knots, km/h) or time not in seconds
+    for frame, ke, kn in (("body", "ub", "vb"), ("earth", "u", "v")):
+        k = speed_scale(ke, kn, lag)
+        if not (math.isfinite(k) and k > 0 and err(ke, kn, lag, k) <= _FRAME_GOOD):
+            continue
+        vals.update(speed_scale=k, frame=frame)
+        also = " (and they are earth-fixed: pass velocity_frame='earth', CLI: --velocity-frame earth)" \
+            if frame == "earth" else ""
+        for factor, fix in _SPEED_UNITS:
+            if abs(k / factor - 1.0) < 0.05:
+                c.add("error", "velocity_frame", ("u", "v"),
+                      f"{uv} are {1 / k:.4g} x the speed along the track of x, y{also}: {fix}", **vals)
+                return
+        c.add("warning", "velocity_frame", ("u", "v", "x", "y"),
+              f"{uv} are {1 / k:.4g} x the speed along the track of x, y{also}: check the units of u, v, x, y "
+              "and time", **vals)
+        return
     c.add("warning", "velocity_frame", ("u", "v", "x", "y"),
           f"{uv} agree with neither the body-axis ({100 * e_body:.0f} %) nor the earth-fixed ({100 * e_earth:.0f} %) "
           "reading of the track x, y: check the columns, their units and the heading", **vals)
+
+
+#: (track speed / logged speed, what to do) for the units a file's speeds or time are commonly in unawares
+_SPEED_UNITS = (
+    (1852.0 / 3600.0, "u, v look like knots: declare units={'u': 'kn', 'v': 'kn'} (CLI: --units u=kn,v=kn)"),
+    (1.0 / 3.6, "u, v look like km/h: declare units={'u': 'km/h', 'v': 'km/h'} (CLI: --units u=km/h,v=km/h)"),
+    (1e-3, "time looks like milliseconds: declare units={'time': 'ms'} (CLI: --units time=ms)"),
+    (60.0, "time looks like minutes: declare units={'time': 'min'} (CLI: --units time=min)"),
+)
 
 
 def _check_rudder_sign(c: _Ctx) -> None:

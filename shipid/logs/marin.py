@@ -32,7 +32,8 @@ def _looks_marin(text: str) -> bool:
 
 def _read_marin(text: str, p: Path, units: Mapping[str, str], marin_time: str):
     if units:
-        raise ValueError("units= does not apply to MARIN .dat files (their units are fixed: degrees, rpm)")
+        raise LogError(f"`{p.name}`: units= (CLI: --units) does not apply to a MARIN .dat file (its units are fixed: "
+                       "degrees, rpm); to read it as a table of your own, pass fmt='csv' (CLI: --format csv)", path=p)
     if marin_time not in ("uniform", "drop"):
         raise ValueError(f"marin_time={marin_time!r}: use 'uniform' or 'drop'")
     lines = text.splitlines()

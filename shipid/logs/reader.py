@@ -50,7 +50,7 @@ def read_log(
         column's 1-based number (``{"u": 5}``) when names are ambiguous.
     units : dict, optional
         Our channel name -> unit of the values in the file; one of s, m, rad,
-        deg, m/s, knots (kn), rad/s, deg/s, rps, rpm, Hz.  Overrides a unit in
+        deg, m/s, knots (kn), km/h, rad/s, deg/s, deg/min, rps, rpm, Hz.  Overrides a unit in
         the header.  Default: the header's bracketed unit, else SI/radians.
     fmt : {"auto", "csv", "marin"}
         File format; "auto" picks "marin" for a ``.dat`` file with the MARIN
@@ -154,7 +154,8 @@ def read_log(
     ship_obj = _as_ship(ship, None)
     if sch.fmt == "marin":
         if columns:
-            raise ValueError("columns= does not apply to MARIN .dat files (their columns are fixed)")
+            raise LogError(f"`{p.name}`: columns= (CLI: --columns) does not apply to a MARIN .dat file (its columns "
+                           "are fixed); to read it as a table of your own, pass fmt='csv' (CLI: --format csv)", path=p)
         t, ch, where, units_in, notes = _read_marin(text, p, units or {}, marin_time)
         meta = {}
     else:

@@ -9,17 +9,18 @@ heading in the shipid convention, units from the header or ``units=``
 from __future__ import annotations
 
 import csv
+import re
 import warnings
 from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
 
-from ._text import (_DELIMS, _ISO_RE, _fast_table, _is_number, _iso_seconds, _mostly_numeric, _parse_meta,
-                    _split_header, _to_float)
+from ._text import (_CLOCK_RE, _DECIMAL_COMMA_RE, _DELIMS, _ISO_RE, _clock_seconds, _fast_table, _is_number,
+                    _iso_seconds, _mostly_numeric, _parse_meta, _split_header, _to_float)
 from .marin import _looks_marin
 from .trial_log import LogError, _convert_units, _fmt_value, _short_list, _Where, required_channels
-from .units import SCHEMA, SHIP_CHANNELS
+from .units import SCHEMA, SHIP_CHANNELS, UNITS, unit_key
 
 def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str, str],
               required: Sequence[str], delimiter: str | None, *, skip_rows: int = 0, header: bool = True,
@@ -138,16 +139,47 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
         if len(cands) == 1:
             colmap[want] = cands[0]
             taken.add(cands[0])
-    required = required_channels(required, colmap)[0]  # (velocities may be missing beside a track; said later)
+    kept = required_channels(required, colmap)[0]  # (velocities may be missing beside a track; said later)
+    for c in [c for c in required if c not in kept]:
+        near = [nm for nm in names if nm.lower() == c.lower() and nm in SHIP_CHANNELS]
+        if near:  # not logged -- unless the file's 'U' (the speed over ground) was meant: say how to map it
+            absent.append(f"{c} (the file's '{near[0]}' is read as channel '{near[0]}'; if it is '{c}': "
+                          f"--columns {c}={near[0]})")
+    required = kept
     missing_cols = [c for c in required if c not in colmap]
     if missing_cols:
         c = missing_cols[0]
         single = " (the header is a single column: is the file comma-separated?)" if len(hdr) == 1 else ""
+        other = [d for d in (";", "\t") if d != delim and d in header_line]
+        if len(hdr) == 1 and other:   # delimiter=',' given for a semicolon/tab file
+            cli = "tab" if other[0] == "\t" else other[0]
+            raise LogError(f"`{p.name}` row {h + 1}: the header is one column holding {_DELIMS[other[0]]}s "
+                           f"({_fmt_value(header_line.strip())}); pass delimiter={other[0]!r} (CLI: --delimiter {cli})",
+                           path=p, row=h + 1, value=header_line.strip())
         if _looks_marin(header_line):
             single = " (this looks like a MARIN .dat file: pass fmt='marin')"
+        near = [nm for nm in names if nm.lower() == c.lower() and nm in SHIP_CHANNELS]
+        if near:  # 'U' (the speed over ground) is never taken for 'u' unasked
+            single = f" ('{near[0]}' is read as channel '{near[0]}', not '{c}'; if it is '{c}': --column {c}={near[0]})"
         raise LogError(f"`{p.name}` row {h + 1}: required column '{c}' not found; header has "
                        f"{', '.join(repr(x) for x in hdr)}{single}; rename the column or map it with "
                        f"columns={{'{c}': 'your name'}} (CLI: --column {c}=NAME)", path=p, column=c, row=h + 1)
+    # --- a units row right under the header ("s, m, m, deg, ..."), as some loggers write ----------
+    data_idx = [k for k in data_idx if not lines[k].lstrip().startswith("#")]
+    units_row = None
+    if header and data_idx:
+        cells = split(lines[data_idx[0]])
+        row_units = _units_row(cells, len(hdr))
+        if row_units is not None:
+            units_row = data_idx.pop(0) + 1
+            for j, u in enumerate(row_units):
+                if u is None:
+                    continue
+                if parsed[j][1] is not None and unit_key(parsed[j][1]) != unit_key(u):
+                    raise LogError(f"`{p.name}` row {units_row}: column '{hdr[j]}' has the unit {parsed[j][1]!r} in "
+                                   f"the header but {u!r} in the units row below it; fix one of them, or declare "
+                                   f"the unit with units= (CLI: --units CH=UNIT)", path=p, row=units_row, value=u)
+                parsed[j] = (parsed[j][0], u)
     header_units = {ours: parsed[j][1] for ours, j in colmap.items() if parsed[j][1] is not None}
     file_col = {ours: names[j] or hdr[j] for ours, j in colmap.items()}
     # --- data rows -----------------------------------------------------------------
@@ -158,7 +190,6 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
     rows_txt: list = []
     keep_rows: list[int] = []
     blank_rows: list[int] = []   # rows of empty cells (bare delimiters), dropped with a note
-    data_idx = [k for k in data_idx if not lines[k].lstrip().startswith("#")]
     fast = _fast_table(lines, data_idx, delim, ncol)
     if fast is not None:  # all cells numeric or blank, every row complete: pandas' C parser did the work
         table, keep = fast
@@ -200,16 +231,23 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
             arrays[ours] = _iso_seconds(cols[j], names[j] or hdr[j], where)
             first_stamp = cols[j][0].strip()
             continue
+        if ours == "time" and fast is None and _CLOCK_RE.match(cols[j][0].strip()):
+            arrays[ours] = _clock_seconds(cols[j], names[j] or hdr[j], where)
+            first_stamp = cols[j][0].strip()
+            continue
         arrays[ours] = _to_float(cols[j], ours, names[j] or hdr[j], where, decimal_comma=delim != ",")
     if "time" not in arrays:
         raise LogError(f"`{p.name}` row {h + 1}: no 'time' column; header has {', '.join(repr(x) for x in hdr)}; "
                        "map it with columns={'time': 'your name'}", path=p, column="time", row=h + 1)
     # unknown extra columns: keep when numeric, else ignore with a warning
     notes: list[str] = []
+    if units_row is not None:
+        notes.append(f"row {units_row} under the header read as the columns' units: "
+                     + ", ".join(f"{hdr[j]} [{u}]" for j, (_, u) in enumerate(parsed) if u is not None))
     if absent:
         notes.append(f"optional channel(s) not in the file: {', '.join(absent)}")
     if first_stamp is not None:
-        notes.append(f"time given as date-time stamps; t = 0 s at {first_stamp}")
+        notes.append(f"time given as date-time or clock stamps; t = 0 s at {first_stamp}")
     if blank_rows:
         trailing = blank_rows[0] > rows[-1]
         notes.append(f"{len(blank_rows)} {'trailing ' if trailing else ''}row(s) of empty cells dropped "
@@ -242,9 +280,12 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
         a = _to_float(cols[j], label, label, where, decimal_comma=delim != ",")
         arrays[label] = a
         extra_at[label] = j
-        if parsed[j][1] is not None:
+        if parsed[j][1] is not None and (unit_key(parsed[j][1]) in UNITS or label in units):
             header_units[label] = parsed[j][1]
             file_col[label] = label
+        elif parsed[j][1] is not None:  # an extra column in a unit shipid does not convert (V, %, degC): as is
+            notes.append(f"column '{hdr[j]}' kept as channel '{label}' in its own unit {parsed[j][1]!r} "
+                         "(not a unit shipid converts; the channel is not used by the models)")
     where.sources = {c: f"column {j + 1} '{hdr[j]}'" for c, j in {**colmap, **extra_at}.items()}
     t, ch, units_in = _convert_units(arrays, units, header_units, where, file_col)
     return t, ch, where, units_in, notes, meta
@@ -259,6 +300,34 @@ def _cell_error(p: Path, k: int, line: str, exc: Exception) -> LogError:
     else:
         what = f"cannot be split into cells ({msg}); fix the row's quoting"
     return LogError(f"`{p.name}` row {k + 1}: {what}", path=p, row=k + 1, value=line[:60])
+
+
+#: a date/clock format written where a unit would be (``hh:mm:ss.sss``, ``dd/mm/yyyy hh:mm:ss``)
+_STAMP_FORMAT_RE = re.compile(r"(?=.*[:/])[ymdhsfYMDHSF:/.\- T]+")
+
+
+def _units_row(cells: list[str], ncol: int) -> list[str | None] | None:
+    """The units of a units row under the header (``s, m, [deg], (m/s), -, ...``; a blank or ``-`` cell:
+    no unit), or None when ``cells`` is not one: a units row has one cell per column, no number in any
+    cell, and at least one cell that is a unit shipid knows."""
+    if len(cells) != ncol:
+        return None
+    out: list[str | None] = []
+    known = 0
+    for c in cells:
+        s = c.strip()
+        if _is_number(s) or _DECIMAL_COMMA_RE.match(s):
+            return None
+        if s[:1] in "[(" and s[-1:] in "])":
+            s = s[1:-1].strip()
+        if unit_key(s) in UNITS:
+            known += 1
+            out.append(s)
+        elif s.lower() in ("", "-", "--") or _STAMP_FORMAT_RE.fullmatch(s):  # no unit; a clock format (hh:mm:ss)
+            out.append(None)
+        else:
+            out.append(s)
+    return out if known else None
 
 
 def _find_col(theirs: str, hdr: list[str], names: list[str]) -> int | None:

@@ -20,7 +20,7 @@ import pandas as pd
 
 from .._io import atomic_write_text
 from .ship import ShipParticulars, _as_ship
-from .units import _UNKNOWN_DIMS, SCHEMA, SHIP_CHANNELS, SI_UNIT, UNITS, _units_for
+from .units import _UNKNOWN_DIMS, SCHEMA, SHIP_CHANNELS, SI_UNIT, UNITS, _units_for, unit_key
 
 # physical plausibility limits (SI); see docs/logs.md
 _ABSURD = {"speed": 100.0, "length": 1e8, "rate": 10.0, "revs": 1000.0, "time": 1e10, "angle": 1e6}
@@ -483,12 +483,12 @@ def _convert_units(arrays: dict[str, np.ndarray], units: Mapping[str, str], head
             units_in[name] = SI_UNIT[dim] if dim else ""
             out[name] = a
             continue
-        key = str(unit).strip().lower().replace("°", "deg").replace(" ", "")
+        key = unit_key(unit)
         if key not in UNITS:
             col = (columns_in_file or {}).get(name, name)
             raise LogError(f"{where.label} column '{col}': unknown unit {unit!r}; use one of "
-                           "s, ms, min, h, m, km, nm (nautical mile), rad, deg, m/s, knots (kn), rad/s, deg/s, "
-                           "rps, rpm, Hz",
+                           "s, ms, min, h, m, km, nm (nautical mile), rad, deg, m/s, knots (kn), km/h, rad/s, "
+                           "deg/s, deg/min, rps, rpm, Hz",
                            column=name, value=unit)
         udim, factor = UNITS[key]
         if dim is not None and udim != dim:
@@ -543,6 +543,9 @@ def _finish(t: np.ndarray, ch: dict[str, np.ndarray], *, where: _Where, name: st
         i = int(np.argmax(np.abs(t) > _ABSURD["time"]))
         raise where.error(f"value {_fmt_value(t[i])} s is not a plausible time; give time in seconds",
                           "time", i, value=t[i])
+    if where.rows is not None and n > 1:
+        t = _drop_repeated_rows(t, ch, where, notes)
+        n = t.shape[0]
     if n < min_samples:
         raise where.error(f"only {n} sample(s); at least {min_samples} are needed to identify anything; "
                           "use a longer record", value=n)
@@ -556,7 +559,7 @@ def _finish(t: np.ndarray, ch: dict[str, np.ndarray], *, where: _Where, name: st
                           "time", i, value=t[i])
     # --- channels: finiteness, plausibility, units --------------------------------
     for c, a in ch.items():
-        _check_channel(c, a, where, unit_checks)
+        _check_channel(c, a, where, unit_checks, units_in.get(c))
     if unit_checks and "psi" in ch:
         _check_heading(t, ch, where)
     if unit_checks and ship is not None and "n" in ch and np.isfinite(ch["n"]).any():
@@ -623,11 +626,43 @@ def _finish(t: np.ndarray, ch: dict[str, np.ndarray], *, where: _Where, name: st
                     dropouts=dropouts, units_in=units_in, notes=notes, fmt=fmt, sources=where.sources)
 
 
+def _drop_repeated_rows(t: np.ndarray, ch: dict[str, np.ndarray], where: _Where, notes: list) -> np.ndarray:
+    """A file row that repeats the row before it exactly (time and every channel; loggers that write a buffer
+    twice) carries nothing new: it is dropped, with a note naming its rows (``ch`` and ``where.rows`` are
+    updated in place).  A repeated time with any other value changed stays, for the time check to refuse."""
+    rep = np.flatnonzero(np.diff(t) == 0) + 1
+    if rep.size == 0:
+        return t
+    same = np.ones(rep.size, dtype=bool)
+    for a in ch.values():
+        same &= (a[rep] == a[rep - 1]) | (np.isnan(a[rep]) & np.isnan(a[rep - 1]))
+    if not same.any():
+        return t
+    keep = np.ones(t.size, dtype=bool)
+    keep[rep[same]] = False
+    dropped = [int(r) for r in where.rows[~keep]]
+    notes.append(f"{len(dropped)} row(s) repeating the row above exactly dropped (rows {_short_list(dropped)})")
+    for c in ch:
+        ch[c] = ch[c][keep]
+    where.rows = where.rows[keep]
+    return t[keep]
+
+
 def _deg_hint(c: str, unit: str) -> str:
     return f"pass units={{'{c}': '{unit}'}} (CLI: --units {c}={unit}) or convert"
 
 
-def _check_channel(c: str, a: np.ndarray, where: _Where, unit_checks: bool) -> None:
+def _declared_misfit(c: str, a: np.ndarray, i: int, where: _Where, declared: str, why: str) -> LogError:
+    """The unit a column was declared in (not SI) gives implausible values: say so, not "looks like deg"."""
+    dim = SHIP_CHANNELS[c]
+    tip = " (a marine rate of turn is in deg/min)" if dim == "rate" else ""
+    return where.error(f"value {_fmt_value(a[i])} {SI_UNIT[dim]}, read as {declared}, is not plausible ({why}); "
+                       f"check the unit declared for '{c}'{tip} (or unit_checks=False)", c, i, value=a[i])
+
+
+def _check_channel(c: str, a: np.ndarray, where: _Where, unit_checks: bool, declared: str | None = None) -> None:
+    """Finiteness and plausibility of one SI channel; ``declared``: the unit it was read in (when that is not
+    SI, an implausible value blames that unit rather than suggesting degrees)."""
     inf = np.isinf(a)
     if inf.any():
         i = int(np.argmax(inf))
@@ -642,14 +677,21 @@ def _check_channel(c: str, a: np.ndarray, where: _Where, unit_checks: bool) -> N
             i = int(np.nanargmax(absa))
             raise where.error(f"value {_fmt_value(a[i])} is absurd (|value| > 1e15); fix the cell", c, i, value=a[i])
         return
+    if declared is not None and unit_key(declared) == unit_key(SI_UNIT[dim]):
+        declared = None
     if unit_checks and dim == "rate" and _RATE_DEG_LIMIT < mx <= _RATE_DEG_LIMIT * 180 / math.pi:
         i = int(np.argmax(absa > _RATE_DEG_LIMIT))
+        if declared:
+            raise _declared_misfit(c, a, i, where, declared, f"|{c}| > {_RATE_DEG_LIMIT:g} rad/s is not a ship's "
+                                   "turn rate")
         raise where.error(f"value {_fmt_value(a[i])} looks like deg/s (|{c}| > {_RATE_DEG_LIMIT:g} rad/s = "
                           f"{math.degrees(_RATE_DEG_LIMIT):.0f} deg/s is not a ship's turn rate); "
                           + _deg_hint(c, "deg/s") + " (or unit_checks=False if it really is rad/s)", c, i, value=a[i])
     if unit_checks and c in _CONTROL_ANGLES + _ATTITUDE_ANGLES and math.pi / 2 < mx <= 180.0:
         i = int(np.argmax(absa > math.pi / 2))
         kind = "rudder/fin angle" if c in _CONTROL_ANGLES else "roll/pitch angle"
+        if declared:
+            raise _declared_misfit(c, a, i, where, declared, f"a {kind} beyond 90 deg")
         raise where.error(f"value {_fmt_value(a[i])} looks like degrees (a {kind} beyond 90 deg = 1.571 rad); "
                           + _deg_hint(c, "deg") + " (or unit_checks=False if it really is radians)", c, i, value=a[i])
     limit = _ABSURD[dim]
@@ -661,6 +703,33 @@ def _check_channel(c: str, a: np.ndarray, where: _Where, unit_checks: bool) -> N
                           f"{SI_UNIT[dim]}); check the column and its unit", c, i, value=a[i])
 
 
+def _psi_r_slope(t: np.ndarray, ch: dict[str, np.ndarray], ok: np.ndarray):
+    """Regression slope of the heading increments on the integrated yaw rate (1 when both are in radians) over
+    contiguous valid samples (no dropout, no 2 pi wrap): ``(slope, its standard error)``, or None when r is
+    absent or the ship turns less than 0.2 rad in total (too little to judge)."""
+    if "r" not in ch:
+        return None
+    psi, r = ch["psi"], ch["r"]
+    dt = np.diff(t)
+    med = float(np.median(dt))
+    a, b = ok[:-1], ok[1:]
+    contiguous = (b - a == 1) & (dt[a] <= 3 * med)
+    jump = psi[b] - psi[a]
+    good = contiguous & np.isfinite(r[a]) & np.isfinite(r[b]) & (np.abs(jump) <= math.pi)
+    if good.sum() < 10:
+        return None
+    rdt = 0.5 * (r[a] + r[b])[good] * dt[a][good]
+    dpsi = jump[good]
+    turned = float(np.sum(np.abs(rdt)))
+    den = float(np.sum(rdt * rdt))
+    if not (turned > 0.2 and den > 0):  # at least ~11 deg of turning to judge
+        return None
+    slope = float(np.sum(dpsi * rdt) / den)
+    m = int(good.sum())
+    se = math.sqrt(max(float(np.sum((dpsi - slope * rdt) ** 2)) / (m - 1), 0.0) / den)
+    return slope, se
+
+
 def _check_heading(t: np.ndarray, ch: dict[str, np.ndarray], where: _Where) -> None:
     """Heuristics for a heading in degrees declared as radians (see docs/logs.md)."""
     psi = ch["psi"]
@@ -668,9 +737,12 @@ def _check_heading(t: np.ndarray, ch: dict[str, np.ndarray], where: _Where) -> N
     if ok.size < 2:
         return
     hint = _deg_hint("psi", "deg") + " (or unit_checks=False if it really is radians)"
-    # (1) first valid heading outside +-2 pi: a log normally starts within one turn
+    fit = _psi_r_slope(t, ch, ok)
+    # (1) first valid heading outside +-2 pi: a log normally starts within one turn -- unless the yaw rate
+    # confirms radians (d psi = integral of r within 20 %): an unwrapped heading after turns
     i0 = int(ok[0])
-    if abs(psi[i0]) > 2 * math.pi + 0.01:
+    radians = fit is not None and abs(fit[0] - 1.0) < 0.2 and abs(fit[0]) > 5 * fit[1]
+    if abs(psi[i0]) > 2 * math.pi + 0.01 and not radians:
         raise where.error(f"value {_fmt_value(psi[i0])} looks like degrees (the first heading lies outside "
                           f"+-2 pi rad); " + hint, "psi", i0, value=psi[i0])
     # (2) jumps > pi between consecutive valid samples that are not wrap-arounds (|jump| close to 2 pi)
@@ -687,30 +759,21 @@ def _check_heading(t: np.ndarray, ch: dict[str, np.ndarray], where: _Where) -> N
                           f"previous sample is neither a turn nor a 2 pi wrap-around); " + hint, "psi", i,
                           value=psi[i])
     # (3) heading change against integrated yaw rate
-    if "r" in ch:
+    if fit is not None:
         r = ch["r"]
-        good = contiguous & np.isfinite(r[a]) & np.isfinite(r[b]) & (np.abs(jump) <= math.pi)
-        if good.sum() >= 10:
-            rdt = 0.5 * (r[a] + r[b])[good] * dt[a][good]
-            dpsi = jump[good]
-            turned = float(np.sum(np.abs(rdt)))
-            den = float(np.sum(rdt * rdt))
-            if turned > 0.2 and den > 0:  # at least ~11 deg of turning to judge
-                slope = float(np.sum(dpsi * rdt) / den)
-                # standard error of the slope: flag only slopes clearly away from both 0 (noise) and 1
-                m = int(good.sum())
-                se = math.sqrt(max(float(np.sum((dpsi - slope * rdt) ** 2)) / (m - 1), 0.0) / den)
-                clear = abs(slope) > 5 * se and abs(abs(slope) - 1.0) > 5 * se
-                if clear and 20.0 < abs(slope) < 200.0:
-                    i = int(ok[np.nanargmax(np.abs(psi[ok]))])
-                    raise where.error(f"value {_fmt_value(psi[i])} looks like degrees (heading changes "
-                                      f"{abs(slope):.1f} x faster than the integral of r; 57.3 = deg/rad); "
-                                      + hint, "psi", i, value=psi[i])
-                if clear and 1 / 200.0 < abs(slope) < 1 / 20.0:
-                    i = int(np.nanargmax(np.abs(r)))
-                    raise where.error(f"value {_fmt_value(r[i])} looks like deg/s (the integral of r changes "
-                                      f"{1 / abs(slope):.1f} x faster than the heading; 57.3 = deg/rad); "
-                                      + _deg_hint("r", "deg/s") + " (or unit_checks=False)", "r", i, value=r[i])
-                if slope < -0.5 and clear:
-                    warnings.warn(f"{where.label}: heading psi and yaw rate r have opposite signs "
-                                  f"(d psi/dt = {slope:.2f} r); check the sign conventions", stacklevel=4)
+        slope, se = fit
+        # standard error of the slope: flag only slopes clearly away from both 0 (noise) and 1
+        clear = abs(slope) > 5 * se and abs(abs(slope) - 1.0) > 5 * se
+        if clear and 20.0 < abs(slope) < 200.0:
+            i = int(ok[np.nanargmax(np.abs(psi[ok]))])
+            raise where.error(f"value {_fmt_value(psi[i])} looks like degrees (heading changes "
+                              f"{abs(slope):.1f} x faster than the integral of r; 57.3 = deg/rad); "
+                              + hint, "psi", i, value=psi[i])
+        if clear and 1 / 200.0 < abs(slope) < 1 / 20.0:
+            i = int(np.nanargmax(np.abs(r)))
+            raise where.error(f"value {_fmt_value(r[i])} looks like deg/s (the integral of r changes "
+                              f"{1 / abs(slope):.1f} x faster than the heading; 57.3 = deg/rad); "
+                              + _deg_hint("r", "deg/s") + " (or unit_checks=False)", "r", i, value=r[i])
+        if slope < -0.5 and clear:
+            warnings.warn(f"{where.label}: heading psi and yaw rate r have opposite signs "
+                          f"(d psi/dt = {slope:.2f} r); check the sign conventions", stacklevel=4)

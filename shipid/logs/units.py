@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 #: unit name -> (dimension, factor to SI).  Aliases are lower-case.
 UNITS: dict[str, tuple[str, float]] = {
@@ -9,11 +10,14 @@ UNITS: dict[str, tuple[str, float]] = {
     "m": ("length", 1.0), "km": ("length", 1000.0), "nm": ("length", 1852.0), "nmi": ("length", 1852.0),
     "rad": ("angle", 1.0), "deg": ("angle", math.pi / 180.0), "degree": ("angle", math.pi / 180.0),
     "degrees": ("angle", math.pi / 180.0),
-    "m/s": ("speed", 1.0), "knots": ("speed", 1852.0 / 3600.0), "knot": ("speed", 1852.0 / 3600.0),
+    "m/s": ("speed", 1.0), "km/h": ("speed", 1.0 / 3.6), "kmh": ("speed", 1.0 / 3.6), "kph": ("speed", 1.0 / 3.6),
+    "knots": ("speed", 1852.0 / 3600.0), "knot": ("speed", 1852.0 / 3600.0),
     "kn": ("speed", 1852.0 / 3600.0), "kt": ("speed", 1852.0 / 3600.0), "kts": ("speed", 1852.0 / 3600.0),
-    "rad/s": ("rate", 1.0), "deg/s": ("rate", math.pi / 180.0),
+    "rad/s": ("rate", 1.0), "deg/s": ("rate", math.pi / 180.0), "deg/min": ("rate", math.pi / 180.0 / 60.0),
+    "rad/min": ("rate", 1.0 / 60.0),
     "rps": ("revs", 1.0), "hz": ("revs", 1.0), "1/s": ("revs", 1.0), "rpm": ("revs", 1.0 / 60.0),
-    "1/min": ("revs", 1.0 / 60.0),
+    "1/min": ("revs", 1.0 / 60.0), "r/min": ("revs", 1.0 / 60.0), "rev/min": ("revs", 1.0 / 60.0),
+    "r/s": ("revs", 1.0), "rev/s": ("revs", 1.0),
 }
 
 #: SI unit written for each dimension.
@@ -34,6 +38,13 @@ SCHEMA: tuple[str, ...] = ("time", "x", "y", "psi", "u", "v", "r", "delta", "n")
 
 #: unit name -> dimension (for channels whose meaning is unknown)
 _UNKNOWN_DIMS = {k: v[0] for k, v in UNITS.items()}
+
+
+def unit_key(unit) -> str:
+    """A unit as written in a file or option -> its key in :data:`UNITS` (lower case, no spaces, the degree
+    sign as ``deg``, ``/sec`` as ``/s``): ``"°/s"`` -> ``"deg/s"``, ``"Deg/Sec"`` -> ``"deg/s"``."""
+    key = str(unit).strip().lower().replace("°", "deg").replace(" ", "")
+    return re.sub(r"/sec$", "/s", key)
 
 
 def _units_for(dim: str) -> str:
