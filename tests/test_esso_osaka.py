@@ -109,6 +109,21 @@ def test_cli_fit_wind_current_then_validate_and_report_with_horizons(tmp_path, c
     assert "--horizon ten" in capsys.readouterr().err
 
 
+
+def _wind_copies(tmp_path, rows: int):
+    """The first ``rows`` samples of a measured random run, in the file's own columns, three times: as they are,
+    without the true-wind columns (apparent wind only), and with no wind at all."""
+    import pandas as pd
+
+    raw = pd.read_csv(DATA / "random" / "random_31-Jul-2020_12_29_58.csv").iloc[:rows]
+    orig, app, none = tmp_path / "orig.csv", tmp_path / "apparent_only.csv", tmp_path / "no_wind.csv"
+    raw.to_csv(orig, index=False)
+    true_cols = ["wind_velo_true [m/s]", "wind_dir_true [rad]"]
+    raw.drop(columns=true_cols).to_csv(app, index=False)
+    raw.drop(columns=true_cols + ["wind_velo_relative_mid [m/s]", "wind_dir_relative_mid [rad]"]).to_csv(
+        none, index=False)
+    return orig, app, none
+
 def test_cli_validate_converts_an_apparent_wind_only_log_at_the_edge(tmp_path, capsys):
     """A wind-aware fit validated on a copy of a measured run without its true-wind columns: the true wind
     is converted from the apparent one in memory (said once on stderr), the horizon numbers equal those on
@@ -116,21 +131,13 @@ def test_cli_validate_converts_an_apparent_wind_only_log_at_the_edge(tmp_path, c
     import hashlib
     import json
 
-    import pandas as pd
-
     from shipid.cli import main
     from shipid.environment.cli import add_true_wind
     from shipid.logs import read_log
     from shipid.validation import resolve_model
     from shipid.validation_horizon import horizon_prediction
 
-    raw = pd.read_csv(DATA / "random" / "random_31-Jul-2020_12_29_58.csv").iloc[:400]  # 40 s, the file's columns
-    orig, app, none = tmp_path / "orig.csv", tmp_path / "apparent_only.csv", tmp_path / "no_wind.csv"
-    raw.to_csv(orig, index=False)
-    true_cols = ["wind_velo_true [m/s]", "wind_dir_true [rad]"]
-    raw.drop(columns=true_cols).to_csv(app, index=False)
-    raw.drop(columns=true_cols + ["wind_velo_relative_mid [m/s]", "wind_dir_relative_mid [rad]"]).to_csv(
-        none, index=False)
+    orig, app, none = _wind_copies(tmp_path, 400)  # 40 s
     sha = hashlib.sha256(app.read_bytes()).hexdigest()
     res = tmp_path / "fit.json"
     # the fit reads the apparent-only copy too (the esso-frt schema's wind columns are optional) and converts it
@@ -201,16 +208,9 @@ def test_cli_sample_converts_an_apparent_wind_only_log_at_the_edge(tmp_path, cap
     import hashlib
     import json
 
-    import pandas as pd
-
     from shipid.cli import main
 
-    raw = pd.read_csv(DATA / "random" / "random_31-Jul-2020_12_29_58.csv").iloc[:300]  # 30 s, the file's columns
-    app, none = tmp_path / "apparent_only.csv", tmp_path / "no_wind.csv"
-    true_cols = ["wind_velo_true [m/s]", "wind_dir_true [rad]"]
-    raw.drop(columns=true_cols).to_csv(app, index=False)
-    raw.drop(columns=true_cols + ["wind_velo_relative_mid [m/s]", "wind_dir_relative_mid [rad]"]).to_csv(
-        none, index=False)
+    _, app, none = _wind_copies(tmp_path, 300)  # 30 s
     sha = hashlib.sha256(app.read_bytes()).hexdigest()
     res = tmp_path / "fit.json"
     assert main(["fit", str(app), "--schema", "esso-frt", "--model", "lowspeed", "--wind", "--estimate", "Yv,Nr,wY1",
