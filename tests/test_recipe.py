@@ -335,3 +335,28 @@ def test_speed_scale_of_the_damping_margin():
     still = TrialLog.from_arrays(t, name="s", u=np.zeros(200), v=np.zeros(200), r=np.zeros(200))
     U, why = _speed_scale([still])
     assert np.isnan(U) and why == "no log moves"
+
+
+def test_a_ship_that_never_gets_under_way_is_refused_with_the_reason(tmp_path, capsys):
+    """A log of a ship that barely moves (0.5 mm/s at most: Froude number 8e-5 at 4.36 m) has no manoeuvre to
+    identify: fit_logs and `shipid fit` stop before the filter (which diverged, exit 4) with the speed, the
+    Froude number and what to check (exit 2)."""
+    import pandas as pd
+
+    from shipid.cli import main
+    from shipid.identify.recipe import fit_logs
+
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 60.0, 0.1)
+    df = pd.DataFrame({"time": t, "x": 0.01 * rng.normal(size=t.size), "y": 0.01 * rng.normal(size=t.size),
+                       "psi": 0.001 * rng.normal(size=t.size), "u": 0.0005 * np.sin(t), "v": 0.0, "r": 0.0,
+                       "delta": np.radians(20.0) * (t > 5), "n": 10.0})
+    lg = TrialLog(df, name="moored")
+    with pytest.raises(ValueError, match=r"the ship is not under way in any log: its largest speed is 0.0005 m/s "
+                                         r"\(Froude number 7.6e-05 at Lpp 4.36 m, below 0.01\)"):
+        fit_logs([lg], "kcs-response", lpp=4.36)
+    p = tmp_path / "moored.csv"
+    df.to_csv(p, index=False)
+    assert main(["fit", str(p), "--model", "kcs-response", "--lpp", "4.36", "--no-consistency-checks",
+                 "--no-progress", "-o", str(tmp_path / "r.json")]) == 2
+    assert "not under way" in capsys.readouterr().err and not (tmp_path / "r.json").exists()

@@ -463,6 +463,35 @@ def _lpp_of(logs, lpp=None) -> float:
     return lpps.pop()
 
 
+#: Smallest Froude number U / sqrt(g L) that the fastest sample of the logs must reach for a fit (0.01: 0.054 m/s
+#: for a 3 m model, 0.56 m/s for a 320 m ship; the fastest samples of the Esso Osaka runs, the slowest logs here,
+#: reach 0.024-0.10).
+FN_UNDER_WAY = 0.01
+
+
+def _check_under_way(logs, L: float) -> None:
+    """ValueError when no log's ship gets under way (its largest speed below :data:`FN_UNDER_WAY`): there is no
+    manoeuvre to identify (a moored or drifting ship), and the filter would only diverge.  The speed is
+    hypot(u, v), else the track's (whose position noise can only make it larger: no false refusal)."""
+    top = 0.0
+    for lg in logs:
+        d = lg.data
+        if "u" in d.columns:
+            U = np.hypot(d["u"].to_numpy(float), d["v"].to_numpy(float) if "v" in d.columns else 0.0)
+        elif {"x", "y"} <= set(d.columns) and len(d) > 1:
+            U = np.hypot(np.diff(d["x"].to_numpy(float)), np.diff(d["y"].to_numpy(float))) / np.diff(
+                d["time"].to_numpy(float))
+        else:
+            return  # nothing to judge by
+        if np.isfinite(U).any():
+            top = max(top, float(np.nanmax(U)))
+    fn = top / math.sqrt(9.81 * L)
+    if fn < FN_UNDER_WAY:
+        raise ValueError(f"the ship is not under way in any log: its largest speed is {top:.3g} m/s (Froude number "
+                         f"{fn:.2g} at Lpp {L:g} m, below {FN_UNDER_WAY:g}); there is no manoeuvre to identify -- give "
+                         "logs in which the ship moves (check the speed channel's unit and the ship length)")
+
+
 def metric_residuals(model, logs, *, lpp: float | None = None, tolerances=None, names=None):
     """Closed-loop standard-manoeuvre errors of ``model`` on ``logs`` as a function of its parameters.
 
@@ -683,6 +712,7 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
 
     logs = _repeated_runs(logs, drop_repeated, step)
     L = _lpp_of(logs, lpp)
+    _check_under_way(logs, L)
     m0, why = _start_model(model, params, L)
     # a model with wind/current parts takes its base ship model's defaults
     env = getattr(m0, "base", None) is not None and hasattr(m0, "identifier_settings")
