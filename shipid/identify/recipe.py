@@ -56,6 +56,7 @@ switchable steps (each one recorded in the result's ``settings["recipe"]``, with
 0. **Repeated runs** (``drop_repeated=True``) -- a log whose every sample is a sample of another log (a trimmed
    copy of the same run: :func:`shipid.logs.overlap.repeated_samples`) is dropped, as it would count that run
    twice; logs that share only part of their samples are kept with a warning.  Recorded only when found.
+   A fit whose logs never get under way (:data:`FN_UNDER_WAY`) stops here with the reason.
 
 Only the logs passed in enter any step: held-out runs never do.
 """
