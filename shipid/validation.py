@@ -282,14 +282,24 @@ def validate_one(model: Model, log, *, lpp: float | None = None, rudder_sign: fl
     return res
 
 
+#: Heading change [deg] over a run's longest rudder hold from which validation reports its steady turn (a turn
+#: short of the 360 deg a steady diameter needs is reported as such; the brief holds of the Esso Osaka random,
+#: berthing and zigzag runs turn 0-70 deg, the turning runs' holds 292-868 deg).
+STEADY_REPORT_DEG = 180.0
+
+
 def _steady(log, sim, L: float, rudder_sign: float, res: LogValidation) -> None:
     """A run that is not a standard manoeuvre but holds its rudder through a turn (a turning run started from rest):
     the steady turn of its longest hold (:func:`~shipid.manoeuvres.run_metrics.steady_turn`), measured and in the
-    replay of the same inputs; nothing (and no note) when the run holds no turning rudder angle."""
+    replay of the same inputs; nothing (and no note) when the run holds no turning rudder angle or its hold turns
+    less than :data:`STEADY_REPORT_DEG`."""
     try:
-        res.steady_measured = steady_turn(log, lpp=L, name=getattr(log, "name", None))
+        st = steady_turn(log, lpp=L, name=getattr(log, "name", None))
     except ValueError:
         return
+    if st.heading_change_deg < STEADY_REPORT_DEG:  # a brief hold (random, berthing, zigzag runs): not a turn
+        return
+    res.steady_measured = st
     if not sim.success:
         return
     pred = sim.to_pandas().reset_index()

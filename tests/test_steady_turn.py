@@ -92,3 +92,19 @@ def test_validate_reports_the_steady_turn_of_a_turning_run_started_from_rest():
     p = d["predicted"]
     assert p["hold_start"] == direct["hold_start"] and p["side"] == "port"
     assert d["difference"]["steady_diameter_L"] == pytest.approx(p["steady_diameter_L"] - direct["steady_diameter_L"])
+
+
+def test_validation_leaves_out_brief_holds():
+    """A run whose longest hold turns less than STEADY_REPORT_DEG (a random or zigzag run) gets no steady_turn entry;
+    one that turns more but under 360 deg gets the entry with success False and the reason."""
+    from shipid.logs import TrialLog
+    from shipid.models import get_model
+    from shipid.validation import STEADY_REPORT_DEG, validate_one
+
+    m = get_model("kcs-response")
+    short = TrialLog(_run(turns=0.3)[0], name="short")  # 108 deg in the hold
+    v = validate_one(m, short, lpp=3.0, closed_loop=False)
+    assert v.to_dict()["steady_turn"] == {} and STEADY_REPORT_DEG == 180.0
+    most = TrialLog(_run(turns=0.8)[0], name="most")  # 288 deg
+    d = validate_one(m, most, lpp=3.0, closed_loop=False).to_dict()["steady_turn"]
+    assert d["measured"]["success"] is False and "a steady turn needs 360 deg" in d["measured"]["message"]
