@@ -3,6 +3,10 @@
 :func:`fit_logs` fits any registered ship model to trial logs of any ship and scale in reported,
 switchable steps (each one recorded in the result's ``settings["recipe"]``, with the reason):
 
+0. **Repeated runs** (``drop_repeated=True``) -- a log whose every sample is a sample of another log (a trimmed
+   copy of the same run: :func:`shipid.logs.overlap.repeated_samples`) is dropped, as it would count that run
+   twice; logs that share only part of their samples are kept with a warning.  Recorded only when found.
+   A fit whose logs never get under way (:data:`FN_UNDER_WAY`) stops here with the reason.
 1. **Ship** -- the logs' particulars (one ship; its Lpp) fix the scale of everything below; the start
    model is built at that length (a named parameter set is Froude-scaled to it), so a start never
    comes from another ship's scale.
@@ -52,11 +56,6 @@ switchable steps (each one recorded in the result's ``settings["recipe"]``, with
    motions.  A fit whose own damping is negative is not touched.  On the MARIN KVLCC2 training runs the
    unconstrained ``response-nl`` refinement had b1 +0.0177 and positive sway damping on 17 % of the
    states (self-excited sway in the slow part of the turns); constrained: b1 < 0, 0 % (docs/validation.md).
-
-0. **Repeated runs** (``drop_repeated=True``) -- a log whose every sample is a sample of another log (a trimmed
-   copy of the same run: :func:`shipid.logs.overlap.repeated_samples`) is dropped, as it would count that run
-   twice; logs that share only part of their samples are kept with a warning.  Recorded only when found.
-   A fit whose logs never get under way (:data:`FN_UNDER_WAY`) stops here with the reason.
 
 Only the logs passed in enter any step: held-out runs never do.
 """
