@@ -38,6 +38,7 @@ import pandas as pd
 from .manoeuvres import metrics as manoeuvre_metrics
 from .manoeuvres import ship_info
 from .manoeuvres import steady_turn
+from .manoeuvres.run_metrics import STEADY_REPORT_DEG
 from .models.base import Model
 from .simulate import SimulationResult, replay, replay_errors
 
@@ -280,12 +281,6 @@ def validate_one(model: Model, log, *, lpp: float | None = None, rudder_sign: fl
         notes.append(f"the replay turns to {side_p}, the log to {side_m}: the log's rudder sign convention is "
                      "probably opposite to the model's; use rudder_sign=-1 (--rudder-sign -1)")
     return res
-
-
-#: Heading change [deg] over a run's longest rudder hold from which validation reports its steady turn (a turn
-#: short of the 360 deg a steady diameter needs is reported as such; the brief holds of the Esso Osaka random,
-#: berthing and zigzag runs turn 0-70 deg, the turning runs' holds 292-868 deg).
-STEADY_REPORT_DEG = 180.0
 
 
 def _steady(log, sim, L: float, rudder_sign: float, res: LogValidation) -> None:

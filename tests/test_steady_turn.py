@@ -108,3 +108,28 @@ def test_validation_leaves_out_brief_holds():
     most = TrialLog(_run(turns=0.8)[0], name="most")  # 288 deg
     d = validate_one(m, most, lpp=3.0, closed_loop=False).to_dict()["steady_turn"]
     assert d["measured"]["success"] is False and "a steady turn needs 360 deg" in d["measured"]["message"]
+
+
+def test_cli_metrics_gives_the_steady_turn_of_a_run_started_from_rest(tmp_path, capsys):
+    """`shipid metrics` on runs that are not standard manoeuvres: one started from rest that turns three circles
+    gets its steady turn (exit 0); one that turns too little gets no metrics, its reason, and exit 1 -- no longer
+    exit 2 for the whole command, as a bad input would."""
+    import json
+
+    from shipid.cli import main
+
+    L = 3.0
+    good, short = tmp_path / "turn.csv", tmp_path / "short.csv"
+    _run(L=L)[0].to_csv(good, index=False)
+    _run(turns=0.3)[0].to_csv(short, index=False)
+    out = tmp_path / "m.json"
+    assert main(["metrics", str(good), "--lpp", str(L), "-o", str(out)]) == 0
+    d = json.loads(out.read_text())[0]
+    assert d["manoeuvre"] == "steady turn" and d["success"] and "start from rest" in d["note"]
+    assert d["steady_diameter_L"] == pytest.approx(2 * 6.0 / L, rel=1e-9)
+    capsys.readouterr()
+    assert main(["metrics", str(good), str(short), "--lpp", str(L), "-o", str(out), "--force"]) == 1
+    both = json.loads(out.read_text())
+    assert [e["manoeuvre"] for e in both] == ["steady turn", None] and "start from rest" in both[1]["note"]
+    err = capsys.readouterr().err
+    assert "no standard-manoeuvre metrics or steady turn for short.csv" in err and "Traceback" not in err

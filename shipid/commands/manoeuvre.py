@@ -123,7 +123,7 @@ def _write_or_print(text: str, output, force: bool):
 
 def _metrics(args) -> int:
     from .._io import dumps_json
-    from ..manoeuvres import metrics
+    from ..manoeuvres import NotStandardManoeuvre, metrics
 
     if args.output:
         check_output_path(args.output, force=args.force, inputs=args.logs)
@@ -134,18 +134,48 @@ def _metrics(args) -> int:
     out = []
     rud, chk = parse_zigzag(args.zigzag) if args.zigzag else (None, None)
     for f, log in zip(args.logs, read_logs(args.logs, args)):
-        m = metrics(log, lpp=args.lpp, kind=args.kind, reference_offset=args.reference_offset, name=Path(f).name,
-                    rudder_deg=rud, check_deg=chk)
+        try:
+            m = metrics(log, lpp=args.lpp, kind=args.kind, reference_offset=args.reference_offset, name=Path(f).name,
+                        rudder_deg=rud, check_deg=chk)
+        except NotStandardManoeuvre as exc:  # a run, not a bad input: its steady turn if it turns, else the reason
+            out.append(_not_standard(f, log, args.lpp, exc))
+            continue
         out.append({"file": str(f), **m.to_dict()})
     _write_or_print(dumps_json(out), args.output, args.force)
     if args.output:
         for d in out:
             print(_summary(d["file"], d))
+    bad = [Path(d["file"]).name for d in out if d["manoeuvre"] is None or d.get("success") is False]
+    if bad:
+        print(f"shipid metrics: warning: no standard-manoeuvre metrics or steady turn for {', '.join(bad)} (see "
+              "their notes; judge such runs by shipid validate --horizon)", file=sys.stderr)
+        return 1
     return 0
 
 
+def _not_standard(f, log, lpp, exc) -> dict:
+    """The entry of a run that is not a standard manoeuvre: the steady turn of its rudder hold when the hold turns
+    at least STEADY_REPORT_DEG (manoeuvre "steady turn"), else no metrics (manoeuvre None); the reason in "note"."""
+    from ..manoeuvres import steady_turn
+    from ..manoeuvres.run_metrics import STEADY_REPORT_DEG
+
+    print(f"note: {exc}", file=sys.stderr)
+    try:
+        st = steady_turn(log, lpp=lpp, name=Path(f).name)
+    except ValueError:
+        st = None
+    if st is None or st.heading_change_deg < STEADY_REPORT_DEG:
+        return {"file": str(f), "manoeuvre": None, "note": str(exc)}
+    return {"file": str(f), "manoeuvre": "steady turn", **st.to_dict(), "note": str(exc)}
+
+
 def _summary(label, d) -> str:
-    parts = [f"{k}={d[k]:.3f}" for k in SUMMARY_KEYS if isinstance(d.get(k), float)]
+    if d["manoeuvre"] is None:
+        return f"{label}: no standard manoeuvre"
+    parts = [f"{k}={d[k]:.3f}" for k in SUMMARY_KEYS + ("time_360_s",) if isinstance(d.get(k), float)]
+    if d["manoeuvre"] == "steady turn":
+        parts.insert(0, f"hold {d['rudder_deg']:+.1f} deg from t = {d['hold_start']:.0f} s, "
+                        f"{d['heading_change_deg']:.0f} deg" + ("" if d["success"] else f" ({d['message']})"))
     side = d.get("side") or d.get("first_side")
     return f"{label}: {d['manoeuvre']} ({side}) " + " ".join(parts)
 

@@ -49,7 +49,7 @@ from .laws import RampSchedule, SampledHold, TurningRudder, ZigzagRudder
 from .runner import ManoeuvreResult, ship_info, steady_rps
 from .turning import TurningMetrics, _turning_rows, turning_circle, turning_metrics, turning_sweep
 from .zigzag import ZigzagMetrics, infer_check_angle, rudder_reversals, zigzag, zigzag_metrics
-from .run_metrics import SteadyTurn, detect_manoeuvre, metrics, steady_turn
+from .run_metrics import NotStandardManoeuvre, SteadyTurn, detect_manoeuvre, metrics, steady_turn
 
 __all__ = [
     "TurningMetrics",
@@ -60,6 +60,7 @@ __all__ = [
     "metrics",
     "steady_turn",
     "SteadyTurn",
+    "NotStandardManoeuvre",
     "detect_manoeuvre",
     "detect_execute",
     "imo_limits",

@@ -16,6 +16,12 @@ from .turning import turning_metrics
 from .zigzag import zigzag_metrics
 
 
+class NotStandardManoeuvre(ValueError):
+    """The run is a manoeuvre, but not a standard one (ITTC 7.5-04-02-01: a turning circle or zigzag from a steady
+    approach at a constant engine setting): a start from rest, the propeller astern.  Judge it by open-loop
+    prediction (``--horizon``) or, when it holds its rudder through a turn, by :func:`steady_turn`."""
+
+
 def detect_manoeuvre(delta, threshold_deg: float = 2.0, n=None) -> str:
     """``"zigzag"`` when the rudder goes both ways from its initial value by more than ``threshold_deg``
     after the execute and holds each side beyond half its largest deflection for at least
@@ -34,7 +40,7 @@ def detect_manoeuvre(delta, threshold_deg: float = 2.0, n=None) -> str:
         na = na[np.isfinite(na)]
         if na.size:
             if na.min() < 0.0:
-                raise ValueError(f"not a standard manoeuvre: the propeller runs astern after the execute (n from "
+                raise NotStandardManoeuvre(f"not a standard manoeuvre: the propeller runs astern after the execute (n from "
                                  f"{na.min():.3g} to {na.max():.3g}); turning and zigzag metrics need a constant "
                                  "rate ahead (berthing or random runs: judge them by open-loop prediction, "
                                  "--horizon)")
@@ -76,7 +82,7 @@ def _check_steady_approach(sub: pd.DataFrame) -> None:
         return
     med = float(np.median(after))
     if med > 0 and U[i] < APPROACH_SPEED_RATIO_MIN * med:
-        raise ValueError(f"not a standard manoeuvre: the rudder moves at t = {te:.3g} s at {U[i]:.2g} m/s, under half "
+        raise NotStandardManoeuvre(f"not a standard manoeuvre: the rudder moves at t = {te:.3g} s at {U[i]:.2g} m/s, under half "
                          f"the median speed after it ({med:.2g} m/s): a start from rest, not a steady approach; cut "
                          "the log to its approach (TrialLog.window) or judge it by --horizon")
 
@@ -154,7 +160,7 @@ def metrics(data, *, lpp: float | None = None, kind: str = "auto", reference_off
                                     n=sub["n"].to_numpy(float) if "n" in sub.columns else None)
             _check_steady_approach(sub)
         except ValueError as exc:
-            raise ValueError(f"{label}: {exc}") from None
+            raise type(exc)(f"{label}: {exc}") from None  # (NotStandardManoeuvre stays one)
     if kind == "turning":  # positions and speed must be present on the samples used
         sub = sub.dropna(subset=[c for c in ("x", "y", "u") if c in sub.columns])
     t = sub["time"].to_numpy(float)
@@ -185,6 +191,10 @@ def metrics(data, *, lpp: float | None = None, kind: str = "auto", reference_off
 HOLD_RUDDER_DEG = 1.0
 HOLD_RPS_SHARE = 0.05
 TURN_RUDDER_DEG = 5.0
+#: Heading change [deg] over the hold from which a run's steady turn is reported by ``shipid validate``/``metrics``
+#: (a turn short of the 360 deg a steady diameter needs is reported as such; the brief holds of the Esso Osaka
+#: random, berthing and zigzag runs turn 0-70 deg, the turning runs' holds 292-868 deg).
+STEADY_REPORT_DEG = 180.0
 
 
 @dataclass
