@@ -145,7 +145,8 @@ def _metrics(args) -> int:
     if args.output:
         for d in out:
             print(_summary(d["file"], d))
-    bad = [Path(d["file"]).name for d in out if d["manoeuvre"] is None or d.get("success") is False]
+    bad = [Path(d["file"]).name for d in out
+           if d["manoeuvre"] is None or (d["manoeuvre"] == "steady turn" and not d["success"])]
     if bad:
         print(f"shipid metrics: warning: no standard-manoeuvre metrics or steady turn for {', '.join(bad)} (see "
               "their notes; judge such runs by shipid validate --horizon)", file=sys.stderr)
