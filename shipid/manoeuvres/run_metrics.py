@@ -286,13 +286,13 @@ def _longest_hold(t, delta) -> tuple:
     """``(i0, i1)``: the samples ``i0 .. i1-1`` of the longest stretch (in time) over which the rudder stays within
     :data:`HOLD_RUDDER_DEG` of its angle at ``i0``, that angle at least :data:`TURN_RUDDER_DEG`; ``(None, None)``
     when there is none."""
-    tol, best, i0 = math.radians(HOLD_RUDDER_DEG), (None, None), 0
-    longest = -1.0
-    n = len(delta)
-    while i0 < n:
-        off = np.flatnonzero(np.abs(delta[i0:] - delta[i0]) > tol)
-        i1 = i0 + int(off[0]) if off.size else n
-        if abs(delta[i0]) >= math.radians(TURN_RUDDER_DEG) and t[i1 - 1] - t[i0] > longest:
-            best, longest = (i0, i1), t[i1 - 1] - t[i0]
-        i0 = i1
+    tol, turn = math.radians(HOLD_RUDDER_DEG), math.radians(TURN_RUDDER_DEG)
+    d, tt = np.asarray(delta, dtype=float).tolist(), np.asarray(t, dtype=float).tolist()  # one pass on floats: O(n)
+    best, longest, i0, n = (None, None), -1.0, 0, len(d)
+    for i in range(1, n + 1):
+        if i < n and abs(d[i] - d[i0]) <= tol:
+            continue
+        if abs(d[i0]) >= turn and tt[i - 1] - tt[i0] > longest:
+            best, longest = (i0, i), tt[i - 1] - tt[i0]
+        i0 = i
     return best
