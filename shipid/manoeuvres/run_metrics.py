@@ -40,10 +40,10 @@ def detect_manoeuvre(delta, threshold_deg: float = 2.0, n=None) -> str:
         na = na[np.isfinite(na)]
         if na.size:
             if na.min() < 0.0:
-                raise NotStandardManoeuvre(f"not a standard manoeuvre: the propeller runs astern after the execute (n from "
-                                 f"{na.min():.3g} to {na.max():.3g}); turning and zigzag metrics need a constant "
-                                 "rate ahead (berthing or random runs: judge them by open-loop prediction, "
-                                 "--horizon)")
+                raise NotStandardManoeuvre(
+                    f"not a standard manoeuvre: the propeller runs astern after the execute (n from {na.min():.3g} "
+                    f"to {na.max():.3g}); turning and zigzag metrics need a constant rate ahead (berthing or random "
+                    "runs: judge them by open-loop prediction, --horizon)")
     if up and down:
         # a zigzag holds the rudder on both sides in turn; a turning circle holds one side, with at most brief
         # corrections of the other (the Esso Osaka turning runs: up to 8 % of the time beyond half the largest
@@ -82,9 +82,10 @@ def _check_steady_approach(sub: pd.DataFrame) -> None:
         return
     med = float(np.median(after))
     if med > 0 and U[i] < APPROACH_SPEED_RATIO_MIN * med:
-        raise NotStandardManoeuvre(f"not a standard manoeuvre: the rudder moves at t = {te:.3g} s at {U[i]:.2g} m/s, under half "
-                         f"the median speed after it ({med:.2g} m/s): a start from rest, not a steady approach; cut "
-                         "the log to its approach (TrialLog.window) or judge it by --horizon")
+        raise NotStandardManoeuvre(
+            f"not a standard manoeuvre: the rudder moves at t = {te:.3g} s at {U[i]:.2g} m/s, under half the median "
+            f"speed after it ({med:.2g} m/s): a start from rest, not a steady approach; cut the log to its approach "
+            "(TrialLog.window) or judge it by --horizon")
 
 
 def _frame(data) -> tuple[pd.DataFrame, Any]:
@@ -228,9 +229,10 @@ def steady_turn(data, *, lpp: float | None = None, name: str | None = None) -> S
     """The steady turn of a run that is not a standard turning circle (a start from rest, an operator steering
     before the hold; the Esso Osaka turning runs): the longest stretch over which the rudder stays at one angle of
     at least :data:`TURN_RUDDER_DEG` (within :data:`HOLD_RUDDER_DEG`), ended where the propeller leaves its rate at
-    the stretch's start (:data:`HOLD_RPS_SHARE`), is taken as the turn, its start as the execute, and the steady diameter and speed are computed as for a turning circle (the approach
-    quantities -- advance, tactical diameter, speed loss -- mean nothing without a steady approach and are not
-    given).  ``success`` False (with the reason) when the hold turns less than 360 deg.
+    the stretch's start (:data:`HOLD_RPS_SHARE`), is taken as the turn, its start as the execute, and the steady
+    diameter and speed are computed as for a turning circle (the approach quantities -- advance, tactical diameter,
+    speed loss -- mean nothing without a steady approach and are not given).  ``success`` False (with the reason)
+    when the hold turns less than 360 deg.
 
     Raises ValueError when the run holds no rudder angle of :data:`TURN_RUDDER_DEG` or more, or lacks the channels
     (time, x, y, psi, u, delta)."""
