@@ -38,7 +38,7 @@ import pandas as pd
 from .manoeuvres import metrics as manoeuvre_metrics
 from .manoeuvres import ship_info
 from .manoeuvres import steady_turn
-from .manoeuvres.run_metrics import STEADY_REPORT_DEG
+from .manoeuvres.run_metrics import reported_steady_turn
 from .models.base import Model
 from .simulate import SimulationResult, replay, replay_errors
 
@@ -287,12 +287,9 @@ def _steady(log, sim, L: float, rudder_sign: float, res: LogValidation) -> None:
     """A run that is not a standard manoeuvre but holds its rudder through a turn (a turning run started from rest):
     the steady turn of its longest hold (:func:`~shipid.manoeuvres.run_metrics.steady_turn`), measured and in the
     replay of the same inputs; nothing (and no note) when the run holds no turning rudder angle or its hold turns
-    less than :data:`STEADY_REPORT_DEG`."""
-    try:
-        st = steady_turn(log, lpp=L, name=getattr(log, "name", None))
-    except ValueError:
-        return
-    if st.heading_change_deg < STEADY_REPORT_DEG:  # a brief hold (random, berthing, zigzag runs): not a turn
+    less than :data:`~shipid.manoeuvres.run_metrics.STEADY_REPORT_DEG`."""
+    st = reported_steady_turn(log, lpp=L, name=getattr(log, "name", None))
+    if st is None:  # no hold, or a brief one (random, berthing, zigzag runs): not a turn
         return
     res.steady_measured = st
     if not sim.success:

@@ -99,7 +99,8 @@ def test_validation_leaves_out_brief_holds():
     one that turns more but under 360 deg gets the entry with success False and the reason."""
     from shipid.logs import TrialLog
     from shipid.models import get_model
-    from shipid.validation import STEADY_REPORT_DEG, validate_one
+    from shipid.manoeuvres.run_metrics import STEADY_REPORT_DEG
+    from shipid.validation import validate_one
 
     m = get_model("kcs-response")
     short = TrialLog(_run(turns=0.3)[0], name="short")  # 108 deg in the hold

@@ -157,15 +157,11 @@ def _metrics(args) -> int:
 def _not_standard(f, log, lpp, exc) -> dict:
     """The entry of a run that is not a standard manoeuvre: the steady turn of its rudder hold when the hold turns
     at least STEADY_REPORT_DEG (manoeuvre "steady turn"), else no metrics (manoeuvre None); the reason in "note"."""
-    from ..manoeuvres import steady_turn
-    from ..manoeuvres.run_metrics import STEADY_REPORT_DEG
+    from ..manoeuvres.run_metrics import reported_steady_turn
 
     print(f"note: {exc}", file=sys.stderr)
-    try:
-        st = steady_turn(log, lpp=lpp, name=Path(f).name)
-    except ValueError:
-        st = None
-    if st is None or st.heading_change_deg < STEADY_REPORT_DEG:
+    st = reported_steady_turn(log, lpp=lpp, name=Path(f).name)
+    if st is None:
         return {"file": str(f), "manoeuvre": None, "note": str(exc)}
     return {"file": str(f), "manoeuvre": "steady turn", **st.to_dict(), "note": str(exc)}
 

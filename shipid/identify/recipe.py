@@ -670,7 +670,8 @@ def _repeated_runs(logs, drop: bool, step) -> list:
 
     if len(logs) < 2:
         return logs
-    kept, gone = drop_contained(logs)
+    rows = repeated_samples(logs)  # (one comparison of the samples for both kinds of finding)
+    kept, gone = drop_contained(logs, rows)
     copies = "; ".join(f"all {r['samples']} samples of {r['log']} are samples of {r['in']}" for r in gone)
     if gone and drop:
         step("repeated runs", {"dropped": [r["log"] for r in gone]},
@@ -679,9 +680,10 @@ def _repeated_runs(logs, drop: bool, step) -> list:
     elif gone:
         step("repeated runs", {"kept": [r["log"] for r in gone]}, f"asked to keep them: {copies}")
         warnings.warn(f"fit_logs: logs repeating another log are fitted twice: {copies}", UserWarning, stacklevel=4)
-    rows = repeated_samples(logs)
-    full = {frozenset((r["index"], r["in_index"])) for r in rows if r["share"] == 1.0}  # (kept copies: said above)
-    part = [r for r in rows if r["index"] < r["in_index"] and frozenset((r["index"], r["in_index"])) not in full]
+    names = {lg.name for lg in logs}  # (indices of ``rows`` refer to the logs as given; names to the kept ones)
+    full = {frozenset((r["index"], r["in_index"])) for r in rows if r["share"] == 1.0}  # (copies: said above)
+    part = [r for r in rows if r["index"] < r["in_index"] and frozenset((r["index"], r["in_index"])) not in full
+            and r["log"] in names and r["in"] in names]
     if part:
         shared = "; ".join(f"{r['log']} and {r['in']} share {r['shared']} samples ({r['share']:.0%} of {r['log']})"
                            for r in part)

@@ -85,11 +85,13 @@ def _row_hash(a: np.ndarray) -> np.ndarray:
     return h
 
 
-def drop_contained(logs) -> tuple[list, list[dict]]:
+def drop_contained(logs, rows=None) -> tuple[list, list[dict]]:
     """``logs`` without those whose every compared sample is a sample of another kept log (of two identical
-    logs the first is kept), and the :func:`repeated_samples` rows of the dropped ones (share 1.0)."""
+    logs the first is kept), and the :func:`repeated_samples` rows of the dropped ones (share 1.0).  ``rows``:
+    :func:`repeated_samples` of these logs, when the caller has them already (any ``min_share``)."""
     logs = list(logs)
-    full = [r for r in repeated_samples(logs, min_share=1.0) if r["shared"] == r["samples"]]
+    rows = repeated_samples(logs, min_share=1.0) if rows is None else rows
+    full = [r for r in rows if r["shared"] == r["samples"]]
     dropped: set = set()
     why = []
     for r in sorted(full, key=lambda r: (r["samples"], -r["index"])):  # the shortest copies first

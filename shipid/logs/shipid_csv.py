@@ -140,11 +140,14 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
             colmap[want] = cands[0]
             taken.add(cands[0])
     kept = required_channels(required, colmap)[0]  # (velocities may be missing beside a track; said later)
+    def near(c):  # a known channel of another case ('U', the speed over ground) is never taken for 'u' unasked
+        return next((nm for nm in names if nm.lower() == c.lower() and nm in SHIP_CHANNELS), None)
+
     for c in [c for c in required if c not in kept]:
-        near = [nm for nm in names if nm.lower() == c.lower() and nm in SHIP_CHANNELS]
-        if near:  # not logged -- unless the file's 'U' (the speed over ground) was meant: say how to map it
-            absent.append(f"{c} (the file's '{near[0]}' is read as channel '{near[0]}'; if it is '{c}': "
-                          f"--columns {c}={near[0]})")
+        other = near(c)
+        if other:  # not logged -- unless the file's 'U' (the speed over ground) was meant: say how to map it
+            absent.append(f"{c} (the file's '{other}' is read as channel '{other}'; if it is '{c}': "
+                          f"--columns {c}={other})")
     required = kept
     missing_cols = [c for c in required if c not in colmap]
     if missing_cols:
@@ -158,9 +161,9 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
                            path=p, row=h + 1, value=header_line.strip())
         if _looks_marin(header_line):
             single = " (this looks like a MARIN .dat file: pass fmt='marin')"
-        near = [nm for nm in names if nm.lower() == c.lower() and nm in SHIP_CHANNELS]
-        if near:  # 'U' (the speed over ground) is never taken for 'u' unasked
-            single = f" ('{near[0]}' is read as channel '{near[0]}', not '{c}'; if it is '{c}': --column {c}={near[0]})"
+        other = near(c)
+        if other:
+            single = f" ('{other}' is read as channel '{other}', not '{c}'; if it is '{c}': --column {c}={other})"
         raise LogError(f"`{p.name}` row {h + 1}: required column '{c}' not found; header has "
                        f"{', '.join(repr(x) for x in hdr)}{single}; rename the column or map it with "
                        f"columns={{'{c}': 'your name'}} (CLI: --column {c}=NAME)", path=p, column=c, row=h + 1)

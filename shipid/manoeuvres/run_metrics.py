@@ -284,6 +284,17 @@ def steady_turn(data, *, lpp: float | None = None, name: str | None = None) -> S
     return res
 
 
+def reported_steady_turn(data, *, lpp: float | None = None, name: str | None = None) -> SteadyTurn | None:
+    """:func:`steady_turn` when the run's hold turns at least :data:`STEADY_REPORT_DEG` (what ``shipid validate``
+    and ``shipid metrics`` report for a run that is not a standard manoeuvre), else None (no hold, a brief one,
+    or channels missing)."""
+    try:
+        st = steady_turn(data, lpp=lpp, name=name)
+    except ValueError:
+        return None
+    return st if st.heading_change_deg >= STEADY_REPORT_DEG else None
+
+
 def _longest_hold(t, delta) -> tuple:
     """``(i0, i1)``: the samples ``i0 .. i1-1`` of the longest stretch (in time) over which the rudder stays within
     :data:`HOLD_RUDDER_DEG` of its angle at ``i0``, that angle at least :data:`TURN_RUDDER_DEG`; ``(None, None)``
