@@ -18,10 +18,11 @@ def register(sub) -> None:
     p = sub.add_parser("fit", help="identify model coefficients from trial logs (augmented-state EKF)",
                        description="Identify a model's coefficients from one or more trial logs (CSV in the "
                                    "shipid schema, or MARIN .dat) with the augmented-state EKF.",
-                       epilog="exit status: 0 fit consistent with its noise model; 1 the output-error refinement "
-                              "failed; 2 bad input or option; 3 fit done but NOT consistent (a warning names the "
-                              "channels and likely causes; the result JSON has diagnostics.consistency); "
-                              "4 the filter diverged (result = start values, success false).")
+                       epilog="exit status: 0 the fit's verdict is 'consistent' (the model explains the logs to "
+                              "their noise) or 'model_error' (no data defect; the model misses the logs by more than "
+                              "their noise: one warning line says how much); 2 bad input or option; 3 'defect' (a data or set-up defect is likely: the warning "
+                              "names it, the channel and the option that fixes it); 4 'diverged' (no estimate). The "
+                              "result JSON's 'verdict' holds the grade, the reasons and the numbers.")
     p.add_argument("logs", nargs="+", metavar="LOG", help="trial log files (.csv, MARIN .dat)")
     p.add_argument("--model", default="kcs-response", help="registered model (see `shipid models`)")
     p.add_argument("--params", default=None, metavar="SET|RESULT.json",
@@ -218,43 +219,23 @@ def _fit(args) -> int:
         sign_bounds=args.sign_bounds, physical_damping=not args.no_physical_damping, tune_noise=args.tune_noise,
         progress=progress_on(args), meas_std=meas_std, ekf_options=extra, start_defaults=args.params is None,
         drop_repeated=not args.keep_repeated, log=print))
-    fit, ident = recipe, recipe.ekf
-    result = fit.result()
+    result = recipe.result()
     result.to_json(out, force=args.force)
     _print_result(result)
     print(f"wrote {out}")
-    if not ident.success_:
-        return EXIT_DIVERGED
-    verdict = ident.diagnostics_.get("consistency", {})
-    if not verdict.get("consistent", True):
-        print(_inconsistency_warning(verdict, refined=result.method != "ekf"), file=sys.stderr)
-    damping = result.diagnostics.get("damping") or {}
-    for reason in damping.get("reasons", []):
-        print(f"warning: {reason} (result JSON: diagnostics.damping)", file=sys.stderr)
-    if not result.success:
-        return 1
-    return 0 if verdict.get("consistent", True) else EXIT_INCONSISTENT
+    return _report_verdict(result)
 
 
-#: ``shipid fit`` exit status of a fit that is not consistent with its noise model, and of a diverged filter.
-EXIT_INCONSISTENT, EXIT_DIVERGED = 3, 4
+def _report_verdict(result) -> int:
+    """Print the verdict's one line (stderr; nothing for a consistent fit) and return the exit status."""
+    from ..identify.verdict import exit_status, verdict_of, warning_line
 
-
-def _inconsistency_warning(verdict: dict, refined: bool = False) -> str:
-    """One plain warning for an inconsistent fit: the channels, the findings, the likely causes.  ``refined``:
-    the verdict is the EKF stage's and a refinement followed, so the coefficient values the findings quote are
-    the EKF stage's, not the refined ones printed above (said, so that the two are not confused)."""
-    from ..identify.diagnostics import likely_causes
-
-    reasons = verdict.get("reasons", [])
-    chans = [c for c in verdict.get("channels", {}) if any(f"'{c}'" in r for r in reasons)]
-    where = f" in channel(s) {', '.join(chans)}" if chans else ""
-    causes = likely_causes(reasons)
-    stage = (" (its EKF stage, before the refinement: coefficient values quoted here are that stage's, the "
-             "refined ones are in the table above)") if refined else ""
-    return (f"warning: the fit is not consistent with its noise model{where}{stage}: " + "; ".join(reasons)
-            + (f". Likely causes: {causes}." if causes else ".") + " Do not use these coefficients before the cause "
-            "is found (exit status 3).")
+    v = verdict_of(result)
+    print(f"verdict: {v.grade}", file=sys.stdout)
+    line = warning_line(v)
+    if line:
+        print(line, file=sys.stderr)
+    return exit_status(v)
 
 
 def _print_result(result) -> None:

@@ -11,7 +11,7 @@ import pandas as pd
 
 from ..models.base import Model
 from .data import LogArrays, frozen_mask, noise_std_from_data, prepare_logs, resolution_std
-from .diagnostics import coefficient_plausibility, consistency, identifiability
+from .diagnostics import consistency, identifiability
 from .ekf import EKFOutput, EKFProblem, bf_smooth, rts_smooth, run_ekf
 from .initial import equation_error_fit
 
@@ -699,12 +699,9 @@ class EKFIdentifier:
                     sq += np.where(ok, np.where(np.isfinite(e), e, np.inf) ** 2, 0.0).sum(axis=0)
                     cnt += ok.sum(axis=0)
             ratio = {m: float(np.sqrt(sq[j] / cnt[j]) / sig[j]) if cnt[j] else float("nan") for j, m in enumerate(meas)}
-        est = s["est_idx"]
-        coef_reasons = coefficient_plausibility(s["est_names"], self.coef_.to_numpy()[est],
-                                                self.coef_std_.to_numpy()[est], s["p_base"][est],
-                                                self.prior_std_.to_numpy())
+        # (the coefficients' physics is judged by the verdict, from the model's declared signs and ranges)
         res = consistency(meas, out.innov[0], out.S_diag[0], out.gated[0], pieces, replay_ratio=ratio,
-                          dynamic=dynamic, extra_reasons=coef_reasons)
+                          dynamic=dynamic)
         res["dynamic_channels"] = dynamic
         res["gaps"] = list(self.gap_notes_)
         if not self.success_:

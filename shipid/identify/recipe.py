@@ -228,6 +228,9 @@ class RecipeFit:
             from .diagnostics import damping_check
 
             res.diagnostics["damping"] = damping_check(self.final.to_model(), self.logs)
+        from .verdict import verdict_from_recipe
+
+        res.verdict = verdict_from_recipe(self, res)
         return res
 
     def summary(self) -> str:

@@ -55,7 +55,7 @@ import numpy as np
 
 from .._jit import rebind
 from . import _response_equations as _req
-from .base import Model, batch_shape
+from .base import RUDDER_UNIT_FIX, STERN_RUDDER_SIGNS, Model, batch_shape
 from .prime import FroudeScaled
 from .response import PRIME_EXPONENTS as _SEED_EXPONENTS
 from .response import _rows
@@ -131,6 +131,11 @@ class ResponseNLModel(FroudeScaled, Model):
     #: damping of r (c2 r + c5 |u| r + c7 r|r|); each <= 0 keeps dv/dt per v and dr/dt per r (without the
     #: cross terms) negative at every speed from rest
     dissipative = ("b1", "b5", "b6", "c2", "c5", "c7")
+    #: a stern rudder b3 < 0, c3 > 0; thrust a9 > 0 (the own damping is a sum of terms: damping_check)
+    physics_signs = {"b3": STERN_RUDDER_SIGNS["sway"], "c3": STERN_RUDDER_SIGNS["yaw"],
+                     "a9": (+1, "the propeller pushes the ship ahead for n > 0", ("n",), "check the sign of n (--sign n=-1)")}
+    #: as kcs-response's c3 (the seed terms have the same meaning)
+    physics_ranges = {"c3": (0.92, 1.97, ("delta",), RUDDER_UNIT_FIX)}
     state_names = ("x", "y", "psi", "u", "v", "r")
     input_names = ("delta", "n")
     param_names = SEED_NAMES + EXTRA_NAMES + ASYM_NAMES
