@@ -241,9 +241,11 @@ def _report_verdict(result) -> int:
 def _print_result(result) -> None:
     import pandas as pd
 
+    from ..identify.verdict import plain_message
+
     tab = result.summary()
     with pd.option_context("display.float_format", "{:.5g}".format, "display.width", 120):
-        print(f"model {result.model} ({result.method}): {result.message}")
+        print(f"model {result.model} ({result.method}): {plain_message(result.message)}")
         print(tab.to_string())
     d = result.diagnostics
     if d:

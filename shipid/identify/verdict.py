@@ -50,7 +50,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["Verdict", "GRADES", "EXIT_STATUS", "exit_status", "verdict_of", "assess", "physics_findings",
-           "RANGE_FACTOR", "warning_line", "verdict_from_identifier", "verdict_from_recipe"]
+           "RANGE_FACTOR", "warning_line", "verdict_from_identifier", "verdict_from_recipe", "plain_message"]
 
 #: The grades, best first.
 GRADES = ("consistent", "model_error", "defect", "diverged")
@@ -514,7 +514,7 @@ def assess(*, consistency: dict | None, diverged: bool = False, message: str = "
                                     "fit): add manoeuvres or refit with --sign-bounds"})
     if refinement_failed:
         findings.append({"kind": "refinement", "grade": "defect", "channels": [], "option": "--refine none",
-                         "message": _clip(f"the refinement did not converge ({refinement_failed}): the EKF "
+                         "message": _clip(f"the refinement did not converge ({plain_message(refinement_failed)}): the EKF "
                                           "stage's coefficients stand; use them with --refine none or raise "
                                           "--max-nfev")})
     findings += _consistency_findings(consistency or {}, r)
@@ -595,3 +595,22 @@ def verdict_from_recipe(recipe, result) -> Verdict:
     return assess(consistency=cons, physics=physics, damping=result.diagnostics.get("damping"),
                   logs_found=log_findings(logs), channels=channels, track=track, runs=runs,
                   refinement_failed=refine_msg)
+
+
+#: The optimiser's own stopping messages (scipy.optimize.least_squares) in the user's words.
+_SOLVER_WORDS = (
+    ("Both `ftol` and `xtol` termination conditions are satisfied.", "the cost and the coefficients stopped changing"),
+    ("`ftol` termination condition is satisfied.", "the cost stopped decreasing"),
+    ("`xtol` termination condition is satisfied.", "the coefficients stopped changing"),
+    ("`gtol` termination condition is satisfied.", "the cost's gradient vanished"),
+    ("The maximum number of function evaluations is exceeded.",
+     "the evaluation limit was reached (raise --max-nfev)"),
+)
+
+
+def plain_message(message: str) -> str:
+    """A fit's message with the optimiser's stopping strings in plain words."""
+    text = str(message or "")
+    for raw, plain in _SOLVER_WORDS:
+        text = text.replace(raw, plain)
+    return text

@@ -18,6 +18,7 @@ from typing import Any, Sequence
 
 
 from .._io import OutputExistsError, atomic_write_text
+from ..identify.verdict import plain_message, verdict_of
 from ..validation import LogValidation, load_logs, resolve_model, validate_one
 from . import figures
 
@@ -104,14 +105,30 @@ def _versions_now() -> dict:
 
 
 # ----------------------------------------------------------------------------- sections
+#: Banner colours per grade (background, border).
+_BANNER = {"consistent": ("#eaf6ea", "#3a8a3a"), "model_error": ("#fdf6e3", "#b58900"),
+           "defect": ("#fbeaea", "#b03030"), "diverged": ("#fbeaea", "#b03030")}
+
+
+def verdict_banner(result) -> str:
+    """The report's opening banner: the fit's grade, each reason as a sentence, and what to do."""
+    v = verdict_of(result)
+    bg, border = _BANNER[v.grade]
+    items = "".join(f"<li>{_e(r)}</li>" for r in v.reasons)
+    return (f"<div class=\"verdict\" id=\"verdict\" style=\"background:{bg};border-left:6px solid {border};"
+            f"padding:6px 12px;margin:8px 0\"><p><b>Verdict: {_e(v.grade.replace('_', ' '))}.</b> {_e(v.advice)}</p>"
+            + (f"<ul>{items}</ul>" if items else "") + "</div>")
+
+
 def _section_model(result, model) -> str:
     mod = sys.modules.get(type(model).__module__)
     doc = (mod.__doc__ or "").strip().splitlines()[0] if mod is not None and mod.__doc__ else ""
     s = result.settings or {}
     rows = [("registered model", _e(result.model)), ("description", _e(doc)),
             ("states", _e(", ".join(model.state_names))), ("inputs", _e(", ".join(model.input_names))),
-            ("method", _e(result.method)), ("fit status", _e(("success" if result.success else "FAILED") +
-                                                              (f": {result.message}" if result.message else ""))),
+            ("method", _e(result.method)), ("verdict", _e(verdict_of(result).grade.replace("_", " "))),
+            ("optimiser", _e(("converged" if result.success else "did not converge") +
+                             (f": {plain_message(result.message)}" if result.message else ""))),
             ("log-likelihood", _f(result.loglik, "{:.6g}")), ("created (UTC)", _e(result.created))]
     for key, label in (("n_passes", "EKF passes"), ("discretisation", "discretisation"), ("substeps", "RK4 substeps"),
                        ("param_walk", "parameter random walk")):
@@ -417,7 +434,7 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
         ("summary", "Replay"), ("imo", "IMO criteria"), ("coefficients", "Coefficients"),
         ("identifiability", "Identifiability"), ("model", "Model"), ("logs", "Logs"), ("inputs", "Inputs"),
         ("versions", "Software")))
-    body = [f"<h1>{_e(title)}</h1>",
+    body = [f"<h1>{_e(title)}</h1>", verdict_banner(res),
             f"<p>Model <b>{_e(res.model)}</b> ({_e(res.method)}; "
             f"{'fitted to ' + str(len(res.inputs)) + ' log(s)' if res.inputs else 'no fitted logs recorded'}), "
             f"validated on {len(validations)} log(s) "
