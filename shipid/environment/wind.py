@@ -35,7 +35,7 @@ symmetries and the magnitudes against the ranges every wind-tunnel data set show
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import Mapping
+from typing import ClassVar, Mapping
 
 import numpy as np
 
@@ -118,6 +118,10 @@ class WindForce:
     H_BR: float
     H_C: float
     rho_air: float = RHO_AIR
+    #: Wind parameters the fit recipe estimates by default (``shipid fit --wind``): the leading Fourier components
+    #: of Fujiwara's surge force, side force and yaw moment, as in the Esso Osaka study; the others stay at the
+    #: regression's values from the above-water geometry.
+    recipe_estimate: ClassVar[tuple[str, ...]] = ("wX1", "wY1", "wN1", "wN2")
 
     def __post_init__(self):
         for k in ("lpp", "breadth", "A_T", "A_L", "A_OD", "H_BR", "H_C", "rho_air"):
