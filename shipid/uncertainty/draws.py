@@ -38,6 +38,8 @@ from typing import Any, Sequence
 import numpy as np
 import pandas as pd
 
+from ..identify.result import as_result
+
 __all__ = ["ManoeuvreSpec", "parse_manoeuvre", "parameter_draws", "predict_manoeuvres", "ManoeuvrePrediction",
            "summarise_draws", "imo_probability", "METRIC_KEYS", "replay_draws"]
 
@@ -92,18 +94,6 @@ def parse_manoeuvre(spec) -> ManoeuvreSpec:
 
 
 # ----------------------------------------------------------------------------- draws
-def _result_of(result):
-    from ..identify.result import FitResult, load_result
-
-    if isinstance(result, FitResult):
-        return result
-    if isinstance(result, dict):
-        return FitResult.from_dict(result)
-    if isinstance(result, (str, os.PathLike)):
-        return load_result(result)
-    raise ValueError(f"result: expected a FitResult, its dict or a result JSON path, got {type(result).__name__}")
-
-
 def parameter_draws(result, draws: int, *, seed=None, samples=None, inflation: float = 1.0) -> np.ndarray:
     """``draws`` full parameter vectors (N, np) of the result's model.
 
@@ -123,7 +113,7 @@ def parameter_draws(result, draws: int, *, seed=None, samples=None, inflation: f
 
     The fixed parameters keep the result's values.
     """
-    res = _result_of(result)
+    res = as_result(result)
     n = int(draws)
     if n < 1:
         raise ValueError(f"draws must be a positive integer, got {draws!r}")
@@ -363,7 +353,7 @@ def predict_manoeuvres(result, manoeuvres: Sequence = ("turning:35", "zigzag:10/
     """
     from ..manoeuvres import turning_circle, zigzag
 
-    res = _result_of(result)
+    res = as_result(result)
     if not 0 < level < 1:
         raise ValueError(f"level must be in (0, 1), got {level!r}")
     specs = [parse_manoeuvre(s) for s in manoeuvres]

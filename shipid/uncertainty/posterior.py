@@ -49,6 +49,8 @@ import pandas as pd
 from scipy.special import ndtri
 from scipy.stats import rankdata
 
+from ..identify.result import as_result
+
 __all__ = ["sample_posterior", "PosteriorSamples", "load_samples", "split_rhat", "CONVERGENCE",
            "OutputErrorLikelihood"]
 
@@ -513,9 +515,7 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
         import emcee
     except ImportError:
         raise ValueError("MCMC sampling needs emcee: pip install 'shipid[mcmc]' (or pip install emcee)") from None
-    from .draws import _result_of
-
-    res = _result_of(result)
+    res = as_result(result)
     model = res.to_model()
     names = list(res.cov.index)
     if not names:
