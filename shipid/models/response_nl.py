@@ -55,7 +55,7 @@ import numpy as np
 
 from .._jit import rebind
 from . import _response_equations as _req
-from .base import RUDDER_UNIT_FIX, STERN_RUDDER_SIGNS, Model, batch_shape
+from .base import RUDDER_UNIT_FIX, STERN_RUDDER_SIGNS, Model, RecipeDefaults, batch_shape
 from .prime import FroudeScaled
 from .response import PRIME_EXPONENTS as _SEED_EXPONENTS
 from .response import _rows
@@ -136,6 +136,10 @@ class ResponseNLModel(FroudeScaled, Model):
                      "a9": (+1, "the propeller pushes the ship ahead for n > 0", ("n",), "check the sign of n (--sign n=-1)")}
     #: as kcs-response's c3 (the seed terms have the same meaning)
     physics_ranges = {"c3": (0.92, 1.97, ("delta",), RUDDER_UNIT_FIX)}
+    #: The fit recipe holds the asymmetry terms b0, c0 at their start (the EKF does not identify them from turns
+    #: and zigzags at one rpm: docs/validation.md), and its staged start fits ``kcs-response`` (the 16 terms
+    #: this model extends) at the logs' scale first, the non-linear terms starting at 0.
+    recipe_defaults = RecipeDefaults(fixed=("b0", "c0"), seed_model="kcs-response")
     state_names = ("x", "y", "psi", "u", "v", "r")
     input_names = ("delta", "n")
     param_names = SEED_NAMES + EXTRA_NAMES + ASYM_NAMES
