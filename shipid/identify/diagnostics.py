@@ -112,16 +112,7 @@ def identifiability(
 
 
 # --------------------------------------------------------------------------- consistency of a fit
-#: Rules of the consistency verdict (fixed from clean synthetic logs before any wrong-physics case was
-#: run; see docs/identification.md "Does the fit say when it is wrong?").
-CONSISTENCY_RULES = {
-    "alpha": 1e-3,          # two-sided level of the statistical tests (per channel and test)
-    "nis_factor": 2.0,      # ... and the mean normalised innovation must be outside [1/f, f] to count
-    "lb_lags": 20,          # Ljung-Box lags (at most a tenth of the samples)
-    "rho_limit": 0.3,       # ... and some |autocorrelation| of the normalised innovations above this
-    "replay_factor": 3.0,   # replay RMS of a dynamic channel above this many noise std
-    "gated_fraction": 0.05, # more than this fraction of a channel's measurements rejected by the gate
-}
+from .verdict import CONSISTENCY_RULES  # noqa: E402 (the rules live with the verdict, on the results floor)
 
 
 def ljung_box(x_segments, lags: int):

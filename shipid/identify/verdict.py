@@ -49,8 +49,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Verdict", "GRADES", "EXIT_STATUS", "exit_status", "verdict_of", "assess", "physics_findings",
+__all__ = ["CONSISTENCY_RULES", "Verdict", "GRADES", "EXIT_STATUS", "exit_status", "verdict_of", "assess", "physics_findings",
            "RANGE_FACTOR", "warning_line", "verdict_from_identifier", "verdict_from_recipe", "plain_message"]
+
+#: Rules of the consistency verdict (fixed from clean synthetic logs before any wrong-physics case was
+#: run; see docs/identification.md "Does the fit say when it is wrong?").
+CONSISTENCY_RULES = {
+    "alpha": 1e-3,          # two-sided level of the statistical tests (per channel and test)
+    "nis_factor": 2.0,      # ... and the mean normalised innovation must be outside [1/f, f] to count
+    "lb_lags": 20,          # Ljung-Box lags (at most a tenth of the samples)
+    "rho_limit": 0.3,       # ... and some |autocorrelation| of the normalised innovations above this
+    "replay_factor": 3.0,   # replay RMS of a dynamic channel above this many noise std
+    "gated_fraction": 0.05, # more than this fraction of a channel's measurements rejected by the gate
+}
 
 #: The grades, best first.
 GRADES = ("consistent", "model_error", "defect", "diverged")
@@ -493,8 +504,6 @@ def assess(*, consistency: dict | None, diverged: bool = False, message: str = "
     channels, track, runs : replay numbers (:func:`replay_numbers`)
     refinement_failed : the refinement's message when it did not succeed
     """
-    from .diagnostics import CONSISTENCY_RULES
-
     r = dict(CONSISTENCY_RULES)
     r.update(rules or {})
     channels, track, runs = dict(channels or {}), dict(track or {}), list(runs or [])
