@@ -265,6 +265,9 @@ class EKFIdentifier:
         """
         self._check_settings()
         model = self.model
+        # the trial logs themselves (not frames): the verdict reads their channel-consistency findings
+        self._trial_logs = [lg for lg in (logs if isinstance(logs, (list, tuple)) else [logs])
+                            if hasattr(lg, "channels") and hasattr(lg, "data")]
         arrays, meas = prepare_logs(model, logs)
         p_base, est_idx, est_names = self._parameters()
         nx = model.nx

@@ -580,7 +580,7 @@ def verdict_from_identifier(ident) -> Verdict:
             unit, k = _USER_UNITS[ch]
             channels[ch] = {"rmse": _finite(rr * sig[ch] * k), "unit": unit, "noise": _finite(sig[ch] * k)}
     return assess(consistency=cons, diverged=not ident.success_, message=ident.message_, physics=physics,
-                  logs_found=log_findings(getattr(ident, "trial_logs_", None)), channels=channels)
+                  logs_found=log_findings(getattr(ident, "_trial_logs", None)), channels=channels)
 
 
 def verdict_from_recipe(recipe, result) -> Verdict:
