@@ -97,7 +97,7 @@ def _swapped(logs):  # v and r columns swapped
 
 @pytest.mark.parametrize("case, kind, grade, needle", [
     (_units, "physics_range", "defect", "--units delta=deg"), (_sign, "physics_sign", "defect", "--rudder-sign -1"),
-    (_decimated, "noise_overstated", "defect", "--meas-std"),
+    (_decimated, "sampling", "defect", "full-rate"),
     pytest.param(_noise, "innovations_large", "model_error", "", marks=pytest.mark.slow),
     pytest.param(_swapped, "innovations_coloured", "model_error", "", marks=pytest.mark.slow)],
     ids=lambda v: getattr(v, "__name__", "")[1:] if callable(v) else None)

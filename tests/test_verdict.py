@@ -56,11 +56,21 @@ def test_large_or_coloured_innovations_are_model_error_with_numbers_small_ones_a
     assert any(r.startswith("innovations of r are not white (largest autocorrelation 0.60)") for r in v.reasons)
     line = warning_line(v)
     assert line.startswith("warning: model error -- no data defect found; replay RMSE u 0.031 m/s") and len(line) <= 300
+    # innovations smaller than the noise model's (measured logs with conservative noise levels): a note only
     small = assess(consistency=_cons(u={"nis_mean": 0.2}, v={"nis_mean": 0.3}))
-    assert small.grade == "defect" and exit_status(small) == 3
-    assert small.reasons == ["innovations of u, v are 0.2-0.3 of the noise model's: the noise estimated from the "
-                             "samples includes the motion, as in a decimated or smoothed log; fit the full-rate log "
-                             "or give the sensors' noise with --meas-std CH=STD"]
+    assert small.grade == "consistent" and [f["kind"] for f in small.findings] == ["noise_overstated"]
+    coarse = assess(consistency=_cons(u={"nis_mean": 1.0}), sampling={"log_step": 1.0, "time_constant": 0.83})
+    assert coarse.grade == "defect" and coarse.reasons == [
+        "the logs sample every 1 s, more than half the ship's fastest time constant (0.83 s at the logs' speed): a "
+        "decimated log (or time in the wrong unit); fit the logger's full-rate file"]
+    assert assess(consistency=_cons(u={"nis_mean": 1.0}), sampling={"log_step": 0.1, "time_constant": 0.83}).grade \
+        == "consistent"
+    # a divergence that a log's channel error explains is a defect naming the fix
+    found = [{"kind": "log_velocity_frame", "channels": ["u", "v"], "option": "--velocity-frame earth",
+              "message": "`a.csv`: 'u', 'v' agree with the earth-fixed dx/dt, dy/dt: pass velocity_frame='earth' "
+                         "(CLI: --velocity-frame earth)"}]
+    dv = assess(consistency={}, diverged=True, message="normalised innovation 1e39", logs_found=found)
+    assert dv.grade == "defect" and dv.reasons[0] == found[0]["message"] and exit_status(dv) == 3
     clean = assess(consistency=_cons(u={"nis_mean": 1.02}, r={"nis_mean": 0.97}))
     assert clean.grade == "consistent" and clean.reasons == [] and warning_line(clean) is None
     div = assess(consistency={}, diverged=True, message="the state left the model's range at t = 12.3 s")

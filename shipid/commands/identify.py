@@ -218,12 +218,19 @@ def _fit(args) -> int:
         n_passes=args.passes, max_nfev=args.max_nfev, hold_unresolved=not args.refine_all,
         sign_bounds=args.sign_bounds, physical_damping=not args.no_physical_damping, tune_noise=args.tune_noise,
         progress=progress_on(args), meas_std=meas_std, ekf_options=extra, start_defaults=args.params is None,
-        drop_repeated=not args.keep_repeated, log=print))
+        drop_repeated=not args.keep_repeated, log=_print_step))
     result = recipe.result()
     result.to_json(out, force=args.force)
     _print_result(result)
     print(f"wrote {out}")
     return _report_verdict(result)
+
+
+def _print_step(line: str) -> None:
+    """A recipe step, one line of at most ~300 characters (the full reason is in the result's settings)."""
+    from ..identify.verdict import clip
+
+    print(clip(line))
 
 
 def _report_verdict(result) -> int:
@@ -250,8 +257,34 @@ def _print_result(result) -> None:
     d = result.diagnostics
     if d:
         print(f"condition number of the scaled covariance: {d.get('condition_number', float('nan')):.3g}")
-        for w in d.get("warnings", []):
-            print(f"warning: {w}")
+        for w in identifiability_lines(d):
+            print(w)
+
+
+def identifiability_lines(d: dict) -> list[str]:
+    """The identifiability findings of a fit's diagnostics, one line per kind (at most ~300 characters; every
+    pair and combination is in the result JSON under diagnostics)."""
+    from ..identify.verdict import clip
+
+    out = []
+    pairs = d.get("correlated_pairs") or []
+    if pairs:
+        shown = ", ".join(f"{a}-{b} ({r:+.2f})" for a, b, r in pairs)
+        out.append(clip(f"note: {len(pairs)} strongly correlated pair(s) (the logs determine a combination better "
+                        f"than each; manoeuvres that excite them differently separate them): {shown}"))
+    combos = d.get("unidentified_combinations") or []
+    if combos:
+        shown = "; ".join(c["combination"] for c in combos)
+        out.append(clip(f"note: {len(combos)} combination(s) of scaled coefficients the data do not determine (the "
+                        f"result along them is the prior): {shown}"))
+    if d.get("poorly_determined"):
+        out.append(clip("note: poorly determined (posterior std above half the prior std): "
+                        + ", ".join(d["poorly_determined"])))
+    generic = ("are strongly correlated (rho", "the data do not determine the combination", "poorly determined (")
+    for w in d.get("warnings", []):
+        if not any(g in w for g in generic):
+            out.append(clip(f"warning: {w}"))
+    return out
 
 
 def _new_dir(base: str | None) -> Path:

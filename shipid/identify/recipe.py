@@ -69,7 +69,7 @@ import numpy as np
 import pandas as pd
 
 from .refine import AUTO_REFINE, METRIC_TOL, METRIC_WEIGHT, REFINE_MODES, _kinds, metric_residuals, refine_fit
-from .sampling import (LINEAR_DRIFT_DEG, MIN_WINDOW_SAMPLES, SAMPLES_PER_TAU, _every, _log_step,
+from .sampling import (LINEAR_DRIFT_DEG, MIN_WINDOW_SAMPLES, SAMPLES_PER_TAU, _every, _log_step, every_kth,
                        _lpp_of, choose_sampling, common_grid, linear_sway_yaw, linear_window)
 
 __all__ = ["fit_logs", "RecipeFit", "neutral_rudder_angle", "approach_segment", "choose_sampling", "common_grid",
@@ -103,6 +103,10 @@ class RecipeFit:
     free_in_refine: list = field(default_factory=list)
     lpp: float | None = None
     metric_weight: float | None = None
+    #: the logs as given (before the recipe's stride and linear range): the verdict checks their channels
+    source_logs: list = field(default_factory=list)
+    #: ``{"log_step": s, "time_constant": s}`` of the logs and the start model (the verdict's sampling rule)
+    sampling: dict = field(default_factory=dict)
 
     @property
     def final(self):
@@ -153,6 +157,18 @@ class RecipeFit:
 
     def summary(self) -> str:
         return "\n".join(f"recipe: {s['step']}: {s['value']} -- {s['reason']}" for s in self.steps)
+
+
+def _sampling_check(model, logs) -> dict:
+    """The logs' sample interval and the start model's fastest time constant at their speed (empty when
+    unknown): the verdict calls a log that samples the ship's fastest motion fewer than twice decimated."""
+    from .sampling import fastest_time_constant
+
+    try:
+        tau = fastest_time_constant(model, logs)[0]
+        return {"log_step": float(_log_step(logs)), "time_constant": float(tau)}
+    except (ValueError, np.linalg.LinAlgError, ZeroDivisionError):
+        return {}
 
 
 def current_start(ekf):
@@ -413,7 +429,7 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         L0, h0 = defaults.sampling
         h = h0 * math.sqrt(L / L0)
         k = max(1, int(round(h / dt_log)))
-        reason = (f"every {k}. sample ({k * dt_log:.3g} s): {name}'s recipe step {h0:g} s at Lpp {L0:g} m"
+        reason = (f"{every_kth(k)} ({k * dt_log:.3g} s): {name}'s recipe step {h0:g} s at Lpp {L0:g} m"
                   f", Froude-scaled to {h:.3g} s at {L:g} m, log step {dt_log:.3g} s")
         if defaults.substeps is not None and "substeps" not in ekf_opts:
             ekf_opts["substeps"] = defaults.substeps
@@ -426,7 +442,7 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         k = int(dt)
         if k < 1:
             raise ValueError(f"dt={dt!r}: give 'auto', None or a positive integer sample stride")
-        reason = f"every {k}. sample (asked)"
+        reason = f"{every_kth(k)} (asked)"
     step("sampling", k, reason)
     used = [_every(lg, k) for lg in logs]
     if max_drift_deg == "auto":
@@ -561,7 +577,8 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         ekf = EKFIdentifier(m0, estimate=est, fixed=fix or None, n_passes=n_passes, tune_noise=tune_noise,
                             progress=progress, meas_std=meas_std, **{**ekf_opts, "gate": None}).fit(used)
         step("EKF", ekf.message_, f"refitted without innovation gating: with the default gate the filter failed ({first})")
-    fit = RecipeFit(ekf=ekf, steps=steps, logs=used, free_in_refine=free_in_refine, lpp=L)
+    fit = RecipeFit(ekf=ekf, steps=steps, logs=used, free_in_refine=free_in_refine, lpp=L, source_logs=logs,
+                    sampling=_sampling_check(m0, logs))
     mode = refine
     if mode == "auto" and (env or not defaults.auto_refine):
         mode = None

@@ -28,15 +28,19 @@ Every fit result carries a :class:`Verdict` with one of four grades:
       non-dimensional value lies outside ``Model.physics_ranges`` (the span of the published ship sets
       widened by :data:`RANGE_FACTOR`, chosen so that a degree/radian confusion, a factor 57.3, always
       leaves it);
-    * innovations *smaller* than the noise model predicts (mean normalised innovation below
-      ``1 / nis_factor`` and outside its chi-square band): model-form error only ever adds to the
-      innovations, so a noise level overstated by the data is a property of the logs (decimated or
-      pre-smoothed channels, whose noise estimated from second differences includes the dynamics);
+    * a log step longer than half the start model's fastest time constant at the logs' speed (fewer than two
+      samples per time constant: the sampling theorem's limit for the fastest motion the model has; a log
+      decimated or time in the wrong unit);
     * a fitted model whose own sway or yaw damping is positive along the logged motions
       (:func:`~shipid.identify.diagnostics.damping_check`): an ill-posed fit.
 
 ``diverged``
-    The filter diverged: there is no estimate.
+    The filter diverged and no data defect explains it: there is no estimate.  (When a channel-consistency
+    error of the logs explains it, the grade is ``defect`` and names the fix.)
+
+Innovations *smaller* than the noise model predicts are no grade of their own: on measured logs the noise
+levels are declared conservatively or estimated from second differences that include the motion, and the
+MARIN KVLCC2 and Esso Osaka fits show mean normalised innovations of 0.06-0.44 in their dynamic channels.
 
 :func:`exit_status` maps a result (or its verdict) to the exit status of ``shipid fit``: 0 for
 ``consistent`` and ``model_error``, 3 for ``defect``, 4 for ``diverged`` (:data:`EXIT_STATUS`).  Other
@@ -50,7 +54,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["CONSISTENCY_RULES", "Verdict", "GRADES", "EXIT_STATUS", "exit_status", "verdict_of", "assess", "physics_findings",
-           "RANGE_FACTOR", "warning_line", "verdict_from_identifier", "verdict_from_recipe", "plain_message"]
+           "RANGE_FACTOR", "warning_line", "clip", "time_constant_at", "verdict_from_identifier", "verdict_from_recipe", "plain_message"]
 
 #: Rules of the consistency verdict (fixed from clean synthetic logs before any wrong-physics case was
 #: run; see docs/identification.md "Does the fit say when it is wrong?").
@@ -205,14 +209,15 @@ def warning_line(result) -> str | None:
         return None
     if v.grade == "model_error":
         nums = _numbers_line(v)
-        return _clip(f"warning: model error -- no data defect found; {nums or 'the model misses the logs by more than their noise'}"
+        return clip(f"warning: model error -- no data defect found; {nums or 'the model misses the logs by more than their noise'}"
                      " (result JSON: verdict)")
     first = v.reasons[0] if v.reasons else ""
     more = f" (+{len(v.reasons) - 1} more in the result JSON: verdict)" if len(v.reasons) > 1 else ""
-    return _clip(f"{'error' if v.grade == 'diverged' else 'warning'}: {v.grade} -- {first}{more}")
+    return clip(f"{'error' if v.grade == 'diverged' else 'warning'}: {v.grade} -- {first}{more}")
 
 
-def _clip(text: str, limit: int = 300) -> str:
+def clip(text: str, limit: int = 300) -> str:
+    """``text`` cut at a word to at most ``limit`` characters (ending in ' ...' when cut)."""
     if len(text) <= limit:
         return text
     cut = text[: limit - 4].rsplit(" ", 1)[0]
@@ -240,6 +245,28 @@ def _numbers_line(v: Verdict) -> str:
 
 
 # --------------------------------------------------------------------------- physics plausibility
+def time_constant_at(model, speed: float) -> float:
+    """The fastest time constant [s] of ``model``'s surge, sway and yaw (its Jacobian's largest decay rate) in
+    straight running at ``speed`` [m/s], with the propeller rate that holds that speed.  ValueError when it has
+    no decaying mode."""
+    from ..manoeuvres import steady_rps
+
+    n = float(steady_rps(model, speed)[0]) if "n" in model.input_names else 0.0
+    x = np.zeros(model.nx)
+    x[model.state_index("u")] = speed
+    u = np.zeros(model.nu)
+    if "n" in model.input_names:
+        u[model.input_index("n")] = n
+    J = np.asarray(model.jac_x(0.0, x, u), dtype=float)
+    dyn = [model.state_index(s) for s in ("u", "v", "r") if s in model.state_names]
+    rates = np.abs(np.linalg.eigvals(J[np.ix_(dyn, dyn)]).real)
+    rates = rates[rates > 0]
+    if not rates.size:
+        raise ValueError("no decaying mode")
+    return 1.0 / float(rates.max())
+
+
+
 def logs_speed(arrays_or_logs) -> float:
     """Median speed through the water [m/s] of the logged samples moving ahead (``hypot(u, v)``), from
     TrialLogs or the identifier's arrays (``.Y`` with channel names ``.meas``); NaN when unknown."""
@@ -327,7 +354,7 @@ def _group(findings: list[dict]) -> list[str]:
         if len(fs) > 1:
             head += f" (and {len(fs) - 1} more of this kind"
             head += f"; channels {', '.join(chans)})" if chans else ")"
-        out.append(_clip(head))
+        out.append(clip(head))
     return out
 
 
@@ -354,12 +381,11 @@ def _consistency_findings(cons: dict, rules: dict) -> list[dict]:
     out = []
     if small:
         chans = [c for c, _ in small]
-        out.append({"kind": "noise_overstated", "grade": "defect", "channels": chans,
+        out.append({"kind": "noise_overstated", "grade": "note", "channels": chans,
                     "option": "--meas-std",
                     "message": f"innovations of {', '.join(chans)} are {_fmt(min(m for _, m in small))}-"
-                               f"{_fmt(max(m for _, m in small))} of the noise model's: the noise estimated from "
-                               "the samples includes the motion, as in a decimated or smoothed log; fit the "
-                               "full-rate log or give the sensors' noise with --meas-std CH=STD"})
+                               f"{_fmt(max(m for _, m in small))} of the noise model's: the noise levels are "
+                               "conservative (declared, or estimated from samples that include the motion)"})
     if large:
         chans = [c for c, _ in large]
         out.append({"kind": "innovations_large", "grade": "model_error", "channels": chans, "option": "",
@@ -491,7 +517,7 @@ def _finite(v):
 def assess(*, consistency: dict | None, diverged: bool = False, message: str = "", physics: list | None = None,
            damping: dict | None = None, logs_found: list | None = None, channels: dict | None = None,
            track: dict | None = None, runs: list | None = None, rules: dict | None = None,
-           refinement_failed: str | None = None) -> Verdict:
+           refinement_failed: str | None = None, sampling: dict | None = None) -> Verdict:
     """Grade a fit from its parts (see the module docstring for the rules).
 
     Parameters
@@ -503,15 +529,24 @@ def assess(*, consistency: dict | None, diverged: bool = False, message: str = "
     logs_found : findings of :func:`log_findings`
     channels, track, runs : replay numbers (:func:`replay_numbers`)
     refinement_failed : the refinement's message when it did not succeed
+    sampling : ``{"log_step": s, "time_constant": s}`` (the recipe's); see the module docstring
     """
     r = dict(CONSISTENCY_RULES)
     r.update(rules or {})
     channels, track, runs = dict(channels or {}), dict(track or {}), list(runs or [])
-    if diverged:
-        return Verdict("diverged", [_clip(f"the filter diverged: {message}" if message else "the filter diverged")],
-                       [{"kind": "diverged", "grade": "diverged", "channels": [], "option": "", "message": message}],
-                       channels, track, runs)
     findings = [dict(f, grade="defect") for f in (logs_found or [])]
+    step, tau = (sampling or {}).get("log_step"), (sampling or {}).get("time_constant")
+    if step and tau and step > 0.5 * tau:
+        findings.append({"kind": "sampling", "grade": "defect", "channels": [], "option": "",
+                         "message": f"the logs sample every {step:.3g} s, more than half the ship's fastest time "
+                                    f"constant ({tau:.3g} s at the logs' speed): a decimated log (or time in the wrong "
+                                    "unit); fit the logger's full-rate file"})
+    if diverged:
+        div = {"kind": "diverged", "grade": "diverged", "channels": [], "option": "", "message": message}
+        text = clip(f"the filter diverged: {message}" if message else "the filter diverged")
+        if findings:   # a data defect found in the logs explains the divergence: name it and its fix
+            return Verdict("defect", _group(findings) + [text], findings + [div], channels, track, runs)
+        return Verdict("diverged", [text], [div], channels, track, runs)
     findings += [dict(f, grade="defect") for f in (physics or [])]
     if damping and damping.get("physical") is False:
         what = [s for s in ("v", "r") if (damping.get(s) or {}).get("fraction_positive") not in (None, 0.0)
@@ -523,11 +558,11 @@ def assess(*, consistency: dict | None, diverged: bool = False, message: str = "
                                     "fit): add manoeuvres or refit with --sign-bounds"})
     if refinement_failed:
         findings.append({"kind": "refinement", "grade": "defect", "channels": [], "option": "--refine none",
-                         "message": _clip(f"the refinement did not converge ({plain_message(refinement_failed)}): the EKF "
+                         "message": clip(f"the refinement did not converge ({plain_message(refinement_failed)}): the EKF "
                                           "stage's coefficients stand; use them with --refine none or raise "
                                           "--max-nfev")})
     findings += _consistency_findings(consistency or {}, r)
-    defects = [f for f in findings if f["grade"] == "defect"]
+    defects = [f for f in findings if f["grade"] == "defect"]  # ("note" findings stay in the JSON only)
     errors = [f for f in findings if f["grade"] == "model_error"]
     if defects:
         grade = "defect"
@@ -535,7 +570,7 @@ def assess(*, consistency: dict | None, diverged: bool = False, message: str = "
     elif errors:
         grade = "model_error"
         nums = _numbers_line(Verdict("model_error", [], [], channels, track, runs))
-        reasons = ([_clip(f"the model misses the logs by more than their noise: {nums}")] if nums else []) \
+        reasons = ([clip(f"the model misses the logs by more than their noise: {nums}")] if nums else []) \
             + _group(errors)
     else:
         grade, reasons = "consistent", []
@@ -579,8 +614,19 @@ def verdict_from_identifier(ident) -> Verdict:
         if ch in _USER_UNITS and rr is not None and ch in sig:
             unit, k = _USER_UNITS[ch]
             channels[ch] = {"rmse": _finite(rr * sig[ch] * k), "unit": unit, "noise": _finite(sig[ch] * k)}
+    sampling = {}
+    s = getattr(ident, "_setup", None) or {}
+    steps = [np.diff(a.t) for a in s.get("arrays", []) if a.t.size > 1]
+    speed = _arrays_speed(ident)
+    if steps and np.isfinite(speed) and speed > 0:
+        try:
+            sampling = {"log_step": float(np.median(np.concatenate(steps))),
+                        "time_constant": time_constant_at(ident.model, speed)}
+        except (ValueError, np.linalg.LinAlgError, ZeroDivisionError):
+            sampling = {}
     return assess(consistency=cons, diverged=not ident.success_, message=ident.message_, physics=physics,
-                  logs_found=log_findings(getattr(ident, "_trial_logs", None)), channels=channels)
+                  logs_found=log_findings(getattr(ident, "_trial_logs", None)), channels=channels,
+                  sampling=sampling)
 
 
 def verdict_from_recipe(recipe, result) -> Verdict:
@@ -589,8 +635,11 @@ def verdict_from_recipe(recipe, result) -> Verdict:
     and the logs' channel-consistency errors."""
     ekf = recipe.ekf
     cons = (getattr(ekf, "diagnostics_", None) or {}).get("consistency") or {}
+    source = list(getattr(recipe, "source_logs", None) or recipe.logs or [])
+    sampling = getattr(recipe, "sampling", None)
     if not ekf.success_:
-        return assess(consistency=cons, diverged=True, message=ekf.message_)
+        return assess(consistency=cons, diverged=True, message=ekf.message_, logs_found=log_findings(source),
+                      sampling=sampling)
     final = recipe.final
     model = final.to_model()
     logs = list(recipe.logs or [])
@@ -602,8 +651,8 @@ def verdict_from_recipe(recipe, result) -> Verdict:
     if recipe.refiner is not None and not recipe.refiner.success_:
         refine_msg = str(recipe.refiner.message_)
     return assess(consistency=cons, physics=physics, damping=result.diagnostics.get("damping"),
-                  logs_found=log_findings(logs), channels=channels, track=track, runs=runs,
-                  refinement_failed=refine_msg)
+                  logs_found=log_findings(source), channels=channels, track=track, runs=runs,
+                  refinement_failed=refine_msg, sampling=sampling)
 
 
 #: The optimiser's own stopping messages (scipy.optimize.least_squares) in the user's words.

@@ -101,7 +101,7 @@ _PARAMS = (
 
 
 class GliderModel(Model):
-    """Spherical-nose underwater glider of seed 004, surge/heave/pitch.
+    """Spherical-nose underwater glider in the vertical plane, surge/heave/pitch.
 
     States ``x, z, theta, u, w, q`` (z positive down = depth); input
     ``delta`` (fin incidence [rad]); 20 parameters (see :attr:`units`).  The

@@ -54,7 +54,7 @@ PRIME_EXPONENTS = {
 
 
 class KCSResponseModel(FroudeScaled, Model):
-    """The seed-002 KCS response model (16 coefficients a1..a9, b1..b4, c1..c3).
+    """The KCS response model of free-running identification by augmented-state EKF (16 coefficients a1..a9, b1..b4, c1..c3).
 
     Parameter sets shipped: ``"synthetic-truth"`` (default; the documented set
     the bundled synthetic logs were generated with, see ``data/README.md``) and
@@ -121,7 +121,7 @@ class KCSResponseModel(FroudeScaled, Model):
     def identifiability_notes(self, arrays, estimated) -> list[str]:
         """Warn when n is constant over all logs: u, u*n and n^2 are then collinear."""
         n = np.concatenate([a.U[:, 1] for a in arrays])
-        if not {"a1", "a8", "a9"} & set(estimated) or n.size == 0:
+        if not {"a1", "a8", "a9"} <= set(estimated) or n.size == 0:  # one of them held: the others separate
             return []
         n_mean = float(np.mean(n))
         if np.ptp(n) <= 0.01 * max(abs(n_mean), 1e-9):

@@ -95,7 +95,7 @@ _POS = {"x": _req.NL_JX_POS, "p": _req.NL_JP_POS, "u": _req.NL_JU_POS}
 
 
 class ResponseNLModel(FroudeScaled, Model):
-    """Seed-002 response model with speed-dependent non-linear sway/yaw damping (29 coefficients).
+    """The KCS response model with speed-dependent non-linear sway/yaw damping (29 coefficients).
 
     The coefficients are dimensional (SI, as ``kcs-response``) and belong to a
     ship of length ``lpp``; :meth:`to_prime`/:meth:`from_prime` convert them
