@@ -78,14 +78,17 @@ def test_large_or_coloured_innovations_are_model_error_with_numbers_small_ones_a
     assert warning_line(div) == "error: diverged -- the filter diverged: the state left the model's range at t = 12.3 s"
 
 
-def test_refinement_that_did_not_converge_and_unphysical_damping_are_defects_in_plain_words():
+def test_refinement_that_did_not_converge_is_a_defect_unphysical_damping_a_model_error_said_first():
     v = assess(consistency=_cons(u={"nis_mean": 1.0}),
-               refinement_failed="The maximum number of function evaluations is exceeded.",
-               damping={"physical": False, "v": {"fraction_positive": 0.12}, "r": {"fraction_positive": 0.0}})
+               refinement_failed="The maximum number of function evaluations is exceeded.")
     assert v.grade == "defect"
-    assert v.reasons[0] == ("the fitted model's own sway damping is positive along the logged motions (self-excited "
-                            "motion, an ill-posed fit): add manoeuvres or refit with --sign-bounds")
-    assert "the evaluation limit was reached (raise --max-nfev)" in v.reasons[1] and "`" not in v.reasons[1]
+    assert "the evaluation limit was reached (raise --max-nfev)" in v.reasons[0] and "`" not in v.reasons[0]
+    u = assess(consistency=_cons(x={"nis_mean": 4.0}),
+               damping={"physical": False, "v": {"fraction_positive": 0.12}, "r": {"fraction_positive": 0.0}})
+    assert u.grade == "model_error" and exit_status(u) == 0
+    line = warning_line(u)
+    assert line.startswith("warning: model error -- no data defect found, but the fitted model is not physical: its "
+                           "own sway damping is positive along the logged motions") and len(line) <= 300
     assert plain_message("x: `ftol` termination condition is satisfied.") == "x: the cost stopped decreasing"
 
 

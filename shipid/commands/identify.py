@@ -228,9 +228,9 @@ def _fit(args) -> int:
 
 def _print_step(line: str) -> None:
     """A recipe step, one line of at most ~300 characters (the full reason is in the result's settings)."""
-    from ..identify.verdict import clip
+    from ..identify.verdict import clip, plain_message
 
-    print(clip(line))
+    print(clip(plain_message(line)))
 
 
 def _report_verdict(result) -> int:

@@ -407,6 +407,7 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
     L = _lpp_of(logs, lpp)
     _check_under_way(logs, L)
     m0, why = _start_model(model, params, L)
+    sampling_check = _sampling_check(m0, logs)  # the start model as built, before any start values from the logs
     # a model with wind/current parts takes its base ship model's defaults
     env = getattr(m0, "base", None) is not None and hasattr(m0, "identifier_settings")
     name = m0.base.name if env else m0.name
@@ -578,7 +579,7 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
                             progress=progress, meas_std=meas_std, **{**ekf_opts, "gate": None}).fit(used)
         step("EKF", ekf.message_, f"refitted without innovation gating: with the default gate the filter failed ({first})")
     fit = RecipeFit(ekf=ekf, steps=steps, logs=used, free_in_refine=free_in_refine, lpp=L, source_logs=logs,
-                    sampling=_sampling_check(m0, logs))
+                    sampling=sampling_check)
     mode = refine
     if mode == "auto" and (env or not defaults.auto_refine):
         mode = None

@@ -22,17 +22,22 @@ Every fit result carries a :class:`Verdict` with one of four grades:
       the ship moves ahead): these compare measured channels with each other through kinematics, with no
       model at all;
     * a well-determined coefficient (more than 3 standard deviations from zero, posterior standard
-      deviation below half the prior's) with the sign physics fixes under shipid's conventions
-      (``Model.physics_signs``: own sway and yaw damping negative, a stern rudder's yaw moment positive
-      and its sway force negative for positive rudder, resistance and rudder lift positive), or whose
-      non-dimensional value lies outside ``Model.physics_ranges`` (the span of the published ship sets
-      widened by :data:`RANGE_FACTOR`, chosen so that a degree/radian confusion, a factor 57.3, always
-      leaves it);
+      deviation below half the prior's) of an *input* with the sign physics fixes under shipid's conventions
+      (``Model.physics_signs``: a stern rudder's yaw moment positive and its sway force negative for positive
+      rudder, rudder lift and thrust positive), or whose non-dimensional value lies outside
+      ``Model.physics_ranges`` (the span of the published ship sets widened by :data:`RANGE_FACTOR`, chosen so
+      that a degree/radian confusion, a factor 57.3, always leaves it): a linear-in-the-input term absorbs a
+      sign or scale error of its input exactly, with white innovations, so only physics can see it;
     * a log step longer than half the start model's fastest time constant at the logs' speed (fewer than two
       samples per time constant: the sampling theorem's limit for the fastest motion the model has; a log
       decimated or time in the wrong unit);
-    * a fitted model whose own sway or yaw damping is positive along the logged motions
-      (:func:`~shipid.identify.diagnostics.damping_check`): an ill-posed fit.
+
+A fitted model that is not physical in its *own* motion -- a damping coefficient with the wrong sign
+(``physics_signs`` of a state: own sway and yaw damping negative, resistance positive) or an own sway or yaw
+damping that is positive along the logged motions (:func:`~shipid.identify.diagnostics.damping_check`) -- is
+``model_error``, said first: model-form error alone produces it (a model without the wind that acts on the
+logs, or linear derivatives carried beyond their drift range), so it names no data defect, but the model is
+not to be used for prediction.
 
 ``diverged``
     The filter diverged and no data defect explains it: there is no estimate.  (When a channel-consistency
@@ -208,6 +213,9 @@ def warning_line(result) -> str | None:
     if v.grade == "consistent":
         return None
     if v.grade == "model_error":
+        bad = [f for f in v.findings if f.get("kind") == "unphysical"]
+        if bad:
+            return clip(f"warning: model error -- no data defect found, but {bad[0]['message']}")
         nums = _numbers_line(v)
         return clip(f"warning: model error -- no data defect found; {nums or 'the model misses the logs by more than their noise'}"
                      " (result JSON: verdict)")
@@ -321,7 +329,9 @@ def physics_findings(model, coef: dict, coef_std: dict, prior_std: dict, speed: 
             continue
         sign, why, chans, option = signs.get(name, (0, "", (), ""))
         if sign and th * sign < 0:
-            out.append({"kind": "physics_sign", "coefficient": name, "channels": list(chans), "option": option,
+            own = not set(chans) & {"delta", "n"}   # a state's own damping or resistance: model-form error can do it
+            out.append({"kind": "unphysical" if own else "physics_sign", "grade": "model_error" if own else "defect",
+                        "coefficient": name, "channels": list(chans), "option": option,
                         "message": f"{name} = {th:.3g} +- {sd:.2g} is {'negative' if th < 0 else 'positive'} but "
                                    f"{why}{(': ' + option) if option else ''}"})
             continue
@@ -332,7 +342,7 @@ def physics_findings(model, coef: dict, coef_std: dict, prior_std: dict, speed: 
                 continue
             a_lo, a_hi = sorted((abs(lo), abs(hi)))
             if abs(pv) > a_hi * RANGE_FACTOR or abs(pv) < a_lo / RANGE_FACTOR:
-                out.append({"kind": "physics_range", "coefficient": name, "channels": list(chans_r),
+                out.append({"kind": "physics_range", "grade": "defect", "coefficient": name, "channels": list(chans_r),
                             "option": option_r,
                             "message": f"{name} = {th:.3g} ({name}' = {pv:.3g} non-dimensional) is "
                                        f"{'above' if abs(pv) > a_hi * RANGE_FACTOR else 'below'} the published "
@@ -547,21 +557,23 @@ def assess(*, consistency: dict | None, diverged: bool = False, message: str = "
         if findings:   # a data defect found in the logs explains the divergence: name it and its fix
             return Verdict("defect", _group(findings) + [text], findings + [div], channels, track, runs)
         return Verdict("diverged", [text], [div], channels, track, runs)
-    findings += [dict(f, grade="defect") for f in (physics or [])]
+    findings += [dict(f, grade=f.get("grade", "defect")) for f in (physics or [])]
     if damping and damping.get("physical") is False:
         what = [s for s in ("v", "r") if (damping.get(s) or {}).get("fraction_positive") not in (None, 0.0)
                 and damping[s]["fraction_positive"] > 0.01]
-        findings.append({"kind": "damping", "grade": "defect", "channels": what or ["v", "r"],
+        findings.append({"kind": "unphysical", "grade": "model_error", "channels": what or ["v", "r"],
                          "option": "--sign-bounds",
-                         "message": f"the fitted model's own {' and '.join({'v': 'sway', 'r': 'yaw'}[s] for s in what) or 'sway or yaw'} "
-                                    "damping is positive along the logged motions (self-excited motion, an ill-posed "
-                                    "fit): add manoeuvres or refit with --sign-bounds"})
+                         "message": f"the fitted model is not physical: its own {' and '.join({'v': 'sway', 'r': 'yaw'}[s] for s in what) or 'sway or yaw'} "
+                                    "damping is positive along the logged motions (self-excited); the model cannot "
+                                    "represent these logs (missing wind or current, drift beyond its range?): do not "
+                                    "predict with it; try --wind --current or --sign-bounds"})
     if refinement_failed:
         findings.append({"kind": "refinement", "grade": "defect", "channels": [], "option": "--refine none",
                          "message": clip(f"the refinement did not converge ({plain_message(refinement_failed)}): the EKF "
                                           "stage's coefficients stand; use them with --refine none or raise "
                                           "--max-nfev")})
     findings += _consistency_findings(consistency or {}, r)
+    findings.sort(key=lambda f: f["kind"] != "unphysical")   # (stable) an unphysical model is said first
     defects = [f for f in findings if f["grade"] == "defect"]  # ("note" findings stay in the JSON only)
     errors = [f for f in findings if f["grade"] == "model_error"]
     if defects:

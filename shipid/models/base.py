@@ -455,8 +455,9 @@ STERN_RUDDER_SIGNS = {
              RUDDER_SIGN_FIX),
 }
 OWN_DAMPING_SIGNS = {
-    "sway": (-1, "a hull's own sway damping is negative", ("v",), "check the sign of v (--sign v=-1)"),
+    "sway": (-1, "a hull's own sway damping is negative", ("v",),
+             "the fitted model is not physical (missing wind or current, drift beyond its range?): do not predict with it"),
     "yaw": (-1, "a hull's own yaw damping is negative", ("r",),
-            "check the sign of r (--sign r=-1), or the model cannot carry the logs' drift (--max-drift)"),
+            "the fitted model is not physical (missing wind or current, drift beyond its range?): do not predict with it"),
 }
 

@@ -1,4 +1,4 @@
-"""Underwater glider in the vertical plane (seed 004, SPEC.md section 5).
+"""Underwater glider in the vertical plane (surge, heave, pitch; the launch study of a spherical-nose glider).
 
 Fossen's 6-DOF form ``M v' + C(v) v + D(v) v + g(eta) = tau`` reduced to
 surge, heave and pitch (``v = p = r = 0``, ``phi = psi = 0``), ``tau = 0``

@@ -121,7 +121,8 @@ _PARAM_DOC = {
 #: rudder lift gradient f_alpha > 0 (a rudder logged positive to port would need f_alpha < 0).
 MMG_PHYSICS_SIGNS = {
     "Yv": OWN_DAMPING_SIGNS["sway"], "Nr": OWN_DAMPING_SIGNS["yaw"],
-    "R0": (+1, "a hull's resistance is positive", ("u",), "check the sign and unit of u"),
+    "R0": (+1, "a hull's resistance is positive", ("u",),
+           "the fitted model is not physical (missing wind or current?): do not predict with it"),
     "f_alpha": (+1, "the rudder's lift grows with its angle of attack", ("delta",), RUDDER_SIGN_FIX),
 }
 #: f_alpha of the published sets: KVLCC2 2.747 (Yasukawa & Yoshimura 2015), KCS 2.727 (mmg_kcs.json),

@@ -1,4 +1,4 @@
-"""4-DOF planing boat of seed 000 (SPEC.md section 2): surge, sway, roll, yaw.
+"""4-DOF planing boat (surge, sway, roll, yaw) of the time-optimal manoeuvring study.
 
 States ``x, y, psi, phi, u, v, p, r`` (earth-fixed position [m], heading
 [rad], roll [rad], body-axis surge/sway [m/s], roll/yaw rate [rad/s]);

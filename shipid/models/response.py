@@ -1,4 +1,4 @@
-"""KCS 3-DOF response model of seed 002 (SPEC.md section 1, eq. (3)).
+"""KCS 3-DOF response model of free-running identification by augmented-state EKF (eq. (3) of its paper).
 
 States ``x, y, psi, u, v, r`` (earth-fixed position [m], heading [rad],
 body-axis surge/sway [m/s], yaw rate [rad/s]); inputs ``delta`` [rad] (positive

@@ -71,6 +71,17 @@ _BANNER = {"consistent": ("#eaf6ea", "#3a8a3a"), "model_error": ("#fdf6e3", "#b5
            "defect": ("#fbeaea", "#b03030"), "diverged": ("#fbeaea", "#b03030")}
 
 
+def _rounded(value):
+    """``value`` (nested dicts and lists) with every float to 6 significant digits, for display."""
+    if isinstance(value, dict):
+        return {k: _rounded(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return type(value)(_rounded(v) for v in value)
+    if isinstance(value, float) and math.isfinite(value):
+        return float(f"{value:.6g}")
+    return value
+
+
 def verdict_banner(result) -> str:
     """The report's opening banner: the fit's grade, each reason as a sentence, and what to do."""
     v = verdict_of(result)
@@ -97,7 +108,7 @@ def _section_model(result, model) -> str:
             rows.append((label, _e(s[key])))
     opts = result.model_options
     if opts:
-        rows.append(("model options", _e(opts)))
+        rows.append(("model options", _e(_rounded(opts))))
     out = "<h2 id=\"model\">Model and method</h2>" + _table(["item", "value"], rows, left=2)
     for key, label in (("meas_std", "measurement noise std (SI units)"), ("process_std", "process noise std (SI units)")):
         d = s.get(key)
