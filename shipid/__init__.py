@@ -5,7 +5,8 @@ from __future__ import annotations
 __version__ = "0.1.0"
 
 from .models import Model, available_models, get_model, register_model  # noqa: E402
-from .simulate import SimulationResult, simulate  # noqa: E402
+from . import simulate  # noqa: E402  (the module; calling it calls simulate.simulate)
+from .simulate import SimulationResult  # noqa: E402
 from .logs import LogError, ShipParticulars, TrialLog, read_log, read_ship  # noqa: E402
 
 __all__ = ["__version__", "Model", "available_models", "get_model", "register_model", "simulate", "SimulationResult",
