@@ -25,7 +25,7 @@ if FAST:  # first 40 s of each log
     logs = [shipid.TrialLog.from_arrays(lg.time[:400], name=lg.name, ship=lg.ship,
             **{c: lg[c][:400] for c in lg.channels if c != "time"}) for lg in logs]
 for lg in logs:
-    print(lg.summary().splitlines()[0], len(lg), "samples")"""),
+    print(lg.message)"""),
 md("## Fit\nStart values 30 % away from the truth; the identifier first makes an equation-error least-squares start, then runs two EKF + RTS-smoother passes over all logs jointly."),
 code("""truth = shipid.get_model("kcs-response", "synthetic-truth")
 rng = np.random.default_rng(0)

@@ -203,7 +203,7 @@ def _fit(args) -> int:
     model = _start_model(args, _logs_lpp(logs))
     for lg in logs:
         if lg.missing or lg.dropouts:
-            print(f"note: {lg.summary()}", file=sys.stderr)
+            print(f"note: {lg}", file=sys.stderr)
     extra = None
     if args.wind or args.current:
         # wind/current parts around the ship model: the recipe with the base model's defaults, not refined
