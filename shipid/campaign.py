@@ -500,7 +500,7 @@ def run_sweep_member(spec: dict):
 
         levels = {k: spec.get(k, PAPER_SWEEP[k]) for k in PAPER_SWEEP}
         res = sweep(**levels, dt=spec.get("dt"), t_max=float(spec.get("t_max", 60.0)), keep_trajectories=False)
-        return res.summary.reset_index(drop=True)
+        return res.launches.reset_index(drop=True)
     from .identify.result import model_from
     from .manoeuvres import ship_info, turning_sweep
 

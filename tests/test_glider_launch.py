@@ -74,21 +74,21 @@ def test_step_size_convergence_and_batch_equals_loop():
     for i in range(4):
         s = launch(sp[i], an[i], fi[i], cg[i], dt=0.01)
         for k in ("max_depth_m", "horizontal_m", "duration_s", "exit_angle_deg"):
-            assert b.summary[k].iloc[i] == pytest.approx(getattr(s, k), rel=1e-10, abs=1e-12)
+            assert b.launches[k].iloc[i] == pytest.approx(getattr(s, k), rel=1e-10, abs=1e-12)
         np.testing.assert_allclose(b.to_pandas(i).to_numpy(), s.to_pandas().to_numpy(), rtol=1e-10, atol=1e-12)
 
 
 def test_unfinished_and_unstable_launches_are_reported_not_raised():
     with pytest.warns(RuntimeWarning, match="still submerged"):
         r = launch(5.0, 45.0, t_max=0.5)
-    assert not r.success and r.status == 1 and r.summary["status"].iloc[0] == "t_max"
+    assert not r.success and r.status == 1 and r.launches["status"].iloc[0] == "t_max"
     assert np.isnan(r.horizontal_m) and r.max_depth_m > 0.5
     big = get_model("glider").with_params({"fin_span": 1.0})   # stiff pitch damping
     with pytest.warns(RuntimeWarning, match="non-finite"):
         r = launch([0.5, 5.0], 45.0, model=big, dt=0.02)
-    assert r.status == 2 and list(r.summary["status"]) == ["surfaced", "non-finite"]
+    assert r.status == 2 and list(r.launches["status"]) == ["surfaced", "non-finite"]
     ok = launch(0.5, 45.0, model=big, dt=0.02)
-    assert r.summary["horizontal_m"].iloc[0] == pytest.approx(ok.horizontal_m, rel=1e-12)
+    assert r.launches["horizontal_m"].iloc[0] == pytest.approx(ok.horizontal_m, rel=1e-12)
     auto = launch(5.0, 45.0, model=big)                        # automatic step handles it
     assert auto.success and auto.dt < 0.005
 

@@ -116,7 +116,7 @@ def _validate(args) -> int:
         for d, (h, _) in zip(res, _horizon_results(args, horizons, logs, model, initial)):
             if h is None:
                 continue
-            d["horizon"] = h.summary()
+            d["horizon"] = h.to_records()
             print(f"{d['name']}: horizon " + ", ".join(
                 f"{e['seconds']:g} s median {e['position_error_median_m']:.3g} m ({e['n_starts']} starts"
                 f"{', %d blow-ups' % e['n_blowups'] if e['n_blowups'] else ''})"

@@ -365,7 +365,7 @@ def _section_horizon(horizons) -> str:
 
     rows, figs = [], []
     for h, log in horizons:
-        for e in h.summary():
+        for e in h.to_records():
             rows.append([_e(h.name), _f(e["seconds"], "{:g}"), _f(e["position_error_median_m"], "{:.3f}"),
                          _f(e["position_error_p90_m"], "{:.3f}"), _f(e["heading_error_median_deg"], "{:.2f}"),
                          _f(e["n_starts"], "{:.0f}"), (_f(e["n_blowups"], "{:.0f}"), "bad" if e["n_blowups"] else "")])
