@@ -31,7 +31,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-__all__ = ["ResultMixin", "result_html", "verdict_grade", "in_degrees", "axes_column", "plot_series"]
+__all__ = ["ResultMixin", "result_html", "verdict_grade", "in_degrees", "axes_column", "plot_series",
+           "coefficient_table", "plot_coefficients"]
 
 #: Units drawn in degrees, and the unit they are shown in.
 _ANGLE_UNITS = {"rad": "deg", "rad/s": "deg/s", "rad/s^2": "deg/s^2", "rad/s2": "deg/s^2"}
@@ -73,9 +74,40 @@ def plot_series(axs, t, frame: pd.DataFrame, names, units: dict, **kw) -> None:
         a.set_ylabel(f"{name} [{unit}]" if unit else name)
 
 
+def coefficient_table(value: pd.Series, std: pd.Series) -> pd.DataFrame:
+    """The coefficient table of a fit: ``value``, ``std``, ``rel_std_%`` (of |value|), and the 95 % interval
+    ``ci95_low``/``ci95_high`` (value -/+ 1.96 std), one row per estimated coefficient."""
+    v, sd = value.astype(float), std.astype(float)
+    return pd.DataFrame({"value": v, "std": sd, "rel_std_%": 100 * sd / v.abs().where(v.abs() > 0),
+                         "ci95_low": v - 1.96 * sd, "ci95_high": v + 1.96 * sd})
+
+
+def plot_coefficients(table: pd.DataFrame, ax=None, title: str | None = None):
+    """Each estimated coefficient's 95 % interval relative to its value (1 = the estimate), so coefficients of
+    every size share one axis; a wide bar is a poorly determined coefficient.  Returns the axes."""
+    if ax is None:
+        import matplotlib.pyplot as plt
+
+        _, ax = plt.subplots(figsize=(6, 0.3 * len(table) + 1.2))
+    v = table["value"].to_numpy(dtype=float)
+    half = 1.96 * table["std"].to_numpy(dtype=float) / np.where(np.abs(v) > 0, np.abs(v), np.nan)
+    pos = np.arange(len(table))
+    ax.errorbar(np.ones(len(table)), pos, xerr=half, fmt="o", capsize=3)
+    ax.axvline(1.0, color="0.6", lw=0.8)
+    ax.set_yticks(pos, [str(i) for i in table.index])
+    ax.invert_yaxis()
+    ax.set_xlabel("95 % interval / estimate")
+    if title:
+        ax.set_title(title)
+    return ax
+
+
 def verdict_grade(result) -> str | None:
-    """The graded verdict of a fit (``result.verdict.grade``) when the result carries one, else None."""
+    """The graded verdict of a fit (``result.verdict.grade``, or ``verdict_`` of a fitted estimator) when the
+    result carries one, else None."""
     v = getattr(result, "verdict", None)
+    if v is None:
+        v = getattr(result, "verdict_", None)
     if v is None:
         return None
     g = getattr(v, "grade", None)

@@ -40,6 +40,7 @@ from .manoeuvres import ship_info
 from .manoeuvres import steady_turn
 from .manoeuvres.run_metrics import reported_steady_turn
 from .models.base import Model
+from .results import ResultMixin
 from .simulate import SimulationResult, replay, replay_errors
 
 __all__ = ["validate", "validate_logs", "validate_one", "LogValidation", "resolve_model", "load_logs", "DIFF_EXCLUDE"]
@@ -49,7 +50,7 @@ DIFF_EXCLUDE = ("lpp", "execute_time", "rudder_deg", "switch_deg")
 
 
 @dataclass
-class LogValidation:
+class LogValidation(ResultMixin):
     """Replay of one log and its comparison with the measurement.
 
     Attributes
@@ -90,8 +91,48 @@ class LogValidation:
         return bool(self.simulation.success) and (self.measured is None) == (self.predicted is None)
 
     @property
+    def message(self) -> str:
+        """One line: the replay's outcome and the notes."""
+        head = f"log '{getattr(self.log, 'name', 'log')}': " + (self.manoeuvre or "no standard manoeuvre") + "; "
+        head += "replay finished" if self.simulation.success else f"replay failed: {self.simulation.message}"
+        return "; ".join([head] + list(self.notes))
+
+    @property
     def manoeuvre(self) -> str | None:
         return None if self.measured is None else self.measured.manoeuvre
+
+    def summary(self) -> pd.DataFrame:
+        """The manoeuvre metrics as logged (``measured``), in the replay of the logged inputs (``replay``)
+        and in the model's own closed-loop manoeuvre (``closed_loop``), one row per metric, with
+        ``replay - measured``; a log that is no standard manoeuvre gives its replay errors instead
+        (:attr:`errors`: ``rmse``, ``nrmse``, ``n_samples`` per channel, SI units and radians)."""
+        if self.measured is None:
+            return self.errors.copy()
+        cols = {"measured": self.measured, "replay": self.predicted, "closed_loop": self.standard}
+        dicts = {k: (v.to_dict() if v is not None else {}) for k, v in cols.items()}
+        keys = [k for k, v in dicts["measured"].items()
+                if k not in DIFF_EXCLUDE and isinstance(v, (int, float)) and not isinstance(v, bool)]
+        out = pd.DataFrame({c: [d.get(k) for k in keys] for c, d in dicts.items()}, index=pd.Index(keys, name="metric"),
+                           dtype=float)
+        out["replay - measured"] = out["replay"] - out["measured"]
+        return out
+
+    def _html_title(self) -> str:
+        return f"Validation on '{getattr(self.log, 'name', 'log')}'"
+
+    def _key_numbers(self) -> dict:
+        k = {"model": self.simulation.model.name, "manoeuvre": self.manoeuvre or "none"}
+        if "track" in self.errors.index:
+            k["track RMSE [m]"] = float(self.errors.loc["track", "rmse"])
+        return k
+
+    def to_pandas(self) -> pd.DataFrame:
+        """The replay's time series (states and inputs, indexed by time; see :meth:`SimulationResult.to_pandas`)."""
+        return self.simulation.to_pandas()
+
+    def plot(self, ax=None):
+        """The measured log under the replay, one axes per state and input (angles in degrees); returns the axes."""
+        return self.simulation.plot(ax=ax)
 
     def difference(self, other: str = "predicted") -> dict:
         """``predicted - measured`` (or ``standard - measured``) for every numeric metric both have
