@@ -1,5 +1,6 @@
 """Launch simulation with surface-return event detection (shipid.glider.launch)."""
 import numpy as np
+import pandas as pd
 import pytest
 
 from shipid.glider import launch, paper_reference_case
@@ -107,8 +108,10 @@ def test_bad_arguments_name_the_value():
     r = launch([5.0, 3.0], 45.0, keep_trajectories=False)
     with pytest.raises(ValueError, match="not kept"):
         r.to_pandas(0)
-    with pytest.raises(ValueError, match="member=i"):
-        launch([5.0, 3.0], 45.0).to_pandas()
+    both = launch([5.0, 3.0], 45.0)
+    df = both.to_pandas()  # a batch: every launch's rows, labelled
+    assert sorted(df["launch"].unique()) == [0, 1]
+    pd.testing.assert_frame_equal(df[df["launch"] == 1].drop(columns="launch"), both.to_pandas(1))
 
 
 def test_plot_draws_trajectories():
