@@ -369,7 +369,7 @@ def _section_horizon(horizons) -> str:
             rows.append([_e(h.name), _f(e["seconds"], "{:g}"), _f(e["position_error_median_m"], "{:.3f}"),
                          _f(e["position_error_p90_m"], "{:.3f}"), _f(e["heading_error_median_deg"], "{:.2f}"),
                          _f(e["n_starts"], "{:.0f}"), (_f(e["n_blowups"], "{:.0f}"), "bad" if e["n_blowups"] else "")])
-        ax = h.plot(log, every=max(1, len(h.start_times) // 12))
+        ax = h.plot(log=log, every=max(1, len(h.start_times) // 12))
         ax.set_title(f"{h.name}: predictions over {h.horizons.max():g} s")
         figs.append(_fig(ax.figure, f"predicted vs measured tracks, {h.name}"))
         plt.close(ax.figure)
