@@ -67,6 +67,14 @@ for ax, lg in zip(axs, logs):
     ax.set_aspect("equal", adjustable="datalim"); ax.set_title(lg.name, fontsize=9)
 axs[0].legend()
 pd.DataFrame(rows).T"""),
+md("""## Results as notebook cards
+
+Every result shipid returns shows itself as a short card in a notebook -- success, message, key
+numbers and the head of its `summary()` table -- and has `summary()`, `to_pandas()` and `plot()`."""),
+code("""from IPython.display import display
+
+display(logs[0], fit, fit.result(), sim)
+sim.plot();"""),
 md("""## Caveat: the paper's Table 3
 
 The coefficients printed in seed 002 (shipped as the parameter set `table3`) have no stated
