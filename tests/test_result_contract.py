@@ -88,7 +88,7 @@ def build(name, log, ekf):
 
         return validate_logs(m, [log], closed_loop=False)[0]
     if name == "HorizonResult":
-        from shipid.validation_horizon import dead_reckoning, horizon_prediction
+        from shipid.validation import dead_reckoning, horizon_prediction
 
         return horizon_prediction(dead_reckoning(), log, horizons=(5.0, 10.0))
     if name == "FitResult":
@@ -101,7 +101,7 @@ def build(name, log, ekf):
         return RecipeFit(ekf=ekf, steps=[{"step": "sampling", "value": 1, "reason": "every sample"}], logs=[log],
                          lpp=4.36)
     if name == "PosteriorSamples":
-        from shipid.identify.posterior import PosteriorSamples
+        from shipid.uncertainty import PosteriorSamples
 
         rng = np.random.default_rng(0)
         names = ["a", "b", "c"]
