@@ -1,7 +1,40 @@
 """Options and helpers shared by the sub-commands (one copy of each)."""
 from __future__ import annotations
 
+import argparse
+import sys
 import warnings
+
+#: How long an old spelling keeps working (said in the notice it prints).
+RENAMED_UNTIL = "the next release"
+
+
+class _RenamedOption(argparse.Action):
+    """A hidden old spelling of an option: stores into the new option's destination and says once, on stderr,
+    what to use instead."""
+
+    def __init__(self, option_strings, dest, *, new: str, note: str = "", **kwargs):
+        self.new, self.note = new, note
+        super().__init__(option_strings, dest, help=argparse.SUPPRESS, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        renamed_notice(parser.prog, option_string, self.new, self.note)
+        setattr(namespace, self.dest, self.const if self.nargs == 0 else values)
+
+
+def renamed_option(p, old: str, new: str, *, dest: str, note: str = "", flag: bool = False, **kwargs) -> None:
+    """Add ``old`` to parser ``p`` as a hidden alias of the option ``new`` (same ``dest``): it works, is not
+    listed in ``--help``, and prints one line on stderr naming ``new``.  ``flag``: an option without a value
+    (stores True); ``kwargs`` (type, nargs, metavar) as the new option's."""
+    if flag:
+        kwargs = {"nargs": 0, "const": True}
+    p.add_argument(old, dest=dest, action=_RenamedOption, new=new, note=note, default=argparse.SUPPRESS, **kwargs)
+
+
+def renamed_notice(prog: str, old: str, new: str, note: str = "") -> None:
+    """The one line an old spelling prints on stderr: what to use instead, and until when the old one works."""
+    extra = f" ({note})" if note else ""
+    print(f"{prog}: note: '{old}' is now '{new}'{extra}; '{old}' works until {RENAMED_UNTIL}", file=sys.stderr)
 
 
 def parse_pairs(items, option: str, convert=str) -> dict:

@@ -192,7 +192,7 @@ def _report(args) -> int:
             for lg in progress_iter(logs, args, "replaying logs")]
     from .uncertainty import check_draws
 
-    unc = {"draws": check_draws(args), "seed": args.draws_seed, "samples": args.samples} if check_draws(args) else None
+    unc = {"draws": check_draws(args), "seed": args.seed, "samples": args.samples} if check_draws(args) else None
     horizons = _horizons(args.horizon)
     hz = [h for h in _horizon_results(args, horizons, logs, model, initial) if h[0] is not None] if horizons else None
     text = render_report(res, args.logs, title=args.title, validations=vals, uncertainty=unc, horizons=hz)
