@@ -42,10 +42,19 @@ from .manoeuvres.run_metrics import reported_steady_turn
 from .models.base import Model
 from .simulate import SimulationResult, replay, replay_errors
 
-__all__ = ["validate", "validate_logs", "validate_one", "LogValidation", "resolve_model", "load_logs", "DIFF_EXCLUDE"]
+__all__ = ["validate", "validate_logs", "validate_one", "LogValidation", "resolve_model", "load_logs", "DIFF_EXCLUDE",
+           "DURATION_MULTIPLE", "STANDARD_METRICS"]
 
 #: Metric keys not differenced (settings of the run rather than predictions).
 DIFF_EXCLUDE = ("lpp", "execute_time", "rudder_deg", "switch_deg")
+#: A closed-loop standard manoeuvre matching a measured run runs until its metrics exist -- a zigzag to its second
+#: overshoot (the fifth rudder execute), a turn to 540 deg of heading -- for at most this many times the measured
+#: run's duration after its execute (never less than the simulator's own limit: 80 L/U for a zigzag, 60 L/U for a
+#: turn).  A model that needs longer is off by more than every goal; the metric is then missing with the reason
+#: (``standard_missing``).  The rule of docs/choosing_a_model.md.
+DURATION_MULTIPLE = 3.0
+#: The metrics of a standard manoeuvre whose absence in the closed-loop prediction is reported (when measured).
+STANDARD_METRICS = {"turning": ("advance_L", "tactical_diameter_L"), "zigzag": ("overshoot1_deg", "overshoot2_deg")}
 
 
 @dataclass
@@ -84,6 +93,7 @@ class LogValidation:
     notes: list = field(default_factory=list)
     steady_measured: Any = None
     steady_predicted: Any = None
+    standard_missing: list = field(default_factory=list)
 
     @property
     def success(self) -> bool:
@@ -146,6 +156,7 @@ class LogValidation:
                          if self.standard is not None else {}),
             "standard_difference": self.difference("standard"),
             "steady_turn": self.steady_summary(),
+            "standard_missing": [dict(m) for m in self.standard_missing],
             "replay": {"success": bool(self.simulation.success), "message": self.simulation.message,
                        "rudder_sign": self.rudder_sign, "model_lpp": self.model_lpp,
                        "n_samples": int(self.simulation.t.size)},
@@ -304,14 +315,15 @@ def _steady(log, sim, L: float, rudder_sign: float, res: LogValidation) -> None:
 
 
 def standard_manoeuvre(model: Model, measured, *, rudder_rate=None, lpp=None, params=None,
-                       heading_change_deg: float = 540.0):
+                       heading_change_deg: float = 540.0, t_max: float | None = None):
     """The model's closed-loop standard manoeuvre matching a measured one.
 
     ``measured``: the log's :class:`~shipid.manoeuvres.TurningMetrics` or
     :class:`~shipid.manoeuvres.ZigzagMetrics` (manoeuvre kind, ordered rudder angle, side, switch
     angle, approach speed).  ``rudder_rate`` [rad/s] defaults to the model's.  ``params`` (np,) or
     (B, np): with B parameter sets the B manoeuvres run as one batch, member b with ``params[b]``.
-    ``heading_change_deg``: how far a turning circle runs.  Returns the
+    ``heading_change_deg``: how far a turning circle runs; ``t_max`` [s]: the simulators' time limit (default
+    theirs).  Returns the
     :class:`~shipid.manoeuvres.ManoeuvreResult`; raises ValueError when the log's approach speed or
     rudder angle is unknown or the model cannot run the manoeuvre.
     """
@@ -325,15 +337,45 @@ def standard_manoeuvre(model: Model, measured, *, rudder_rate=None, lpp=None, pa
     spd = np.full(len(params), speed) if per_member else speed  # one member per parameter set
     if m.manoeuvre == "turning":
         return turning_circle(model, rudder, speed=spd, side=m.side, rudder_rate=rudder_rate, lpp=lpp,
-                              params=params, heading_change_deg=heading_change_deg)
+                              params=params, heading_change_deg=heading_change_deg, t_max=t_max)
     # the rudder reversal is located within the step (shipid.manoeuvres.ZigzagRudder), so the default
     # step gives the overshoots to ~0.01 deg (tests/test_manoeuvres.py)
     return zigzag(model, rudder, float(m.switch_deg), speed=spd, first=m.first_side, rudder_rate=rudder_rate,
-                  lpp=lpp, params=params)
+                  lpp=lpp, params=params, t_max=t_max)
+
+
+def standard_time_limit(measured, log, lpp: float) -> tuple[float, float]:
+    """``(t_max, duration)`` [s] of the closed-loop manoeuvre matching a measured run: the execute (2 L/U, the
+    simulators' default) plus the larger of the simulator's own limit (80 L/U zigzag, 60 L/U turn) and
+    :data:`DURATION_MULTIPLE` times the measured run's duration after its execute."""
+    U = float(measured.approach_speed)
+    t = np.asarray(getattr(log, "time", None) if hasattr(log, "time") else log["time"], dtype=float)
+    te = float(getattr(measured, "execute_time", math.nan))
+    duration = float(t[-1] - te) if (t.size and math.isfinite(te)) else float(t[-1] - t[0]) if t.size else 0.0
+    own = (80.0 if measured.manoeuvre == "zigzag" else 60.0) * lpp / U
+    return 2.0 * lpp / U + max(own, DURATION_MULTIPLE * duration), duration
+
+
+def _missing_reason(kind: str, metric: str, met, t_max: float, duration: float, run_message: str) -> str:
+    """Why the closed-loop manoeuvre has no ``metric`` (one line)."""
+    within = f"within {t_max:.0f} s ({DURATION_MULTIPLE:g} times the measured run's {duration:.0f} s, or the simulator's limit)"
+    if run_message and "t_max" not in run_message and "finished" not in run_message:
+        return f"the prediction stopped: {run_message}"
+    if kind == "turning":
+        return f"the model's heading never changed by {90 if metric == 'advance_L' else 180} deg {within}"
+    sw = getattr(met, "switch_deg", math.nan)
+    msg = getattr(met, "message", "") or ""
+    if "never reached the switch angle" in msg:
+        return f"the model's heading deviation never reached the check angle {sw:g} deg {within}"
+    if metric == "overshoot1_deg" or "third execute" in msg:
+        return (f"the model's heading never came back through the check angle {sw:g} deg on the other side "
+                f"{within}, so the zigzag has no {'first' if metric == 'overshoot1_deg' else 'second'} overshoot")
+    return f"the model's heading never turned back after the third execute {within}, so there is no second overshoot"
 
 
 def _standard(model: Model, log, res: LogValidation) -> None:
-    """Closed-loop standard manoeuvre of the model matching the measured one (see :func:`validate`)."""
+    """Closed-loop standard manoeuvre of the model matching the measured one (see :func:`validate`); a metric the
+    run measured but the prediction does not reach is listed in ``res.standard_missing`` with the reason."""
     m = res.measured
     ship = getattr(log, "ship", None)
     rate = getattr(ship, "rudder_rate", None) or ship_info(model).get("rudder_rate")
@@ -343,9 +385,12 @@ def _standard(model: Model, log, res: LogValidation) -> None:
     if m.manoeuvre != "turning":
         settings["switch_deg"] = float(m.switch_deg)
     try:
+        t_max, duration = standard_time_limit(m, log, res.lpp)
+        settings["t_max_s"] = t_max
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            run = standard_manoeuvre(model, m, rudder_rate=rate, lpp=res.lpp)
+            run = standard_manoeuvre(model, m, rudder_rate=rate, lpp=res.lpp,
+                                     t_max=t_max if math.isfinite(t_max) and t_max > 0 else None)
     except ValueError as exc:
         res.notes.append(f"closed-loop manoeuvre not available: {exc}")
         return
@@ -353,6 +398,11 @@ def _standard(model: Model, log, res: LogValidation) -> None:
     if not run.success:
         res.notes.append(f"closed-loop manoeuvre: {run.message}")
     res.standard, res.standard_settings = run.metrics[0], settings
+    md, sd = m.to_dict(), res.standard.to_dict()
+    for k in STANDARD_METRICS.get(m.manoeuvre, ()):
+        if _num(md.get(k)) is not None and _num(sd.get(k)) is None:
+            res.standard_missing.append({"metric": k, "reason": _missing_reason(m.manoeuvre, k, res.standard, t_max,
+                                                                                duration, run.message)})
 
 
 def validate_logs(result_or_model, logs, lpp: float | None = None, *, rudder_sign: float = 1.0,
