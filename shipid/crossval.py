@@ -284,6 +284,7 @@ def _run_entry(v, h, L, fold: int) -> dict:
             err[key] = None
         else:
             err[key] = _pct(pv, mv) if pct else pv - mv
+    e["reached_after_simulator_limit"] = list(v.standard_settings.get("reached_after_simulator_limit", []))
     st = v.steady_summary()
     if st:
         sm, sp = st["measured"], st["predicted"] or {}

@@ -399,6 +399,14 @@ def _standard(model: Model, log, res: LogValidation) -> None:
         res.notes.append(f"closed-loop manoeuvre: {run.message}")
     res.standard, res.standard_settings = run.metrics[0], settings
     md, sd = m.to_dict(), res.standard.to_dict()
+    # metrics reached only after the simulators' own limit (the prediction ran longer for them, by the rule above)
+    own = (80.0 if m.manoeuvre == "zigzag" else 60.0) * res.lpp / float(m.approach_speed)
+    times = {"advance_L": "time_90", "tactical_diameter_L": "time_180", "overshoot1_deg": "overshoot1_time",
+             "overshoot2_deg": "overshoot2_time"}
+    late = [k for k in STANDARD_METRICS.get(m.manoeuvre, ())
+            if _num(sd.get(k)) is not None and (_num(getattr(res.standard, times[k], None)) or 0.0) > own]
+    if late:
+        settings["reached_after_simulator_limit"] = late
     for k in STANDARD_METRICS.get(m.manoeuvre, ()):
         if _num(md.get(k)) is not None and _num(sd.get(k)) is None:
             res.standard_missing.append({"metric": k, "reason": _missing_reason(m.manoeuvre, k, res.standard, t_max,
