@@ -197,3 +197,23 @@ def test_esso_runs_cross_validate_in_folds():
     assert cv.copies and len(cv.runs) == len(files) - len(cv.copies)
     assert cv.success, cv.message
     assert cv.summary().loc["position_30s_m", "median"] < 1.0
+
+
+def test_cross_validation_sits_above_fitting_and_validation():
+    """Cross-validation uses fitting and validation, so nothing they are built from imports it (no module of the
+    identifier, the models, the simulators, the manoeuvres or the validation imports ``shipid.crossval``)."""
+    import ast
+
+    pkg = REPO / "shipid"
+    below = [p for p in pkg.rglob("*.py")
+             if p.relative_to(pkg).parts[0] in ("identify", "models", "manoeuvres", "logs", "environment", "validation")
+             or p.name in ("validation.py", "validation_horizon.py", "simulate.py", "integrate.py")]
+    assert len(below) > 20
+    bad = []
+    for p in below:
+        for node in ast.walk(ast.parse(p.read_text())):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                     [node.module or ""] + [a.name for a in node.names] if isinstance(node, ast.ImportFrom) else [])
+            if any(n.split(".")[-1] == "crossval" for n in names):
+                bad.append(f"{p.relative_to(REPO)}:{node.lineno}")
+    assert not bad, bad
