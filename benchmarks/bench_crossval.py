@@ -70,8 +70,8 @@ class _Stages:
         setattr(owner, name, timed)
 
     def install(self):
-        import shipid.validation as val
-        import shipid.validation_horizon as hz
+        import shipid.validation.horizon as hz
+        import shipid.validation.replay as val
         from shipid.identify.batch import OutputErrorRefiner
         from shipid.identify.identifier import EKFIdentifier
 

@@ -4,7 +4,7 @@
 for every fold, through the path ``shipid fit`` and ``shipid validate`` take: the fit is
 :func:`shipid.identify.fit_logs` with the caller's options, the prediction
 :func:`shipid.validation.validate_one` (replay, steady turn, the closed-loop standard manoeuvre with the run's
-own rudder and check angles) and :func:`shipid.validation_horizon.horizon_prediction` (open loop from the
+own rudder and check angles) and :func:`shipid.validation.horizon_prediction` (open loop from the
 measured states every 5 s, 10/30/60 s ahead), from the fit's start current for a model with current states.
 
 :func:`choose_model` cross-validates the candidate models (:func:`candidates_for`: the ones that apply to the
@@ -256,7 +256,7 @@ def _pct(pred, meas):
 
 def _run_entry(v, h, L, fold: int) -> dict:
     """The per-run entry of a left-out run from its :class:`~shipid.validation.LogValidation` ``v`` and
-    :class:`~shipid.validation_horizon.HorizonResult` ``h``."""
+    :class:`~shipid.validation.HorizonResult` ``h``."""
     log = v.log
     path = getattr(log, "path", None)
     e = {"run": getattr(log, "name", "log"), "file": str(path) if path is not None else None,
@@ -336,7 +336,7 @@ def run_fold(spec: dict) -> dict:
     from .environment.cli import environment_model
     from .identify import fit_logs, model_from
     from .validation import validate_one
-    from .validation_horizon import horizon_prediction
+    from .validation import horizon_prediction
 
     t0 = time.perf_counter()
     cand: Candidate = spec["candidate"]

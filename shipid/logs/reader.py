@@ -11,7 +11,7 @@ from .schema import (OPTIONAL_CHANNELS, PRESETS, Schema, apply_conventions, chec
                      load_schema, merged)
 from .ship import ShipParticulars, _as_ship, _bundled_ship, read_ship
 from .shipid_csv import _read_csv
-from .trial_log import LogError, TrialLog, _finish
+from .trial_log import LogError, TrialLog, _finish, _run_consistency
 
 
 def read_log(
@@ -194,22 +194,3 @@ def _schema_ship(spec: str) -> ShipParticulars:
     if resources.files("shipid").joinpath("data_ships", f"{spec}.json").is_file():
         return _bundled_ship(spec)
     return read_ship(spec)
-
-
-def _run_consistency(log: TrialLog, opt_out: str = "or --no-consistency-checks") -> None:
-    """Check the channels; errors raise LogError (all named, first in full, then ``opt_out``: how to
-    skip the checks), warnings warn."""
-    import warnings
-
-    from .consistency import check_consistency
-
-    res = check_consistency(log)
-    log.consistency = res
-    for f in res.warnings:
-        warnings.warn(f.message, stacklevel=3)
-    if res.errors:
-        more = len(res.errors) - 1
-        tail = f" (and {more} more consistency error(s))" if more else ""
-        e = res.errors[0]
-        raise LogError(e.message + tail + "; " + opt_out,
-                       path=log.path, column=e.channels[0] if e.channels else None)
