@@ -11,3 +11,15 @@ from .logs import LogError, ShipParticulars, TrialLog, read_log, read_ship  # no
 
 __all__ = ["__version__", "Model", "available_models", "get_model", "register_model", "simulate", "SimulationResult",
            "read_log", "TrialLog", "LogError", "ShipParticulars", "read_ship"]
+
+#: Names exported lazily (their modules import the identifier and the validation floor).
+_LAZY = {"cross_validate": "shipid.crossval", "CrossValidation": "shipid.crossval", "choose_model": "shipid.crossval"}
+__all__ += list(_LAZY)
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'shipid' has no attribute {name!r}")

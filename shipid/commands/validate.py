@@ -132,6 +132,14 @@ def _validate(args) -> int:
         print(_line(d))
         for n in d["notes"]:
             print(f"  note: {n}")
+        miss = d.get("standard_missing") or []
+        if miss:
+            print(f"  closed-loop: {len(miss)} measured metric(s) not predicted: "
+                  + "; ".join(f"{x['metric']}: {x['reason']}" for x in miss))
+    n_miss = sum(len(d.get("standard_missing") or []) for d in res)
+    if n_miss:
+        print(f"closed-loop: {n_miss} measured metric(s) not predicted on "
+              f"{sum(1 for d in res if d.get('standard_missing'))} of {len(res)} logs (standard_missing in the JSON)")
     print(f"wrote {out}")
     bad = [d["name"] for d in res if not d["replay"]["success"]]
     if bad:
