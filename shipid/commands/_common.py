@@ -37,6 +37,30 @@ def renamed_notice(prog: str, old: str, new: str, note: str = "") -> None:
     print(f"{prog}: note: '{old}' is now '{new}'{extra}; '{old}' works until {RENAMED_UNTIL}", file=sys.stderr)
 
 
+def split_model_option(args) -> None:
+    """``--model MODEL[:SET]`` or ``--model RESULT.json`` of ``fit``/``crossval`` into the model name
+    (``args.model``) and its start values (``args.params``: the set or the result file); ``auto[:...]`` is
+    left as it is.  ValueError when the start values are named twice (with the old ``--params``)."""
+    from pathlib import Path
+
+    spec = str(args.model)
+    if spec == "auto" or spec.startswith("auto:"):
+        return
+    if spec.lower().endswith(".json") or Path(spec).is_file():
+        name, start = None, spec
+    else:
+        name, colon, start = spec.partition(":")
+        if not colon:
+            return
+    if getattr(args, "params", None) is not None:
+        raise ValueError(f"--model {spec} already names the start values; drop --params {args.params}")
+    if name is None:
+        from ..identify.result import load_result
+
+        name = load_result(start).model
+    args.model, args.params = name, start or None
+
+
 def parse_pairs(items, option: str, convert=str) -> dict:
     """``["a=1,b=2", "c=3"]`` -> ``{"a": convert("1"), ...}``; ValueError naming the option otherwise
     (also for a name given twice, e.g. ``psi=deg,psi=rad``: which one was meant cannot be guessed)."""
