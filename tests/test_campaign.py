@@ -47,7 +47,7 @@ def _fits(tmp_path):
     ([{"name": "a", "logs": [str(DATA / "kcs_zz_m10.csv")], "refine": 1}], {}, r"'refine' must be true/false"),
     ([{"logs": [str(DATA / "kcs_zz_m10.csv")]}], {}, r"'name' is required"),
     ([{"name": "a", "logs": [str(DATA / "kcs_zz_m10.csv")], "manoeuvres": ["circle:3"]}], {}, r"manoeuvre 'circle:3'"),
-    ([{"name": "a", "logs": [str(DATA / "kcs_zz_m10.csv")]}] * 2, {}, r"must be unique"),
+    ([{"name": "a", "logs": [str(DATA / "kcs_zz_m10.csv")]}] * 2, {}, r"name .a. is used twice"),
     ([{"name": "a", "logs": [str(DATA / "kcs_zz_m10.csv")]}], {"seeds": 1}, r"unknown top-level key 'seeds'"),
     ([], {"sweeps": [{"name": "s", "model": "kcs-response", "rudder": [10, "x"]}]},
      r"sweeps\[0\] \('s'\): 'rudder' must be a non-empty list of finite numbers"),
@@ -57,7 +57,7 @@ def _fits(tmp_path):
     ([], {"sweeps": [{"name": "s", "rudder": [10]}]}, r"'model' is required"),
     ([], {"sweeps": [{"name": "s", "model": "nofile.json"}]}, r"model 'nofile.json' not found"),
     ([{"name": "a", "logs": [str(DATA / "kcs_zz_m10.csv")]}], {"sweeps": [{"name": "a", "model": "kcs-response"}]},
-     r"sweeps\[0\] \('a'\): name 'a' must be unique"),
+     r"sweeps\[0\] \('a'\): name 'a' is used twice"),
     ([], {}, r"no members"),
 ])
 def test_campaign_file_errors_are_one_line(tmp_path, fits, top, match):
@@ -162,7 +162,7 @@ def test_campaign_cli_serial(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["campaign", str(p), "-o", str(out), "--workers", "1", "--no-progress"]) == 1  # one member failed
     text = capsys.readouterr().out
-    assert "bad: FAILED" in text and "zz: ok" in text and "1/2 members completed" in text
+    assert "bad: FAILED" in text and "zz: ok" in text and "2 members: 1 ok, 0 flagged, 1 failed" in text
     summary = json.loads((out / "campaign.json").read_text())
     assert summary["n_failed"] == 1 and (out / "zz" / "result.json").is_file()
     assert main(["campaign", str(p), "-o", str(out), "--workers", "1"]) == 2  # not empty, no --force

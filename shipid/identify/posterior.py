@@ -448,6 +448,30 @@ def _recorded_prior(res, names):
     return None, None
 
 
+#: Fewest kept steps per walker (after burn-in and thinning) the chain diagnostics need (split-R-hat halves
+#: the chain, the autocorrelation estimate needs a few lags).
+MIN_KEPT_STEPS = 4
+
+
+def _check_sample_size(nw: int, steps: int, burn: int, thin: int, k: int, logs, like) -> None:
+    """Refuse before anything is allocated: a thinning that keeps fewer than :data:`MIN_KEPT_STEPS` steps, and
+    a run whose chain and batched simulations need more memory than :func:`shipid._io.memory_limit_bytes`."""
+    from .._io import check_memory
+
+    kept = -(-(steps - burn) // thin)
+    if kept < MIN_KEPT_STEPS:
+        raise ValueError(f"thin={thin}: keeps {kept} of the {steps - burn} steps after burn-in (steps={steps}, "
+                         f"burn={burn}); the diagnostics need at least {MIN_KEPT_STEPS}: use a smaller thin "
+                         "(--thin) or more steps (--steps)")
+    n_samples = sum(int(np.size(getattr(lg, "t", ()))) for lg in logs) or 1
+    nx = len(getattr(like.model, "state_names", ())) or 6
+    # emcee's chain and log-probabilities (steps x walkers x (dims + 1)), the proposal and its batched
+    # simulation (walkers x samples x states, ~4 arrays of it alive in one RK4 step)
+    need = 8.0 * (steps * nw * (k + 1) + 4 * nw * k + 4 * nw * n_samples * nx)
+    check_memory(need, f"sampling with walkers={nw} x steps={steps}",
+                 "use fewer walkers or steps (--walkers, --steps; the default walkers is max(4 x coefficients, 32))")
+
+
 def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2000, burn: int | None = None,
                      thin: int = 1, seed=0, vectorize: bool = True, channels=None, substeps: int = 1,
                      start_scale: float = 1.0, use_prior: bool = True, moves: str = "de",
@@ -541,6 +565,7 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
     nw += nw % 2
     if nw < 2 * k:
         raise ValueError(f"walkers={nw}: emcee needs at least 2 x {k} sampled dimensions = {2 * k} walkers")
+    _check_sample_size(nw, steps, burn, thin, k, logs, like)
     rng = np.random.default_rng(seed)
     w, V = np.linalg.eigh(0.5 * (cov + cov.T))
     A = V * np.sqrt(np.clip(w, 0, None))

@@ -12,6 +12,7 @@ from .schema import (OPTIONAL_CHANNELS, PRESETS, Schema, apply_conventions, chec
 from .ship import ShipParticulars, _as_ship, _bundled_ship, read_ship
 from .shipid_csv import _read_csv
 from .trial_log import LogError, TrialLog, _finish
+from .units import SCHEMA
 
 
 def read_log(
@@ -169,6 +170,13 @@ def read_log(
     if unknown:
         raise LogError(f"`{p.name}`: signs for {unknown}, but the log has no such channel; its channels are "
                        f"{sorted(c for c in ch if c != 'time')}", path=p, column=unknown[0])
+    for key, given in (("signs", sch.signs), ("meas_std", sch.meas_std)):  # the schema's own, as the options
+        known = set(ch) | set(sch.columns or ()) | set(SCHEMA) | set(OPTIONAL_CHANNELS)
+        unknown = sorted(str(c) for c in set(given or ()) - known)
+        if unknown:
+            raise LogError(f"`{p.name}`: schema '{sch.name}' gives {key} for {', '.join(unknown[:3])}, but the log has "
+                           f"no such channel; its channels are {sorted(c for c in ch if c != 'time')}; fix the "
+                           "schema's keys", path=p, column=unknown[0])
     apply_conventions(ch, units_in, notes, sch, where)
     if ship_obj is None and sch.ship is not None:
         ship_obj = _schema_ship(sch.ship)
@@ -182,8 +190,17 @@ def read_log(
                    interpolate_inputs=interpolate_inputs, required=required, min_samples=min_samples,
                    unit_checks=unit_checks, units_in=units_in, notes=notes, fmt=sch.fmt)
     log.meas_std = dict(sch.meas_std)
+    reader_notes = {"truncated": meta.get("_truncated"), "lookalike": meta.get("_lookalike", [])}
     if consistency_checks:
-        _run_consistency(log)
+        _run_consistency(log, reader_notes=reader_notes)
+    else:  # the reader's own findings are said even without the channel checks
+        import warnings
+
+        from .sensors import check_sensors
+
+        for f in check_sensors(log, reader_notes=reader_notes):
+            if f.check in ("truncated_row", "header_lookalike"):
+                warnings.warn(f.message, UserWarning, stacklevel=2)
     return log
 
 
@@ -196,14 +213,20 @@ def _schema_ship(spec: str) -> ShipParticulars:
     return read_ship(spec)
 
 
-def _run_consistency(log: TrialLog, opt_out: str = "or --no-consistency-checks") -> None:
+def _run_consistency(log: TrialLog, opt_out: str = "or --no-consistency-checks", *,
+                     reader_notes: dict | None = None) -> None:
     """Check the channels; errors raise LogError (all named, first in full, then ``opt_out``: how to
     skip the checks), warnings warn."""
     import warnings
 
     from .consistency import check_consistency
 
+    from .sensors import check_sensors
+
     res = check_consistency(log)
+    res.findings.extend(check_sensors(log, reader_notes=reader_notes))  # sensor faults, in the same structure
+    order = {"error": 0, "warning": 1, "info": 2}
+    res.findings.sort(key=lambda f: order.get(f.level, 3))
     log.consistency = res
     for f in res.warnings:
         warnings.warn(f.message, stacklevel=3)
