@@ -354,13 +354,12 @@ def load_samples(obj) -> PosteriorSamples:
     if isinstance(obj, dict):
         return PosteriorSamples.from_dict(obj)
     if isinstance(obj, (str, os.PathLike)):
+        from .._io import read_json
+
         p = Path(obj)
-        if not p.is_file():
+        if not p.exists():
             raise FileNotFoundError(f"{p}: no such samples file; write it with `shipid sample`")
-        try:
-            doc = json.loads(p.read_text(encoding="utf-8"))
-        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise ValueError(f"{p}: not a JSON samples file ({exc})") from None
+        doc = read_json(p, "JSON samples file", advice="pass the file written by `shipid sample -o`")
         if not isinstance(doc, dict):
             raise ValueError(f"{p}: not a shipid samples file (top level is not an object)")
         return PosteriorSamples.from_dict(doc, source=str(p))
