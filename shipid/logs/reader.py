@@ -196,11 +196,11 @@ def read_log(
     else:  # the reader's own findings are said even without the channel checks
         import warnings
 
-        from .sensors import check_sensors
+        from .sensors import SensorWarning, check_sensors
 
         for f in check_sensors(log, reader_notes=reader_notes):
             if f.check in ("truncated_row", "header_lookalike"):
-                warnings.warn(f.message, UserWarning, stacklevel=2)
+                warnings.warn(f.message, SensorWarning, stacklevel=2)
     return log
 
 

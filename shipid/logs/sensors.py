@@ -31,7 +31,7 @@ import numpy as np
 
 from .consistency import Finding
 
-__all__ = ["check_sensors", "yaw_rate_scale", "SCALE_SIGMAS", "SCALE_FLOOR", "plain_header", "LOOKALIKES"]
+__all__ = ["SensorWarning", "check_sensors", "yaw_rate_scale", "SCALE_SIGMAS", "SCALE_FLOOR", "plain_header", "LOOKALIKES"]
 
 #: Standard errors by which the gyro scale must differ from 1 to be reported (4: a false alarm on a log
 #: whose residuals are Gaussian has probability 6e-5).
@@ -54,6 +54,10 @@ LOOKALIKES = {"\u0430": "a", "\u0435": "e", "\u043e": "o", "\u0440": "p", "\u044
               "\u03c1": "p", "\u0391": "A", "\u0392": "B", "\u0395": "E", "\u0397": "H", "\u0399": "I",
               "\u039a": "K", "\u039c": "M", "\u039d": "N", "\u039f": "O", "\u03a1": "P", "\u03a4": "T",
               "\u03a7": "X", "\u03a5": "Y", "\u0396": "Z"}
+
+
+class SensorWarning(UserWarning):
+    """A reader's finding (cut last row, look-alike header) said when the channel checks are turned off."""
 
 
 def plain_header(cell: str) -> tuple[str, list[str]]:
