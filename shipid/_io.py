@@ -400,7 +400,7 @@ def _yaml_bounds(text: str, where: str, what: str) -> None:
                 raise ValueError(f"{where}: more than {MAX_ALIASES} YAML aliases (*name); write the {what} "
                                  "with fewer aliases (or as JSON)")
             if ev.anchor not in size:  # an alias to its own enclosing node (a recursive document)
-                raise ValueError(f"{where}: YAML alias *{short(ev.anchor, 30)} refers to a node that contains it; "
+                raise ValueError(f"{where}: YAML alias *{str(ev.anchor)[:30]} refers to a node that contains it; "
                                  f"not a {what} file")
             close(None, size[ev.anchor], height[ev.anchor])
         if stack and stack[0][1] > MAX_EXPANDED_NODES:
