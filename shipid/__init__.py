@@ -2,7 +2,7 @@
 validate the identified models and use them for control, routing and studies."""
 from __future__ import annotations
 
-__version__ = "0.1.0"
+from ._version import __version__  # noqa: E402
 
 from .models import Model, available_models, get_model, register_model  # noqa: E402
 from .simulate import SimulationResult, simulate  # noqa: E402

@@ -3,6 +3,7 @@ uncertainties, diagnostics, inputs (path + sha256) and software versions, and
 loads back into a model."""
 from __future__ import annotations
 
+import os
 import platform
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -13,7 +14,7 @@ import pandas as pd
 
 from .._io import (as_bool, as_mapping, as_number, as_string, atomic_write_text, dumps_json, read_json, short)
 
-__all__ = ["FitResult", "load_result", "model_from", "software_versions", "diagnostics_to_json", "fitted_ship"]
+__all__ = ["FitResult", "load_result", "as_result", "model_from", "software_versions", "diagnostics_to_json", "fitted_ship"]
 
 
 def fitted_ship(model, inputs, ship: dict | None = None) -> tuple[dict, dict]:
@@ -68,7 +69,7 @@ def software_versions() -> dict:
     import matplotlib
     import scipy
 
-    from .. import __version__
+    from .._version import __version__
 
     return {"shipid": __version__, "python": platform.python_version(), "numpy": np.__version__,
             "scipy": scipy.__version__, "pandas": pd.__version__, "filterpy": filterpy.__version__,
@@ -313,3 +314,15 @@ def check_result_dict(doc, source: str = "result") -> dict:
     out["success"] = as_bool(doc.get("success", True), w + "success")
     out["loglik"] = as_number(doc["loglik"], w + "loglik", finite=False) if doc.get("loglik") is not None else None
     return out
+
+
+def as_result(result) -> FitResult:
+    """``result`` as a :class:`FitResult`: the object itself, its dict (:meth:`FitResult.to_dict`) or the path of
+    its JSON file."""
+    if isinstance(result, FitResult):
+        return result
+    if isinstance(result, dict):
+        return FitResult.from_dict(result)
+    if isinstance(result, (str, os.PathLike)):
+        return load_result(result)
+    raise ValueError(f"result: expected a FitResult, its dict or a result JSON path, got {type(result).__name__}")

@@ -10,7 +10,7 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
-from .trial_log import LogError, _Where
+from .errors import LogError, _Where
 
 #: cell texts read as a missing sample (compared in lower case): blanks, NaN spellings, a dash, Excel's #N/A
 _MISSING_TOKENS = {"", "nan", "na", "n/a", "null", "none", "-nan", "-", "--", "#n/a"}

@@ -11,7 +11,7 @@ from .schema import (OPTIONAL_CHANNELS, PRESETS, Schema, apply_conventions, chec
                      load_schema, merged)
 from .ship import ShipParticulars, _as_ship, _bundled_ship, read_ship
 from .shipid_csv import _read_csv
-from .trial_log import LogError, TrialLog, _finish
+from .trial_log import LogError, TrialLog, _finish, _run_consistency
 from .units import SCHEMA
 
 
@@ -211,28 +211,3 @@ def _schema_ship(spec: str) -> ShipParticulars:
     if resources.files("shipid").joinpath("data_ships", f"{spec}.json").is_file():
         return _bundled_ship(spec)
     return read_ship(spec)
-
-
-def _run_consistency(log: TrialLog, opt_out: str = "or --no-consistency-checks", *,
-                     reader_notes: dict | None = None) -> None:
-    """Check the channels; errors raise LogError (all named, first in full, then ``opt_out``: how to
-    skip the checks), warnings warn."""
-    import warnings
-
-    from .consistency import check_consistency
-
-    from .sensors import check_sensors
-
-    res = check_consistency(log)
-    res.findings.extend(check_sensors(log, reader_notes=reader_notes))  # sensor faults, in the same structure
-    order = {"error": 0, "warning": 1, "info": 2}
-    res.findings.sort(key=lambda f: order.get(f.level, 3))
-    log.consistency = res
-    for f in res.warnings:
-        warnings.warn(f.message, stacklevel=3)
-    if res.errors:
-        more = len(res.errors) - 1
-        tail = f" (and {more} more consistency error(s))" if more else ""
-        e = res.errors[0]
-        raise LogError(e.message + tail + "; " + opt_out,
-                       path=log.path, column=e.channels[0] if e.channels else None)

@@ -19,6 +19,9 @@ import numpy as np
 import pandas as pd
 
 from .._io import atomic_write_text
+from .consistency import check_consistency
+from .sensors import check_sensors
+from .errors import LogError, _fmt_value, _Where
 from .ship import ShipParticulars, _as_ship
 from .units import _UNKNOWN_DIMS, SCHEMA, SHIP_CHANNELS, SI_UNIT, UNITS, _units_for, unit_key
 
@@ -29,80 +32,6 @@ _CONTROL_ANGLES = ("delta", "fin")   # |value| > pi/2 rad looks like degrees
 _ATTITUDE_ANGLES = ("phi", "theta")  # |value| > pi/2 rad looks like degrees
 _RATE_DEG_LIMIT = 3.0                 # |rate| > 3 rad/s looks like deg/s
 _RPM_SCORE = 200.0                    # n sqrt(Lpp) [rps m^0.5] above this looks like rpm
-
-
-# --------------------------------------------------------------------------------------
-# errors
-# --------------------------------------------------------------------------------------
-
-
-class LogError(ValueError):
-    """A trial log (file or arrays) cannot be used as given.
-
-    Attributes
-    ----------
-    path : pathlib.Path or None
-        The file, or None for arrays.
-    column : str or None
-        Our channel name (or the file's column name) concerned.
-    row : int or None
-        1-based line number in the file (header = line 1 when there are no
-        comment lines), or the 0-based sample index for arrays.
-    value : object
-        The offending value, when there is one.
-    """
-
-    def __init__(self, message: str, *, path=None, column: str | None = None, row: int | None = None, value=None):
-        super().__init__(message)
-        self.path = Path(path) if path is not None else None
-        self.column = column
-        self.row = row
-        self.value = value
-
-
-def _fmt_value(v) -> str:
-    if isinstance(v, (float, np.floating)):
-        v = float(v)
-        if math.isnan(v):
-            return "blank/NaN"
-        if math.isinf(v):
-            return "inf" if v > 0 else "-inf"
-        return f"{v:.6g}"
-    if isinstance(v, str):
-        return repr(v if len(v) <= 40 else v[:37] + "...")
-    return str(v)
-
-
-class _Where:
-    """How to name places in messages: a file (rows are file lines) or arrays (indices)."""
-
-    def __init__(self, path: Path | None, name: str, rows: np.ndarray | None = None):
-        self.path = path
-        self.name = name
-        self.rows = rows
-        self.sources: dict[str, str] = {}   # channel -> the file's column, e.g. "column 7 'r [deg/s]'"
-
-    @property
-    def label(self) -> str:
-        return f"`{self.path.name}`" if self.path is not None else f"log '{self.name}'"
-
-    def row_of(self, i: int) -> int:
-        return int(self.rows[i]) if self.rows is not None else int(i)
-
-    def place(self, column: str | None = None, i: int | None = None, *, row: int | None = None) -> str:
-        s = self.label
-        if column is not None:
-            s += f" column '{column}'"
-        if row is None and i is not None:
-            row = self.row_of(i)
-        if row is not None:
-            s += f" {'row' if self.path is not None else 'index'} {row}"
-        return s
-
-    def error(self, msg: str, column: str | None = None, i: int | None = None, *, row: int | None = None, value=None):
-        if row is None and i is not None:
-            row = self.row_of(i)
-        return LogError(f"{self.place(column, row=row)}: {msg}", path=self.path, column=column, row=row, value=value)
 
 
 # --------------------------------------------------------------------------------------
@@ -226,8 +155,6 @@ class TrialLog:
                       inputs=inputs, interpolate_inputs=interpolate_inputs, required=required,
                       min_samples=min_samples, unit_checks=unit_checks, units_in=units_in, notes=[], fmt="arrays")
         if consistency_checks:
-            from .reader import _run_consistency
-
             _run_consistency(log, opt_out="pass consistency_checks=False")
         return log
 
@@ -777,3 +704,23 @@ def _check_heading(t: np.ndarray, ch: dict[str, np.ndarray], where: _Where) -> N
         if slope < -0.5 and clear:
             warnings.warn(f"{where.label}: heading psi and yaw rate r have opposite signs "
                           f"(d psi/dt = {slope:.2f} r); check the sign conventions", stacklevel=4)
+
+
+def _run_consistency(log: TrialLog, opt_out: str = "or --no-consistency-checks", *,
+                     reader_notes: dict | None = None) -> None:
+    """Check the channels and the sensors (:mod:`shipid.logs.sensors`, with what the reader found in
+    ``reader_notes``); errors raise LogError (all named, first in full, then ``opt_out``: how to skip the
+    checks), warnings warn."""
+    res = check_consistency(log)
+    res.findings.extend(check_sensors(log, reader_notes=reader_notes))  # sensor faults, in the same structure
+    order = {"error": 0, "warning": 1, "info": 2}
+    res.findings.sort(key=lambda f: order.get(f.level, 3))
+    log.consistency = res
+    for f in res.warnings:
+        warnings.warn(f.message, stacklevel=3)
+    if res.errors:
+        more = len(res.errors) - 1
+        tail = f" (and {more} more consistency error(s))" if more else ""
+        e = res.errors[0]
+        raise LogError(e.message + tail + "; " + opt_out,
+                       path=log.path, column=e.channels[0] if e.channels else None)

@@ -8,18 +8,17 @@ be mailed or archived as one file.
 """
 from __future__ import annotations
 
-import html
 import math
 import os
 import sys
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, Sequence
 
 
 from .._io import OutputExistsError, atomic_write_text
 from ..validation import LogValidation, load_logs, resolve_model, validate_one
 from . import figures
+from ._markup import _e, _f, _fig, _img, _table  # noqa: F401  (_img: the helpers as one set)
 
 __all__ = ["render_report", "write_report"]
 
@@ -55,44 +54,6 @@ nav a{margin-right:12px}
 
 
 # ----------------------------------------------------------------------------- helpers
-def _e(x: Any) -> str:
-    return html.escape("" if x is None else str(x), quote=True)
-
-
-def _f(v, fmt: str = "{:.4g}") -> str:
-    if v is None or isinstance(v, bool):
-        return "&ndash;" if v is None else _e(v)
-    try:
-        v = float(v)
-    except (TypeError, ValueError):
-        return _e(v)
-    return "&ndash;" if not math.isfinite(v) else _e(fmt.format(v))
-
-
-def _table(header: Sequence[str], rows: Sequence[Sequence[str]], left: int = 1, cls: str = "") -> str:
-    """Rows are already-escaped HTML cell contents (or (content, css class) tuples)."""
-    th = "".join(f'<th class="l">{h}</th>' if i < left else f"<th>{h}</th>" for i, h in enumerate(header))
-    body = []
-    for r in rows:
-        cells = []
-        for i, c in enumerate(r):
-            css = "l" if i < left else ""
-            if isinstance(c, tuple):
-                c, extra = c
-                css = f"{css} {extra}".strip()
-            cells.append(f'<td class="{css}">{c}</td>' if css else f"<td>{c}</td>")
-        body.append("<tr>" + "".join(cells) + "</tr>")
-    return f'<table class="{cls}"><thead><tr>{th}</tr></thead><tbody>' + "".join(body) + "</tbody></table>"
-
-
-def _img(uri: str, alt: str) -> str:
-    return f'<img src="{uri}" alt="{_e(alt)}">'
-
-
-def _fig(fig, alt: str) -> str:
-    return _img(figures.to_data_uri(fig), alt)
-
-
 def _anchor(i: int) -> str:
     return f"log{i + 1}"
 
@@ -357,7 +318,7 @@ def _section_versions(result) -> str:
 
 # ----------------------------------------------------------------------------- public
 def _section_horizon(horizons) -> str:
-    """Multi-start open-loop prediction errors (:func:`shipid.validation_horizon.horizon_prediction`) and
+    """Multi-start open-loop prediction errors (:func:`shipid.validation.horizon.horizon_prediction`) and
     predicted-vs-measured track overlays; ``horizons`` is a list of ``(HorizonResult, log)``."""
     if not horizons:
         return ""

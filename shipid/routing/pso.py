@@ -50,6 +50,7 @@ from typing import Callable, Sequence
 import numpy as np
 import pandas as pd
 
+from .._io import check_memory
 from .energy import PaperUSVModel
 from .fields import Field, PiecewiseTimeField, UniformField, as_field
 
@@ -930,8 +931,6 @@ def compare_planners(problem: USVProblem, *, rng=0, n_particles: int = 25, max_i
     Returns a dict with the three paths, their voyages and
     ``saving_vs_distance_optimal = 1 - W_OCPSO / W_DOPSO`` (both sailed).
     """
-    from .spec import check_pso_size
-
     check_pso_size(int(n_particles), int(max_iter), len(problem.obstacles), "compare_planners")
     rng = np.random.default_rng(rng)
     bar, callback = None, None
@@ -957,3 +956,19 @@ def compare_planners(problem: USVProblem, *, rng=0, n_particles: int = 25, max_i
     return {"dopso": do, "eopso": eo, "ocpso": oc, "dopso_voyage": vd, "eopso_voyage": ve,
             "saving_vs_distance_optimal": (1.0 - oc.energy / vd.total_energy) if ok else float("nan"),
             "success": bool(ok and do.success and oc.initial.success)}
+
+
+def check_pso_size(n_particles: int, max_iter: int, n_obstacles: int, where: str = "PSO") -> None:
+    """Refuse a PSO run whose estimated memory exceeds :func:`shipid._io.memory_limit_bytes`.
+
+    One swarm per left/right class (``2**k`` for ``k`` obstacles, at most 64 counted), each of
+    ``n_particles`` particles with ``k`` waypoints; a cost evaluation holds about 64 doubles per
+    particle and leg, and the initialisation draws ``4 n_particles`` candidates per class.
+    """
+    k = max(int(n_obstacles), 1)
+    swarms = 2 ** min(k, 6)
+    need = 8.0 * swarms * 4 * n_particles * (k + 1) * 64
+    check_memory(need, f"{where}: n_particles {n_particles}", "use fewer n_particles (25 is the default)")
+    if n_particles * max_iter > 10**9:
+        raise ValueError(f"{where}: n_particles x max_iter = {n_particles * max_iter:.3g} evaluations would run "
+                         "for days; use n_particles <= 1000 and max_iter <= 10000")

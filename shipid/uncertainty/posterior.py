@@ -49,6 +49,8 @@ import pandas as pd
 from scipy.special import ndtri
 from scipy.stats import rankdata
 
+from ..identify.result import as_result
+
 __all__ = ["sample_posterior", "PosteriorSamples", "load_samples", "split_rhat", "CONVERGENCE",
            "OutputErrorLikelihood"]
 
@@ -165,7 +167,7 @@ class OutputErrorLikelihood:
 
     def __init__(self, model, logs, names, *, meas_std=None, channels=None, prior_mean=None, prior_std=None,
                  substeps: int = 1, input_hold: str = "foh", x0_states=None):
-        from .data import noise_std_from_data, prepare_logs
+        from ..identify.data import noise_std_from_data, prepare_logs
 
         self.model = model
         self.names = list(names)
@@ -536,9 +538,7 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
         import emcee
     except ImportError:
         raise ValueError("MCMC sampling needs emcee: pip install 'shipid[mcmc]' (or pip install emcee)") from None
-    from ..uncertainty import _result_of
-
-    res = _result_of(result)
+    res = as_result(result)
     model = res.to_model()
     names = list(res.cov.index)
     if not names:

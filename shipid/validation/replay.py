@@ -35,12 +35,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .manoeuvres import metrics as manoeuvre_metrics
-from .manoeuvres import ship_info
-from .manoeuvres import steady_turn
-from .manoeuvres.run_metrics import reported_steady_turn
-from .models.base import Model
-from .simulate import SimulationResult, replay, replay_errors
+from ..manoeuvres import metrics as manoeuvre_metrics
+from ..manoeuvres import ship_info
+from ..manoeuvres import standard_manoeuvre, steady_turn
+from ..manoeuvres.run_metrics import reported_steady_turn
+from ..models.base import Model
+from ..simulate import SimulationResult, replay, replay_errors
 
 __all__ = ["validate", "validate_logs", "validate_one", "LogValidation", "resolve_model", "load_logs", "DIFF_EXCLUDE"]
 
@@ -181,7 +181,7 @@ def resolve_model(result_or_model) -> tuple[Model, Any]:
     -------
     (Model, FitResult or None)
     """
-    from .identify.result import model_from
+    from ..identify.result import model_from
 
     if isinstance(result_or_model, (str, os.PathLike)) and not Path(result_or_model).is_file():
         raise FileNotFoundError(f"{result_or_model}: no such result file; run `shipid fit` first or check the path")
@@ -190,7 +190,7 @@ def resolve_model(result_or_model) -> tuple[Model, Any]:
 
 def load_logs(logs, *, lpp: float | None = None) -> list:
     """TrialLogs from paths (read with :func:`shipid.logs.read_log`) or TrialLog objects."""
-    from .logs import TrialLog, read_log
+    from ..logs import TrialLog, read_log
 
     if isinstance(logs, (str, os.PathLike, TrialLog)):
         logs = [logs]
@@ -306,35 +306,6 @@ def _steady(log, sim, L: float, rudder_sign: float, res: LogValidation) -> None:
         res.steady_predicted = steady_turn(pred, lpp=L, name=f"replay of {getattr(log, 'name', 'log')}")
     except ValueError as exc:
         res.notes.append(f"steady turn of the replay not available: {exc}")
-
-
-def standard_manoeuvre(model: Model, measured, *, rudder_rate=None, lpp=None, params=None,
-                       heading_change_deg: float = 540.0):
-    """The model's closed-loop standard manoeuvre matching a measured one.
-
-    ``measured``: the log's :class:`~shipid.manoeuvres.TurningMetrics` or
-    :class:`~shipid.manoeuvres.ZigzagMetrics` (manoeuvre kind, ordered rudder angle, side, switch
-    angle, approach speed).  ``rudder_rate`` [rad/s] defaults to the model's.  ``params`` (np,) or
-    (B, np): with B parameter sets the B manoeuvres run as one batch, member b with ``params[b]``.
-    ``heading_change_deg``: how far a turning circle runs.  Returns the
-    :class:`~shipid.manoeuvres.ManoeuvreResult`; raises ValueError when the log's approach speed or
-    rudder angle is unknown or the model cannot run the manoeuvre.
-    """
-    from .manoeuvres import turning_circle, zigzag
-
-    m = measured
-    rudder, speed = abs(float(m.rudder_deg)), float(m.approach_speed)
-    if not (math.isfinite(speed) and speed > 0) or not rudder > 0:
-        raise ValueError("approach speed or rudder angle of the log unknown")
-    per_member = params is not None and np.ndim(params) == 2
-    spd = np.full(len(params), speed) if per_member else speed  # one member per parameter set
-    if m.manoeuvre == "turning":
-        return turning_circle(model, rudder, speed=spd, side=m.side, rudder_rate=rudder_rate, lpp=lpp,
-                              params=params, heading_change_deg=heading_change_deg)
-    # the rudder reversal is located within the step (shipid.manoeuvres.ZigzagRudder), so the default
-    # step gives the overshoots to ~0.01 deg (tests/test_manoeuvres.py)
-    return zigzag(model, rudder, float(m.switch_deg), speed=spd, first=m.first_side, rudder_rate=rudder_rate,
-                  lpp=lpp, params=params)
 
 
 def _standard(model: Model, log, res: LogValidation) -> None:
