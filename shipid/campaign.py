@@ -456,6 +456,13 @@ def load_campaign(path) -> dict:
         for k in ("passes", "draws"):
             if k in spec and spec[k] < (1 if k == "passes" else 0):
                 raise ValueError(f"{p}: {label}: '{k}' must be >= {1 if k == 'passes' else 0}, got {spec[k]}")
+        if spec.get("draws"):
+            from .uncertainty.draws import check_draws_memory
+
+            try:
+                check_draws_memory(int(spec["draws"]))
+            except ValueError as exc:
+                raise ValueError(f"{p}: {label}: {exc}") from None
         if "manoeuvres" in spec:
             from .uncertainty import parse_manoeuvre
 

@@ -454,6 +454,29 @@ def _recorded_prior(res, names):
 MIN_KEPT_STEPS = 4
 
 
+def _run_mcmc(sampler, state, steps: int, progress):
+    """``sampler.run_mcmc(state, steps)`` with Ctrl-C taken between steps: emcee prints a traceback for any
+    exception raised inside the likelihood (KeyboardInterrupt included) before passing it on, so the
+    interrupt is noted by a handler and raised here, outside the likelihood.  Returns the last state."""
+    import signal
+    import threading
+
+    hit: list = []
+    previous = None
+    if threading.current_thread() is threading.main_thread() and \
+            signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        previous = signal.signal(signal.SIGINT, lambda signum, frame: hit.append(signum))
+    try:
+        last = state
+        for last in sampler.sample(state, iterations=steps, progress=progress):
+            if hit:
+                raise KeyboardInterrupt
+        return last
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+
+
 def _check_sample_size(nw: int, steps: int, burn: int, thin: int, k: int, logs, like) -> None:
     """Refuse before anything is allocated: a thinning that keeps fewer than :data:`MIN_KEPT_STEPS` steps, and
     a run whose chain and batched simulations need more memory than :func:`shipid._io.memory_limit_bytes`."""
@@ -597,18 +620,18 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
         pm, pc = _proposal_in_sampler_coordinates(proposal, all_names, like)
         kept = emcee.EnsembleSampler(nw, k, fn, vectorize=vectorize, moves=_independence_move(emcee, pm, pc))
         kept._random = sampler._random
-        kept.run_mcmc(emcee.State(p0, log_prob=lp0), steps, progress=progress)
+        _run_mcmc(kept, emcee.State(p0, log_prob=lp0), steps, progress)
         chain, acceptance = kept.get_chain(discard=burn, thin=thin), kept.acceptance_fraction
     elif moves == "independence":
-        state = sampler.run_mcmc(emcee.State(p0, log_prob=lp0), burn, progress=progress)
+        state = _run_mcmc(sampler, emcee.State(p0, log_prob=lp0), burn, progress)
         pts = sampler.get_chain(discard=burn // 2).reshape(-1, k)
         kept = emcee.EnsembleSampler(nw, k, fn, vectorize=vectorize,
                                      moves=_independence_move(emcee, pts.mean(axis=0), np.cov(pts, rowvar=False)))
         kept._random = sampler._random
-        kept.run_mcmc(state, steps - burn, progress=progress)
+        _run_mcmc(kept, state, steps - burn, progress)
         chain, acceptance = kept.get_chain(thin=thin), kept.acceptance_fraction
     else:
-        sampler.run_mcmc(emcee.State(p0, log_prob=lp0), steps, progress=progress)  # start values evaluated once
+        _run_mcmc(sampler, emcee.State(p0, log_prob=lp0), steps, progress)  # start values evaluated once
         chain, acceptance = sampler.get_chain(discard=burn, thin=thin), sampler.acceptance_fraction
     diag = chain_diagnostics(chain, acceptance, all_names, steps)
     diag["n_simulations"] = int(like.n_sims)
