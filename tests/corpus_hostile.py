@@ -201,7 +201,7 @@ def cases() -> list[Case]:
     add = out.append
 
     # campaigns: names, confinement, stale outputs, verdicts, workers, scheduler
-    for label, name, fast in [("dotdot", "..", True), ("dot", ".", False), ("newline", "a\n", True),
+    for label, name, fast in [("dotdot", "..", True), ("dot", ".", False), ("newline", "a\n", False),
                               ("summary-name", "campaign.json", False), ("slash", "a/b", False),
                               ("tab", "a\tb", False), ("nul", "a\u0000b", False), ("journal-name", ".journal", False)]:
         add(Case(f"campaign-name-{label}", "campaign", ["campaign", "{in}/c.json", "-o", "{out}", "--workers", "1",
@@ -227,7 +227,7 @@ def cases() -> list[Case]:
     add(Case("campaign-workers-huge", "campaign", ["campaign", "{in}/c.json", "-o", "{out}", "--workers", "100000"],
              _campaign({"fits": [_fit("m1")]}), needles=("--workers",), timeout=120))
     add(Case("campaign-workers-zero", "campaign", ["campaign", "{in}/c.json", "-o", "{out}", "--workers", "0"],
-             _campaign({"fits": [_fit("m1")]}), needles=("workers",), fast=True))
+             _campaign({"fits": [_fit("m1")]}), needles=("workers",)))
     add(Case("campaign-scheduler-silent", "campaign",
              ["campaign", "{in}/c.json", "-o", "{out}", "--scheduler", "tcp://127.0.0.1:{port}"],
              _campaign({"fits": [_fit("m1")]}), needles=("--scheduler",), timeout=120))
@@ -259,7 +259,7 @@ def cases() -> list[Case]:
             b = _special(kind, "X")
             add(Case(f"output-{kind}-{cmd}", "outputs", argv, _both(build, b) if build else b,
                      needles=("regular file", "is a folder"), special=("X",),
-                     fast=(cmd == "log" and kind in ("device", "fifo"))))
+                     fast=(cmd == "log" and kind == "device")))
 
     # structured files: alias bombs, sizes, nesting
     add(Case("schema-yaml-bomb", "loader", ["log", "{in}/log.csv", "--schema", "{in}/s.yaml"],
@@ -296,7 +296,7 @@ def cases() -> list[Case]:
              _both(_copy_log, _result), needles=("--steps", "GiB"), timeout=120))
     add(Case("sample-thin-past-steps", "sizes",
              ["sample", "{in}/r.json", "{in}/log.csv", "-o", "{out}/s.json", "--thin", "1000", "--steps", "30"],
-             _both(_copy_log, _result), needles=("--thin",), fast=True))
+             _both(_copy_log, _result), needles=("--thin",)))
     add(Case("validate-draws-1e9", "sizes", ["validate", "{in}/r.json", "{in}/log.csv", "--draws", "1000000000",
                                              "-o", "{out}/v.json"],
              _both(_copy_log, _result), needles=("--draws",), timeout=120))
@@ -363,7 +363,7 @@ def cases() -> list[Case]:
                                        (signal.SIGKILL, 8, 16), (signal.SIGINT, 5, 12), (signal.SIGKILL, 4, 20)]):
         add(Case(f"campaign-kill-{sig.name}-{i}", "kill",
                  ["campaign", "{in}/c.json", "-o", "{out}", "--workers", "1", "--progress"], camp3,
-                 expect="any", kill=(sig, lo, hi), resume=True, members=names, fast=i == 1))
+                 expect="any", kill=(sig, lo, hi), resume=True, members=names))
     add(Case("sample-sigint", "kill", ["sample", "{in}/r.json", "{in}/log.csv", "-o", "{out}/s.json", "--steps", "100000"],
              _both(_copy_log, _result), expect="any", kill=(signal.SIGINT, 15, 20)))
     for i, sig in enumerate((signal.SIGKILL, signal.SIGTERM)):
