@@ -610,3 +610,22 @@ def test_sample_refuses_a_thinning_that_keeps_too_few_steps_and_a_run_beyond_mem
     err = capsys.readouterr().err
     assert rc == 2 and "sampling with walkers=1000000000 x steps=30 needs about" in err and "--walkers" in err
     assert not (tmp_path / "s.json").exists()
+
+
+def test_ctrl_c_during_sample_is_one_line(tmp_path):
+    """SIGINT while the walkers run: 'shipid: interrupted', exit 130, no traceback (emcee prints one for any
+    exception inside the likelihood, so the interrupt is taken between steps)."""
+    import subprocess
+    import sys
+    import time
+
+    r = tmp_path / "r.json"
+    assert main(["fit", str(LOG), "-o", str(r), "--passes", "1"]) in (0, 3)
+    proc = subprocess.Popen([sys.executable, "-m", "shipid", "sample", str(r), str(LOG), "-o", str(tmp_path / "s.json"),
+                             "--steps", "100000"], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    time.sleep(12.0)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130 and "Traceback" not in err and err.strip().endswith("shipid: interrupted"), err[-500:]
+    assert not (tmp_path / "s.json").exists() and not list(tmp_path.glob(".*.tmp"))
