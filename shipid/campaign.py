@@ -56,10 +56,12 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
+import pandas as pd
 
 from ._io import short
+from .results import ResultMixin
 
-__all__ = ["Engine", "Outcome", "member_seeds", "load_campaign", "run_campaign", "run_fit_member", "run_sweep_member",
+__all__ = ["Engine", "Outcome", "CampaignResult", "member_seeds", "load_campaign", "run_campaign", "run_fit_member", "run_sweep_member",
            "run_member", "member_cost", "warm_fits", "warm_specs", "FIT_KEYS", "SWEEP_KEYS", "dask_available"]
 
 
@@ -579,7 +581,7 @@ def run_sweep_member(spec: dict):
 
         levels = {k: spec.get(k, PAPER_SWEEP[k]) for k in PAPER_SWEEP}
         res = sweep(**levels, dt=spec.get("dt"), t_max=float(spec.get("t_max", 60.0)), keep_trajectories=False)
-        return res.summary.reset_index(drop=True)
+        return res.launches.reset_index(drop=True)
     from .identify.result import model_from
     from .manoeuvres import ship_info, turning_sweep
 
@@ -837,7 +839,7 @@ def run_campaign(campaign, outdir, *, engine: Engine | None = None, force: bool 
                "n_failed": sum(m["status"] == "failed" for m in members), "n_resumed": len(done),
                "members": members}
     atomic_write_text(out / SUMMARY, json.dumps(summary, indent=2) + "\n", force=True)
-    return summary
+    return CampaignResult(summary)
 
 
 def _write_member(out: Path, spec: dict, o: Outcome) -> dict:
@@ -868,3 +870,53 @@ def _write_member(out: Path, spec: dict, o: Outcome) -> dict:
         atomic_write_text(d / "predictions.json", dumps_json(o.value["prediction"]))
         rec["files"].append(f"{spec['name']}/predictions.json")
     return rec
+
+
+class CampaignResult(dict, ResultMixin):
+    """What :func:`run_campaign` wrote to ``campaign.json``: the same dict (``members``, ``n_failed``, ...),
+    with the result contract on top (one row per member in :meth:`summary`)."""
+
+    @property
+    def success(self) -> bool:
+        """Every member ran and is ``ok`` (none flagged, none failed; :func:`member_status`), and every fit and
+        sweep reports success."""
+        return all(m.get("ok") and m.get("status", "ok") == "ok" and m.get("success", True)
+                   for m in self.get("members", []))
+
+    @property
+    def message(self) -> str:
+        n = int(self.get("n_members", 0))
+        unsuccessful = sum(1 for m in self.get("members", []) if m.get("ok") and not m.get("success", True))
+        return (f"{n} member(s): {self.get('n_ok', 0)} ok, {self.get('n_flagged', 0)} flagged, "
+                f"{self.get('n_failed', 0)} failed ({self.get('engine', '')})"
+                + (f"; {unsuccessful} completed without success" if unsuccessful else ""))
+
+    def summary(self) -> pd.DataFrame:
+        """One row per member: name, type, status, ok, success, seconds, error, files written."""
+        cols = ["name", "type", "status", "ok", "success", "seconds", "error", "files"]
+        rows = [{"name": m.get("name"), "type": m.get("type"), "status": m.get("status"), "ok": m.get("ok"),
+                 "success": m.get("success"), "seconds": m.get("seconds"), "error": m.get("error"),
+                 "files": ", ".join(m.get("files", []))} for m in self.get("members", [])]
+        return pd.DataFrame(rows, columns=cols)
+
+    def to_pandas(self) -> pd.DataFrame:
+        """Every member's record as written (seed included), one row each."""
+        return pd.DataFrame(self.get("members", []))
+
+    def _html_title(self) -> str:
+        return f"Campaign ({self.get('n_members', 0)} members)"
+
+    def plot(self, ax=None):
+        """Seconds each member took, coloured by outcome (green ok, orange flagged or no success, red failed);
+        returns the axes."""
+        import matplotlib.pyplot as plt
+
+        df = self.summary()
+        if ax is None:
+            _, ax = plt.subplots(figsize=(6, 0.3 * len(df) + 1.2))
+        colour = ["C3" if not ok else ("C2" if s in (True, None) and st in ("ok", None) else "C1")
+                  for ok, s, st in zip(df["ok"], df["success"], df["status"])]
+        ax.barh(df["name"].astype(str), df["seconds"].astype(float), color=colour)
+        ax.invert_yaxis()
+        ax.set_xlabel("seconds")
+        return ax

@@ -39,6 +39,7 @@ import numpy as np
 import pandas as pd
 
 from ..identify.result import as_result
+from ..results import ResultMixin
 
 __all__ = ["ManoeuvreSpec", "parse_manoeuvre", "parameter_draws", "predict_manoeuvres", "ManoeuvrePrediction",
            "summarise_draws", "imo_probability", "METRIC_KEYS", "replay_draws"]
@@ -212,7 +213,7 @@ def imo_probability(imo_dicts: Sequence[dict]) -> dict:
 
 
 @dataclass
-class ManoeuvrePrediction:
+class ManoeuvrePrediction(ResultMixin):
     """Predicted standard manoeuvres with their uncertainty (from :func:`predict_manoeuvres`).
 
     Attributes
@@ -224,7 +225,7 @@ class ManoeuvrePrediction:
         The drawn parameter sets.
     source : str
         "gaussian" (fit covariance, with ``inflation``) or "mcmc".
-    summary : DataFrame
+    metrics : DataFrame
         One row per (manoeuvre, metric): nominal, mean, median, std, low, high, n, n_nonfinite.
     imo : dict label -> dict criterion -> probability block (see :func:`imo_probability`)
     failures : dict label -> {"n_failed": int, "messages": {message: count}}
@@ -240,7 +241,7 @@ class ManoeuvrePrediction:
     level: float
     inflation: float
     seed: Any
-    summary: pd.DataFrame
+    metrics: pd.DataFrame
     imo: dict
     failures: dict
     nominal: dict
@@ -253,9 +254,34 @@ class ManoeuvrePrediction:
     def draws(self) -> int:
         return int(self.params.shape[0])
 
+    def summary(self) -> pd.DataFrame:
+        """One row per manoeuvre and metric: nominal, mean, median, std, interval ``low``/``high``, counts."""
+        return self.metrics.copy()
+
     def to_pandas(self) -> pd.DataFrame:
-        """The metric summary (one row per manoeuvre and metric)."""
-        return self.summary.copy()
+        """Every simulated member's settings and metrics (member 0 = point estimate, 1..N = draws), with a
+        ``manoeuvre`` column."""
+        return pd.concat([self.runs[s.label].to_pandas().rename_axis("member").reset_index().assign(manoeuvre=s.label)
+                          for s in self.manoeuvres], ignore_index=True)
+
+    def _html_title(self) -> str:
+        return f"Manoeuvre prediction ({self.draws} draws, {self.source})"
+
+    def plot(self, ax=None):
+        """One panel per manoeuvre with every draw (turning: tracks; zigzag: heading and rudder [deg]);
+        returns the axes."""
+        import matplotlib.pyplot as plt
+
+        n = len(self.manoeuvres)
+        if ax is None:
+            _, axs = plt.subplots(1, n, figsize=(5 * n, 4), squeeze=False)
+            axs = axs[0]
+        else:
+            axs = np.resize(np.atleast_1d(ax).ravel(), n)
+        for a, spec in zip(axs, self.manoeuvres):
+            self.runs[spec.label].plot(ax=a)
+            a.set_title(spec.label)
+        return axs
 
     def metrics_of(self, label: str) -> pd.DataFrame:
         """Per-draw metrics of one manoeuvre (rows = draws 1..N; the point estimate is row 0)."""
@@ -272,7 +298,7 @@ class ManoeuvrePrediction:
         for spec in self.manoeuvres:
             lab = spec.label
             block = dict(self.nominal[lab])
-            rows = self.summary[self.summary["manoeuvre"] == lab]
+            rows = self.metrics[self.metrics["manoeuvre"] == lab]
             block.update(ci_block(rows))
             block["imo_probability"] = self.imo[lab]
             block["draws"] = {"n": self.draws, **self.failures[lab]}
