@@ -677,9 +677,8 @@ def fit_exit_status(result: dict) -> tuple[int, list[str]]:
     """``shipid fit``'s exit status for a result dict (0 consistent, 1 not converged, 3 not consistent with its
     noise model, 4 filter diverged) and the reasons, from the result's own diagnostics."""
     diag = result.get("diagnostics") or {}
-    if diag.get("diverged") or (result.get("method") == "ekf" and not result.get("success", True)
-                                and "diverg" in str(result.get("message", "")).lower()):
-        return 4, [str(result.get("message", "the filter diverged"))]
+    if result.get("method") == "ekf" and not result.get("success", True):  # the filter did not finish
+        return 4, [f"the filter diverged: {result.get('message', '')}"]
     verdict = diag.get("consistency") or {}
     if isinstance(verdict, dict) and not verdict.get("consistent", True):
         return 3, [str(r) for r in verdict.get("reasons", [])] or ["not consistent with its noise model"]
