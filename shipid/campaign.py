@@ -40,6 +40,16 @@ and sweeps (the batched studies of ``shipid sweep`` and the glider launch sweep)
 :func:`run_campaign` writes ``OUTDIR/<name>/result.json`` (and
 ``predictions.json`` when ``draws`` > 0) per fit, ``OUTDIR/<name>/sweep.csv`` per
 sweep and ``OUTDIR/campaign.json`` with every member's status and error.
+
+Every file name a campaign file supplies is treated as hostile (as git and rsync never write outside the
+destination): a member name is a plain file name (letters, digits, ``_ . -``, not starting with ``.`` or
+``-``; not ``campaign.json``, ``campaign.journal`` or a device name), checked before anything runs, and a
+member folder that is a link or resolves outside OUTDIR is refused.  A member's files are written as soon as
+it finishes and a line is appended to ``OUTDIR/campaign.journal``; ``--resume`` keeps the members it lists
+(files unchanged) and runs the others, so a kill at any point loses no finished member.  A member is ``ok``,
+``flagged`` (its fit would make ``shipid fit`` exit 3 or 4: not consistent with its noise model, or diverged;
+a sweep with failed runs) or ``failed`` (it raised, or its worker died :data:`MEMBER_RETRIES` + 1 times); the
+command exits 0, 3 (some flagged, none failed) or 1 (some failed).
 """
 from __future__ import annotations
 

@@ -381,3 +381,19 @@ def test_resume_refuses_a_changed_campaign_and_a_folder_without_journal(tmp_path
     assert "no campaign.journal in this folder, so nothing to resume" in capsys.readouterr().err
     assert main(["campaign", str(p), "-o", str(out), "--workers", "1", "--resume", "--force"]) == 2
     assert "--force and --resume: give one" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_a_member_that_kills_its_worker_is_retried_then_reported_and_the_others_complete():
+    """A member whose worker process dies is started again MEMBER_RETRIES times, then reported as that
+    member's failure (Dask's KilledWorker, one line); the other members complete."""
+    pytest.importorskip("distributed")
+    from shipid.campaign import MEMBER_RETRIES
+
+    seen = []
+    with Engine(2, progress=False) as eng:
+        out = eng.map(eval, ["1 + 1", "__import__('os')._exit(3)", "2 + 2"], on_result=seen.append)
+    assert [o.ok for o in out] == [True, False, True] and out[0].value == 2 and out[2].value == 4
+    assert out[1].error == (f"its worker process died {MEMBER_RETRIES + 1} times running it (out of memory, or a "
+                            "crash); run it alone with --workers 1 to see why")
+    assert sorted(o.index for o in seen) == [0, 1, 2]
