@@ -155,11 +155,17 @@ def read_logs(paths, args) -> list:
               schema=args.schema, skip_rows=args.skip_rows, header=args.header,
               velocity_frame=args.velocity_frame, rudder_sign=args.rudder_sign,
               consistency_checks=not args.no_consistency_checks)
+    from ..logs.sensors import SensorWarning
+
     logs = []
     for path in paths:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("ignore", UserWarning)
+            warnings.simplefilter("always", SensorWarning)
             logs.append(read_log(path, **kw))
+        for w in caught:  # what the reader found without the channel checks (a cut last row, look-alikes)
+            if issubclass(w.category, SensorWarning):
+                warnings.warn(str(w.message), UserWarning, stacklevel=2)
         # consistency warnings (GNSS freezes, a loose yaw rate, rpm?) matter to every command: one line each
         for f in (logs[-1].consistency.warnings if logs[-1].consistency is not None else []):
             warnings.warn(f.message, UserWarning, stacklevel=2)

@@ -147,7 +147,15 @@ def _metrics(args) -> int:
                          "of midship in metres (a finite number)")
     out = []
     rud, chk = parse_zigzag(args.zigzag) if args.zigzag else (None, None)
-    for f, log in zip(args.logs, read_logs(args.logs, args)):
+    logs = read_logs(args.logs, args)
+    for f, log in zip(args.logs, logs):  # the logged point lies on the ship (bow sensors reach past the FP)
+        L = args.lpp or getattr(getattr(log, "ship", None), "lpp", None)
+        off = args.reference_offset
+        if off is not None and abs(off) > (0.6 * L if L else 500.0):
+            lim = f"within +/-0.6 Lpp = +/-{0.6 * L:.3g} m of midship" if L else "within 500 m of midship"
+            raise ValueError(f"--reference-offset {off:.3g}: {Path(f).name}: the logged point must lie on the ship "
+                             f"({lim}); give its distance forward of midship in metres")
+    for f, log in zip(args.logs, logs):
         try:
             m = metrics(log, lpp=args.lpp, kind=args.kind, reference_offset=args.reference_offset, name=Path(f).name,
                         rudder_deg=rud, check_deg=chk)

@@ -61,7 +61,12 @@ def register(sub) -> None:
                  "sweep and OUTDIR/campaign.json.",
                  positional=[("campaign", "CAMPAIGN", "campaign file (.json, .yaml)")],
                  output_help="output folder (new or empty)", output_metavar="OUTDIR",
-                 force_help="write into a non-empty output folder")
+                 force_help="run every member again into a used output folder (removes the members' old files)")
+    c.add_argument("--resume", action="store_true",
+                   help="finish a campaign that was stopped: members OUTDIR/campaign.journal lists as finished "
+                        "(files unchanged) are kept, the others run")
+    c.epilog = ("exit status: 0 every member ok; 3 some fits flagged (`shipid fit` would exit 3 or 4 on them: not "
+                "consistent with their noise model, or diverged) and none failed; 1 some members failed; 2 bad input")
     add_engine_options(c)
 
 
@@ -104,9 +109,12 @@ def check_draws(args) -> int:
 def _sample(args) -> int:
     from ..uncertainty.posterior import sample_posterior
 
-    out = Path(args.output)
-    if out.exists() and not args.force:
-        raise ValueError(f"{out}: output exists; choose another name or pass --force to overwrite it")
+    from ._common import check_output_path
+
+    out = check_output_path(args.output, force=args.force, inputs=[args.result, *args.logs], what="samples")
+    for opt, v, low in (("--walkers", args.walkers, 2), ("--steps", args.steps, 10), ("--thin", args.thin, 1)):
+        if v is not None and v < low:
+            raise ValueError(f"{opt} {v}: give a whole number >= {low}")
     logs = read_logs_for_result(args)  # as validate reads them (a wind-aware fit: true wind from apparent-only logs)
     chans = [c.strip() for c in args.channels.split(",") if c.strip()] if args.channels else None
     import warnings
@@ -130,19 +138,32 @@ def _sample(args) -> int:
     return 0 if s.converged else 1
 
 
-def _campaign(args) -> int:
-    from ..campaign import load_campaign, run_campaign
+def _member_line(m: dict) -> str:
+    if m["status"] == "failed":
+        return f"{m['name']}: FAILED: {m['error']}"
+    if m["status"] == "flagged":
+        why = "; ".join(m.get("reasons") or [])
+        return f"{m['name']}: flagged: {why[:200]}{'...' if len(why) > 200 else ''}"
+    note = "" if m.get("success", True) else " (did not converge)"
+    return f"{m['name']}: ok{note}"
 
+
+def _campaign(args) -> int:
+    from ..campaign import campaign_exit_status, load_campaign, run_campaign
+
+    if args.force and args.resume:
+        raise ValueError("--force and --resume: give one (--resume keeps finished members, --force runs them again)")
     camp = load_campaign(args.campaign)  # validate before starting any worker
     with engine_from(args) as eng:
-        summary = run_campaign(camp, args.output, engine=eng, force=args.force)
+        summary = run_campaign(camp, args.output, engine=eng, force=args.force, resume=args.resume,
+                               on_member=lambda m: print(_member_line(m), flush=True))
     for m in summary["members"]:
-        bad = "fit did not converge" if m.get("type", "fit") == "fit" else "some runs of the sweep failed"
-        state = ("ok" if m.get("success", True) else bad) if m["ok"] else f"FAILED: {m['error']}"
-        print(f"{m['name']}: {state}")
-    print(f"{summary['n_members'] - summary['n_failed']}/{summary['n_members']} members completed "
-          f"({summary['engine']}); wrote {Path(args.output) / 'campaign.json'}")
-    return 1 if summary["n_failed"] else 0
+        for w in m.get("warnings", [])[:3]:
+            print(f"{m['name']}: warning: {w}", file=sys.stderr)
+    resumed = f", {summary['n_resumed']} kept from the earlier run" if summary.get("n_resumed") else ""
+    print(f"{summary['n_members']} members: {summary['n_ok']} ok, {summary['n_flagged']} flagged, "
+          f"{summary['n_failed']} failed{resumed} ({summary['engine']}); wrote {Path(args.output) / 'campaign.json'}")
+    return campaign_exit_status(summary)
 
 
 # ----------------------------------------------------------------------------- --draws hunks

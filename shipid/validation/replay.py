@@ -215,6 +215,11 @@ def _num(v) -> float | None:
 
 
 # ----------------------------------------------------------------------------- inputs
+def _check_substeps(substeps) -> None:
+    if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
+        raise ValueError(f"substeps must be a whole number >= 1 (RK4 steps per log sample), got {substeps!r}")
+
+
 def resolve_model(result_or_model) -> tuple[Model, Any]:
     """A model (and the fit result, if any) from a fit result, its JSON, a path to it, or a model.
 
@@ -476,6 +481,7 @@ def validate(result_or_model, logs, lpp: float | None = None, *, rudder_sign: fl
     and radians, NRMSE relative to the measured range), ``track_rmse_m``, ``replay`` (success,
     message), ``success`` and ``notes``.
     """
+    _check_substeps(substeps)
     return [v.to_dict() for v in validate_logs(result_or_model, logs, lpp, rudder_sign=rudder_sign,
                                                substeps=substeps, closed_loop=closed_loop,
                                                zigzag_angles=zigzag_angles, initial=initial)]
