@@ -583,7 +583,7 @@ class OutputErrorRefiner:
             self.message_ = (f"refinement failed: the refined model's replay of some logs still diverges ({sol.message}); "
                              "the model cannot follow these logs")
         else:
-            self.message_ = str(sol.message)
+            self.message_ = _least_squares_words(sol)
         if start is not None and getattr(start, "success_", True) is False:
             # a start from a diverged filter is not a result, whatever the optimiser says
             self.success_ = False
@@ -631,3 +631,13 @@ class OutputErrorRefiner:
                    "rms_normalised_residual": self.rms_normalised_residual_},
             model_options=opts, ship=ship,
         )
+
+
+def _least_squares_words(sol) -> str:
+    """scipy's least_squares status in words (its own message names its options in backquotes)."""
+    return {1: "converged: gradient below the tolerance (gtol)",
+            2: "converged: the cost no longer decreases by more than the tolerance (ftol)",
+            3: "converged: the step is below the tolerance (xtol)",
+            4: "converged: cost change and step below their tolerances (ftol, xtol)",
+            0: f"stopped at the evaluation limit ({sol.nfev} evaluations; raise max_nfev / --max-nfev)"}.get(
+        int(sol.status), f"stopped: {str(sol.message).replace('`', '')}")
