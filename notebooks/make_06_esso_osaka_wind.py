@@ -16,13 +16,13 @@ and the unfitted `lowspeed` prior, (3) fit `lowspeed` with and without wind + cu
 runs and predict the others (multi-start open-loop prediction, starts every 5 s).
 
 `SHIPID_FAST=1` (the test suite) uses two random runs, two folds and coarse decimation; the
-full study is `python -m shipid.studies.esso_osaka` (docs/environment.md)."""),
+full study is `python -m studies.esso_osaka` (docs/environment.md)."""),
     code("""import os
 from pathlib import Path
 import numpy as np, pandas as pd, matplotlib.pyplot as plt
-from shipid.studies import esso_osaka as es
+from studies import esso_osaka as es
 from shipid.environment import WindForce, apparent_wind
-from shipid.validation_horizon import horizon_prediction, dead_reckoning
+from shipid.validation.horizon import horizon_prediction, dead_reckoning
 
 FAST = os.environ.get("SHIPID_FAST") == "1"
 folder = Path("..") / ".." / "shared" / "data" / "esso_osaka_frt"

@@ -1,7 +1,7 @@
 """Distributed work on Dask: an engine that maps independent members over workers, and campaigns.
 
 :class:`Engine` runs a list of independent tasks (fits of a campaign, replicates of
-:func:`shipid.identify.coverage_study`, chunks of posterior draws) either
+the replicate coverage study in ``studies/``, chunks of posterior draws) either
 
 * on an embedded :class:`distributed.LocalCluster` of ``workers`` processes
   (one thread each, loopback address only, no dashboard) -- the default when

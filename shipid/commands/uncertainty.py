@@ -100,7 +100,7 @@ def check_draws(args) -> int:
 
 
 def _sample(args) -> int:
-    from ..identify.posterior import sample_posterior
+    from ..uncertainty.posterior import sample_posterior
 
     out = Path(args.output)
     if out.exists() and not args.force:
@@ -183,7 +183,7 @@ def _sides(side: str) -> list[str]:
 def validate_draws(args, result_path, vals: list, out: list) -> None:
     """Add ``"<metric>_ci"`` / ``"imo_probability"`` / ``"draws"`` to each log's ``predicted`` block."""
     from ..uncertainty import parameter_draws, replay_draws
-    from ..validation import _for_length, resolve_model
+    from ..validation.replay import _for_length, resolve_model
 
     n = check_draws(args)
     if n == 0:

@@ -149,7 +149,7 @@ def _horizons(text: str) -> list[float]:
 def _horizon_results(args, horizons, logs, model, initial) -> list:
     """``(HorizonResult, log)`` per log for ``--horizon``, each prediction started with ``initial`` (the
     fit's start current, :func:`_current_start`)."""
-    from ..validation_horizon import horizon_prediction
+    from ..validation.horizon import horizon_prediction
 
     out = []
     for lg in logs:

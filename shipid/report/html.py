@@ -413,7 +413,7 @@ def _section_versions(result) -> str:
 
 # ----------------------------------------------------------------------------- public
 def _section_horizon(horizons) -> str:
-    """Multi-start open-loop prediction errors (:func:`shipid.validation_horizon.horizon_prediction`) and
+    """Multi-start open-loop prediction errors (:func:`shipid.validation.horizon.horizon_prediction`) and
     predicted-vs-measured track overlays; ``horizons`` is a list of ``(HorizonResult, log)``."""
     if not horizons:
         return ""

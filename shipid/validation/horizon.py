@@ -20,9 +20,9 @@ import warnings
 import numpy as np
 import pandas as pd
 
-from .identify.data import measured_states
-from .models.base import Model
-from .models.kinematics import planar_rates
+from ..identify.data import measured_states
+from ..models.base import Model
+from ..models.kinematics import planar_rates
 
 __all__ = ["horizon_prediction", "HorizonResult", "DeadReckoning", "dead_reckoning", "DEFAULT_HORIZONS"]
 
@@ -209,7 +209,7 @@ def horizon_prediction(model: Model, log, *, horizons=DEFAULT_HORIZONS, start_ev
     if model.nu:
         Ub = pd.DataFrame(Ub.reshape(-1, model.nu)).ffill().to_numpy().reshape(Ub.shape)
     tt = np.arange(nH_eff + 1) * dt
-    from .simulate import simulate
+    from ..simulate import simulate
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)

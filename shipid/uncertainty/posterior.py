@@ -165,7 +165,7 @@ class OutputErrorLikelihood:
 
     def __init__(self, model, logs, names, *, meas_std=None, channels=None, prior_mean=None, prior_std=None,
                  substeps: int = 1, input_hold: str = "foh", x0_states=None):
-        from .data import noise_std_from_data, prepare_logs
+        from ..identify.data import noise_std_from_data, prepare_logs
 
         self.model = model
         self.names = list(names)
@@ -559,7 +559,7 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
         import emcee
     except ImportError:
         raise ValueError("MCMC sampling needs emcee: pip install 'shipid[mcmc]' (or pip install emcee)") from None
-    from ..uncertainty import _result_of
+    from .draws import _result_of
 
     res = _result_of(result)
     model = res.to_model()

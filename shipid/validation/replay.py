@@ -35,12 +35,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .manoeuvres import metrics as manoeuvre_metrics
-from .manoeuvres import ship_info
-from .manoeuvres import steady_turn
-from .manoeuvres.run_metrics import reported_steady_turn
-from .models.base import Model
-from .simulate import SimulationResult, replay, replay_errors
+from ..manoeuvres import metrics as manoeuvre_metrics
+from ..manoeuvres import ship_info
+from ..manoeuvres import steady_turn
+from ..manoeuvres.run_metrics import reported_steady_turn
+from ..models.base import Model
+from ..simulate import SimulationResult, replay, replay_errors
 
 __all__ = ["validate", "validate_logs", "validate_one", "LogValidation", "resolve_model", "load_logs", "DIFF_EXCLUDE"]
 
@@ -176,7 +176,7 @@ def resolve_model(result_or_model) -> tuple[Model, Any]:
     -------
     (Model, FitResult or None)
     """
-    from .identify.result import model_from
+    from ..identify.result import model_from
 
     if isinstance(result_or_model, (str, os.PathLike)) and not Path(result_or_model).is_file():
         raise FileNotFoundError(f"{result_or_model}: no such result file; run `shipid fit` first or check the path")
@@ -185,7 +185,7 @@ def resolve_model(result_or_model) -> tuple[Model, Any]:
 
 def load_logs(logs, *, lpp: float | None = None) -> list:
     """TrialLogs from paths (read with :func:`shipid.logs.read_log`) or TrialLog objects."""
-    from .logs import TrialLog, read_log
+    from ..logs import TrialLog, read_log
 
     if isinstance(logs, (str, os.PathLike, TrialLog)):
         logs = [logs]
@@ -315,7 +315,7 @@ def standard_manoeuvre(model: Model, measured, *, rudder_rate=None, lpp=None, pa
     :class:`~shipid.manoeuvres.ManoeuvreResult`; raises ValueError when the log's approach speed or
     rudder angle is unknown or the model cannot run the manoeuvre.
     """
-    from .manoeuvres import turning_circle, zigzag
+    from ..manoeuvres import turning_circle, zigzag
 
     m = measured
     rudder, speed = abs(float(m.rudder_deg)), float(m.approach_speed)

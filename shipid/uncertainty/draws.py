@@ -2,7 +2,7 @@
 
 From a fit result, N parameter sets are drawn -- from the Gaussian (Laplace)
 posterior with the result's full covariance, or from MCMC samples
-(:func:`shipid.identify.sample_posterior`) -- and every requested standard
+(:func:`shipid.uncertainty.sample_posterior`) -- and every requested standard
 manoeuvre is simulated for all of them as **one batch**
 (:func:`shipid.manoeuvres.turning_circle` / :func:`~shipid.manoeuvres.zigzag`
 with ``params`` of shape ``(N + 1, np)``: member 0 is the point estimate).
@@ -93,7 +93,7 @@ def parse_manoeuvre(spec) -> ManoeuvreSpec:
 
 # ----------------------------------------------------------------------------- draws
 def _result_of(result):
-    from .identify.result import FitResult, load_result
+    from ..identify.result import FitResult, load_result
 
     if isinstance(result, FitResult):
         return result
@@ -114,7 +114,7 @@ def parameter_draws(result, draws: int, *, seed=None, samples=None, inflation: f
         Number of parameter sets N (>= 1).
     seed : int or numpy Generator, optional
     samples : PosteriorSamples, dict or path to a samples JSON, optional
-        MCMC samples (:func:`shipid.identify.sample_posterior`); N rows are drawn from them without
+        MCMC samples (:func:`shipid.uncertainty.sample_posterior`); N rows are drawn from them without
         replacement (with replacement when N exceeds their number).  Default: the Gaussian posterior
         ``N(coef, inflation**2 * cov)`` over the estimated coefficients (the result's ``cov``).
     inflation : float
@@ -133,7 +133,7 @@ def parameter_draws(result, draws: int, *, seed=None, samples=None, inflation: f
     model = res.to_model()
     base = model.params.astype(float).copy()
     if samples is not None:
-        from .identify.posterior import load_samples
+        from .posterior import load_samples
 
         s = load_samples(samples)
         if s.model != res.model:
@@ -271,7 +271,7 @@ class ManoeuvrePrediction:
         return out
 
     def to_json(self, path, *, force: bool = False) -> Path:
-        from ._io import atomic_write_text
+        from .._io import atomic_write_text
 
         return atomic_write_text(path, json.dumps(self.to_dict(), indent=2, allow_nan=False) + "\n", force=force)
 
@@ -361,7 +361,7 @@ def predict_manoeuvres(result, manoeuvres: Sequence = ("turning:35", "zigzag:10/
     -------
     ManoeuvrePrediction
     """
-    from .manoeuvres import turning_circle, zigzag
+    from ..manoeuvres import turning_circle, zigzag
 
     res = _result_of(result)
     if not 0 < level < 1:
@@ -385,7 +385,7 @@ def predict_manoeuvres(result, manoeuvres: Sequence = ("turning:35", "zigzag:10/
     for spec in specs:
         spd = None if speed is None else np.full(B, float(speed))
         if spd is None:
-            from .manoeuvres import ship_info
+            from ..manoeuvres import ship_info
 
             u0 = ship_info(model).get("design_speed")
             if u0 is None:
@@ -443,8 +443,8 @@ def replay_draws(model, log, params: np.ndarray, *, lpp: float, kind: str, switc
     Returns ``{"<metric>_ci": [low, high], ..., "imo_probability": {...}, "draws": {...},
     "simulation": SimulationResult}``.
     """
-    from .manoeuvres import metrics
-    from .simulate import replay
+    from ..manoeuvres import metrics
+    from ..simulate import replay
 
     data = log.data if hasattr(log, "data") else log
     if rudder_sign == -1 and "delta" in data.columns:
