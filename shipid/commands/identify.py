@@ -217,7 +217,7 @@ def _fit(args) -> int:
         n_passes=args.passes, max_nfev=args.max_nfev, hold_unresolved=not args.refine_all,
         sign_bounds=args.sign_bounds, physical_damping=not args.no_physical_damping, tune_noise=args.tune_noise,
         progress=progress_on(args), meas_std=meas_std, ekf_options=extra, start_defaults=args.params is None,
-        drop_repeated=not args.keep_repeated, log=print))
+        drop_repeated=not args.keep_repeated, log=None if args.quiet else print))
     fit, ident = recipe, recipe.ekf
     result = fit.result()
     result.to_json(out, force=args.force)
