@@ -456,12 +456,12 @@ def _data_set(validations) -> str:
 
 
 def default_title(result, model, validations) -> str:
-    """"SHIP: MODEL model on N log(s) from FOLDER" (the ship from the logs' particulars, else its length)."""
+    """"SHIP — MODEL model on N log(s) from FOLDER" (the ship from the logs' particulars, else its length)."""
     ship = _ship_name(validations)
     if ship is None:
         L = next((v.lpp for v in validations if v.lpp), None) or getattr(model, "lpp", None)
         ship = f"ship of Lpp {L:.4g} m" if L else "ship"
-    return f"{ship}: {model_label(result, model)} model on {_data_set(validations)}"
+    return f"{ship} — {model_label(result, model)} model on {_data_set(validations)}"
 
 
 def _section_verdict(result) -> str:
