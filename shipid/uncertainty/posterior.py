@@ -439,7 +439,8 @@ def _early_stop(sampler, done: int, steps: int, burn: int, every: int, thin: int
     needed = int(np.ceil(burn + CONVERGENCE["tau_factor"] * tau_max))
     if not np.isfinite(tau_max) or needed <= EARLY_STOP_FACTOR * steps:
         return None
-    suggest = int(np.ceil(1.5 * needed / 1000.0) * 1000)  # burn is a third of the steps by default: room for it
+    # with the default burn (a third of the steps) the kept two thirds must hold 50 tau: steps >= 75 tau
+    suggest = int(np.ceil(max(needed, 1.5 * CONVERGENCE["tau_factor"] * tau_max) / 1000.0) * 1000)
     return {"at": int(done), "tau_max": tau_max, "needed": needed, "suggest": suggest}
 
 
@@ -491,8 +492,8 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
                      thin: int = 1, seed=0, vectorize: bool = True, channels=None, substeps: int = 1,
                      start_scale: float = 1.0, use_prior: bool = True, moves: str = "de",
                      input_hold: str | None = None, sample_x0: bool = False, proposal=None,
-                     progress: bool = False, early_stop: bool = True, check_every: int | None = None
-                     ) -> PosteriorSamples:
+                     progress: bool = False, early_stop: bool = True, check_every: int | None = None,
+                     log=None) -> PosteriorSamples:
     """Sample the posterior of a fit's estimated coefficients with emcee (optional extra ``mcmc``).
 
     Parameters
@@ -550,6 +551,7 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
         would need more than :data:`EARLY_STOP_FACTOR` times ``steps``; the result is then not converged and
         its message says how many steps to ask for (a lower bound: tau from a short chain is biased low).
     check_every : int, optional  -- steps between those checks
+    log : callable, optional  -- called with one line as sampling starts and one per check (e.g. ``print``)
 
     Returns
     -------
@@ -633,10 +635,15 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
     else:
         done, state = 0, emcee.State(p0, log_prob=lp0)  # start values evaluated once
         every = max(50, steps // 10) if check_every is None else max(1, int(check_every))
+        if log is not None:
+            log(f"sampling: {nw} walkers x {steps} steps ({k} dimensions, {burn} "
+                f"steps of burn-in), checked every {every} steps ...")
         while done < steps:
             n = min(every, steps - done)
             state = sampler.run_mcmc(state, n, progress=progress)
             done += n
+            if log is not None:
+                log(f"sampling: {done} of {steps} steps, mean acceptance {np.mean(sampler.acceptance_fraction):.2f}")
             stop = _early_stop(sampler, done, steps, burn, every, thin) if early_stop and done < steps else None
             if stop is not None:
                 break
