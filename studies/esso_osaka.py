@@ -57,7 +57,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from shipid.identify.recipe import DEFAULT_ESTIMATE, DEFAULT_ESTIMATE_WIND, DEFAULT_PROCESS_STD, DEFAULT_START
+from shipid.environment import WindForce
+from shipid.models import model_class
 from shipid.logs.schema import PRESETS
 
 __all__ = ["run_study", "refine_on_windows", "in_sample_errors", "REFINE_DEFAULTS", "REFINE_CANDIDATES", "anemometer_check", "path_relative_error", "current_vs_wind", "start_current_floor", "drift_factor", "with_drift_current", "air_velocity", "EssoStudy", "load_runs", "recipe_loro", "RECIPE_CANDIDATES_11", "error_diagnosis", "residual_accelerations", "split_position_error", "PRIOR_PARAMS", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
@@ -76,19 +77,20 @@ DUPLICATES = ("turn_cut_14-Sep-2020_15_58_08",)
 #: 0.26546 against 0.27080; docs/environment.md).
 #: (One copy: the fit recipe's lowspeed default, ``shipid.identify.recipe.DEFAULT_ESTIMATE``, which ``shipid fit``
 #: uses.)
-ESTIMATE = tuple(DEFAULT_ESTIMATE["lowspeed"])
-ESTIMATE_WIND = tuple(DEFAULT_ESTIMATE_WIND)
+_LOWSPEED = model_class("lowspeed").recipe_defaults  # what `shipid fit` uses for lowspeed (one copy, in the model)
+ESTIMATE = tuple(_LOWSPEED.estimate)
+ESTIMATE_WIND = tuple(WindForce.recipe_estimate)
 #: Values replacing the ``esso-osaka-prior`` set's in every ``lowspeed`` fit of the study: the MMG standard
 #: method's side-dependent flow straightening at the KVLCC2's published split (gamma_R 0.640 / 0.395 for
 #: beta_R > 0 / < 0, Yasukawa & Yoshimura 2015: +-0.1225 about the prior's 0.5), chosen in session 7 by the
 #: pre-registered round 4 (candidate G1: 8-fold mean of the 30 s medians 0.2898 vs 0.2922, leave-one-run-out
 #: chosen-scope mean 0.2708 vs 0.2780; docs/environment.md).  ``run_study(prior_params={})`` is the setting
 #: before.
-PRIOR_PARAMS = dict(DEFAULT_START["lowspeed"])  # (one copy: the recipe's lowspeed start default)
+PRIOR_PARAMS = dict(_LOWSPEED.start)  # (one copy: the recipe's lowspeed start default)
 #: Measurement noise of the fits: the ``esso-frt`` format's sensor noise (one copy, in the log adapter).
 MEAS_STD = dict(PRESETS["esso-frt"].meas_std)
 #: Process noise of the fits at 3 m (one copy: the recipe's lowspeed default, Froude-scaled there to other lengths).
-PROCESS_STD = dict(DEFAULT_PROCESS_STD["lowspeed"][1])
+PROCESS_STD = dict(_LOWSPEED.process_std[1])
 
 
 #: Froude-scaled IMO minimum steering-gear rate (2.32 deg/s at full scale, A.751(18)) for the 3 m model
@@ -856,9 +858,7 @@ RECIPE_CANDIDATES_11 = {"N1": {"fit_options": {"tune_noise": True}}, "S1": {"sam
 def _estimate_plus(*names) -> dict:
     """:func:`recipe_loro` options estimating the recipe's default list for ``lowspeed`` with a wind part, plus
     ``names``."""
-    from shipid.identify.recipe import DEFAULT_ESTIMATE, DEFAULT_ESTIMATE_WIND
-
-    return {"fit_options": {"estimate": list(DEFAULT_ESTIMATE["lowspeed"]) + list(DEFAULT_ESTIMATE_WIND) + list(names)}}
+    return {"fit_options": {"estimate": list(ESTIMATE) + list(ESTIMATE_WIND) + list(names)}}
 
 
 #: Session 12, round 12 (pre-registered in docs/environment.md before any ran): one more coefficient estimated

@@ -13,9 +13,9 @@ switchable steps (each one recorded in the result's ``settings["recipe"]``, with
 2. **Sampling step** (``dt="auto"``) -- every k-th sample, k the largest with ``k * dt_log`` at most
    1/:data:`SAMPLES_PER_TAU` of the fastest time constant of the start model's sway-yaw-surge
    dynamics linearised at the logs' approach speed (the eigenvalues of ``jac_x``); never finer than
-   the log; ``mmg``: 1/50 (:data:`DEFAULT_SAMPLES_PER_TAU`, chosen by leave-one-run-out within the KVLCC2
-   training runs in session 6).  (For the MARIN KVLCC2 runs: tau = 13.7 s, dt_log = 0.135 s -> k = 2 for
-   ``mmg`` (4 at 25, the value the KVLCC2 study had set by hand), every 3rd sample for ``response-nl``
+   the log; a model may set its own rate (``recipe_defaults.samples_per_tau``: ``mmg`` 1/50, chosen by
+   leave-one-run-out within the KVLCC2 training runs).  (For the MARIN KVLCC2 runs: tau = 13.7 s,
+   dt_log = 0.135 s -> k = 2 for ``mmg`` (4 at 25), every 3rd sample for ``response-nl``
    (tau = 10.7 s); for the 4.36 m KCS logs: tau = 0.83 s -> every sample.)
 2b. **Linear range** (``max_drift_deg="auto"``) -- a model whose sway and yaw equations are linear in
    ``v`` and ``r`` (:func:`linear_sway_yaw`: ``kcs-response``) holds for small drift only: linear hull
@@ -68,67 +68,22 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from ..results import ResultMixin, coefficient_table, plot_coefficients, verdict_grade
 from .refine import AUTO_REFINE, METRIC_TOL, METRIC_WEIGHT, REFINE_MODES, _kinds, metric_residuals, refine_fit
-from .sampling import (DEFAULT_SAMPLES_PER_TAU, LINEAR_DRIFT_DEG, MIN_WINDOW_SAMPLES, SAMPLES_PER_TAU, _every, _log_step,
+from .sampling import (LINEAR_DRIFT_DEG, MIN_WINDOW_SAMPLES, SAMPLES_PER_TAU, _every, _log_step,
                        _lpp_of, choose_sampling, common_grid, linear_sway_yaw, linear_window)
 
 __all__ = ["fit_logs", "RecipeFit", "neutral_rudder_angle", "approach_segment", "choose_sampling", "common_grid",
            "linear_sway_yaw", "linear_window", "LINEAR_DRIFT_DEG",
-           "metric_residuals", "refine_fit", "METRIC_TOL", "METRIC_WEIGHT", "SAMPLES_PER_TAU", "DEFAULT_SAMPLES_PER_TAU", "REFINE_MODES", "AUTO_REFINE"]
+           "metric_residuals", "refine_fit", "METRIC_TOL", "METRIC_WEIGHT", "SAMPLES_PER_TAU", "REFINE_MODES", "AUTO_REFINE"]
 
-#: Parameters each model's EKF stage estimates by default (None: all).  ``mmg``: the linear and the main
-#: non-linear hull derivatives, the resistance and the side-dependent wake correction C_2 (beta_P > 0, < 0:
-#: the propeller's wake, hence thrust and rudder inflow, differs between turns to port and starboard; chosen
-#: by leave-one-run-out within the KVLCC2 training runs, session 9: worst fold 0.945 against 1.823 without;
-#: studies.kvlcc2.RECIPE_VARIANTS_9) and the rudder-hull interaction aH, xH (the hull's share of the rudder
-#: force and its point of action, which set a zigzag's yaw checking; session 10, same rule: worst fold 0.767
-#: against 0.945 without; RECIPE_VARIANTS_11); the other rudder/propeller coefficients stay published.
-#: ``lowspeed``: the hull's resistance, linear sway/yaw and cross-flow terms, the four-quadrant propeller's thrust
-#: and astern side force, the rudder's normal force and its hull interaction (the Esso Osaka study's list, each
-#: addition to its first list chosen there by pre-registered cross-validation: aH, tR in round 3, CrY in round 7;
-#: docs/environment.md).  f_alpha, aH, tR are not separately identifiable on those runs: read them as a group.
-DEFAULT_ESTIMATE = {"mmg": ["Yv", "Yr", "Nv", "Nr", "Yvvr", "Nvvr", "Nrrr", "R0", "C2p", "C2m", "aH", "xH"],
-                    "lowspeed": ["X0F", "X0A", "Yv", "Yr", "Nv", "Nr", "CD", "k0", "CTa0", "YPa", "NPa", "f_alpha",
-                                 "aH", "tR", "CrY"]}
-#: Parameters of a model's wind part (``with_environment(..., wind=...)``, ``shipid fit --wind``) estimated by
-#: default: the leading Fourier components of Fujiwara's surge force, side force and yaw moment (the Esso Osaka
-#: study's set; the others stay at the regression's values from the above-water geometry).
-DEFAULT_ESTIMATE_WIND = ["wX1", "wY1", "wN1", "wN2"]
-#: Start values that replace a model's default set (only when the caller gives no parameters of its own).
-#: ``lowspeed``: the MMG standard method's side-dependent flow straightening at the KVLCC2's published split
-#: (gamma_R 0.640 / 0.395, Yasukawa & Yoshimura 2015: +-0.1225 about the prior's 0.5), chosen by the Esso Osaka
-#: study's pre-registered round 4 (leave-one-run-out 0.2708 against 0.2780 m; docs/environment.md).
-DEFAULT_START = {"lowspeed": {"dgammaR": 0.1225}}
-#: Start of the EKF stage per model (default: the identifier's equation-error start).  ``lowspeed``: the
-#: (prior) parameter set itself, which is also the prior mean (100 % std), as in every Esso Osaka study number.
-DEFAULT_INIT = {"lowspeed": "model"}
-#: Sampling step per model as ``(Lpp [m], step [s])``, Froude-scaled to the logs' Lpp (times as sqrt(L)), replacing
-#: step 2's time-constant rule.  ``lowspeed``: 2 s (0.5 Hz) at 3 m with two RK4 substeps per interval, the Esso
-#: Osaka study's setting fixed before any held-out error (at these runs' 0.1-0.5 m/s the fastest time constant is
-#: 5-100 s); every cross-validated number of docs/environment.md used it.  Set for low-speed runs (Froude numbers
-#: 0.02-0.09): at service speed (the MARIN KVLCC2 runs, Fn 0.142: 20.7 s at 320 m) it is coarse; pass ``dt``
-#: (``--dt``) there.
-DEFAULT_SAMPLING_S = {"lowspeed": (3.0, 2.0)}
-DEFAULT_SUBSTEPS = {"lowspeed": 2}
-#: Process noise per model (state -> std per sqrt(s), SI) at the length it was set for, Froude-scaled to the
-#: logs' Lpp (x, y as L^0.75, psi as L^-0.25, u, v as L^0.25, r as L^-0.75: a velocity per sqrt of a time).
-#: ``lowspeed``: the Esso Osaka study's values at 3 m, set by hand before any held-out error (the identifier's
-#: default, a tenth of the measurement noise per sample, gave unusable fits there).
-DEFAULT_PROCESS_STD = {"lowspeed": (3.0, {"x": 0.005, "y": 0.005, "psi": 0.002, "u": 0.003, "v": 0.003, "r": 0.002})}
+#: Froude exponents of the process noise per state (std per sqrt(s)) when a model's recipe default is scaled to
+#: the logs' Lpp: x, y as L^0.75, psi as L^-0.25, u, v as L^0.25, r as L^-0.75 (a velocity per sqrt of a time).
 _FROUDE_EXP = {"x": 0.75, "y": 0.75, "psi": -0.25, "u": 0.25, "v": 0.25, "r": -0.75}
-#: Step 3 (rudder neutral angle) per model (default on).  ``lowspeed``: off -- the Esso Osaka study scored a
-#: rudder neutral angle in its pre-registered round 6 and did not keep it (8-fold 0.2951-0.2975 against 0.28981).
-DEFAULT_NEUTRAL = {"lowspeed": False}
-#: Models for which ``refine="auto"`` means no refinement: ``lowspeed`` -- the Esso Osaka study's windowed
-#: output-error refinement (rounds 9 and 10) kept nothing, and the metric refinement was chosen on one other hull.
-NO_AUTO_REFINE = ("lowspeed",)
-#: Parameters held at their start value by default.  ``response-nl``: the asymmetry terms b0, c0 (the EKF
-#: does not identify them from turns and zigzags at one rpm: docs/validation.md).
-DEFAULT_FIXED = {"response-nl": ["b0", "c0"]}
 
 
 @dataclass
-class RecipeFit:
+class RecipeFit(ResultMixin):
     """What :func:`fit_logs` did and made.
 
     Attributes
@@ -163,7 +118,59 @@ class RecipeFit:
 
     @property
     def success(self) -> bool:
+        """True when the EKF stage and the refinement (when run) both succeeded; the result JSON says the same."""
         return bool(self.ekf.success_) and (self.refiner is None or bool(self.refiner.success_))
+
+    @property
+    def success_(self) -> bool:
+        """The same as :attr:`success` (one truth for the whole recipe, not only its last stage)."""
+        return self.success
+
+    @property
+    def message(self) -> str:
+        """The last stage's message; when the EKF stage failed under a refinement, that first."""
+        if self.refiner is not None and not self.ekf.success_:
+            return f"EKF stage failed ({self.ekf.message_}); refinement: {self.refiner.message_}"
+        return self.final.message_
+
+    @property
+    def message_(self) -> str:
+        return self.message
+
+    @property
+    def verdict(self):
+        """The fit's verdict from its EKF stage (None when the identifier has none)."""
+        return getattr(self.ekf, "verdict", None) or getattr(self.ekf, "verdict_", None)
+
+    def summary(self) -> pd.DataFrame:
+        """The last stage's coefficient table (value, std, relative std, 95 % interval; ``attrs["verdict"]``
+        the verdict grade when there is one)."""
+        f = self.final
+        tab = self.ekf.summary() if self.refiner is None else coefficient_table(f.coef_[f.estimated_], f.coef_std_[f.estimated_])
+        grade = verdict_grade(self)
+        if grade is not None:
+            tab.attrs["verdict"] = grade
+        return tab
+
+    def recipe(self) -> pd.DataFrame:
+        """The recipe's steps, one row each: ``step``, ``value``, ``reason``."""
+        return pd.DataFrame([{"step": s["step"], "value": s["value"], "reason": s["reason"]} for s in self.steps],
+                            columns=["step", "value", "reason"])
+
+    def to_pandas(self) -> pd.DataFrame:
+        """The EKF stage's smoothed states of every log (see :meth:`EKFIdentifier.to_pandas`)."""
+        return self.ekf.to_pandas()
+
+    def plot(self, ax=None):
+        """Each estimated coefficient's 95 % interval relative to its value (last stage); returns the axes."""
+        return plot_coefficients(self.summary(), ax, title=f"{self.ekf.model.name} (recipe)")
+
+    def _html_title(self) -> str:
+        return f"Recipe fit of '{self.ekf.model.name}'" + (" (EKF + refinement)" if self.refiner is not None else "")
+
+    def _key_numbers(self) -> dict:
+        return {"logs": len(self.logs) or len(getattr(self.final, "logs_", [])), "Lpp [m]": self.lpp,
+                "recipe steps": len(self.steps)}
 
     def to_model(self):
         return self.final.to_model()
@@ -194,7 +201,8 @@ class RecipeFit:
             res.diagnostics["damping"] = damping_check(self.final.to_model(), self.logs)
         return res
 
-    def summary(self) -> str:
+    def __str__(self) -> str:
+        """The recipe's steps as text, one ``recipe: step: value -- reason`` line each."""
         return "\n".join(f"recipe: {s['step']}: {s['value']} -- {s['reason']}" for s in self.steps)
 
 
@@ -315,7 +323,7 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
     params : str, mapping or None  start parameter set or coefficients (default: the model's default set)
     lpp : float, optional  ship length [m] (default: the logs' particulars)
     estimate, fixed : optional  as :class:`~shipid.identify.identifier.EKFIdentifier`; default
-        :data:`DEFAULT_ESTIMATE` / :data:`DEFAULT_FIXED` (plus ``a8`` at constant rpm, ``delta0`` below)
+        the model's ``recipe_defaults`` (estimate / fixed) (plus ``a8`` at constant rpm, ``delta0`` below)
     start : {"staged", "given"}  staged start values (step 4) or the start model as it is
     neutral : bool  rudder neutral angle from the straight approaches (step 3), where the model has ``delta0``
     free_neutral : bool  free that angle again in the refinement (default) or keep it fixed
@@ -332,13 +340,13 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
     sign_bounds : bool  step 6 keeps the model's dissipative coefficients <= 0 (:func:`refine_fit`; default False)
     physical_damping : bool  step 6 keeps the model's own sway and yaw damping negative along the logs
         (:func:`refine_fit`; default True)
-    start_defaults : bool, optional  apply :data:`DEFAULT_START` to the start model; default: when ``model`` is
+    start_defaults : bool, optional  apply the model's ``recipe_defaults.start`` to the start model; default: when ``model`` is
         a name and ``params`` None (a model object or given parameters are the start the caller wants; ``shipid
         fit`` passes True unless ``--params`` is given)
     log : callable, optional  called with one line per step as it happens (e.g. ``print``)
 
     Models with wind and/or current (:func:`shipid.environment.with_environment`) take the defaults of their
-    base model (estimate list, start, sampling, noise) plus :data:`DEFAULT_ESTIMATE_WIND` for a wind part; their
+    base model (estimate list, start, sampling, noise) plus the wind model's ``recipe_estimate`` for a wind part; their
     EKF stage is not refined.  Measurement noise: ``meas_std``, else the sensor noise the logs' format declares
     (``TrialLog.meas_std``, e.g. the ``esso-frt`` schema's), else the identifier's estimate from the data.
 
@@ -362,11 +370,12 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
                          drop_repeated=drop_repeated, log=log)
 
 
-def _froude_process_std(name: str, L: float):
-    """:data:`DEFAULT_PROCESS_STD` of model ``name`` Froude-scaled to length ``L`` (None: no default)."""
-    if name not in DEFAULT_PROCESS_STD:
+def _froude_process_std(defaults, L: float):
+    """A model's recipe process noise (``RecipeDefaults.process_std``) Froude-scaled to length ``L`` (None: no
+    default)."""
+    if defaults.process_std is None:
         return None
-    L0, std = DEFAULT_PROCESS_STD[name]
+    L0, std = defaults.process_std
     return {k: v * (L / L0) ** _FROUDE_EXP[k] for k, v in std.items()}
 
 
@@ -437,28 +446,29 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
     env = getattr(m0, "base", None) is not None and hasattr(m0, "identifier_settings")
     name = m0.base.name if env else m0.name
     wind_part = env and getattr(m0, "wind", None) is not None
+    defaults = (m0.base if env else m0).recipe_defaults  # the model's own (shipid.models.RecipeDefaults)
     if env and refine not in (None, "none", "auto"):
         raise ValueError(f"refine={refine!r}: the refinement is not available for models with wind or current "
                          "parts yet; use refine=None (shipid fit: --refine none)")
     step("ship", {"lpp": L}, f"the logs' particulars; start: {why}")
     if start_defaults is None:
         start_defaults = isinstance(model, str) and params is None
-    if start_defaults and name in DEFAULT_START:
-        m0 = m0.with_params(DEFAULT_START[name])
-        step("start values (model default)", dict(DEFAULT_START[name]), f"{name}'s recipe default (DEFAULT_START; "
-             "chosen by cross-validation, see its note)")
+    if start_defaults and defaults.start:
+        m0 = m0.with_params(dict(defaults.start))
+        step("start values (model default)", dict(defaults.start), f"{name}'s recipe default (chosen by "
+             "cross-validation, see the model's recipe_defaults)")
     ekf_opts = dict(ekf_options or {})
     # sampling step
-    if dt == "auto" and name in DEFAULT_SAMPLING_S:
+    if dt == "auto" and defaults.sampling is not None:
         dt_log = _log_step(logs)
-        L0, h0 = DEFAULT_SAMPLING_S[name]
+        L0, h0 = defaults.sampling
         h = h0 * math.sqrt(L / L0)
         k = max(1, int(round(h / dt_log)))
-        reason = (f"every {k}. sample ({k * dt_log:.3g} s): {name}'s recipe step {h0:g} s at Lpp {L0:g} m "
-                  f"(DEFAULT_SAMPLING_S), Froude-scaled to {h:.3g} s at {L:g} m, log step {dt_log:.3g} s")
-        if name in DEFAULT_SUBSTEPS and "substeps" not in ekf_opts:
-            ekf_opts["substeps"] = DEFAULT_SUBSTEPS[name]
-            reason += f", {DEFAULT_SUBSTEPS[name]} RK4 substeps per interval"
+        reason = (f"every {k}. sample ({k * dt_log:.3g} s): {name}'s recipe step {h0:g} s at Lpp {L0:g} m"
+                  f", Froude-scaled to {h:.3g} s at {L:g} m, log step {dt_log:.3g} s")
+        if defaults.substeps is not None and "substeps" not in ekf_opts:
+            ekf_opts["substeps"] = defaults.substeps
+            reason += f", {defaults.substeps} RK4 substeps per interval"
     elif dt == "auto":
         k, reason = choose_sampling(m0, logs)
     elif dt is None:
@@ -509,18 +519,19 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
     elif max_drift_deg != "auto" or not linear_sway_yaw(m0):
         step("linear range", drift, why_drift)
     # estimated / fixed
-    est = list(estimate) if estimate is not None else DEFAULT_ESTIMATE.get(name)
+    est = list(estimate) if estimate is not None else (
+        list(defaults.estimate) if defaults.estimate is not None else None)
     if estimate is None and est is not None:
         if wind_part:
-            est = est + [w for w in DEFAULT_ESTIMATE_WIND if w in m0.param_names]
-        step("estimated", list(est), f"{name}'s recipe default (DEFAULT_ESTIMATE"
-             + (" + DEFAULT_ESTIMATE_WIND" if wind_part else "") + ")")
+            est = est + [w for w in m0.wind.recipe_estimate if w in m0.param_names]
+        step("estimated", list(est), f"{name}'s recipe default"
+             + (" and the wind model's leading Fourier components" if wind_part else ""))
     fix: dict = {}
     if isinstance(fixed, dict):
         fix.update({k2: float(v) for k2, v in fixed.items()})
     elif fixed is not None:
         fix.update({k2: float(m0.params[m0.param_index(k2)]) for k2 in fixed})
-    for k2 in DEFAULT_FIXED.get(name, ()):
+    for k2 in defaults.fixed:
         if k2 not in fix and (estimate is None or k2 not in estimate):
             fix[k2] = float(m0.params[m0.param_index(k2)])
     if "a8" in m0.param_names and "a8" not in fix and (est is None or "a8" in est):
@@ -531,9 +542,9 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
             step("a8", 0.0, f"the propeller rate is constant ({np.mean(n_all):.4g} rps) in every log: "
                             "a1, a8, a9 are collinear, a8 fixed at 0")
     free_in_refine: list[str] = []
-    if "delta0" in m0.param_names and neutral and not DEFAULT_NEUTRAL.get(name, True) and "delta0" not in fix:
+    if "delta0" in m0.param_names and neutral and not defaults.neutral and "delta0" not in fix:
         neutral = False
-        step("neutral rudder angle", None, f"off for {name} (DEFAULT_NEUTRAL: not kept by cross-validation)")
+        step("neutral rudder angle", None, f"off for {name} (its recipe default: not kept by cross-validation)")
     if "delta0" in m0.param_names and neutral and "delta0" not in fix:
         try:
             d0, n_logs = neutral_rudder_angle(used)
@@ -556,10 +567,10 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
     if est is not None:
         est = [p for p in est if p not in fix]
     # staged start
-    if start == "staged" and name == "response-nl":
+    if start == "staged" and defaults.seed_model is not None:
         from ..models import get_model
 
-        seed_model = get_model("kcs-response", lpp=L)
+        seed_model = get_model(defaults.seed_model, lpp=L)
         seed_fix = {k2: v for k2, v in fix.items() if k2 in seed_model.param_names}
         # the seed is linear in v and r: fitted on the linear range (step 2b) unless that is switched off
         seed_drift = LINEAR_DRIFT_DEG if max_drift_deg == "auto" else drift
@@ -577,9 +588,9 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
              + f" ({seed.message_}); the non-linear terms start at 0")
     else:
         step("start values", "as built", why)
-    if name in DEFAULT_INIT and "init" not in ekf_opts:
-        ekf_opts["init"] = DEFAULT_INIT[name]
-        step("EKF start", DEFAULT_INIT[name], f"{name}'s recipe default (DEFAULT_INIT): the start model's values")
+    if defaults.init is not None and "init" not in ekf_opts:
+        ekf_opts["init"] = defaults.init
+        step("EKF start", defaults.init, f"{name}'s recipe default: the start model's values")
     # noise levels: measurement (given > the logs' declared sensor noise > the identifier's estimate), process
     if meas_std is None:
         meas_std = _declared_meas_std(logs)
@@ -587,11 +598,11 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
              if meas_std is not None else "estimated from the data by the identifier (no --meas-std, none declared)")
     else:
         step("measurement noise", dict(meas_std), "asked")
-    proc = _froude_process_std(name, L)
+    proc = _froude_process_std(defaults, L)
     if proc is not None:
         ekf_opts["process_std"] = {**proc, **dict(ekf_opts.get("process_std") or {})}
         step("process noise", {k2: float(f"{v:.4g}") for k2, v in ekf_opts["process_std"].items()},
-             f"{name}'s recipe default (DEFAULT_PROCESS_STD) at Lpp {DEFAULT_PROCESS_STD[name][0]:g} m, "
+             f"{name}'s recipe default at Lpp {defaults.process_std[0]:g} m, "
              f"Froude-scaled to {L:g} m" + ("; current states from the environment model" if env else ""))
     if log is not None:
         log(f"recipe: running the EKF: {n_passes} pass(es) over {len(used)} log(s), "
@@ -611,10 +622,10 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         step("EKF", ekf.message_, f"refitted without innovation gating: with the default gate the filter failed ({first})")
     fit = RecipeFit(ekf=ekf, steps=steps, logs=used, free_in_refine=free_in_refine, lpp=L)
     mode = refine
-    if mode == "auto" and (env or name in NO_AUTO_REFINE):
+    if mode == "auto" and (env or not defaults.auto_refine):
         mode = None
         step("refinement", "none", "models with wind/current parts are not refined" if env else
-             f"{name}: none by default (NO_AUTO_REFINE: its study's refinements kept nothing)")
+             f"{name}: none by default (its recipe default: its study's refinements kept nothing)")
     elif mode == "auto":
         kinds = _kinds(logs, L)
         mode = AUTO_REFINE if {"turning", "zigzag"} <= kinds else None

@@ -37,13 +37,13 @@ def metric_residuals(model, logs, *, lpp: float | None = None, tolerances=None, 
     then (m,)) -- for each turning log the tactical-diameter error [%] and for each zigzag the first and
     second overshoot errors [deg] of the model's closed-loop manoeuvre matching the log (same rudder and
     check angle, side, approach speed; the log's rudder rate, else the model's;
-    :func:`shipid.validation.standard_manoeuvre`), each divided by its tolerance (:data:`METRIC_TOL`);
+    :func:`shipid.manoeuvres.standard_manoeuvre`), each divided by its tolerance (:data:`METRIC_TOL`);
     and the names of the logs used (logs without standard-manoeuvre metrics are left out).  The B
     parameter sets of one manoeuvre run as one batch; a manoeuvre a set cannot complete gives 1e3.
     """
     from ..manoeuvres import metrics as manoeuvre_metrics
     from ..manoeuvres import ship_info
-    from ..validation import standard_manoeuvre
+    from ..manoeuvres import standard_manoeuvre
 
     L = _lpp_of(logs, lpp)
     tol = {**METRIC_TOL, **(tolerances or {})}

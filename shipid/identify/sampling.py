@@ -8,20 +8,13 @@ import warnings
 
 import numpy as np
 
-__all__ = ["choose_sampling", "common_grid", "linear_sway_yaw", "linear_window", "LINEAR_DRIFT_DEG", "SAMPLES_PER_TAU",
-           "DEFAULT_SAMPLES_PER_TAU"]
+__all__ = ["choose_sampling", "common_grid", "linear_sway_yaw", "linear_window", "LINEAR_DRIFT_DEG", "SAMPLES_PER_TAU"]
 
 #: Samples per fastest time constant of the model at the EKF step (RK4 with h = tau/25 is accurate to ~1e-7
-#: per step); :data:`DEFAULT_SAMPLES_PER_TAU` overrides it per model.
+#: per step); a model may set its own (``recipe_defaults.samples_per_tau``).  Finer is not better for every
+#: model: at 50 (every MARIN KVLCC2 sample) the kcs-response refinement stops on its 60-evaluation limit on the
+#: KVLCC2 training runs.
 SAMPLES_PER_TAU = 25
-#: Per-model samples per time constant.  ``mmg``: 50, chosen by leave-one-run-out within the four KVLCC2
-#: training runs (session 6, ``studies.kvlcc2.RECIPE_VARIANTS_6``, rule ``LORO_RULE_6`` fixed before any variant
-#: ran; the held-out zz+-20 not read): the EKF on every 2nd MARIN sample (what 50 gives for its 13.7 s) scored
-#: 1.82 against 2.03 for every 4th (25) and 2.10 for every 8th; the finer step gives the filter twice the
-#: measurement updates per time constant.  The round ran on mmg only, so the other models keep 25: at 50
-#: (every MARIN sample) the kcs-response refinement stops on its 60-evaluation limit (exit 1) on the training
-#: runs.  One hull decided it.
-DEFAULT_SAMPLES_PER_TAU = {"mmg": 50}
 #: Drift angle [deg] up to which :func:`linear_window` uses a log for a model linear in v and r: the usual
 #: range of linear hull manoeuvring derivatives (drift of a few degrees up to about 10; beyond it cross-flow
 #: drag grows with v|v|).  Taken as that usual value, not tuned: 6 and 10 deg were both tried on the KVLCC2
@@ -75,9 +68,9 @@ def _log_step(logs) -> float:
 
 def choose_sampling(model, logs, samples_per_tau: int | None = None) -> tuple[int, str]:
     """Every how many samples of the logs the EKF uses, and why (see the module docstring, step 2);
-    ``samples_per_tau`` default: :data:`DEFAULT_SAMPLES_PER_TAU` for the model, else :data:`SAMPLES_PER_TAU`."""
+    ``samples_per_tau`` default: the model's ``recipe_defaults.samples_per_tau``, else :data:`SAMPLES_PER_TAU`."""
     if samples_per_tau is None:
-        samples_per_tau = DEFAULT_SAMPLES_PER_TAU.get(model.name, SAMPLES_PER_TAU)
+        samples_per_tau = model.recipe_defaults.samples_per_tau or SAMPLES_PER_TAU
     dt_log = _log_step(logs)
     try:
         from ..manoeuvres import steady_rps

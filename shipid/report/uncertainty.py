@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import figures
+from ._markup import _e, _f, _fig, _table
 
 __all__ = ["uncertainty_section", "band_figure", "pair_figure"]
 
@@ -85,7 +86,6 @@ def uncertainty_section(res, validations, *, draws: int, seed: int = 0, samples=
     """HTML of the section (see the module docstring); ``res`` a FitResult, ``validations`` LogValidations."""
     from ..uncertainty import METRIC_KEYS, parameter_draws, replay_draws
     from ..validation.replay import _for_length
-    from .html import _e, _f, _fig, _table
 
     P = parameter_draws(res, draws, seed=seed, samples=samples)
     src = "MCMC samples" if samples is not None else "the fit's Gaussian posterior (full covariance)"
