@@ -243,7 +243,7 @@ def test_cli_defect_fit_exits_3_with_one_warning_and_strict_json(tmp_path, capsy
     out = tmp_path / "r.json"
     # the reader's own rudder-sign check refuses this file first (exit 2): switched off, the fit's verdict still
     # finds the flipped rudder (from the log's channels and from the coefficients' physical signs)
-    rc = main(["fit", str(p), "--params", "synthetic-truth", "--passes", "1", "-o", str(out), "--no-progress",
+    rc = main(["fit", str(p), "--model", "kcs-response:synthetic-truth", "--passes", "1", "-o", str(out), "--no-progress",
                "--lpp", "4.36", "--no-consistency-checks"])
     cap = capsys.readouterr()
     assert rc == 3
@@ -273,7 +273,7 @@ def test_cli_diverged_fit_exits_4_and_refinement_from_it_fails(tmp_path, capsys,
     # the CLI: an absurd start that diverges
     p = _write_csv(tmp_path / "tc.csv", noisy)
     (tmp_path / "start.json").write_text(json.dumps({"model": "kcs-response", "coef": bad.params_series().to_dict()}))
-    rc = main(["fit", str(p), "--params", str(tmp_path / "start.json"), "--estimate", "a1", "--passes", "1",
+    rc = main(["fit", str(p), "--model", str(tmp_path / "start.json"), "--estimate", "a1", "--passes", "1",
                "-o", str(tmp_path / "r.json"), "--no-progress", "--lpp", "4.36"])
     assert rc == 4
 

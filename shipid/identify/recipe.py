@@ -68,6 +68,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from ..results import ResultMixin, coefficient_table, plot_coefficients, verdict_grade
 from .refine import AUTO_REFINE, METRIC_TOL, METRIC_WEIGHT, REFINE_MODES, _kinds, metric_residuals, refine_fit
 from .sampling import (LINEAR_DRIFT_DEG, MIN_WINDOW_SAMPLES, SAMPLES_PER_TAU, _every, _log_step, every_kth,
                        _lpp_of, choose_sampling, common_grid, linear_sway_yaw, linear_window)
@@ -82,7 +83,7 @@ _FROUDE_EXP = {"x": 0.75, "y": 0.75, "psi": -0.25, "u": 0.25, "v": 0.25, "r": -0
 
 
 @dataclass
-class RecipeFit:
+class RecipeFit(ResultMixin):
     """What :func:`fit_logs` did and made.
 
     Attributes
@@ -121,7 +122,59 @@ class RecipeFit:
 
     @property
     def success(self) -> bool:
+        """True when the EKF stage and the refinement (when run) both succeeded; the result JSON says the same."""
         return bool(self.ekf.success_) and (self.refiner is None or bool(self.refiner.success_))
+
+    @property
+    def success_(self) -> bool:
+        """The same as :attr:`success` (one truth for the whole recipe, not only its last stage)."""
+        return self.success
+
+    @property
+    def message(self) -> str:
+        """The last stage's message; when the EKF stage failed under a refinement, that first."""
+        if self.refiner is not None and not self.ekf.success_:
+            return f"EKF stage failed ({self.ekf.message_}); refinement: {self.refiner.message_}"
+        return self.final.message_
+
+    @property
+    def message_(self) -> str:
+        return self.message
+
+    @property
+    def verdict(self):
+        """The fit's verdict from its EKF stage (None when the identifier has none)."""
+        return getattr(self.ekf, "verdict", None) or getattr(self.ekf, "verdict_", None)
+
+    def summary(self) -> pd.DataFrame:
+        """The last stage's coefficient table (value, std, relative std, 95 % interval; ``attrs["verdict"]``
+        the verdict grade when there is one)."""
+        f = self.final
+        tab = self.ekf.summary() if self.refiner is None else coefficient_table(f.coef_[f.estimated_], f.coef_std_[f.estimated_])
+        grade = verdict_grade(self)
+        if grade is not None:
+            tab.attrs["verdict"] = grade
+        return tab
+
+    def recipe(self) -> pd.DataFrame:
+        """The recipe's steps, one row each: ``step``, ``value``, ``reason``."""
+        return pd.DataFrame([{"step": s["step"], "value": s["value"], "reason": s["reason"]} for s in self.steps],
+                            columns=["step", "value", "reason"])
+
+    def to_pandas(self) -> pd.DataFrame:
+        """The EKF stage's smoothed states of every log (see :meth:`EKFIdentifier.to_pandas`)."""
+        return self.ekf.to_pandas()
+
+    def plot(self, ax=None):
+        """Each estimated coefficient's 95 % interval relative to its value (last stage); returns the axes."""
+        return plot_coefficients(self.summary(), ax, title=f"{self.ekf.model.name} (recipe)")
+
+    def _html_title(self) -> str:
+        return f"Recipe fit of '{self.ekf.model.name}'" + (" (EKF + refinement)" if self.refiner is not None else "")
+
+    def _key_numbers(self) -> dict:
+        return {"logs": len(self.logs) or len(getattr(self.final, "logs_", [])), "Lpp [m]": self.lpp,
+                "recipe steps": len(self.steps)}
 
     def to_model(self):
         return self.final.to_model()
@@ -155,7 +208,8 @@ class RecipeFit:
         res.verdict = verdict_from_recipe(self, res)
         return res
 
-    def summary(self) -> str:
+    def __str__(self) -> str:
+        """The recipe's steps as text, one ``recipe: step: value -- reason`` line each."""
         return "\n".join(f"recipe: {s['step']}: {s['value']} -- {s['reason']}" for s in self.steps)
 
 
@@ -542,6 +596,8 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         seed_drift = LINEAR_DRIFT_DEG if max_drift_deg == "auto" else drift
         seed_logs = [linear_window(lg, seed_drift) for lg in used] if seed_drift is not None else used
         seed_logs = [lg for lg in seed_logs if len(lg) >= MIN_WINDOW_SAMPLES] or used  # none in range: all
+        if log is not None:
+            log(f"recipe: start values: fitting kcs-response to {len(seed_logs)} log(s) first ...")
         seed = EKFIdentifier(seed_model, fixed=seed_fix or None, n_passes=n_passes, progress=progress,
                              meas_std=meas_std, **(ekf_options or {})).fit(seed_logs)
         vals = {k2: float(seed.coef_.get(k2, 0.0)) for k2 in m0.param_names}
@@ -568,6 +624,10 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         step("process noise", {k2: float(f"{v:.4g}") for k2, v in ekf_opts["process_std"].items()},
              f"{name}'s recipe default at Lpp {defaults.process_std[0]:g} m, "
              f"Froude-scaled to {L:g} m" + ("; current states from the environment model" if env else ""))
+    if log is not None:
+        log(f"recipe: running the EKF: {n_passes} pass(es) over {len(used)} log(s), "
+            f"{sum(len(lg) for lg in used)} samples, "
+            f"{len(est) if est is not None else len([q for q in m0.param_names if q not in fix])} coefficients ...")
     ekf = EKFIdentifier(m0, estimate=est, fixed=fix or None, n_passes=n_passes, tune_noise=tune_noise,
                         progress=progress, meas_std=meas_std, **ekf_opts).fit(used)
     step("EKF", ekf.message_, f"{len(ekf.estimated_)} parameters estimated, {n_passes} passes")
@@ -575,6 +635,8 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         # the start transient of a model far from the data gives large innovations; rejecting them (gating)
         # leaves the filter open-loop (the MARIN KVLCC2 mmg fit diverges at t = 38 s with the default gate)
         first = ekf.message_
+        if log is not None:
+            log(f"recipe: the EKF failed with the innovation gate ({first}): running it again without ...")
         ekf = EKFIdentifier(m0, estimate=est, fixed=fix or None, n_passes=n_passes, tune_noise=tune_noise,
                             progress=progress, meas_std=meas_std, **{**ekf_opts, "gate": None}).fit(used)
         step("EKF", ekf.message_, f"refitted without innovation gating: with the default gate the filter failed ({first})")
@@ -602,7 +664,7 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         return fit
     return refine_fit(fit, logs, mode, max_nfev=max_nfev, metric_weight=metric_weight,
                       hold_unresolved=hold_unresolved, sign_bounds=sign_bounds,
-                      physical_damping=physical_damping, log=log)
+                      physical_damping=physical_damping, log=log, progress=progress)
 
 
 def recipe_table(fit: RecipeFit) -> pd.DataFrame:
