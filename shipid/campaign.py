@@ -685,7 +685,13 @@ def member_status(value: dict | None, ok: bool) -> tuple[str, list[str]]:
 
 def fit_exit_status(result: dict) -> tuple[int, list[str]]:
     """``shipid fit``'s exit status for a result dict (0 consistent, 1 not converged, 3 not consistent with its
-    noise model, 4 filter diverged) and the reasons, from the result's own diagnostics."""
+    noise model, 4 filter diverged) and the reasons, from the result's own diagnostics; a result with a graded
+    verdict exits as ``shipid fit`` does on it (:func:`shipid.identify.verdict.exit_status`)."""
+    if isinstance(result.get("verdict"), dict):
+        from .identify.verdict import exit_status, verdict_of
+
+        v = verdict_of(result)
+        return exit_status(v), list(v.reasons)
     diag = result.get("diagnostics") or {}
     if result.get("method") == "ekf" and not result.get("success", True):  # the filter did not finish
         return 4, [f"the filter diverged: {result.get('message', '')}"]

@@ -329,6 +329,17 @@ def _print_step(line: str) -> None:
     print(clip(plain_message(line)))
 
 
+def _print_verdict(result) -> None:
+    """The verdict's grade and, unless consistent, its one line (the demo's parts)."""
+    from ..identify.verdict import verdict_of, warning_line
+
+    v = verdict_of(result)
+    print(f"verdict: {v.grade}")
+    line = warning_line(v)
+    if line:
+        print(line)
+
+
 def _report_verdict(result) -> int:
     """Print the verdict's one line (stderr; nothing for a consistent fit) and return the exit status."""
     from ..identify.verdict import exit_status, verdict_of, warning_line
@@ -423,6 +434,7 @@ def _demo(args) -> int:
     result = ident.result()
     result.to_json(outdir / "result.json")
     _print_result(result)
+    _print_verdict(result)
     tab = result.summary()
     tab["truth"] = truth.params_series()[tab.index]
     tab["error_sigma"] = (tab["value"] - tab["truth"]) / tab["std"]
@@ -490,6 +502,7 @@ def _demo_mmg(args, outdir: Path) -> None:
     res = ident.result()
     res.to_json(outdir / "mmg_result.json")
     _print_result(res)
+    _print_verdict(res)
     write_report(res, logs, outdir / "report.html", identifier=ident,
                  title="shipid demo, part 2: kcs-response identified from MMG-generated KCS logs",
                  intro=DEMO_INTRO_2.format(held=", ".join(lg.name for lg in held_out) or "none"))

@@ -658,6 +658,7 @@ class EKFIdentifier(ResultMixin):
         # per-log smoothed states and innovations: tables built when first read (states_, innovations_)
         self._tables = (zs[0, :, :nx], var_x[0], out.innov[0], out.S_diag[0])
         self.__dict__.pop("_tables_built", None)
+        self.__dict__.pop("_verdict_cache", None)
         notes = []
         hook = getattr(model, "identifiability_notes", None)
         if hook is not None:
@@ -776,6 +777,17 @@ class EKFIdentifier(ResultMixin):
     def message(self) -> str:
         """``message_`` of a fitted identifier."""
         return getattr(self, "message_", "not fitted yet: call fit(logs) first")
+
+    @property
+    def verdict_(self):
+        """The fit's graded verdict (:func:`shipid.identify.verdict.verdict_from_identifier`; computed once)."""
+        self._check_fitted()
+        v = self.__dict__.get("_verdict_cache")
+        if v is None:
+            from .verdict import verdict_from_identifier
+
+            v = self._verdict_cache = verdict_from_identifier(self)
+        return v
 
     def summary(self) -> pd.DataFrame:
         """Coefficient table: value, std, relative std, 95 % interval, prior std (``attrs["verdict"]``: the

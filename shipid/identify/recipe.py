@@ -143,8 +143,9 @@ class RecipeFit(ResultMixin):
 
     @property
     def verdict(self):
-        """The fit's verdict from its EKF stage (None when the identifier has none)."""
-        return getattr(self.ekf, "verdict", None) or getattr(self.ekf, "verdict_", None)
+        """The fit's graded verdict (:func:`shipid.identify.verdict.verdict_from_recipe`), as its result carries it."""
+        v = self.__dict__.get("_verdict")
+        return v if v is not None else self.result().verdict
 
     def summary(self) -> pd.DataFrame:
         """The last stage's coefficient table (value, std, relative std, 95 % interval; ``attrs["verdict"]``
@@ -205,7 +206,7 @@ class RecipeFit(ResultMixin):
             res.diagnostics["damping"] = damping_check(self.final.to_model(), self.logs)
         from .verdict import verdict_from_recipe
 
-        res.verdict = verdict_from_recipe(self, res)
+        res.verdict = self.__dict__["_verdict"] = verdict_from_recipe(self, res)
         return res
 
     def __str__(self) -> str:

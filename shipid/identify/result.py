@@ -131,10 +131,8 @@ class FitResult(ResultMixin):
             "substeps": int(ident.substeps),
             "discretisation": ident.method,
         }
-        from .verdict import verdict_from_identifier
-
         opts, ship = fitted_ship(ident.model, ident.logs_)
-        return cls(verdict=verdict_from_identifier(ident),
+        return cls(verdict=ident.verdict_,
             model=ident.model.name, coef={k: float(v) for k, v in ident.coef_.items()},
             coef_std={k: float(v) for k, v in ident.coef_std_.items()}, cov=ident.cov_.copy(),
             diagnostics=diag, inputs=_inputs(ident.logs_), method="ekf", settings=settings,
