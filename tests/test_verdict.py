@@ -155,6 +155,10 @@ def test_physics_findings_name_the_channel_and_the_option_and_hold_at_any_scale(
     assert [x["coefficient"] for x in f] == ["b3", "c3"] and all(x["channels"] == ["delta"] for x in f)
     assert f[1]["message"] == ("c3 = -0.14 +- 0.0014 is negative but positive (starboard) rudder must turn the ship "
                                "to starboard: rudder logged positive to port? pass --rudder-sign -1")
+    vflip = dict(coef, b3=-coef["b3"])   # the sway term alone: v's sign, not the rudder's
+    f = physics_findings(m, vflip, std, prior, speed=1.5)
+    assert [x["coefficient"] for x in f] == ["b3"] and f[0]["channels"] == ["v"]
+    assert f[0]["message"].endswith("while c3 has the rudder's sign: v logged positive to port? pass --sign v=-1")
     scaled = dict(coef, c3=57.3 * coef["c3"])
     f = physics_findings(m, scaled, std, prior, speed=1.5)
     assert [x["kind"] for x in f] == ["physics_range"] and "--units delta=deg" in f[0]["message"]

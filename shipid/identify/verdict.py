@@ -348,6 +348,19 @@ def physics_findings(model, coef: dict, coef_std: dict, prior_std: dict, speed: 
                                        f"{'above' if abs(pv) > a_hi * RANGE_FACTOR else 'below'} the published "
                                        f"ships' {a_lo:.2g}-{a_hi:.2g} by more than {RANGE_FACTOR:g}x: "
                                        f"{option_r}"})
+    # a stern rudder's sway term with the wrong sign while its yaw term has the right one: the rudder's sign is
+    # fine (it would flip both), the sway velocity's is not
+    from ..models.base import STERN_RUDDER_SIGNS
+
+    sway = [n for n in signs if signs[n] is STERN_RUDDER_SIGNS["sway"]]
+    yaw = [n for n in signs if signs[n] is STERN_RUDDER_SIGNS["yaw"]]
+    wrong = {f["coefficient"] for f in out if f["kind"] == "physics_sign"}
+    if yaw and not wrong & set(yaw) and yaw[0] in coef:
+        for f in out:
+            if f["coefficient"] in sway and f["kind"] == "physics_sign":
+                f.update(channels=["v"], option="--sign v=-1",
+                         message=f["message"].split(": ")[0] + f" while {yaw[0]} has the rudder's sign: v logged "
+                                 "positive to port? pass --sign v=-1")
     return sorted(out, key=lambda f: f["coefficient"])
 
 
