@@ -43,7 +43,7 @@ def register(sub) -> None:
                                    "ITTC/IMO manoeuvre metrics of the log and of the replay.")
     _common(p, model=True)
     p.add_argument("-o", "--output", required=True, help="JSON file to write (a list, one object per log)")
-    from .uncertainty import add_draws_option
+    from .sample import add_draws_option
 
     add_draws_option(p)
     p.set_defaults(handler=_validate)
@@ -55,7 +55,7 @@ def register(sub) -> None:
     _common(r)
     r.add_argument("-o", "--output", required=True, help="HTML file to write")
     r.add_argument("--title", default=None, help="report title")
-    from .uncertainty import add_draws_option
+    from .sample import add_draws_option
 
     add_draws_option(r)
     r.set_defaults(handler=_report)
@@ -105,7 +105,7 @@ def _line(d: dict) -> str:
 def _validate(args) -> int:
     from .._io import atomic_write_text, dumps_json
     from ..validation import resolve_model, validate_one
-    from .uncertainty import check_draws, validate_draws
+    from .sample import check_draws, validate_draws
 
     out = _check(args)
     horizons = _horizons(args.horizon)
@@ -205,7 +205,7 @@ def _report(args) -> int:
     vals = [validate_one(model, lg, lpp=args.lpp, closed_loop=not args.no_closed_loop,
                          zigzag_angles=_zigzag(args), initial=initial)
             for lg in progress_iter(logs, args, "replaying logs")]
-    from .uncertainty import check_draws
+    from .sample import check_draws
 
     unc = {"draws": check_draws(args), "seed": args.seed, "samples": args.samples} if check_draws(args) else None
     horizons = _horizons(args.horizon)

@@ -54,7 +54,7 @@ def register(sub) -> None:
     p.add_argument("-o", "--output", default=None,
                    help="CSV of the time series, units in the headers (with --side both: both turns, column 'run')")
     p.add_argument("--force", action="store_true", help="overwrite the output file")
-    from .uncertainty import add_draws_option
+    from .sample import add_draws_option
 
     add_draws_option(p)
     p.add_argument("--metrics-output", default=None, metavar="FILE",
@@ -216,7 +216,7 @@ def _check_common(args) -> None:
 
 def _simulate(args) -> int:
     from ..manoeuvres import turning_circle, zigzag
-    from .uncertainty import check_draws, simulate_draws
+    from .sample import check_draws, simulate_draws
 
     _check_common(args)
     if check_draws(args):
