@@ -23,13 +23,18 @@ MAX_MESSAGE = 300
 COMMAND_MODULES: list[str] = [
     "shipid.commands.models",
     "shipid.commands.fit",
+    "shipid.commands.demo",
     "shipid.commands.log",
+    "shipid.commands.metrics",
     "shipid.commands.simulate",
+    "shipid.commands.sweep",
     "shipid.commands.route",
     "shipid.commands.glider",
     "shipid.commands.validate",
+    "shipid.commands.report",
     "shipid.commands.plan",
     "shipid.commands.sample",
+    "shipid.commands.campaign",
     "shipid.commands.crossval",
 ]
 

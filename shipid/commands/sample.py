@@ -1,18 +1,12 @@
-"""``shipid sample`` (MCMC posterior of a fit) and ``shipid campaign`` (many fits and sweeps on Dask), plus the
-``--draws`` helpers of ``shipid simulate`` / ``validate`` / ``report`` (the logic is in
-:mod:`shipid.uncertainty`)."""
+"""``shipid sample``: the MCMC posterior of a fit's coefficients (the logic is in :mod:`shipid.uncertainty`)."""
 from __future__ import annotations
 
-import json
-import sys
-from pathlib import Path
-
-from ._common import add_log_options, add_progress_option, progress_on, read_logs_for_result, renamed_option
+from ._common import add_log_options, add_progress_option, progress_on, read_logs_for_result
 
 
 def _command(sub, name, handler, help, description, *, positional, output_help, output_metavar=None,
              force_help="overwrite an existing output"):
-    """A sub-command of this module: its positional arguments (``(name, metavar, help[, nargs])``),
+    """A sub-command that writes one output (``sample``, ``campaign``): its positional arguments (``(name, metavar, help[, nargs])``),
     the required ``-o/--output`` and ``--force``."""
     p = sub.add_parser(name, help=help, description=description)
     for dest, metavar, text, *nargs in positional:
@@ -52,58 +46,9 @@ def register(sub) -> None:
     _progress_option(p)
     add_log_options(p)
 
-    c = _command(sub, "campaign", _campaign,
-                 "run the fits and sweeps of a campaign file (JSON/YAML) on Dask workers",
-                 "Run many fits, each with its own logs and settings, and sweeps (turning-diameter grids, glider "
-                 "launch factorials) from a campaign file; an embedded LocalCluster of --workers processes by "
-                 "default, an existing cluster with --scheduler, serially with --workers 1.  Writes "
-                 "OUTDIR/<name>/result.json (+ predictions.json with draws) per fit, OUTDIR/<name>/sweep.csv per "
-                 "sweep and OUTDIR/campaign.json.",
-                 positional=[("campaign", "CAMPAIGN", "campaign file (.json, .yaml)")],
-                 output_help="output folder (new or empty)", output_metavar="OUTDIR",
-                 force_help="run every member again into a used output folder (removes the members' old files)")
-    c.add_argument("--resume", action="store_true",
-                   help="finish a campaign that was stopped: members OUTDIR/campaign.journal lists as finished "
-                        "(files unchanged) are kept, the others run")
-    c.epilog = ("exit status: 0 every member ok; 3 some fits flagged (`shipid fit` would exit 3 or 4 on them: not "
-                "consistent with their noise model, or diverged) and none failed; 1 some members failed; 2 bad input")
-    add_engine_options(c)
-
 
 def _progress_option(p) -> None:
     add_progress_option(p)  # --progress / --no-progress, on at a terminal, as every long-running command
-
-
-def add_engine_options(p) -> None:
-    p.add_argument("--workers", type=int, default=None,
-                   help="worker processes of the embedded Dask LocalCluster (default: CPUs; 1 = serial)")
-    p.add_argument("--scheduler", default=None, metavar="ADDRESS", help="existing Dask scheduler, e.g. tcp://host:8786")
-    _progress_option(p)
-
-
-def engine_from(args):
-    from ..campaign import Engine
-
-    return Engine(args.workers, scheduler=args.scheduler, progress=progress_on(args))
-
-
-def add_draws_option(p) -> None:
-    """``--draws N`` (+ ``--seed``, ``--samples``) for simulate / validate / report (``--draws-seed``: the old
-    spelling of ``--seed``)."""
-    p.add_argument("--draws", type=int, default=0, metavar="N",
-                   help="propagate the fit's uncertainty: N parameter draws simulated as one batch (95 %% intervals, "
-                        "IMO probabilities)")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the draws (default 0)")
-    renamed_option(p, "--draws-seed", "--seed", dest="seed", type=int, metavar="SEED")
-    p.add_argument("--samples", default=None, metavar="SAMPLES.json",
-                   help="draw from MCMC samples (`shipid sample`) instead of the fit's Gaussian posterior")
-
-
-def check_draws(args) -> int:
-    n = int(getattr(args, "draws", 0) or 0)
-    if n < 0:
-        raise ValueError(f"--draws {n}: give a positive number of parameter draws (or 0 for none)")
-    return n
 
 
 def _sample(args) -> int:
@@ -138,98 +83,3 @@ def _sample(args) -> int:
     return 0 if s.converged else 1
 
 
-def _member_line(m: dict) -> str:
-    if m["status"] == "failed":
-        return f"{m['name']}: FAILED: {m['error']}"
-    if m["status"] == "flagged":
-        why = "; ".join(m.get("reasons") or [])
-        return f"{m['name']}: flagged: {why[:200]}{'...' if len(why) > 200 else ''}"
-    note = "" if m.get("success", True) else " (did not converge)"
-    return f"{m['name']}: ok{note}"
-
-
-def _campaign(args) -> int:
-    from ..campaign import campaign_exit_status, load_campaign, run_campaign
-
-    if args.force and args.resume:
-        raise ValueError("--force and --resume: give one (--resume keeps finished members, --force runs them again)")
-    camp = load_campaign(args.campaign)  # validate before starting any worker
-    with engine_from(args) as eng:
-        summary = run_campaign(camp, args.output, engine=eng, force=args.force, resume=args.resume,
-                               on_member=lambda m: print(_member_line(m), flush=True))
-    for m in summary["members"]:
-        for w in m.get("warnings", [])[:3]:
-            print(f"{m['name']}: warning: {w}", file=sys.stderr)
-    resumed = f", {summary['n_resumed']} kept from the earlier run" if summary.get("n_resumed") else ""
-    print(f"{summary['n_members']} members: {summary['n_ok']} ok, {summary['n_flagged']} flagged, "
-          f"{summary['n_failed']} failed{resumed} ({summary['engine']}); wrote {Path(args.output) / 'campaign.json'}")
-    return campaign_exit_status(summary)
-
-
-# ----------------------------------------------------------------------------- --draws hunks
-def simulate_draws(args, model_spec: str) -> int:
-    """``shipid simulate RESULT.json --turning 35 --draws N [--metrics-output FILE]``."""
-    from ..uncertainty import predict_manoeuvres
-
-    if not (model_spec.lower().endswith(".json") and Path(model_spec).is_file()):
-        raise ValueError(f"--draws needs a fit result JSON (with a covariance), got '{model_spec}'")
-    if args.output:
-        raise ValueError("-o/--output (time series CSV) is not written with --draws; use --metrics-output FILE")
-    if args.turning is not None:
-        specs = [f"turning:{args.turning:g}:{s}" for s in _sides(args.side)]
-    else:
-        d, _, p = args.zigzag.partition("/")
-        specs = [f"zigzag:{d}/{p or d}:{s}" for s in _sides(args.side)]
-    import math
-
-    pred = predict_manoeuvres(model_spec, specs, draws=check_draws(args), seed=args.seed, samples=args.samples,
-                              speed=args.speed, lpp=args.lpp, method=args.integrator,
-                              rudder_rate=math.radians(args.rudder_rate) if args.rudder_rate is not None else None)
-    tab = pred.summary()
-    print(tab[["manoeuvre", "metric", "nominal", "median", "low", "high", "n_nonfinite"]].to_string(
-        index=False, float_format=lambda v: f"{v:.4g}"))
-    for lab, blk in pred.imo.items():
-        for crit, v in blk.items():
-            print(f"{lab}: IMO {crit} met with probability {v['probability']:.3f} "
-                  f"({v['n_met']}/{pred.draws}; {v['n_not_evaluated']} not evaluated)")
-    print(pred.message)
-    if getattr(args, "metrics_output", None):
-        pred.to_json(args.metrics_output, force=args.force)
-        print(f"wrote {args.metrics_output}")
-    return 0 if pred.status == 0 else 1
-
-
-def _sides(side: str) -> list[str]:
-    return ["starboard", "port"] if side == "both" else [side]
-
-
-def validate_draws(args, result_path, vals: list, out: list) -> None:
-    """Add ``"<metric>_ci"`` / ``"imo_probability"`` / ``"draws"`` to each log's ``predicted`` block."""
-    from ..uncertainty import parameter_draws, replay_draws
-    from ..validation.replay import _for_length, resolve_model
-
-    n = check_draws(args)
-    if n == 0:
-        return
-    model, res = resolve_model(result_path)
-    if res is None:
-        raise ValueError("--draws needs a fit result (with a covariance), not a model name")
-    P = parameter_draws(res, n, seed=args.seed, samples=args.samples)
-    for v, d in zip(vals, out):
-        if v.measured is None or v.lpp is None or not d.get("predicted"):
-            continue
-        m = _for_length(model, v.lpp, [])
-        blk = replay_draws(m, v.log, P, lpp=v.lpp, kind=v.measured.manoeuvre,
-                           switch_deg=getattr(v.measured, "switch_deg", None), rudder_sign=v.rudder_sign)
-        blk.pop("simulation")
-        d["predicted"].update(blk)
-
-
-def write_json(path, obj, force) -> None:
-    from .._io import atomic_write_text
-
-    atomic_write_text(path, json.dumps(obj, indent=2, allow_nan=False) + "\n", force=force)
-
-
-def warn(msg: str) -> None:
-    print(msg, file=sys.stderr)
