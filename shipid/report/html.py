@@ -530,7 +530,7 @@ def plain_summary(result, model, validations, horizons=None) -> str:
                    + ".")
     by_h: dict = {}
     for h, _log in horizons or []:
-        for e in h.summary():
+        for e in h.to_records():
             by_h.setdefault(float(e["seconds"]), []).append(e.get("position_error_median_m"))
     if by_h:
         sec = 30.0 if 30.0 in by_h else sorted(by_h)[len(by_h) // 2]
