@@ -200,7 +200,7 @@ def _cpu_projection(ser: dict, st: dict, workers: int) -> float:
 
 def bench_mcmc(steps: int) -> None:
     from shipid.identify import EKFIdentifier
-    from shipid.identify.posterior import sample_posterior
+    from shipid.uncertainty.posterior import sample_posterior
     from shipid.models import get_model
     from shipid.synthetic import TrialRecipe, make_trial
 
@@ -227,8 +227,8 @@ def bench_mcmc_study(steps: int) -> None:
     from shipid import _jit
     from shipid._kernel import filter_functions
     from shipid.identify import EKFIdentifier
-    from shipid.identify.coverage import COVERAGE_RECIPES
-    from shipid.identify.posterior import OutputErrorLikelihood, sample_posterior
+    from studies.coverage import COVERAGE_RECIPES
+    from shipid.uncertainty.posterior import OutputErrorLikelihood, sample_posterior
     from shipid.models import get_model
     from shipid.synthetic import KCS_NOISE_STD, make_trial
 

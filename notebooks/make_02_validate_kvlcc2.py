@@ -20,7 +20,7 @@ closed-loop manoeuvres.
 from pathlib import Path
 import numpy as np, pandas as pd, matplotlib.pyplot as plt
 import shipid
-from shipid.studies import kvlcc2 as ks
+from studies import kvlcc2 as ks
 from shipid.manoeuvres import metrics
 
 FAST = os.environ.get("SHIPID_FAST") == "1"

@@ -16,13 +16,13 @@ and the unfitted `lowspeed` prior, (3) fit `lowspeed` with and without wind + cu
 runs and predict the others (multi-start open-loop prediction, starts every 5 s).
 
 `SHIPID_FAST=1` (the test suite) uses two random runs, two folds and coarse decimation; the
-full study is `python -m shipid.studies.esso_osaka` (docs/environment.md)."""),
+full study is `python -m studies.esso_osaka` (docs/environment.md)."""),
     code("""import os
 from pathlib import Path
 import numpy as np, pandas as pd, matplotlib.pyplot as plt
-from shipid.studies import esso_osaka as es
+from studies import esso_osaka as es
 from shipid.environment import WindForce, apparent_wind
-from shipid.validation_horizon import horizon_prediction, dead_reckoning
+from shipid.validation.horizon import horizon_prediction, dead_reckoning
 
 FAST = os.environ.get("SHIPID_FAST") == "1"
 folder = Path("..") / ".." / "shared" / "data" / "esso_osaka_frt"
@@ -50,8 +50,8 @@ if HAVE_DATA:
     for name, m in {"dead reckoning": dead_reckoning(), "mmg kvlcc2 3 m": get_model("mmg", "kvlcc2", lpp=3.0),
                     "lowspeed prior": get_model("lowspeed")}.items():
         r = horizon_prediction(m, lg.data.iloc[::2])
-        print(name, [(e["seconds"], round(e["position_error_median_m"], 3)) for e in r.summary()])
-    ax = r.plot(lg.data, every=6)
+        print(name, [(e["seconds"], round(e["position_error_median_m"], 3)) for e in r.to_records()])
+    ax = r.plot(every=6)
     ax.set_title("lowspeed prior: 60 s predictions from every 30 s")"""),
     md("## 3. Fit with and without wind + current, predict held-out runs"),
     code("""if HAVE_DATA:

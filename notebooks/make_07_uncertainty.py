@@ -65,7 +65,7 @@ code("""
 N = 60 if FAST else 500
 pred = predict_manoeuvres(res, ["turning:35", "zigzag:10/10"], draws=N, seed=1)
 print(pred.message)
-pred.to_pandas()[["manoeuvre", "metric", "nominal", "median", "low", "high", "n_nonfinite"]].round(4)
+pred.summary()[["manoeuvre", "metric", "nominal", "median", "low", "high", "n_nonfinite"]].round(4)
 """)
 code("""
 pd.DataFrame({(lab, crit): v for lab, blk in pred.imo.items() for crit, v in blk.items()}).T[
@@ -93,7 +93,7 @@ time, the effective sample size and the rank-normalised split-R̂ (Vehtari et al
 and calls the chain converged only when all pass.
 """)
 code("""
-from shipid.identify.posterior import sample_posterior
+from shipid.uncertainty.posterior import sample_posterior
 fit3 = EKFIdentifier(truth, estimate=["c1", "c2", "c3"], init="model").fit(logs[:2])
 with warnings.catch_warnings():
     warnings.simplefilter("ignore", RuntimeWarning)
@@ -118,7 +118,7 @@ them) is the one that `docs/uncertainty.md` finds calibrated, with the 100-repli
 the MCMC column and the evidence.
 """)
 code("""
-from shipid.identify.coverage import coverage_study
+from studies.coverage import coverage_study
 import pandas as pd
 n = 2 if FAST else 30
 cov = [coverage_study(n_replicates=n, draws=0 if FAST else 50, seed=0, refine=r) for r in (None, "output-error")]

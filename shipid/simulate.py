@@ -1,5 +1,10 @@
 """Integrate a protocol model under an input schedule or a feedback law.
 
+``shipid.simulate`` is this module, and calling it calls :func:`simulate`: ``shipid.simulate(model,
+x0, t, U)`` and ``shipid.simulate.simulate(model, x0, t, U)`` are the same call, and
+``shipid.simulate.replay`` is reachable as documented.  (The package exports the module rather than
+the function so that the function's name does not hide the module's other tools.)
+
 :func:`simulate` is the single forward simulator of the package, vectorised
 over a leading batch axis, with inputs given as samples on the time grid
 (held between samples, or linear between them with ``input_hold="foh"``, as
@@ -16,6 +21,8 @@ laws).  Two integrators:
 """
 from __future__ import annotations
 
+import sys
+import types
 import warnings
 from dataclasses import dataclass, field
 from typing import Callable
@@ -25,6 +32,7 @@ import pandas as pd
 
 from .integrate import dopri5, hold_steps, interval_steps, rk4_map
 from .models.base import Model
+from .results import ResultMixin, axes_column, in_degrees, plot_series
 
 __all__ = ["simulate", "SimulationResult", "InputLaw", "replay", "replay_errors", "METHODS", "INPUT_HOLDS"]
 
@@ -74,8 +82,8 @@ class InputLaw:
 
 
 @dataclass
-class SimulationResult:
-    """Result of :func:`simulate`.
+class SimulationResult(ResultMixin):
+    """Result of :func:`simulate` (and of :func:`replay`, which also keeps the measured log).
 
     Attributes
     ----------
@@ -89,6 +97,9 @@ class SimulationResult:
         shared-step run fails is integrated member by member, ``meta["per_member"]``);
         ``meta["failed"]`` lists the failed members and ``meta["failed_at"]`` their failure times [s].
     message : str
+    measured : DataFrame or None
+        The log a :func:`replay` reproduces (``time`` and its channels); drawn under the simulation by
+        :meth:`plot` and compared in :meth:`summary`.
     """
 
     t: np.ndarray
@@ -99,6 +110,7 @@ class SimulationResult:
     success: bool = True
     message: str = "integration finished"
     meta: dict = field(default_factory=dict)
+    measured: pd.DataFrame | None = field(default=None, repr=False)
 
     @property
     def batched(self) -> bool:
@@ -123,19 +135,57 @@ class SimulationResult:
         cols.update({n: u[:, i] for i, n in enumerate(self.model.input_names)})
         return pd.DataFrame(cols, index=pd.Index(self.t, name="time"))
 
-    def plot(self, ax=None, member: int | None = 0):
-        """Plot the states against time on one axes per state."""
-        import matplotlib.pyplot as plt
+    def summary(self) -> pd.DataFrame:
+        """Per state and input (angles in degrees): unit, start, end, min and max of the run (of every
+        member of a batch, index ``(member, channel)``); a replay adds the ``rmse`` against the log
+        (:func:`replay_errors`, in the same display units) and the track row."""
+        units = self.model.units
+        names = list(self.model.state_names) + list(self.model.input_names)
+        data = np.concatenate([self.x, self.u], axis=-1)
+        members = range(data.shape[0]) if self.batched else [None]
+        rows, index = [], []
+        for b in members:
+            d = data[b] if b is not None else data
+            for j, n in enumerate(names):
+                col, unit = in_degrees(d[:, j], units.get(n, ""))
+                fin = col[np.isfinite(col)]
+                rows.append({"unit": unit, "start": col[0], "end": col[-1],
+                             "min": fin.min() if fin.size else np.nan, "max": fin.max() if fin.size else np.nan})
+                index.append(n if b is None else (b, n))
+        out = pd.DataFrame(rows, index=pd.MultiIndex.from_tuples(index, names=["member", "channel"])
+                           if self.batched else pd.Index(index, name="channel"))
+        if self.measured is not None and not self.batched:
+            err = replay_errors(self, self.measured)
+            out["rmse"] = [float(in_degrees(err.loc[n, "rmse"], units.get(n, ""))[0]) if n in err.index else np.nan
+                           for n in out.index]
+            if "track" in err.index:
+                out.loc["track", ["unit", "rmse"]] = ["m", float(err.loc["track", "rmse"])]
+        return out
 
+    def _key_numbers(self) -> dict:
+        k = {"model": self.model.name, "duration [s]": float(self.t[-1] - self.t[0]) if self.t.size else 0.0,
+             "samples": int(self.t.size)}
+        if self.batched:
+            k["members"] = int(self.x.shape[0])
+        return k
+
+    def _html_title(self) -> str:
+        return "Replay" if self.measured is not None else "Simulation"
+
+    def plot(self, ax=None, member: int | None = 0):
+        """Plot states and inputs against time (one axes each, angles in degrees); a replay draws the
+        measured log under the simulation.  ``member`` picks one run of a batch.  Returns the axes."""
         df = self.to_pandas(member if self.batched else None)
-        names = list(self.model.state_names)
-        if ax is None:
-            fig, axs = plt.subplots(len(names), 1, sharex=True, figsize=(7, 1.6 * len(names)))
-        else:
-            axs = np.atleast_1d(ax)
-        for a, n in zip(axs, names):
-            a.plot(df.index, df[n])
-            a.set_ylabel(f"{n} [{self.model.units.get(n, '')}]")
+        names = list(self.model.state_names) + list(self.model.input_names)
+        axs = axes_column(ax, len(names))
+        if self.measured is not None:
+            m = self.measured
+            plot_series(axs, m["time"].to_numpy(), m, list(self.model.state_names), self.model.units,
+                        color="0.55", lw=1.2, label="measured")
+        plot_series(axs, df.index.to_numpy(), df, names, self.model.units, color="C0", lw=0.9,
+                    label="simulated" if self.measured is not None else None)
+        if self.measured is not None:
+            axs[0].legend(loc="best", fontsize="small")
         axs[-1].set_xlabel("time [s]")
         return axs
 
@@ -197,9 +247,18 @@ def simulate(
     SimulationResult
         ``meta`` holds ``method`` and, for ``dopri5``, ``n_steps``, ``n_rejected``, ``n_fev``, ``h_last``.
     """
+    _check_model(model, "model")
     t = np.asarray(t, dtype=float)
-    if t.ndim != 1 or t.size < 2 or np.any(np.diff(t) <= 0):
-        raise ValueError("t must be a strictly increasing 1-D array with at least two times")
+    if t.ndim != 1 or t.size < 2:
+        raise ValueError(f"t must be a 1-D array of at least two times; got shape {t.shape}")
+    if not np.all(np.isfinite(t)):
+        i = int(np.flatnonzero(~np.isfinite(t))[0])
+        raise ValueError(f"t must be finite; t[{i}] = {t[i]}")
+    if np.any(np.diff(t) <= 0):
+        i = int(np.flatnonzero(np.diff(t) <= 0)[0])
+        raise ValueError(f"t must be strictly increasing; t[{i + 1}] = {t[i + 1]:g} follows t[{i}] = {t[i]:g}")
+    if x0 is None:
+        raise ValueError(f"x0 must be the initial state, shape ({model.nx},) for {list(model.state_names)}; got None")
     if (inputs is None) == (controller is None):
         raise ValueError("give exactly one of inputs= (sampled inputs) or controller= (feedback law)")
     if substeps < 1:
@@ -211,8 +270,11 @@ def simulate(
     if method == "dopri5" and not (0 < rtol < 1):
         raise ValueError(f"rtol must be in (0, 1), got {rtol}")
     x0 = np.asarray(x0, dtype=float)
-    if x0.shape[-1] != model.nx or x0.ndim > 2:
+    if x0.ndim == 0 or x0.shape[-1] != model.nx or x0.ndim > 2:
         raise ValueError(f"x0 must have shape ({model.nx},) or (B, {model.nx}) for {model.state_names}; got {x0.shape}")
+    if x0.ndim == 1 and not np.all(np.isfinite(x0)):
+        i = int(np.flatnonzero(~np.isfinite(x0))[0])
+        raise ValueError(f"x0 must be finite; x0[{i}] ('{model.state_names[i]}') = {x0[i]}")
     p = model.params if params is None else np.asarray(params, dtype=float)
     batch = x0.shape[:-1]
     n_t = t.size
@@ -247,9 +309,20 @@ def simulate(
 
         Xc = replay_compiled(model, x0.reshape(-1, model.nx), t, U.reshape(-1, n_t, model.nu), p, n_int, foh)
         if Xc is not None:
-            meta = {"method": "rk4", **({"failed": [], "failed_at": []} if batch else {})}
-            return SimulationResult(t=t, x=Xc.reshape(batch + (n_t, model.nx)), u=np.array(U), model=model,
-                                    params=np.array(p), success=True, message="integration finished", meta=meta)
+            Xc = Xc.reshape(batch + (n_t, model.nx))
+            bad = ~np.all(np.isfinite(Xc), axis=-1)  # (batch..., n_t): a member that became non-finite
+            failed_at = np.where(bad.any(axis=-1), t[np.argmax(bad, axis=-1)], np.nan)
+            ok = not bad.any()
+            if not ok:  # NaN from the first non-finite sample on, and said (as the interpreted loop does)
+                Xc = np.where((np.cumsum(bad, axis=-1) > 0)[..., None], np.nan, Xc)
+                warnings.warn(_failure_message(t, failed_at), RuntimeWarning, stacklevel=2)
+            meta = {"method": "rk4"}
+            if batch:
+                meta["failed"] = [int(i) for i in np.flatnonzero(np.isfinite(failed_at.ravel()))]
+                meta["failed_at"] = [float(v) for v in failed_at.ravel()[meta["failed"]]]
+            return SimulationResult(t=t, x=Xc, u=np.array(U), model=model, params=np.array(p), success=ok,
+                                    message="integration finished" if ok else _failure_message(t, failed_at),
+                                    meta=meta)
     X = np.full(batch + (n_t, model.nx), np.nan)
     Uout = np.full(batch + (n_t, model.nu), np.nan)
     x = x0.copy()
@@ -297,6 +370,14 @@ def simulate(
         meta["failed"] = [int(i) for i in np.flatnonzero(np.isfinite(failed_at.ravel()))]
         meta["failed_at"] = [float(v) for v in failed_at.ravel()[meta["failed"]]]
     return SimulationResult(t=t, x=X, u=Uout, model=model, params=np.array(p), success=ok, message=msg, meta=meta)
+
+
+def _check_model(model, name: str = "model") -> None:
+    """TypeError naming the argument when ``model`` is not a model object (e.g. a model's name)."""
+    if not all(hasattr(model, a) for a in ("nx", "state_names", "params")):
+        hint = f"; build it with shipid.models.get_model({model!r})" if isinstance(model, str) else ""
+        raise TypeError(f"{name} must be a model object (shipid.models), got {type(model).__name__}"
+                        f" {str(model)[:40]!r}{hint}")
 
 
 def _failure_message(t, failed_at) -> str:
@@ -490,6 +571,8 @@ def replay(model: Model, log, *, x0=None, substeps: int = 2, params=None, input_
         Start values of named states in place of the default ``x0``'s (e.g. the current ``cx``, ``cy`` of a
         model with current states, which no log carries); not with ``x0``.
     """
+    if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
+        raise ValueError(f"substeps must be a whole number >= 1 (RK4 steps per log sample), got {substeps!r}")
     if initial and x0 is not None:
         raise ValueError("replay: give x0 or initial, not both")
     bad = [k for k in (initial or {}) if k not in model.state_names]
@@ -518,7 +601,9 @@ def replay(model: Model, log, *, x0=None, substeps: int = 2, params=None, input_
         x0 = np.broadcast_to(np.asarray(x0, dtype=float), (np.shape(params)[0], model.nx))
     if h_max is None:
         h_max = 1.5 * float(np.median(np.diff(t))) / substeps
-    return simulate(model, x0, t, U, substeps=substeps, params=params, input_hold=input_hold, h_max=h_max)
+    sim = simulate(model, x0, t, U, substeps=substeps, params=params, input_hold=input_hold, h_max=h_max)
+    sim.measured = df
+    return sim
 
 
 def replay_errors(sim: SimulationResult, log) -> pd.DataFrame:
@@ -550,3 +635,13 @@ def replay_errors(sim: SimulationResult, log) -> pd.DataFrame:
         if ok.any():
             rows["track"] = {"rmse": float(np.sqrt(np.mean(d2[ok]))), "nrmse": np.nan, "n_samples": int(ok.sum())}
     return pd.DataFrame.from_dict(rows, orient="index")
+
+
+class _CallableModule(types.ModuleType):
+    """This module's type: calling the module calls :func:`simulate`."""
+
+    def __call__(self, *args, **kwargs) -> SimulationResult:
+        return simulate(*args, **kwargs)
+
+
+sys.modules[__name__].__class__ = _CallableModule

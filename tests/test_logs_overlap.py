@@ -65,7 +65,7 @@ def test_the_esso_osaka_trimmed_copy_is_the_only_repeat_among_the_runs():
     (``random_06-Aug-2020_16_24_25_*``) share no sample, and neither does the other cut, whose full run is not
     among these files."""
     from shipid.logs import read_log
-    from shipid.studies.esso_osaka import DUPLICATES
+    from studies.esso_osaka import DUPLICATES
 
     files = sorted(ESSO.glob("*/*.csv"))
     with warnings.catch_warnings():

@@ -1,4 +1,4 @@
-"""MCMC posterior sampling (shipid.identify.posterior): split-R-hat, convergence verdicts, accuracy against
+"""MCMC posterior sampling (shipid.uncertainty.posterior): split-R-hat, convergence verdicts, accuracy against
 an exact grid posterior."""
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import warnings
 import numpy as np
 import pytest
 
-from shipid.identify.posterior import OutputErrorLikelihood, sample_posterior, split_rhat
+from shipid.uncertainty.posterior import OutputErrorLikelihood, sample_posterior, split_rhat
 
 pytest.importorskip("emcee")
 

@@ -133,45 +133,6 @@ def test_refine_fit_reuses_one_ekf_stage_and_weighs_the_metrics():
         refine_fit(ekf, logs, "both")
 
 
-def test_leave_one_run_out_of_refinements_scores_each_variant_on_one_ekf_stage():
-    """shipid.studies.kvlcc2.leave_one_run_out_refinements on the bundled KCS logs (one fold: fit on the turn
-    and one zigzag, predict the other zigzag): one row per variant, a finite goal-normalised error; the
-    metric residuals at weight 0 score exactly as the output-error refinement (same EKF stage, same fit)."""
-    from shipid.datasets import bundled_kcs_logs
-    from shipid.logs import read_log
-    from shipid.studies import kvlcc2 as ks
-
-    runs = {p.stem: read_log(p) for p in bundled_kcs_logs()[1:]}  # tc +35, zz -10, zz +20 (rpm change)
-    variants = {"oe": {"mode": "output-error", "max_nfev": 3},
-                "m0": {"mode": "metrics", "metric_weight": 0.0, "max_nfev": 3}}
-    tab = ks.leave_one_run_out_refinements(runs, "kcs-response", variants=variants, train=tuple(runs),
-                                           folds=["kcs_zz_p20_rpm"])
-    assert list(tab["variant"]) == ["oe", "m0"] and set(tab["left_out"]) == {"kcs_zz_p20_rpm"}
-    assert np.all(np.isfinite(tab["error"])) and tab["error"].iloc[0] > 0
-    assert tab["error"].iloc[1] == tab["error"].iloc[0]
-
-
-def test_leave_one_run_out_of_recipes_shares_ekf_stages_between_variants_with_the_same_fit_options():
-    """shipid.studies.kvlcc2.leave_one_run_out_recipes (session 6's round) on the bundled KCS logs, one fold:
-    variants with the same ``fit`` options share one EKF stage (with nothing held by the identifiable subset,
-    switching it off changes nothing), another sampling step is another EKF stage; one row per variant."""
-    from shipid.datasets import bundled_kcs_logs
-    from shipid.logs import read_log
-    from shipid.studies import kvlcc2 as ks
-
-    runs = {p.stem: read_log(p) for p in bundled_kcs_logs()[1:]}
-    oe = {"mode": "output-error", "max_nfev": 3}
-    variants = {"a": {"fit": {"n_passes": 1}, "refine": oe},
-                "a, all refined": {"fit": {"n_passes": 1}, "refine": {**oe, "hold_unresolved": False}},
-                "every 2nd": {"fit": {"n_passes": 1, "dt": 2}, "refine": oe}}
-    tab = ks.leave_one_run_out_recipes(runs, "kcs-response", variants=variants, train=tuple(runs),
-                                       folds=["kcs_zz_p20_rpm"])
-    assert list(tab["variant"]) == list(variants) and set(tab["left_out"]) == {"kcs_zz_p20_rpm"}
-    assert np.all(np.isfinite(tab["error"])) and list(tab["held"]) == [[], [], []]
-    assert tab["error"].iloc[1] == tab["error"].iloc[0] and tab["error"].iloc[2] != tab["error"].iloc[0]
-    assert ks.RECIPE_VARIANTS_6["default"] == {"fit": {}, "refine": {"mode": "metrics"}} and "0.01" in ks.LORO_RULE_6
-
-
 def test_cli_metric_weight_is_checked(tmp_path, capsys):
     """shipid fit --metric-weight -1: exit 2 with a one-line message naming the option (no fit run)."""
     from shipid.cli import main

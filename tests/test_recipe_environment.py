@@ -78,8 +78,8 @@ def test_cli_fit_of_wind_current_model_is_the_study_setting(tmp_path, capsys):
     mean current, and `shipid validate` starts its replay and its predictions from it."""
     from shipid.environment import with_environment
     from shipid.models import get_model
-    from shipid.studies import esso_osaka as S
-    from shipid.validation_horizon import horizon_prediction
+    from studies import esso_osaka as S
+    from shipid.validation.horizon import horizon_prediction
 
     files = _esso("random", 4)
     train, test = files[:3], files[3]
@@ -115,8 +115,8 @@ def test_cli_fit_of_wind_current_model_is_the_study_setting(tmp_path, capsys):
     from shipid.validation import resolve_model
 
     model, _ = resolve_model(out)
-    mine = horizon_prediction(model, lg, horizons=(30.0,), initial={"cx": cs["cx"], "cy": cs["cy"]}).summary()[0]
-    zero = horizon_prediction(model, lg, horizons=(30.0,)).summary()[0]
+    mine = horizon_prediction(model, lg, horizons=(30.0,), initial={"cx": cs["cx"], "cy": cs["cy"]}).to_records()[0]
+    zero = horizon_prediction(model, lg, horizons=(30.0,)).to_records()[0]
     assert h["position_error_median_m"] == pytest.approx(mine["position_error_median_m"], rel=1e-12)
     assert h["position_error_median_m"] != pytest.approx(zero["position_error_median_m"], rel=1e-6)
     # the replay starts with the same current (session 12; it had started with none)
@@ -146,7 +146,7 @@ def test_recipe_loro_reaches_the_study_numbers():
     position error per run type are the study's (docs/environment.md: 0.243 / 0.430 / 0.184 / 0.205 m), so issue
     13's goals hold for a user's fit as they do for the study's -- met on turning, random, berthing (<= 0.3 /
     0.3 / 0.6 m), missed on zigzag (0.432 m, band: the measured value +-0.01 m, a regression check)."""
-    from shipid.studies.esso_osaka import recipe_loro
+    from studies.esso_osaka import recipe_loro
 
     _esso("turning", 1)
     df = recipe_loro(DATA)
@@ -196,10 +196,12 @@ def test_a_turn_with_a_brief_opposite_correction_is_a_turn():
 
 
 def test_model_default_start_applies_to_names_not_to_a_callers_model(monkeypatch):
-    """``DEFAULT_START`` (lowspeed: dgammaR 0.1225) replaces the default set's value when the model is named;
+    """The model's recipe start (lowspeed: dgammaR 0.1225) replaces the default set's value when the model is named;
     a model object the caller built is the start the caller wants (unless ``start_defaults=True``)."""
+    from dataclasses import replace
+
     from shipid.identify import recipe
-    from shipid.models import get_model
+    from shipid.models import get_model, model_class
 
     seen = []
 
@@ -210,7 +212,8 @@ def test_model_default_start_applies_to_names_not_to_a_callers_model(monkeypatch
         seen.append(float(model.params[model.param_index("dgammaR")]))
         raise Stop
 
-    monkeypatch.setattr(recipe, "DEFAULT_SAMPLING_S", {})
+    cls = model_class("lowspeed")
+    monkeypatch.setattr(cls, "recipe_defaults", replace(cls.recipe_defaults, sampling=None))
     monkeypatch.setattr(recipe, "choose_sampling", fake_sampling)
     t = np.arange(100) * 0.1
     lg = TrialLog.from_arrays(t, name="a", ship={"lpp": 3.0}, x=t * 0.2, y=0 * t, psi=0 * t, u=0 * t + 0.2,

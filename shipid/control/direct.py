@@ -69,7 +69,7 @@ def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int | N
         from .ipopt import solve_ipopt
 
         return solve_ipopt(problem, n_segments=n_segments, max_iter=max_iter, tol=tol, U0=U0, tf0=tf0)
-    from .spec import check_problem_size
+    from .problem import check_problem_size
 
     nseg = problem.shooting_segments if n_segments is None else n_segments
     check_problem_size(problem.model, problem.n_intervals, problem.substeps, problem.name, n_segments=nseg)

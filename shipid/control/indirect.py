@@ -235,7 +235,7 @@ def solve_indirect(problem: Problem, *, method: str = "bfgs", r0: float = 1.0, c
         raise ValueError(f"solve_indirect: method must be 'bfgs' or 'steepest', got {method!r}")
     if not 0.0 < c_factor < 1.0:
         raise ValueError(f"solve_indirect: c_factor must be in (0, 1), got {c_factor!r}")
-    from .spec import check_problem_size
+    from .problem import check_problem_size
 
     check_problem_size(problem.model, problem.n_intervals, problem.substeps, problem.name, n_segments=1)
     t0 = time.perf_counter()

@@ -20,9 +20,10 @@ from typing import Callable, Mapping
 import numpy as np
 
 from .._blas import one_blas_thread  # noqa: F401  (re-exported: the control solvers' context)
+from .._io import check_memory
 from ..models.base import Model
 
-__all__ = ["Problem", "rk4_sensitivities", "Trajectory", "evaluate", "Bounds", "one_blas_thread"]
+__all__ = ["Problem", "rk4_sensitivities", "Trajectory", "evaluate", "Bounds", "one_blas_thread", "check_problem_size"]
 
 
 Bounds = Mapping[str, tuple]
@@ -176,8 +177,6 @@ class Problem:
         self.u_fixed = hi == lo
         if self.n_intervals < 2 or self.substeps < 1:
             raise ValueError(f"n_intervals must be >= 2 and substeps >= 1, got {self.n_intervals}, {self.substeps}")
-        from .spec import check_problem_size
-
         check_problem_size(m, self.n_intervals, self.substeps, self.name, n_segments=self.shooting_segments)
         if self.final_time is not None and not self.final_time > 0:
             raise ValueError(f"final_time must be positive [s], got {self.final_time!r}")
@@ -322,3 +321,21 @@ def evaluate(problem: Problem, U, tf, substeps: int = 10) -> Trajectory:
         viol["finite states"] = np.inf
     mv = max(viol.values()) if viol else 0.0
     return Trajectory(t=t, x=X, u=np.vstack([Us, Us[-1:]]), violations=viol, max_violation=mv)
+
+
+def check_problem_size(model, n_intervals: int, substeps: int, where: str = "problem",
+                       n_segments: int = 5) -> None:
+    """Refuse a transcription whose estimated memory exceeds :func:`shipid._io.memory_limit_bytes`.
+
+    The estimate is the largest of the multiple-shooting sensitivities (``N * substeps * L * nx * nu``
+    doubles, ``L = N / n_segments``), the dense constraint Jacobian of SLSQP (``(N * substeps + N * nu) *
+    (N * nu + n_segments * nx)`` doubles) and its quasi-Newton matrix (``(N * nu + ...)**2``).
+    """
+    N, ns, nx, nu = int(n_intervals), int(substeps), model.nx, model.nu
+    if N > 10**9 or ns > 10**9:
+        N, ns = min(N, 10**9), min(ns, 10**9)  # (the estimate below already refuses these; no float overflow)
+    nvar = N * nu + n_segments * nx + 1
+    need = 8.0 * max(N * ns * max(N // n_segments, 1) * nx * nu, (N * ns + 2 * N * nu) * nvar, nvar ** 2)
+    shown = ", ".join(f"{k} {v if v < 10**12 else f'{v:.3g}'}" for k, v in
+                      (("n_intervals", int(n_intervals)), ("substeps", int(substeps))))
+    check_memory(need, f"{where}: {shown}", "use fewer n_intervals or substeps")

@@ -26,10 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .._io import (as_int, as_mapping, as_number, as_string, check_keys, check_memory, read_json, short)
+from .._io import (as_int, as_mapping, as_number, as_string, check_keys, read_json, short)
 
 from ..models import get_model
-from .problem import Problem
+from .problem import Problem, check_problem_size
 
 __all__ = ["load_problem", "problem_from_dict", "kcs_turn_problem", "check_problem_size"]
 
@@ -153,24 +153,6 @@ def problem_from_dict(doc: dict, *, where: str = "problem", base_dir: Path | Non
     except (ValueError, IndexError) as exc:
         raise ValueError(f"{where}: {exc}") from None
     return problem
-
-
-def check_problem_size(model, n_intervals: int, substeps: int, where: str = "problem",
-                       n_segments: int = 5) -> None:
-    """Refuse a transcription whose estimated memory exceeds :func:`shipid._io.memory_limit_bytes`.
-
-    The estimate is the largest of the multiple-shooting sensitivities (``N * substeps * L * nx * nu``
-    doubles, ``L = N / n_segments``), the dense constraint Jacobian of SLSQP (``(N * substeps + N * nu) *
-    (N * nu + n_segments * nx)`` doubles) and its quasi-Newton matrix (``(N * nu + ...)**2``).
-    """
-    N, ns, nx, nu = int(n_intervals), int(substeps), model.nx, model.nu
-    if N > 10**9 or ns > 10**9:
-        N, ns = min(N, 10**9), min(ns, 10**9)  # (the estimate below already refuses these; no float overflow)
-    nvar = N * nu + n_segments * nx + 1
-    need = 8.0 * max(N * ns * max(N // n_segments, 1) * nx * nu, (N * ns + 2 * N * nu) * nvar, nvar ** 2)
-    shown = ", ".join(f"{k} {v if v < 10**12 else f'{v:.3g}'}" for k, v in
-                      (("n_intervals", int(n_intervals)), ("substeps", int(substeps))))
-    check_memory(need, f"{where}: {shown}", "use fewer n_intervals or substeps")
 
 
 def load_problem(path: str | Path) -> Problem:

@@ -23,7 +23,6 @@ from math import cos, sin
 
 import numpy as np
 
-from .wind import coefficients_cs
 
 #: Number of environment constants before the base model's in :func:`env_derived`.
 HEADER = 16
@@ -34,6 +33,19 @@ N_PART = 10
 derived = rates = None
 
 
+def coefficients_cs(c, s, comp):
+    """``(C_X, C_Y, C_N)`` from ``c = cos gamma``, ``s = sin gamma`` by the multiple-angle identities
+    (complex-step safe); ``comp`` the ten components in :data:`shipid.environment.wind.WIND_PARAM_NAMES` order."""
+    X0, X1, X3, X5, Y1, Y3, Y5, N1, N2, N3 = comp
+    c2, s2 = c * c - s * s, 2.0 * s * c
+    c3, s3 = c2 * c - s2 * s, s2 * c + c2 * s
+    c5, s5 = c3 * c2 - s3 * s2, s3 * c2 + c3 * s2
+    CX = X0 + X1 * c + X3 * c3 + X5 * c5
+    CY = -(Y1 * s + Y3 * s3 + Y5 * s5)
+    CN = -(N1 * s + N2 * s2 + N3 * s3)
+    return CX, CY, CN
+
+
 def inv_sqrt_pos(z):
     """1/sqrt(z) for z > 0, else 0."""
     return 1.0 / math.sqrt(z) if z > 0 else 0.0
@@ -42,7 +54,7 @@ def inv_sqrt_pos(z):
 def wind_force(ac, as_, qAT, qAL, qALL, X0, X1, X3, X5, Y1, Y3, Y5, N1, N2, N3):
     """``(X_A, Y_A, N_A)`` [N, N, N m] from the apparent wind vector written as ``(V cos g, V sin g)``
     (no angle, smooth at V = 0), the scales ``1/2 rho_air A_T``, ``1/2 rho_air A_L``, ``1/2 rho_air A_L L``
-    and the ten Fourier components (:func:`shipid.environment.wind.coefficients_cs`)."""
+    and the ten Fourier components (:func:`coefficients_cs`)."""
     V2 = ac * ac + as_ * as_
     iV = inv_sqrt_pos(V2)
     CX, CY, CN = coefficients_cs(ac * iV, as_ * iV, (X0, X1, X3, X5, Y1, Y3, Y5, N1, N2, N3))

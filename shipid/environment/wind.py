@@ -35,9 +35,11 @@ symmetries and the magnitudes against the ranges every wind-tunnel data set show
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import Mapping
+from typing import ClassVar, Mapping
 
 import numpy as np
+
+from ._equations import coefficients_cs, wind_force_numpy
 
 __all__ = ["WindForce", "fujiwara_components", "apparent_wind", "true_wind_from_apparent", "WIND_PARAM_NAMES",
            "RHO_AIR"]
@@ -118,6 +120,10 @@ class WindForce:
     H_BR: float
     H_C: float
     rho_air: float = RHO_AIR
+    #: Wind parameters the fit recipe estimates by default (``shipid fit --wind``): the leading Fourier components
+    #: of Fujiwara's surge force, side force and yaw moment, as in the Esso Osaka study; the others stay at the
+    #: regression's values from the above-water geometry.
+    recipe_estimate: ClassVar[tuple[str, ...]] = ("wX1", "wY1", "wN1", "wN2")
 
     def __post_init__(self):
         for k in ("lpp", "breadth", "A_T", "A_L", "A_OD", "H_BR", "H_C", "rho_air"):
@@ -174,8 +180,6 @@ class WindForce:
         """Forces from the apparent wind vector written as ``(V cos gamma, V sin gamma)`` (no angle, no
         square root: smooth at V = 0 and complex-step safe).  ``comp`` is a sequence of the ten components
         in :data:`WIND_PARAM_NAMES` order (floats or arrays)."""
-        from ._equations import wind_force_numpy
-
         return wind_force_numpy()(a_cos, a_sin, *self.scales(), *comp)
 
     def scales(self) -> tuple:
@@ -191,19 +195,6 @@ class WindForce:
                 raise ValueError(f"wind components: unknown name(s) {unknown}; use {list(WIND_PARAM_NAMES)}")
             base.update({k: float(v) for k, v in components.items()})
         return [base[k] for k in WIND_PARAM_NAMES]
-
-
-def coefficients_cs(c, s, comp):
-    """``(C_X, C_Y, C_N)`` from ``c = cos gamma``, ``s = sin gamma`` by the multiple-angle identities
-    (complex-step safe); ``comp`` the ten components in :data:`WIND_PARAM_NAMES` order."""
-    X0, X1, X3, X5, Y1, Y3, Y5, N1, N2, N3 = comp
-    c2, s2 = c * c - s * s, 2.0 * s * c
-    c3, s3 = c2 * c - s2 * s, s2 * c + c2 * s
-    c5, s5 = c3 * c2 - s3 * s2, s3 * c2 + c3 * s2
-    CX = X0 + X1 * c + X3 * c3 + X5 * c5
-    CY = -(Y1 * s + Y3 * s3 + Y5 * s5)
-    CN = -(N1 * s + N2 * s2 + N3 * s3)
-    return CX, CY, CN
 
 
 def apparent_wind(speed_true, dir_true, psi, u_ground, v_ground):

@@ -95,7 +95,7 @@ def prediction_windows(model: Model, logs, horizon: float, every: float, *, samp
     has its time counted from 0 (so all windows share one time grid and the refiner simulates them as one
     batch) and its heading unwrapped from the start.  Refine with
     ``OutputErrorRefiner(model, ...).fit(windows, x0=x0)``: every window starts at its measured state, the
-    cost is the open-loop prediction error over ``horizon`` s, as :func:`shipid.validation_horizon.horizon_prediction`
+    cost is the open-loop prediction error over ``horizon`` s, as :func:`shipid.validation.horizon.horizon_prediction`
     judges it (which holds the inputs between samples: pass ``input_hold="zoh"`` to match it).  The start
     states are measured, not estimated: their noise enters the estimate (negligible when it is small against
     what the window's error is made of), and overlapping windows make the residuals correlated, so the

@@ -104,7 +104,7 @@ def measured_states(model: Model, frame: pd.DataFrame, initial: dict | None = No
     A state the frame has as a column is its measured channel; any other is its value in ``initial``
     (states the log does not measure, e.g. a fitted current ``{"cx": .., "cy": ..}``), else 0.  Returns
     an array ``(len(frame), model.nx)`` (one copy for :func:`shipid.identify.batch.prediction_windows`
-    and :func:`shipid.validation_horizon.horizon_prediction`).
+    and :func:`shipid.validation.horizon.horizon_prediction`).
 
     Raises
     ------

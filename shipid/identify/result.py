@@ -3,6 +3,7 @@ uncertainties, diagnostics, inputs (path + sha256) and software versions, and
 loads back into a model."""
 from __future__ import annotations
 
+import os
 import platform
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -12,8 +13,9 @@ import numpy as np
 import pandas as pd
 
 from .._io import (as_bool, as_mapping, as_number, as_string, atomic_write_text, dumps_json, read_json, short)
+from ..results import ResultMixin, coefficient_table, plot_coefficients, verdict_grade
 
-__all__ = ["FitResult", "load_result", "model_from", "software_versions", "diagnostics_to_json", "fitted_ship"]
+__all__ = ["FitResult", "load_result", "as_result", "model_from", "software_versions", "diagnostics_to_json", "fitted_ship"]
 
 
 def fitted_ship(model, inputs, ship: dict | None = None) -> tuple[dict, dict]:
@@ -68,7 +70,7 @@ def software_versions() -> dict:
     import matplotlib
     import scipy
 
-    from .. import __version__
+    from .._version import __version__
 
     return {"shipid": __version__, "python": platform.python_version(), "numpy": np.__version__,
             "scipy": scipy.__version__, "pandas": pd.__version__, "filterpy": filterpy.__version__,
@@ -76,7 +78,7 @@ def software_versions() -> dict:
 
 
 @dataclass
-class FitResult:
+class FitResult(ResultMixin):
     """Serialisable result of an identification.
 
     Attributes
@@ -179,11 +181,42 @@ class FitResult:
                              f"{short(self.model_options, 80)}: {exc}") from None
 
     def summary(self) -> pd.DataFrame:
+        """Estimated coefficients: value, std, relative std [%], 95 % interval.  ``attrs["verdict"]`` holds the
+        fit's verdict grade when it has one."""
         est = list(self.cov.index)
-        v = pd.Series({k: self.coef[k] for k in est})
-        sd = pd.Series({k: self.coef_std.get(k, np.nan) for k in est})
-        return pd.DataFrame({"value": v, "std": sd, "rel_std_%": 100 * sd / v.abs().where(v.abs() > 0),
-                             "ci95_low": v - 1.96 * sd, "ci95_high": v + 1.96 * sd})
+        tab = coefficient_table(pd.Series({k: self.coef[k] for k in est}, dtype=float),
+                                pd.Series({k: self.coef_std.get(k, np.nan) for k in est}, dtype=float))
+        grade = verdict_grade(self)
+        if grade is not None:
+            tab.attrs["verdict"] = grade
+        return tab
+
+    def to_pandas(self) -> pd.DataFrame:
+        """Every parameter of the model (estimated and fixed): ``value``, ``std`` and ``estimated``."""
+        est = set(self.cov.index)
+        return pd.DataFrame({"value": pd.Series(self.coef, dtype=float),
+                             "std": pd.Series({k: self.coef_std.get(k, 0.0) for k in self.coef}, dtype=float),
+                             "estimated": pd.Series({k: k in est for k in self.coef}, dtype=bool)})
+
+    def plot(self, ax=None):
+        """Each estimated coefficient's 95 % interval relative to its value; returns the axes."""
+        return plot_coefficients(self.summary(), ax, title=f"{self.model} ({self.method})")
+
+    def _html_title(self) -> str:
+        return f"Fit of '{self.model}' ({self.method})"
+
+    def _key_numbers(self) -> dict:
+        k = {"logs": ", ".join(str(i.get("name", "?")) for i in self.inputs[:6]) + (" ..." if len(self.inputs) > 6 else ""),
+             "estimated": len(self.cov.index)}
+        if self.ship.get("lpp"):
+            k["Lpp [m]"] = float(self.ship["lpp"])
+        cons = self.diagnostics.get("consistency") if isinstance(self.diagnostics, dict) else None
+        if verdict_grade(self) is None and isinstance(cons, dict) and "consistent" in cons:
+            k["consistent with the noise model"] = bool(cons["consistent"])
+        warn = self.diagnostics.get("warnings") if isinstance(self.diagnostics, dict) else None
+        if warn:
+            k["warnings"] = len(warn)
+        return k
 
 
 def model_from(spec, *, model: str | None = None):
@@ -313,3 +346,15 @@ def check_result_dict(doc, source: str = "result") -> dict:
     out["success"] = as_bool(doc.get("success", True), w + "success")
     out["loglik"] = as_number(doc["loglik"], w + "loglik", finite=False) if doc.get("loglik") is not None else None
     return out
+
+
+def as_result(result) -> FitResult:
+    """``result`` as a :class:`FitResult`: the object itself, its dict (:meth:`FitResult.to_dict`) or the path of
+    its JSON file."""
+    if isinstance(result, FitResult):
+        return result
+    if isinstance(result, dict):
+        return FitResult.from_dict(result)
+    if isinstance(result, (str, os.PathLike)):
+        return load_result(result)
+    raise ValueError(f"result: expected a FitResult, its dict or a result JSON path, got {type(result).__name__}")

@@ -10,7 +10,7 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
-from .trial_log import LogError, _Where
+from .errors import LogError, _Where
 
 #: cell texts read as a missing sample (compared in lower case): blanks, NaN spellings, a dash, Excel's #N/A
 _MISSING_TOKENS = {"", "nan", "na", "n/a", "null", "none", "-nan", "-", "--", "#n/a"}
@@ -19,6 +19,15 @@ _DELIMS = {",": "comma", ";": "semicolon", "\t": "tab", "whitespace": "whitespac
 
 
 def _check_path(p: Path, what: str = "log file") -> None:
+    if not p.exists() and p.is_symlink():
+        import os
+
+        try:
+            target = os.readlink(p)
+        except OSError:
+            target = "?"
+        raise LogError(f"`{p}`: a symbolic link to {target!r}, which is missing or links back in a loop; give the "
+                       f"{what} itself or fix the link", path=p)
     if not p.exists():
         hint = ""
         parent = p.parent if str(p.parent) else Path(".")

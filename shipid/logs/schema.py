@@ -217,7 +217,7 @@ _ESSO_CONVENTIONS = (
 
 #: Measurement noise of the Esso Osaka pond's sensors as ``shipid fit`` uses it (SI): 1 cm in position, 0.003 rad
 #: (0.17 deg) in heading, 1 cm/s in velocity, 0.003 rad/s in yaw rate.  Set a priori in the Esso Osaka study
-#: (``shipid.studies.esso_osaka.MEAS_STD``, before any held-out error was computed; docs/environment.md)
+#: (``studies.esso_osaka.MEAS_STD`` in a source checkout, before any held-out error was computed; docs/environment.md)
 #: and used in every cross-validated number since.  The identifier's own estimate from the data does not suit
 #: these logs: the GNSS positions freeze for up to 2 s and then jump, and the study fits at 0.5 Hz, where
 #: sample-to-sample differences are motion, not noise.

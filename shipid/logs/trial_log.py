@@ -19,6 +19,10 @@ import numpy as np
 import pandas as pd
 
 from .._io import atomic_write_text
+from ..results import ResultMixin, axes_column, in_degrees
+from .consistency import check_consistency
+from .sensors import check_sensors
+from .errors import LogError, _fmt_value, _Where
 from .ship import ShipParticulars, _as_ship
 from .units import _UNKNOWN_DIMS, SCHEMA, SHIP_CHANNELS, SI_UNIT, UNITS, _units_for, unit_key
 
@@ -32,85 +36,11 @@ _RPM_SCORE = 200.0                    # n sqrt(Lpp) [rps m^0.5] above this looks
 
 
 # --------------------------------------------------------------------------------------
-# errors
-# --------------------------------------------------------------------------------------
-
-
-class LogError(ValueError):
-    """A trial log (file or arrays) cannot be used as given.
-
-    Attributes
-    ----------
-    path : pathlib.Path or None
-        The file, or None for arrays.
-    column : str or None
-        Our channel name (or the file's column name) concerned.
-    row : int or None
-        1-based line number in the file (header = line 1 when there are no
-        comment lines), or the 0-based sample index for arrays.
-    value : object
-        The offending value, when there is one.
-    """
-
-    def __init__(self, message: str, *, path=None, column: str | None = None, row: int | None = None, value=None):
-        super().__init__(message)
-        self.path = Path(path) if path is not None else None
-        self.column = column
-        self.row = row
-        self.value = value
-
-
-def _fmt_value(v) -> str:
-    if isinstance(v, (float, np.floating)):
-        v = float(v)
-        if math.isnan(v):
-            return "blank/NaN"
-        if math.isinf(v):
-            return "inf" if v > 0 else "-inf"
-        return f"{v:.6g}"
-    if isinstance(v, str):
-        return repr(v if len(v) <= 40 else v[:37] + "...")
-    return str(v)
-
-
-class _Where:
-    """How to name places in messages: a file (rows are file lines) or arrays (indices)."""
-
-    def __init__(self, path: Path | None, name: str, rows: np.ndarray | None = None):
-        self.path = path
-        self.name = name
-        self.rows = rows
-        self.sources: dict[str, str] = {}   # channel -> the file's column, e.g. "column 7 'r [deg/s]'"
-
-    @property
-    def label(self) -> str:
-        return f"`{self.path.name}`" if self.path is not None else f"log '{self.name}'"
-
-    def row_of(self, i: int) -> int:
-        return int(self.rows[i]) if self.rows is not None else int(i)
-
-    def place(self, column: str | None = None, i: int | None = None, *, row: int | None = None) -> str:
-        s = self.label
-        if column is not None:
-            s += f" column '{column}'"
-        if row is None and i is not None:
-            row = self.row_of(i)
-        if row is not None:
-            s += f" {'row' if self.path is not None else 'index'} {row}"
-        return s
-
-    def error(self, msg: str, column: str | None = None, i: int | None = None, *, row: int | None = None, value=None):
-        if row is None and i is not None:
-            row = self.row_of(i)
-        return LogError(f"{self.place(column, row=row)}: {msg}", path=self.path, column=column, row=row, value=value)
-
-
-# --------------------------------------------------------------------------------------
 # the log object
 # --------------------------------------------------------------------------------------
 
 
-class TrialLog:
+class TrialLog(ResultMixin):
     """A validated trial log in SI units and radians.
 
     Build one with :func:`read_log` or :meth:`TrialLog.from_arrays`; both run
@@ -226,8 +156,6 @@ class TrialLog:
                       inputs=inputs, interpolate_inputs=interpolate_inputs, required=required,
                       min_samples=min_samples, unit_checks=unit_checks, units_in=units_in, notes=[], fmt="arrays")
         if consistency_checks:
-            from .reader import _run_consistency
-
             _run_consistency(log, opt_out="pass consistency_checks=False")
         return log
 
@@ -352,7 +280,42 @@ class TrialLog:
         src = self.path.name if self.path is not None else "arrays"
         return f"TrialLog(name={self.name!r}, source={src!r}, samples={len(self)}, channels={self.channels})"
 
-    def summary(self) -> str:
+    @property
+    def success(self) -> bool:
+        """False when the channel-consistency checks found an error (:attr:`consistency`)."""
+        return self.consistency is None or bool(self.consistency.success)
+
+    @property
+    def message(self) -> str:
+        """One line: samples, time span and the consistency status."""
+        t = self.time
+        span = f", t = {t[0]:g} .. {t[-1]:g} s" if len(t) else ""
+        cons = f"; {self.consistency.message.split(': ', 1)[-1]}" if self.consistency is not None else ""
+        return f"log '{self.name}': {len(self)} samples{span}{cons}"
+
+    def summary(self) -> pd.DataFrame:
+        """One row per channel (angles in degrees): unit, finite samples, missing samples, min, mean, max."""
+        u = self.units()
+        rows = {}
+        for c in self.channels:
+            y, unit = in_degrees(self[c], u.get(c, ""))
+            y = np.asarray(y, dtype=float)
+            fin = y[np.isfinite(y)]
+            rows[c] = {"unit": unit, "samples": int(fin.size), "missing": len(self.missing.get(c, [])),
+                       "min": fin.min() if fin.size else np.nan, "mean": fin.mean() if fin.size else np.nan,
+                       "max": fin.max() if fin.size else np.nan}
+        return pd.DataFrame.from_dict(rows, orient="index", columns=["unit", "samples", "missing", "min", "mean", "max"])
+
+    def _html_title(self) -> str:
+        src = self.path.name if self.path is not None else "arrays"
+        return f"TrialLog '{self.name}' ({src})"
+
+    def _key_numbers(self) -> dict:
+        k = {"samples": len(self), "dt [s] (median)": self.dt if len(self) > 1 else float("nan"),
+             "ship": str(self.ship) if self.ship is not None else "not given", "dropouts": len(self.dropouts)}
+        return k
+
+    def __str__(self) -> str:
         """Short text: source, samples, time span, channels, ship, missing samples, dropouts, notes."""
         t = self.time
         u = self.units()
@@ -561,7 +524,7 @@ def _finish(t: np.ndarray, ch: dict[str, np.ndarray], *, where: _Where, name: st
     for c, a in ch.items():
         _check_channel(c, a, where, unit_checks, units_in.get(c))
     if unit_checks and "psi" in ch:
-        _check_heading(t, ch, where)
+        _check_heading(t, ch, where, psi_unit=units_in.get("psi"))
     if unit_checks and ship is not None and "n" in ch and np.isfinite(ch["n"]).any():
         # Froude scaling keeps n sqrt(Lpp) of ships and their models within ~10..100 rps m^0.5
         # (KVLCC2 1.5 rps x sqrt(320 m) = 27; KCS model 10 rps x sqrt(4.36 m) = 21); rpm gives 60x that
@@ -730,8 +693,9 @@ def _psi_r_slope(t: np.ndarray, ch: dict[str, np.ndarray], ok: np.ndarray):
     return slope, se
 
 
-def _check_heading(t: np.ndarray, ch: dict[str, np.ndarray], where: _Where) -> None:
-    """Heuristics for a heading in degrees declared as radians (see docs/logs.md)."""
+def _check_heading(t: np.ndarray, ch: dict[str, np.ndarray], where: _Where, psi_unit: str | None = None) -> None:
+    """Heuristics for a heading in degrees declared as radians (see docs/logs.md), and for one in radians
+    declared as degrees (``psi_unit``: the unit the file declared)."""
     psi = ch["psi"]
     ok = np.flatnonzero(np.isfinite(psi))
     if ok.size < 2:
@@ -769,6 +733,16 @@ def _check_heading(t: np.ndarray, ch: dict[str, np.ndarray], where: _Where) -> N
             raise where.error(f"value {_fmt_value(psi[i])} looks like degrees (heading changes "
                               f"{abs(slope):.1f} x faster than the integral of r; 57.3 = deg/rad); "
                               + hint, "psi", i, value=psi[i])
+        if clear and 1 / 200.0 < abs(slope) < 1 / 20.0 and psi_unit is not None and \
+                unit_key(psi_unit) in ("deg", "degree", "degrees") and \
+                float(np.nanmax(np.abs(np.degrees(psi[ok])))) <= 2 * math.pi + 0.1:
+            # declared degrees, yet the file's numbers never leave +-2 pi: the heading is in radians (r is not
+            # to blame: it agrees with the heading read as radians)
+            i = int(ok[np.nanargmax(np.abs(psi[ok]))])
+            raise where.error(f"value {_fmt_value(math.degrees(psi[i]))} declared in deg looks like radians (the "
+                              f"file's headings stay within +-2 pi and the integral of r changes {1 / abs(slope):.1f} "
+                              "x faster than them read as degrees); declare units={'psi': 'rad'} (CLI: --units "
+                              "psi=rad) or fix the header's unit", "psi", i, value=math.degrees(psi[i]))
         if clear and 1 / 200.0 < abs(slope) < 1 / 20.0:
             i = int(np.nanargmax(np.abs(r)))
             raise where.error(f"value {_fmt_value(r[i])} looks like deg/s (the integral of r changes "
@@ -777,3 +751,23 @@ def _check_heading(t: np.ndarray, ch: dict[str, np.ndarray], where: _Where) -> N
         if slope < -0.5 and clear:
             warnings.warn(f"{where.label}: heading psi and yaw rate r have opposite signs "
                           f"(d psi/dt = {slope:.2f} r); check the sign conventions", stacklevel=4)
+
+
+def _run_consistency(log: TrialLog, opt_out: str = "or --no-consistency-checks", *,
+                     reader_notes: dict | None = None) -> None:
+    """Check the channels and the sensors (:mod:`shipid.logs.sensors`, with what the reader found in
+    ``reader_notes``); errors raise LogError (all named, first in full, then ``opt_out``: how to skip the
+    checks), warnings warn."""
+    res = check_consistency(log)
+    res.findings.extend(check_sensors(log, reader_notes=reader_notes))  # sensor faults, in the same structure
+    order = {"error": 0, "warning": 1, "info": 2}
+    res.findings.sort(key=lambda f: order.get(f.level, 3))
+    log.consistency = res
+    for f in res.warnings:
+        warnings.warn(f.message, stacklevel=3)
+    if res.errors:
+        more = len(res.errors) - 1
+        tail = f" (and {more} more consistency error(s))" if more else ""
+        e = res.errors[0]
+        raise LogError(e.message + tail + "; " + opt_out,
+                       path=log.path, column=e.channels[0] if e.channels else None)

@@ -50,6 +50,7 @@ from .runner import ManoeuvreResult, ship_info, steady_rps
 from .turning import TurningMetrics, _turning_rows, turning_circle, turning_metrics, turning_sweep
 from .zigzag import ZigzagMetrics, infer_check_angle, rudder_reversals, zigzag, zigzag_metrics
 from .run_metrics import NotStandardManoeuvre, SteadyTurn, detect_manoeuvre, metrics, steady_turn
+from .matched import standard_manoeuvre
 
 __all__ = [
     "TurningMetrics",
@@ -59,6 +60,7 @@ __all__ = [
     "zigzag_metrics",
     "metrics",
     "steady_turn",
+    "standard_manoeuvre",
     "SteadyTurn",
     "NotStandardManoeuvre",
     "detect_manoeuvre",

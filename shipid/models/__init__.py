@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import importlib
 
-from .base import Model, ParameterSet
+from .base import Model, ParameterSet, RecipeDefaults
 
-__all__ = ["Model", "ParameterSet", "register_model", "get_model", "model_class", "available_models"]
+__all__ = ["Model", "ParameterSet", "RecipeDefaults", "register_model", "get_model", "model_class", "available_models"]
 
 _REGISTRY: dict[str, str] = {
     "kcs-response": "shipid.models.response:KCSResponseModel",

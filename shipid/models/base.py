@@ -27,7 +27,57 @@ from typing import Any, ClassVar, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-__all__ = ["Model", "ParameterSet", "as_batch", "batch_shape"]
+__all__ = ["Model", "ParameterSet", "RecipeDefaults", "as_batch", "batch_shape"]
+
+
+@dataclass(frozen=True)
+class RecipeDefaults:
+    """What the fit recipe (:func:`shipid.identify.fit_logs`) does for a model unless told otherwise.
+
+    A model declares them as its class attribute ``recipe_defaults``, with the reason for each choice beside
+    it, so that adding or changing a model touches only ``shipid/models/``.  Every field's empty value means
+    "the recipe's generic rule".
+
+    estimate : tuple of str or None
+        Parameters the EKF stage estimates (None: all).
+    fixed : tuple of str
+        Parameters held at their start value.
+    start : mapping
+        Start values that replace the model's default parameter set (only when the caller names the model
+        and gives no parameters of its own).
+    init : str or None
+        Start of the EKF stage (:class:`~shipid.identify.EKFIdentifier`'s ``init``; None: its equation-error
+        start).
+    samples_per_tau : int or None
+        Samples per fastest time constant for the sampling step (None: the recipe's
+        :data:`~shipid.identify.sampling.SAMPLES_PER_TAU`).
+    sampling : (Lpp [m], step [s]) or None
+        A fixed sampling step at a length, Froude-scaled (times as sqrt(L)) to the logs' Lpp; replaces the
+        time-constant rule.
+    substeps : int or None
+        RK4 substeps per sampling interval that go with ``sampling``.
+    process_std : (Lpp [m], {state: std per sqrt(s)}) or None
+        Process noise at a length, Froude-scaled to the logs' Lpp (None: the identifier's default).
+    neutral : bool
+        Estimate the rudder's neutral angle from the straight approaches (models with ``delta0``).
+    auto_refine : bool
+        ``refine="auto"`` may refine (False: no refinement by default).
+    seed_model : str or None
+        ``start="staged"``: a registered model fitted first at the logs' scale whose coefficients start this
+        one (the other terms start at 0).
+    """
+
+    estimate: tuple[str, ...] | None = None
+    fixed: tuple[str, ...] = ()
+    start: Mapping[str, float] = field(default_factory=dict)
+    init: str | None = None
+    samples_per_tau: int | None = None
+    sampling: tuple[float, float] | None = None
+    substeps: int | None = None
+    process_std: tuple[float, Mapping[str, float]] | None = None
+    neutral: bool = True
+    auto_refine: bool = True
+    seed_model: str | None = None
 
 
 @dataclass(frozen=True)
@@ -108,6 +158,8 @@ class Model:
     #: linear and cross-flow terms), so dissipative, i.e. <= 0 in the model's sign convention, for any
     #: conventional hull.  The identifiers can keep them at their physical sign (``sign_bounds``).
     dissipative: ClassVar[tuple[str, ...]] = ()
+    #: The fit recipe's defaults for this model (:class:`RecipeDefaults`; the generic rules by default).
+    recipe_defaults: ClassVar[RecipeDefaults] = RecipeDefaults()
     #: Package-relative folder of parameter-set JSON files.
     _parameter_dir: ClassVar[str] = "shipid.models.parameters"
 

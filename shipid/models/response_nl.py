@@ -55,7 +55,7 @@ import numpy as np
 
 from .._jit import rebind
 from . import _response_equations as _req
-from .base import Model, batch_shape
+from .base import Model, RecipeDefaults, batch_shape
 from .prime import FroudeScaled
 from .response import PRIME_EXPONENTS as _SEED_EXPONENTS
 from .response import _rows
@@ -131,6 +131,10 @@ class ResponseNLModel(FroudeScaled, Model):
     #: damping of r (c2 r + c5 |u| r + c7 r|r|); each <= 0 keeps dv/dt per v and dr/dt per r (without the
     #: cross terms) negative at every speed from rest
     dissipative = ("b1", "b5", "b6", "c2", "c5", "c7")
+    #: The fit recipe holds the asymmetry terms b0, c0 at their start (the EKF does not identify them from turns
+    #: and zigzags at one rpm: docs/validation.md), and its staged start fits ``kcs-response`` (the 16 terms
+    #: this model extends) at the logs' scale first, the non-linear terms starting at 0.
+    recipe_defaults = RecipeDefaults(fixed=("b0", "c0"), seed_model="kcs-response")
     state_names = ("x", "y", "psi", "u", "v", "r")
     input_names = ("delta", "n")
     param_names = SEED_NAMES + EXTRA_NAMES + ASYM_NAMES

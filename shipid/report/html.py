@@ -8,18 +8,17 @@ be mailed or archived as one file.
 """
 from __future__ import annotations
 
-import html
 import math
 import os
 import sys
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, Sequence
 
 
 from .._io import OutputExistsError, atomic_write_text
 from ..validation import LogValidation, load_logs, resolve_model, validate_one
 from . import figures
+from ._markup import _e, _f, _fig, _img, _table  # noqa: F401  (_img: the helpers as one set)
 
 __all__ = ["render_report", "write_report"]
 
@@ -55,44 +54,6 @@ nav a{margin-right:12px}
 
 
 # ----------------------------------------------------------------------------- helpers
-def _e(x: Any) -> str:
-    return html.escape("" if x is None else str(x), quote=True)
-
-
-def _f(v, fmt: str = "{:.4g}") -> str:
-    if v is None or isinstance(v, bool):
-        return "&ndash;" if v is None else _e(v)
-    try:
-        v = float(v)
-    except (TypeError, ValueError):
-        return _e(v)
-    return "&ndash;" if not math.isfinite(v) else _e(fmt.format(v))
-
-
-def _table(header: Sequence[str], rows: Sequence[Sequence[str]], left: int = 1, cls: str = "") -> str:
-    """Rows are already-escaped HTML cell contents (or (content, css class) tuples)."""
-    th = "".join(f'<th class="l">{h}</th>' if i < left else f"<th>{h}</th>" for i, h in enumerate(header))
-    body = []
-    for r in rows:
-        cells = []
-        for i, c in enumerate(r):
-            css = "l" if i < left else ""
-            if isinstance(c, tuple):
-                c, extra = c
-                css = f"{css} {extra}".strip()
-            cells.append(f'<td class="{css}">{c}</td>' if css else f"<td>{c}</td>")
-        body.append("<tr>" + "".join(cells) + "</tr>")
-    return f'<table class="{cls}"><thead><tr>{th}</tr></thead><tbody>' + "".join(body) + "</tbody></table>"
-
-
-def _img(uri: str, alt: str) -> str:
-    return f'<img src="{uri}" alt="{_e(alt)}">'
-
-
-def _fig(fig, alt: str) -> str:
-    return _img(figures.to_data_uri(fig), alt)
-
-
 def _anchor(i: int) -> str:
     return f"log{i + 1}"
 
@@ -356,8 +317,46 @@ def _section_versions(result) -> str:
 
 
 # ----------------------------------------------------------------------------- public
+#: Units of the cross-validated metrics (``shipid crossval``).
+_CV_UNITS = {"tactical_diameter_pct": "%", "advance_pct": "%", "overshoot1_deg": "deg", "overshoot2_deg": "deg",
+             "steady_diameter_pct": "%", "time_360_pct": "%"}
+
+
+def _section_crossval(result) -> str:
+    """The cross-validation stored in the result (``shipid fit --cross-validate`` or ``--model auto``): the
+    candidates' scores when the model was chosen, the per-metric median and worst error on left-out runs."""
+    extra = getattr(result, "extra", None) or {}
+    cv, choice = extra.get("crossval"), extra.get("model_choice")
+    if not cv and not choice:
+        return ""
+    out = ['<h2 id="crossval">Expected error on runs not used for fitting (cross-validation)</h2>']
+    if choice:
+        rows = [[_e(r["candidate"]), _f(r.get("score"), "{:.3g}"), _e(r.get("worst_run") or ""),
+                 _f(r.get("worst"), "{:.3g}"), _f(r.get("failed_folds"), "{:.0f}"), _f(r.get("blowups"), "{:.0f}"),
+                 _f(r.get("missing"), "{:.0f}")] for r in choice.get("table", [])]
+        out.append(f"<p>Model chosen by cross-validation ({_e(choice.get('message', ''))}; score: mean over the "
+                   "left-out runs of the errors over their goals, TD 5 %, overshoots 2 and 3 deg, 30 s position "
+                   "0.1 L; 1 = at the goals).</p>")
+        out.append(_table(["candidate", "score", "worst run", "its score", "failed folds", "blow-ups",
+                           "not predicted"], rows))
+    if cv:
+        rows = []
+        for r in cv.get("summary", []):
+            unit = _CV_UNITS.get(r["metric"], "m" if r["metric"].startswith("position_") else "")
+            if r["metric"] in ("blowups", "failed_folds"):
+                rows.append([_e(r["metric"].replace("_", " ")), "", _f(r.get("worst"), "{:.0f}"), "", ""])
+                continue
+            rows.append([_e(f"{r['metric']} [{unit}]"), _f(r.get("median"), "{:.3g}"), _f(r.get("worst"), "{:+.3g}"),
+                         _e(r.get("worst_run") or ""), _f(r.get("n"), "{:.0f}")])
+        out.append(f"<p>{_e(cv.get('candidate', ''))}: {_e(cv.get('message', ''))}. Each run was predicted by a fit "
+                   "on the other runs (closed-loop standard manoeuvres with the run's own rudder and check angles; "
+                   "open-loop position errors from the measured state); errors are predicted minus measured.</p>")
+        out.append(_table(["metric", "median |error|", "worst", "worst run", "runs"], rows))
+    return "".join(out)
+
+
 def _section_horizon(horizons) -> str:
-    """Multi-start open-loop prediction errors (:func:`shipid.validation_horizon.horizon_prediction`) and
+    """Multi-start open-loop prediction errors (:func:`shipid.validation.horizon.horizon_prediction`) and
     predicted-vs-measured track overlays; ``horizons`` is a list of ``(HorizonResult, log)``."""
     if not horizons:
         return ""
@@ -365,11 +364,11 @@ def _section_horizon(horizons) -> str:
 
     rows, figs = [], []
     for h, log in horizons:
-        for e in h.summary():
+        for e in h.to_records():
             rows.append([_e(h.name), _f(e["seconds"], "{:g}"), _f(e["position_error_median_m"], "{:.3f}"),
                          _f(e["position_error_p90_m"], "{:.3f}"), _f(e["heading_error_median_deg"], "{:.2f}"),
                          _f(e["n_starts"], "{:.0f}"), (_f(e["n_blowups"], "{:.0f}"), "bad" if e["n_blowups"] else "")])
-        ax = h.plot(log, every=max(1, len(h.start_times) // 12))
+        ax = h.plot(log=log, every=max(1, len(h.start_times) // 12))
         ax.set_title(f"{h.name}: predictions over {h.horizons.max():g} s")
         figs.append(_fig(ax.figure, f"predicted vs measured tracks, {h.name}"))
         plt.close(ax.figure)
@@ -426,7 +425,7 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
             *[f"<p class=\"intro\">{_e(par.strip())}</p>" for par in (intro or "").split("\n\n") if par.strip()],
             f"<nav>{nav}</nav>",
             _section_summary(validations), _section_horizon(horizons), _section_imo(validations),
-            *extra,
+            _section_crossval(res), *extra,
             _section_coefficients(res),
             _section_identifiability(res), _section_model(res, model),
             "<h2 id=\"logs\">Measured vs simulated, per log</h2>",

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import figures
+from ._markup import _e, _f, _fig, _table
 
 __all__ = ["uncertainty_section", "band_figure", "pair_figure"]
 
@@ -83,8 +84,7 @@ def pair_figure(samples, k: int = 4):
 def uncertainty_section(res, validations, *, draws: int, seed: int = 0, samples=None) -> str:
     """HTML of the section (see the module docstring); ``res`` a FitResult, ``validations`` LogValidations."""
     from ..uncertainty import METRIC_KEYS, parameter_draws, replay_draws
-    from ..validation import _for_length
-    from .html import _e, _f, _fig, _table
+    from ..validation.replay import _for_length
 
     P = parameter_draws(res, draws, seed=seed, samples=samples)
     src = "MCMC samples" if samples is not None else "the fit's Gaussian posterior (full covariance)"
@@ -126,7 +126,7 @@ def uncertainty_section(res, validations, *, draws: int, seed: int = 0, samples=
                      _table(["log", "criterion", "probability", "met", "not evaluated"], imo_rows, left=2))
     parts += figs
     if samples is not None:
-        from ..identify.posterior import load_samples
+        from ..uncertainty.posterior import load_samples
 
         s = load_samples(samples)
         parts.append(f"<h3>Posterior samples</h3><p class=\"note\">{_e(s.message)}</p>")

@@ -49,9 +49,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .._io import as_int, as_mapping, as_string, check_keys, check_memory, read_json, short
+from .._io import as_int, as_mapping, as_string, check_keys, read_json, short
 from .fields import (AffineField, Field, GridField, PiecewiseTimeField, SumField, UniformField, VortexField,
                      linear_shear)
+from .pso import check_pso_size
 
 __all__ = ["field_from_spec", "load_problem_spec", "zermelo_from_spec", "usv_from_spec", "vessel_from_spec",
            "check_pso_settings", "check_pso_size"]
@@ -160,7 +161,7 @@ def load_problem_spec(path) -> tuple[dict, Path]:
     """Read and minimally validate a problem JSON; returns ``(spec, folder)``."""
     path = Path(path)
     if not path.exists():
-        raise ValueError(f"{path}: no such problem file; use zermelo-paper, pso-paper or a JSON problem")
+        raise ValueError(f"{path}: no such problem file; use paper-zermelo, paper-pso or a JSON problem")
     spec = read_json(path, "routing problem file", advice="see shipid/routing/spec.py for the format")
     if not isinstance(spec, dict) or spec.get("type") not in ("zermelo", "pso"):
         raise ValueError(f"{path}: top-level 'type' must be 'zermelo' or 'pso'")
@@ -196,22 +197,6 @@ def check_pso_settings(spec: dict, where: str) -> dict:
     n_obst = len(spec["obstacles"]) if isinstance(spec.get("obstacles"), list) else 3
     check_pso_size(out.get("n_particles", 25), out.get("max_iter", 120), n_obst, where)
     return out
-
-
-def check_pso_size(n_particles: int, max_iter: int, n_obstacles: int, where: str = "PSO") -> None:
-    """Refuse a PSO run whose estimated memory exceeds :func:`shipid._io.memory_limit_bytes`.
-
-    One swarm per left/right class (``2**k`` for ``k`` obstacles, at most 64 counted), each of
-    ``n_particles`` particles with ``k`` waypoints; a cost evaluation holds about 64 doubles per
-    particle and leg, and the initialisation draws ``4 n_particles`` candidates per class.
-    """
-    k = max(int(n_obstacles), 1)
-    swarms = 2 ** min(k, 6)
-    need = 8.0 * swarms * 4 * n_particles * (k + 1) * 64
-    check_memory(need, f"{where}: n_particles {n_particles}", "use fewer n_particles (25 is the default)")
-    if n_particles * max_iter > 10**9:
-        raise ValueError(f"{where}: n_particles x max_iter = {n_particles * max_iter:.3g} evaluations would run "
-                         "for days; use n_particles <= 1000 and max_iter <= 10000")
 
 
 def zermelo_from_spec(spec: dict, where: str = "problem", base_dir: Path | None = None):

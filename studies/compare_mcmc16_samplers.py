@@ -1,14 +1,14 @@
 """16-coefficient MCMC samplers compared on replicate 1 of the coverage study (docs/uncertainty.md sect. 2).
 
-    OPENBLAS_NUM_THREADS=1 nice python benchmarks/compare_mcmc16_samplers.py
+    OPENBLAS_NUM_THREADS=1 nice python -m studies.compare_mcmc16_samplers
 """
 import time, warnings, numpy as np
 warnings.simplefilter("ignore")
 from shipid.campaign import member_seeds
 from shipid.identify import EKFIdentifier
 from shipid.identify.batch import OutputErrorRefiner
-from shipid.identify.coverage import COVERAGE_RECIPES
-from shipid.identify.posterior import sample_posterior
+from studies.coverage import COVERAGE_RECIPES
+from shipid.uncertainty.posterior import sample_posterior
 from shipid.models import get_model
 from shipid.synthetic import KCS_NOISE_STD, make_trial
 truth = get_model("kcs-response", "synthetic-truth")

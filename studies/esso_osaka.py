@@ -2,7 +2,7 @@
 
 A thin user of the public API: logs read with the ``esso-frt`` schema, models built with
 :func:`shipid.models.get_model` and :func:`shipid.environment.with_environment`, fitted with
-:class:`shipid.identify.EKFIdentifier`, judged by :func:`shipid.validation_horizon.horizon_prediction`
+:class:`shipid.identify.EKFIdentifier`, judged by :func:`shipid.validation.horizon.horizon_prediction`
 (open-loop prediction from the measured state every 5 s).  The runs are split by run into ``folds``
 (:func:`assign_folds`; ``"loro"``: leave-one-run-out): every model that is fitted is fitted on the other
 folds only, so every error reported is on runs the fit has not seen.
@@ -57,13 +57,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..identify.recipe import DEFAULT_ESTIMATE, DEFAULT_ESTIMATE_WIND, DEFAULT_PROCESS_STD, DEFAULT_START
-from ..logs.schema import PRESETS
+from shipid.environment import WindForce
+from shipid.models import model_class
+from shipid.logs.schema import PRESETS
 
 __all__ = ["run_study", "refine_on_windows", "in_sample_errors", "REFINE_DEFAULTS", "REFINE_CANDIDATES", "anemometer_check", "path_relative_error", "current_vs_wind", "start_current_floor", "drift_factor", "with_drift_current", "air_velocity", "EssoStudy", "load_runs", "recipe_loro", "RECIPE_CANDIDATES_11", "error_diagnosis", "residual_accelerations", "split_position_error", "PRIOR_PARAMS", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
 
 #: Where the shared data set lives relative to the repository root.
-DATA_DIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "esso_osaka_frt"
+DATA_DIR = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "esso_osaka_frt"
 RUN_TYPES = ("turning", "zigzag", "random", "berthing")
 #: A trimmed copy of another run (same samples): left out.
 DUPLICATES = ("turn_cut_14-Sep-2020_15_58_08",)
@@ -76,19 +77,20 @@ DUPLICATES = ("turn_cut_14-Sep-2020_15_58_08",)
 #: 0.26546 against 0.27080; docs/environment.md).
 #: (One copy: the fit recipe's lowspeed default, ``shipid.identify.recipe.DEFAULT_ESTIMATE``, which ``shipid fit``
 #: uses.)
-ESTIMATE = tuple(DEFAULT_ESTIMATE["lowspeed"])
-ESTIMATE_WIND = tuple(DEFAULT_ESTIMATE_WIND)
+_LOWSPEED = model_class("lowspeed").recipe_defaults  # what `shipid fit` uses for lowspeed (one copy, in the model)
+ESTIMATE = tuple(_LOWSPEED.estimate)
+ESTIMATE_WIND = tuple(WindForce.recipe_estimate)
 #: Values replacing the ``esso-osaka-prior`` set's in every ``lowspeed`` fit of the study: the MMG standard
 #: method's side-dependent flow straightening at the KVLCC2's published split (gamma_R 0.640 / 0.395 for
 #: beta_R > 0 / < 0, Yasukawa & Yoshimura 2015: +-0.1225 about the prior's 0.5), chosen in session 7 by the
 #: pre-registered round 4 (candidate G1: 8-fold mean of the 30 s medians 0.2898 vs 0.2922, leave-one-run-out
 #: chosen-scope mean 0.2708 vs 0.2780; docs/environment.md).  ``run_study(prior_params={})`` is the setting
 #: before.
-PRIOR_PARAMS = dict(DEFAULT_START["lowspeed"])  # (one copy: the recipe's lowspeed start default)
+PRIOR_PARAMS = dict(_LOWSPEED.start)  # (one copy: the recipe's lowspeed start default)
 #: Measurement noise of the fits: the ``esso-frt`` format's sensor noise (one copy, in the log adapter).
 MEAS_STD = dict(PRESETS["esso-frt"].meas_std)
 #: Process noise of the fits at 3 m (one copy: the recipe's lowspeed default, Froude-scaled there to other lengths).
-PROCESS_STD = dict(DEFAULT_PROCESS_STD["lowspeed"][1])
+PROCESS_STD = dict(_LOWSPEED.process_std[1])
 
 
 #: Froude-scaled IMO minimum steering-gear rate (2.32 deg/s at full scale, A.751(18)) for the 3 m model
@@ -116,7 +118,7 @@ def load_runs(data_dir=DATA_DIR, types=RUN_TYPES, max_runs: int | None = None,
     """The runs as TrialLogs (``esso-frt`` schema), with ``run_type`` in ``log.meta``; rows with missing
     samples (the empty trailing rows of one zigzag file) are dropped.  ``rudder_rate`` [deg/s]: pass the
     logged rudder angle through a rate limiter of that slew rate (:func:`rate_limit`; None: as logged)."""
-    from ..logs import read_log
+    from shipid.logs import read_log
 
     data_dir = Path(data_dir)
     if not data_dir.is_dir():
@@ -248,7 +250,7 @@ def refine_on_windows(model, runs, currents, *, estimate, horizon=30.0, every=10
     :data:`REFINE_DEFAULTS` explains the settings).  ``currents``: per run ``{"cx": .., "cy": ..}`` estimated by
     the fit.  ``hold``: coefficients of ``estimate`` held at the fitted model's values (round 10); ``loss``,
     ``f_scale``: the refiner's loss (round 10).  Returns the fitted :class:`shipid.identify.batch.OutputErrorRefiner`."""
-    from ..identify.batch import OutputErrorRefiner, prediction_windows
+    from shipid.identify.batch import OutputErrorRefiner, prediction_windows
 
     if current == "mean":
         mean = {k: float(np.mean([c[k] for c in currents])) for k in ("cx", "cy")}
@@ -275,12 +277,12 @@ def refine_on_windows(model, runs, currents, *, estimate, horizon=30.0, every=10
 def in_sample_errors(models: dict, runs, currents, horizon: float = 30.0, start_every: float = 10.0,
                      eval_every: int = 2) -> pd.DataFrame:
     """Open-loop prediction errors of fitted ``models`` (name -> model) on runs they were fitted on (in-sample),
-    judged like the held-out runs (:func:`shipid.validation_horizon.horizon_prediction` on the
+    judged like the held-out runs (:func:`shipid.validation.horizon.horizon_prediction` on the
     ``eval_every``-th 10 Hz sample) but each run started with its own ``currents`` entry (``{"cx", "cy"}``, as
     estimated by the fit; None for models without a current).  Round 9's diagnosis: does a refinement lower
     the judged error on its own training runs?  Columns ``model``, ``run``, ``run_type``, ``position_error``
     [m], ``heading_error`` [deg] at ``horizon``, one row per start."""
-    from ..validation_horizon import horizon_prediction
+    from shipid.validation.horizon import horizon_prediction
 
     rows = []
     for lg, c in zip(runs, currents):
@@ -332,7 +334,7 @@ def with_drift_current(frame: pd.DataFrame, k: float, window: float = DRIFT_WIND
 
 
 def _fit(model, frames, estimate, substeps, input_hold="foh", gate=5.0, prior_std=1.0):
-    from ..identify import EKFIdentifier
+    from shipid.identify import EKFIdentifier
 
     extra = model.identifier_settings() if hasattr(model, "identifier_settings") else {}
     pstd = dict(PROCESS_STD, **extra.pop("process_std", {}))
@@ -350,8 +352,8 @@ def _turning_rows(lg, models, every) -> list[dict]:
     """Steady turning of a measured turning run against each model's replay of its inputs (from the
     run's first state, open loop over the whole run): steady diameter / L, steady speed, time to
     turn 360 deg in the steady part (from the mean yaw rate of the last half of the turn)."""
-    from ..manoeuvres.run_metrics import metrics
-    from ..simulate import replay
+    from shipid.manoeuvres.run_metrics import metrics
+    from shipid.simulate import replay
 
     d = _frame(lg, every)
     out = []
@@ -450,9 +452,9 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
         Refine every environment-aware fit on open-loop prediction windows of its training runs
         (:func:`refine_on_windows` with :data:`REFINE_DEFAULTS` updated by this dict; round 9); None: the EKF fit.
     """
-    from ..environment import with_environment
-    from ..models import get_model
-    from ..validation_horizon import dead_reckoning, horizon_prediction
+    from shipid.environment import with_environment
+    from shipid.models import get_model
+    from shipid.validation.horizon import dead_reckoning, horizon_prediction
 
     if current_start not in ("mean", "wind"):
         raise ValueError(f"current_start must be 'mean' or 'wind', got {current_start!r}")
@@ -640,7 +642,7 @@ def _run_currents(study: "EssoStudy") -> pd.DataFrame:
 def _held_out_prediction(study: "EssoStudy", lg, model: str, horizon: float, start_every: float):
     """Run ``lg`` (its evaluation frame) and its open-loop ``horizon`` s predictions by the fold model of
     ``study`` that did not see it, started with that fold's mean current: ``(frame, HorizonResult, model)``."""
-    from ..validation_horizon import horizon_prediction
+    from shipid.validation.horizon import horizon_prediction
 
     k = study.settings["fold_of"][lg.name]
     m = study.models[k][model]
@@ -722,7 +724,7 @@ def start_current_floor(study: "EssoStudy", model: str = "lowspeed + wind + curr
     replaced by a 2 s quadratic Savitzky-Golay fit (``"smoothed start"``: what the start state's noise costs)."""
     from scipy.signal import savgol_filter
 
-    from ..validation_horizon import horizon_prediction
+    from shipid.validation.horizon import horizon_prediction
 
     own = _run_currents(study)
     fold_of, every = study.settings["fold_of"], study.settings["eval_every"]
@@ -808,8 +810,8 @@ def residual_accelerations(study: "EssoStudy", candidates=("YPf", "NPf", "delta0
     ``runs``: the logs (``name``, ``run_type``, ``data``; default :func:`load_runs` of ``data_dir``)."""
     from scipy.signal import savgol_filter
 
-    from ..environment import with_environment
-    from ..models import get_model
+    from shipid.environment import with_environment
+    from shipid.models import get_model
 
     base = get_model("lowspeed").with_params(study.settings.get("prior_params") or {})
     env = with_environment(base, wind=study.settings.get("wind") or "esso-osaka-3m", current="constant")
@@ -856,9 +858,7 @@ RECIPE_CANDIDATES_11 = {"N1": {"fit_options": {"tune_noise": True}}, "S1": {"sam
 def _estimate_plus(*names) -> dict:
     """:func:`recipe_loro` options estimating the recipe's default list for ``lowspeed`` with a wind part, plus
     ``names``."""
-    from ..identify.recipe import DEFAULT_ESTIMATE, DEFAULT_ESTIMATE_WIND
-
-    return {"fit_options": {"estimate": list(DEFAULT_ESTIMATE["lowspeed"]) + list(DEFAULT_ESTIMATE_WIND) + list(names)}}
+    return {"fit_options": {"estimate": list(ESTIMATE) + list(ESTIMATE_WIND) + list(names)}}
 
 
 #: Session 12, round 12 (pre-registered in docs/environment.md before any ran): one more coefficient estimated
@@ -878,11 +878,11 @@ def recipe_loro(data_dir=DATA_DIR, *, types=RUN_TYPES, horizons=(10.0, 30.0, 60.
     ``fit_options``: further keyword arguments of :func:`~shipid.identify.fit_logs`; ``sampling="rule"``: the
     recipe's time-constant rule (:func:`~shipid.identify.recipe.choose_sampling`) instead of the model's default
     step."""
-    from ..environment import with_environment
-    from ..identify.recipe import choose_sampling, current_start, fit_logs
-    from ..logs import read_log
-    from ..models import get_model
-    from ..validation_horizon import horizon_prediction
+    from shipid.environment import with_environment
+    from shipid.identify.recipe import choose_sampling, current_start, fit_logs
+    from shipid.logs import read_log
+    from shipid.models import get_model
+    from shipid.validation.horizon import horizon_prediction
 
     if sampling not in ("default", "rule"):
         raise ValueError(f"sampling={sampling!r}: use 'default' or 'rule'")
@@ -918,7 +918,7 @@ def recipe_loro(data_dir=DATA_DIR, *, types=RUN_TYPES, horizons=(10.0, 30.0, 60.
     return pd.DataFrame(rows)
 
 
-def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shipid.studies.esso_osaka
+def _main(argv=None):  # pragma: no cover - the full study (slow): python -m studies.esso_osaka
     import argparse
     import pickle
 
@@ -953,7 +953,7 @@ def _main(argv=None):  # pragma: no cover - the full study (slow): python -m shi
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     from dataclasses import replace
 
-    from ..environment import WindForce
+    from shipid.environment import WindForce
 
     wind = "esso-osaka-3m" if a.wind_cbr is None else replace(WindForce.esso_osaka_3m(), C_BR=a.wind_cbr)
     rate = FROUDE_RUDDER_RATE_DEG_S if a.froude_rudder_rate else a.rudder_rate

@@ -14,7 +14,7 @@ as in the filter): :func:`shipid.identify.ekf.gain_covariance` via ``EKFIdentifi
 noise model.  The script prints, per coefficient, the coverage and z spread of the reported intervals and of the
 re-evaluated ones (same replicates as coverage_study(seed=2026): replicate i has the same logs).
 
-    OPENBLAS_NUM_THREADS=1 nice python benchmarks/diag_ekf_actual_covariance.py [N_REPLICATES]
+    OPENBLAS_NUM_THREADS=1 nice python -m studies.diag_ekf_actual_covariance [N_REPLICATES]
 """
 import sys
 import warnings
@@ -25,7 +25,7 @@ import numpy as np
 def main(n):
     from shipid.campaign import member_seeds
     from shipid.identify import EKFIdentifier
-    from shipid.identify.coverage import COVERAGE_RECIPES
+    from studies.coverage import COVERAGE_RECIPES
     from shipid.models import get_model
     from shipid.synthetic import KCS_NOISE_STD, make_trial
 

@@ -1,10 +1,10 @@
-"""Replicate study of interval coverage (shipid.identify.coverage)."""
+"""Replicate study of interval coverage (studies.coverage)."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from shipid.identify.coverage import COVERAGE_RECIPES, coverage_study, wilson_interval
+from studies.coverage import COVERAGE_RECIPES, coverage_study, wilson_interval
 
 
 def test_wilson_interval_known_values():
@@ -198,7 +198,7 @@ def test_mcmc_column_machinery():
 
 @pytest.mark.slow
 def test_mcmc_column_16_coefficients():
-    """The 16-coefficient MCMC column's settings (benchmarks/run_mcmc16_coverage.py: 16 coefficients + 6 initial
+    """The 16-coefficient MCMC column's settings (python -m studies.run_mcmc16_coverage: 16 coefficients + 6 initial
     states, independence proposal from each replicate's output-error Laplace approximation, walkers started from the
     EKF posterior, flat prior) on 8 replicates (about 3 CPU-minutes): every chain passes the unchanged convergence rules, each
     posterior agrees with that Laplace approximation (std within 15 %, means within 0.3 sigma), and of the

@@ -9,12 +9,12 @@ it pulled the posterior means of a2-a7 by 0.37-0.41 sigma towards the EKF estima
 the output-error maximum-likelihood estimate).  Re-running the same command skips the replicates already in
 the checkpoint; ``--table`` only tabulates it.
 
-    OPENBLAS_NUM_THREADS=1 nice python benchmarks/run_mcmc16_coverage.py CHECKPOINT.jsonl [--n 100] [--table]
+    OPENBLAS_NUM_THREADS=1 nice python -m studies.run_mcmc16_coverage CHECKPOINT.jsonl [--n 100] [--table]
 """
 import argparse
 import warnings
 
-from shipid.identify.coverage import coverage_study
+from studies.coverage import coverage_study
 
 MCMC16 = dict(steps=800, burn=100, walkers=48, moves="independence", sample_x0=True, proposal="output-error",
               use_prior=False)

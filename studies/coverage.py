@@ -9,13 +9,13 @@ interval of the fit) contains the true value.  For the predicted tactical
 diameter (35 deg turn) and first overshoot (10/10 zigzag) it counts how often
 the 2.5-97.5 % interval of :func:`shipid.uncertainty.predict_manoeuvres`
 contains the truth model's value, and optionally (``mcmc_replicates``) the same
-for the MCMC posterior of :func:`shipid.identify.sample_posterior`.
+for the MCMC posterior of :func:`shipid.uncertainty.sample_posterior`.
 
 ``refine="output-error"`` tables the output-error fit that also estimates each log's initial u, v, r
 (``estimate_x0``); the MCMC column (docs/uncertainty.md sect. 3) samples the 3 yaw coefficients and
 the initial states (``mcmc_kwargs=dict(steps=1000, burn=300, moves="independence", sample_x0=True)``);
 ``checkpoint=`` makes a long study resumable.  The 16-coefficient MCMC column
-(``benchmarks/run_mcmc16_coverage.py``) samples all coefficients and the initial states with the
+(``python -m studies.run_mcmc16_coverage``) samples all coefficients and the initial states with the
 independence proposal taken from the replicate's output-error Laplace approximation
 (``mcmc_kwargs=dict(..., proposal="output-error", use_prior=False)``, needs ``refine="output-error"``).
 ``refine="ekf-sensor-noise"`` tables the EKF's estimates with their covariance re-evaluated under sensor
@@ -41,7 +41,7 @@ __all__ = ["coverage_study", "CoverageResult", "COVERAGE_RECIPES", "wilson_inter
 
 
 def _recipes():
-    from ..synthetic import TrialRecipe
+    from shipid.synthetic import TrialRecipe
 
     # short data sets (40 s each, 0.1 s sampling) so that 100 fits take minutes: a 35 deg turn with an
     # rpm step (separates the surge terms) and a 20/20 zigzag
@@ -66,10 +66,10 @@ def wilson_interval(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
 
 def _replicate(task: dict) -> dict:
     """One replicate (runs on a worker): data, fit, coefficient z-scores, predicted-metric intervals."""
-    from ..synthetic import make_trial
-    from ..uncertainty import predict_manoeuvres
-    from .identifier import EKFIdentifier
-    from .posterior import sample_posterior
+    from shipid.synthetic import make_trial
+    from shipid.uncertainty import predict_manoeuvres
+    from shipid.identify.identifier import EKFIdentifier
+    from shipid.uncertainty.posterior import sample_posterior
 
     cpu0 = time.process_time()
     truth = task["truth"]
@@ -98,7 +98,7 @@ def _replicate(task: dict) -> dict:
     if task["refine"] == "output-error":
         # the output-error maximum-likelihood estimate started from the EKF: weights = the EKF's noise levels,
         # exact RK4 sensitivities, Laplace covariance (J^T J)^-1 s^2
-        from .batch import OutputErrorRefiner
+        from shipid.identify.batch import OutputErrorRefiner
 
         # the channels of the MCMC likelihood (measured u, v, r): with a few yaw coefficients estimated, u and v
         # still carry information on them through the coupling
@@ -117,7 +117,7 @@ def _replicate(task: dict) -> dict:
     if task["draws"] > 0:
         pred = predict_manoeuvres(fit, task["manoeuvres"], draws=task["draws"], seed=task["seed"] % (2**32),
                                   zigzag_executes=3, inflation=task["inflation"])
-        out["metrics"] = {f"{r.manoeuvre}:{r.metric}": [r.low, r.high, r.nominal] for r in pred.summary.itertuples()}
+        out["metrics"] = {f"{r.manoeuvre}:{r.metric}": [r.low, r.high, r.nominal] for r in pred.metrics.itertuples()}
         out["n_failed_draws"] = {k: v["n_failed"] for k, v in pred.failures.items()}
     if task["mcmc"]:
         kw = dict(task["mcmc_kwargs"])
@@ -137,7 +137,7 @@ def _replicate(task: dict) -> dict:
         if task["draws"] > 0:
             pm = predict_manoeuvres(res, task["manoeuvres"], draws=task["draws"], seed=task["seed"] % (2**32),
                                     samples=s, zigzag_executes=3)
-            out["mcmc"]["metrics"] = {f"{r.manoeuvre}:{r.metric}": [r.low, r.high] for r in pm.summary.itertuples()}
+            out["mcmc"]["metrics"] = {f"{r.manoeuvre}:{r.metric}": [r.low, r.high] for r in pm.metrics.itertuples()}
     out["cpu_s"] = time.process_time() - cpu0
     if task.get("checkpoint"):
         _append_line(task["checkpoint"], {"key": task["key"], **out})
@@ -296,11 +296,11 @@ def coverage_study(truth=None, recipes=None, *, n_replicates: int = 100, seed: i
     -------
     CoverageResult
     """
-    from ..campaign import Engine, member_seeds
-    from ..manoeuvres import turning_circle, zigzag
-    from ..models import get_model
-    from ..synthetic import KCS_NOISE_STD
-    from ..uncertainty import parse_manoeuvre
+    from shipid.campaign import Engine, member_seeds
+    from shipid.manoeuvres import turning_circle, zigzag
+    from shipid.models import get_model
+    from shipid.synthetic import KCS_NOISE_STD
+    from shipid.uncertainty import parse_manoeuvre
 
     if int(n_replicates) < 2:
         raise ValueError(f"n_replicates must be >= 2, got {n_replicates}")

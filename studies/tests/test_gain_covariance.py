@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from shipid.identify import EKFIdentifier
-from shipid.identify.coverage import COVERAGE_RECIPES, coverage_study
+from studies.coverage import COVERAGE_RECIPES, coverage_study
 from shipid.identify.ekf import gain_covariance, run_ekf
 from shipid.synthetic import make_trial
 
@@ -60,7 +60,7 @@ def test_sensor_noise_column_machinery():
 def test_sensor_noise_covariance_is_calibrated_on_100_replicates():
     """100 replicates (seed 2026, all 16 coefficients, about 3 CPU-minutes): the EKF posterior as reported covers
     0.98-1.00 (12 of 16 at 1.00); its covariance re-evaluated under sensor noise only covers 0.90-0.99 for every
-    coefficient with a z spread of 0.75-1.25.  The band was written after benchmarks/diag_ekf_actual_covariance.py
+    coefficient with a z spread of 0.75-1.25.  The band was written after python -m studies.diag_ekf_actual_covariance
     had measured 0.90-0.99 and 0.80-1.11 on these replicates: a regression check of that result, not a prediction."""
     r = coverage_study(n_replicates=100, draws=0, seed=2026, refine="ekf-sensor-noise")
     t = r.table.set_index("quantity")

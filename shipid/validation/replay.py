@@ -35,21 +35,31 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .manoeuvres import metrics as manoeuvre_metrics
-from .manoeuvres import ship_info
-from .manoeuvres import steady_turn
-from .manoeuvres.run_metrics import reported_steady_turn
-from .models.base import Model
-from .simulate import SimulationResult, replay, replay_errors
+from ..manoeuvres import metrics as manoeuvre_metrics
+from ..manoeuvres import ship_info
+from ..manoeuvres import standard_manoeuvre, steady_turn
+from ..manoeuvres.run_metrics import reported_steady_turn
+from ..models.base import Model
+from ..results import ResultMixin
+from ..simulate import SimulationResult, replay, replay_errors
 
-__all__ = ["validate", "validate_logs", "validate_one", "LogValidation", "resolve_model", "load_logs", "DIFF_EXCLUDE"]
+__all__ = ["validate", "validate_logs", "validate_one", "LogValidation", "resolve_model", "load_logs", "DIFF_EXCLUDE",
+           "DURATION_MULTIPLE", "STANDARD_METRICS"]
 
 #: Metric keys not differenced (settings of the run rather than predictions).
 DIFF_EXCLUDE = ("lpp", "execute_time", "rudder_deg", "switch_deg")
+#: A closed-loop standard manoeuvre matching a measured run runs until its metrics exist -- a zigzag to its second
+#: overshoot (the fifth rudder execute), a turn to 540 deg of heading -- for at most this many times the measured
+#: run's duration after its execute (never less than the simulator's own limit: 80 L/U for a zigzag, 60 L/U for a
+#: turn).  A model that needs longer is off by more than every goal; the metric is then missing with the reason
+#: (``standard_missing``).  The rule of docs/choosing_a_model.md.
+DURATION_MULTIPLE = 3.0
+#: The metrics of a standard manoeuvre whose absence in the closed-loop prediction is reported (when measured).
+STANDARD_METRICS = {"turning": ("advance_L", "tactical_diameter_L"), "zigzag": ("overshoot1_deg", "overshoot2_deg")}
 
 
 @dataclass
-class LogValidation:
+class LogValidation(ResultMixin):
     """Replay of one log and its comparison with the measurement.
 
     Attributes
@@ -84,14 +94,55 @@ class LogValidation:
     notes: list = field(default_factory=list)
     steady_measured: Any = None
     steady_predicted: Any = None
+    standard_missing: list = field(default_factory=list)
 
     @property
     def success(self) -> bool:
         return bool(self.simulation.success) and (self.measured is None) == (self.predicted is None)
 
     @property
+    def message(self) -> str:
+        """One line: the replay's outcome and the notes."""
+        head = f"log '{getattr(self.log, 'name', 'log')}': " + (self.manoeuvre or "no standard manoeuvre") + "; "
+        head += "replay finished" if self.simulation.success else f"replay failed: {self.simulation.message}"
+        return "; ".join([head] + list(self.notes))
+
+    @property
     def manoeuvre(self) -> str | None:
         return None if self.measured is None else self.measured.manoeuvre
+
+    def summary(self) -> pd.DataFrame:
+        """The manoeuvre metrics as logged (``measured``), in the replay of the logged inputs (``replay``)
+        and in the model's own closed-loop manoeuvre (``closed_loop``), one row per metric, with
+        ``replay - measured``; a log that is no standard manoeuvre gives its replay errors instead
+        (:attr:`errors`: ``rmse``, ``nrmse``, ``n_samples`` per channel, SI units and radians)."""
+        if self.measured is None:
+            return self.errors.copy()
+        cols = {"measured": self.measured, "replay": self.predicted, "closed_loop": self.standard}
+        dicts = {k: (v.to_dict() if v is not None else {}) for k, v in cols.items()}
+        keys = [k for k, v in dicts["measured"].items()
+                if k not in DIFF_EXCLUDE and isinstance(v, (int, float)) and not isinstance(v, bool)]
+        out = pd.DataFrame({c: [d.get(k) for k in keys] for c, d in dicts.items()}, index=pd.Index(keys, name="metric"),
+                           dtype=float)
+        out["replay - measured"] = out["replay"] - out["measured"]
+        return out
+
+    def _html_title(self) -> str:
+        return f"Validation on '{getattr(self.log, 'name', 'log')}'"
+
+    def _key_numbers(self) -> dict:
+        k = {"model": self.simulation.model.name, "manoeuvre": self.manoeuvre or "none"}
+        if "track" in self.errors.index:
+            k["track RMSE [m]"] = float(self.errors.loc["track", "rmse"])
+        return k
+
+    def to_pandas(self) -> pd.DataFrame:
+        """The replay's time series (states and inputs, indexed by time; see :meth:`SimulationResult.to_pandas`)."""
+        return self.simulation.to_pandas()
+
+    def plot(self, ax=None):
+        """The measured log under the replay, one axes per state and input (angles in degrees); returns the axes."""
+        return self.simulation.plot(ax=ax)
 
     def difference(self, other: str = "predicted") -> dict:
         """``predicted - measured`` (or ``standard - measured``) for every numeric metric both have
@@ -146,6 +197,7 @@ class LogValidation:
                          if self.standard is not None else {}),
             "standard_difference": self.difference("standard"),
             "steady_turn": self.steady_summary(),
+            "standard_missing": [dict(m) for m in self.standard_missing],
             "replay": {"success": bool(self.simulation.success), "message": self.simulation.message,
                        "rudder_sign": self.rudder_sign, "model_lpp": self.model_lpp,
                        "n_samples": int(self.simulation.t.size)},
@@ -163,29 +215,37 @@ def _num(v) -> float | None:
 
 
 # ----------------------------------------------------------------------------- inputs
+def _check_substeps(substeps) -> None:
+    if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
+        raise ValueError(f"substeps must be a whole number >= 1 (RK4 steps per log sample), got {substeps!r}")
+
+
 def resolve_model(result_or_model) -> tuple[Model, Any]:
     """A model (and the fit result, if any) from a fit result, its JSON, a path to it, or a model.
 
     Parameters
     ----------
     result_or_model : FitResult, dict, str, os.PathLike or Model
-        A result JSON may carry ``"model_options"`` (keyword arguments of the model class, e.g.
+        A result (or the path of its JSON), a model, or a registered model's name with an optional
+        parameter set (``"mmg:kvlcc2"``).  A result JSON may carry ``"model_options"`` (keyword arguments of the model class, e.g.
         MMG particulars ``{"lpp": 320}``), at top level or under ``"extra"``.
 
     Returns
     -------
     (Model, FitResult or None)
     """
-    from .identify.result import model_from
+    from ..identify.result import model_from
 
-    if isinstance(result_or_model, (str, os.PathLike)) and not Path(result_or_model).is_file():
+    looks_like_file = isinstance(result_or_model, (str, os.PathLike)) and (
+        Path(result_or_model).suffix.lower() == ".json" or os.sep in str(result_or_model))
+    if looks_like_file and not Path(result_or_model).is_file():  # else a registered model name[:set]
         raise FileNotFoundError(f"{result_or_model}: no such result file; run `shipid fit` first or check the path")
     return model_from(result_or_model)
 
 
 def load_logs(logs, *, lpp: float | None = None) -> list:
     """TrialLogs from paths (read with :func:`shipid.logs.read_log`) or TrialLog objects."""
-    from .logs import TrialLog, read_log
+    from ..logs import TrialLog, read_log
 
     if isinstance(logs, (str, os.PathLike, TrialLog)):
         logs = [logs]
@@ -303,37 +363,38 @@ def _steady(log, sim, L: float, rudder_sign: float, res: LogValidation) -> None:
         res.notes.append(f"steady turn of the replay not available: {exc}")
 
 
-def standard_manoeuvre(model: Model, measured, *, rudder_rate=None, lpp=None, params=None,
-                       heading_change_deg: float = 540.0):
-    """The model's closed-loop standard manoeuvre matching a measured one.
+def standard_time_limit(measured, log, lpp: float) -> tuple[float, float]:
+    """``(t_max, duration)`` [s] of the closed-loop manoeuvre matching a measured run: the execute (2 L/U, the
+    simulators' default) plus the larger of the simulator's own limit (80 L/U zigzag, 60 L/U turn) and
+    :data:`DURATION_MULTIPLE` times the measured run's duration after its execute."""
+    U = float(measured.approach_speed)
+    t = np.asarray(getattr(log, "time", None) if hasattr(log, "time") else log["time"], dtype=float)
+    te = float(getattr(measured, "execute_time", math.nan))
+    duration = float(t[-1] - te) if (t.size and math.isfinite(te)) else float(t[-1] - t[0]) if t.size else 0.0
+    own = (80.0 if measured.manoeuvre == "zigzag" else 60.0) * lpp / U
+    return 2.0 * lpp / U + max(own, DURATION_MULTIPLE * duration), duration
 
-    ``measured``: the log's :class:`~shipid.manoeuvres.TurningMetrics` or
-    :class:`~shipid.manoeuvres.ZigzagMetrics` (manoeuvre kind, ordered rudder angle, side, switch
-    angle, approach speed).  ``rudder_rate`` [rad/s] defaults to the model's.  ``params`` (np,) or
-    (B, np): with B parameter sets the B manoeuvres run as one batch, member b with ``params[b]``.
-    ``heading_change_deg``: how far a turning circle runs.  Returns the
-    :class:`~shipid.manoeuvres.ManoeuvreResult`; raises ValueError when the log's approach speed or
-    rudder angle is unknown or the model cannot run the manoeuvre.
-    """
-    from .manoeuvres import turning_circle, zigzag
 
-    m = measured
-    rudder, speed = abs(float(m.rudder_deg)), float(m.approach_speed)
-    if not (math.isfinite(speed) and speed > 0) or not rudder > 0:
-        raise ValueError("approach speed or rudder angle of the log unknown")
-    per_member = params is not None and np.ndim(params) == 2
-    spd = np.full(len(params), speed) if per_member else speed  # one member per parameter set
-    if m.manoeuvre == "turning":
-        return turning_circle(model, rudder, speed=spd, side=m.side, rudder_rate=rudder_rate, lpp=lpp,
-                              params=params, heading_change_deg=heading_change_deg)
-    # the rudder reversal is located within the step (shipid.manoeuvres.ZigzagRudder), so the default
-    # step gives the overshoots to ~0.01 deg (tests/test_manoeuvres.py)
-    return zigzag(model, rudder, float(m.switch_deg), speed=spd, first=m.first_side, rudder_rate=rudder_rate,
-                  lpp=lpp, params=params)
+def _missing_reason(kind: str, metric: str, met, t_max: float, duration: float, run_message: str) -> str:
+    """Why the closed-loop manoeuvre has no ``metric`` (one line)."""
+    within = f"within {t_max:.0f} s ({DURATION_MULTIPLE:g} times the measured run's {duration:.0f} s, or the simulator's limit)"
+    if run_message and "t_max" not in run_message and "finished" not in run_message:
+        return f"the prediction stopped: {run_message}"
+    if kind == "turning":
+        return f"the model's heading never changed by {90 if metric == 'advance_L' else 180} deg {within}"
+    sw = getattr(met, "switch_deg", math.nan)
+    msg = getattr(met, "message", "") or ""
+    if "never reached the switch angle" in msg:
+        return f"the model's heading deviation never reached the check angle {sw:g} deg {within}"
+    if metric == "overshoot1_deg" or "third execute" in msg:
+        return (f"the model's heading never came back through the check angle {sw:g} deg on the other side "
+                f"{within}, so the zigzag has no {'first' if metric == 'overshoot1_deg' else 'second'} overshoot")
+    return f"the model's heading never turned back after the third execute {within}, so there is no second overshoot"
 
 
 def _standard(model: Model, log, res: LogValidation) -> None:
-    """Closed-loop standard manoeuvre of the model matching the measured one (see :func:`validate`)."""
+    """Closed-loop standard manoeuvre of the model matching the measured one (see :func:`validate`); a metric the
+    run measured but the prediction does not reach is listed in ``res.standard_missing`` with the reason."""
     m = res.measured
     ship = getattr(log, "ship", None)
     rate = getattr(ship, "rudder_rate", None) or ship_info(model).get("rudder_rate")
@@ -343,9 +404,12 @@ def _standard(model: Model, log, res: LogValidation) -> None:
     if m.manoeuvre != "turning":
         settings["switch_deg"] = float(m.switch_deg)
     try:
+        t_max, duration = standard_time_limit(m, log, res.lpp)
+        settings["t_max_s"] = t_max
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            run = standard_manoeuvre(model, m, rudder_rate=rate, lpp=res.lpp)
+            run = standard_manoeuvre(model, m, rudder_rate=rate, lpp=res.lpp,
+                                     t_max=t_max if math.isfinite(t_max) and t_max > 0 else None)
     except ValueError as exc:
         res.notes.append(f"closed-loop manoeuvre not available: {exc}")
         return
@@ -353,6 +417,19 @@ def _standard(model: Model, log, res: LogValidation) -> None:
     if not run.success:
         res.notes.append(f"closed-loop manoeuvre: {run.message}")
     res.standard, res.standard_settings = run.metrics[0], settings
+    md, sd = m.to_dict(), res.standard.to_dict()
+    # metrics reached only after the simulators' own limit (the prediction ran longer for them, by the rule above)
+    own = (80.0 if m.manoeuvre == "zigzag" else 60.0) * res.lpp / float(m.approach_speed)
+    times = {"advance_L": "time_90", "tactical_diameter_L": "time_180", "overshoot1_deg": "overshoot1_time",
+             "overshoot2_deg": "overshoot2_time"}
+    late = [k for k in STANDARD_METRICS.get(m.manoeuvre, ())
+            if _num(sd.get(k)) is not None and (_num(getattr(res.standard, times[k], None)) or 0.0) > own]
+    if late:
+        settings["reached_after_simulator_limit"] = late
+    for k in STANDARD_METRICS.get(m.manoeuvre, ()):
+        if _num(md.get(k)) is not None and _num(sd.get(k)) is None:
+            res.standard_missing.append({"metric": k, "reason": _missing_reason(m.manoeuvre, k, res.standard, t_max,
+                                                                                duration, run.message)})
 
 
 def validate_logs(result_or_model, logs, lpp: float | None = None, *, rudder_sign: float = 1.0,
@@ -404,6 +481,7 @@ def validate(result_or_model, logs, lpp: float | None = None, *, rudder_sign: fl
     and radians, NRMSE relative to the measured range), ``track_rmse_m``, ``replay`` (success,
     message), ``success`` and ``notes``.
     """
+    _check_substeps(substeps)
     return [v.to_dict() for v in validate_logs(result_or_model, logs, lpp, rudder_sign=rudder_sign,
                                                substeps=substeps, closed_loop=closed_loop,
                                                zigzag_angles=zigzag_angles, initial=initial)]

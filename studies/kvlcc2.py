@@ -5,7 +5,7 @@ Fit a model on the turning circles (tc +-35) and the 10/10 zigzags with the fit 
 seen, and compare the closed-loop standard manoeuvres of the fitted model with the measured ones
 (:func:`shipid.validation.validate`, what ``shipid validate`` runs).  Nothing here is specific to this ship
 but the file names and the rudder sign: the length comes from the logs, the check angles from the logs.
-Used by ``notebooks/02_validate_kvlcc2.ipynb`` and ``tests/test_kvlcc2_study.py``.
+Used by ``notebooks/02_validate_kvlcc2.ipynb`` and ``studies/tests/test_kvlcc2_study.py``.
 
 The MARIN files use the opposite rudder sign to the shipped models (+35 deg turns to port): a run whose
 positive rudder turns the ship to port as read is flipped (:func:`rudder_sign`), so the study stays right
@@ -18,9 +18,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from ..identify import recipe
-from ..logs import TrialLog, read_log
-from ..validation import validate
+from shipid.identify import recipe
+from shipid.logs import TrialLog, read_log
+from shipid.validation import validate
 
 __all__ = ["RUNS", "TRAIN", "TEST", "RUDDER_SIGN", "MEASURED_README", "START", "GOAL_TOL", "load_runs", "fit_model",
            "evaluate", "neutral_rudder_angle", "common_grid", "metric_residuals", "rudder_sign", "leave_one_run_out",
@@ -41,7 +41,7 @@ MEASURED_README = {
     "zz_10": {"overshoot1_deg": 9.4}, "zz_-10": {"overshoot1_deg": 8.1},
     "zz_20": {"overshoot1_deg": 15.6}, "zz_-20": {"overshoot1_deg": 12.7},
 }
-#: Start parameter set of each model (``shipid fit --params``): the published KVLCC2 MMG set for ``mmg``,
+#: Start parameter set of each model (``shipid fit --model MODEL:SET``): the published KVLCC2 MMG set for ``mmg``,
 #: the shipped sets (Froude-scaled to the logs' length by the recipe) for the others.
 START = {"mmg": "kvlcc2", "response-nl": None, "kcs-response": None}
 #: Goal tolerances of the issues: tactical diameter [%], first and second overshoot [deg].
@@ -331,7 +331,7 @@ def leave_one_run_out_recipes(runs: dict[str, TrialLog], name: str = "mmg", vari
 
 def _goal_errors(model, log) -> list[float]:
     """The run's closed-loop metric errors over their goal tolerances (TD / 5 %; overshoots / 2, 3 deg)."""
-    from ..validation import validate_one
+    from shipid.validation import validate_one
 
     v = validate_one(model, log)
     m = v.measured.to_dict()

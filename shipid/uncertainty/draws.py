@@ -2,7 +2,7 @@
 
 From a fit result, N parameter sets are drawn -- from the Gaussian (Laplace)
 posterior with the result's full covariance, or from MCMC samples
-(:func:`shipid.identify.sample_posterior`) -- and every requested standard
+(:func:`shipid.uncertainty.sample_posterior`) -- and every requested standard
 manoeuvre is simulated for all of them as **one batch**
 (:func:`shipid.manoeuvres.turning_circle` / :func:`~shipid.manoeuvres.zigzag`
 with ``params`` of shape ``(N + 1, np)``: member 0 is the point estimate).
@@ -37,6 +37,9 @@ from typing import Any, Sequence
 
 import numpy as np
 import pandas as pd
+
+from ..identify.result import as_result
+from ..results import ResultMixin
 
 __all__ = ["ManoeuvreSpec", "parse_manoeuvre", "parameter_draws", "predict_manoeuvres", "ManoeuvrePrediction",
            "summarise_draws", "imo_probability", "METRIC_KEYS", "replay_draws"]
@@ -92,16 +95,22 @@ def parse_manoeuvre(spec) -> ManoeuvreSpec:
 
 
 # ----------------------------------------------------------------------------- draws
-def _result_of(result):
-    from .identify.result import FitResult, load_result
+#: Bytes one parameter draw costs per simulated sample and state: the batched RK4 keeps about four state
+#: arrays alive (stages) and the trajectory; one more for the metrics' frames.
+_DRAW_BYTES_PER_SAMPLE_STATE = 8 * 6
+#: A standard manoeuvre's length in samples for the estimate before it is simulated (a 35 deg turning circle
+#: or a 20/20 zigzag of the KCS model at dt = 0.1 s: 1000-3000).
+MANOEUVRE_SAMPLES = 3000
 
-    if isinstance(result, FitResult):
-        return result
-    if isinstance(result, dict):
-        return FitResult.from_dict(result)
-    if isinstance(result, (str, os.PathLike)):
-        return load_result(result)
-    raise ValueError(f"result: expected a FitResult, its dict or a result JSON path, got {type(result).__name__}")
+
+def check_draws_memory(draws: int, samples: int = MANOEUVRE_SAMPLES, states: int = 8, what: str = "draws") -> None:
+    """Refuse ``draws`` whose batched simulations of ``samples`` samples need more memory than
+    :func:`shipid._io.memory_limit_bytes` (one line with the estimate, the limit and the option)."""
+    from .._io import check_memory
+
+    shown = f"{draws}" if draws < 10**12 else f"{draws:.3g}"
+    check_memory(float(draws) * max(samples, 1) * max(states, 1) * _DRAW_BYTES_PER_SAMPLE_STATE,
+                 f"{what}={shown} ({max(samples, 1)} samples each)", "use fewer draws (--draws, or 'draws' in a campaign)")
 
 
 def parameter_draws(result, draws: int, *, seed=None, samples=None, inflation: float = 1.0) -> np.ndarray:
@@ -114,7 +123,7 @@ def parameter_draws(result, draws: int, *, seed=None, samples=None, inflation: f
         Number of parameter sets N (>= 1).
     seed : int or numpy Generator, optional
     samples : PosteriorSamples, dict or path to a samples JSON, optional
-        MCMC samples (:func:`shipid.identify.sample_posterior`); N rows are drawn from them without
+        MCMC samples (:func:`shipid.uncertainty.sample_posterior`); N rows are drawn from them without
         replacement (with replacement when N exceeds their number).  Default: the Gaussian posterior
         ``N(coef, inflation**2 * cov)`` over the estimated coefficients (the result's ``cov``).
     inflation : float
@@ -123,17 +132,18 @@ def parameter_draws(result, draws: int, *, seed=None, samples=None, inflation: f
 
     The fixed parameters keep the result's values.
     """
-    res = _result_of(result)
+    res = as_result(result)
     n = int(draws)
     if n < 1:
         raise ValueError(f"draws must be a positive integer, got {draws!r}")
+    check_draws_memory(n, 1, 1)
     if not (inflation > 0 and math.isfinite(inflation)):
         raise ValueError(f"inflation must be a positive factor, got {inflation!r}")
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     model = res.to_model()
     base = model.params.astype(float).copy()
     if samples is not None:
-        from .identify.posterior import load_samples
+        from .posterior import load_samples
 
         s = load_samples(samples)
         if s.model != res.model:
@@ -203,7 +213,7 @@ def imo_probability(imo_dicts: Sequence[dict]) -> dict:
 
 
 @dataclass
-class ManoeuvrePrediction:
+class ManoeuvrePrediction(ResultMixin):
     """Predicted standard manoeuvres with their uncertainty (from :func:`predict_manoeuvres`).
 
     Attributes
@@ -215,7 +225,7 @@ class ManoeuvrePrediction:
         The drawn parameter sets.
     source : str
         "gaussian" (fit covariance, with ``inflation``) or "mcmc".
-    summary : DataFrame
+    metrics : DataFrame
         One row per (manoeuvre, metric): nominal, mean, median, std, low, high, n, n_nonfinite.
     imo : dict label -> dict criterion -> probability block (see :func:`imo_probability`)
     failures : dict label -> {"n_failed": int, "messages": {message: count}}
@@ -231,7 +241,7 @@ class ManoeuvrePrediction:
     level: float
     inflation: float
     seed: Any
-    summary: pd.DataFrame
+    metrics: pd.DataFrame
     imo: dict
     failures: dict
     nominal: dict
@@ -244,9 +254,34 @@ class ManoeuvrePrediction:
     def draws(self) -> int:
         return int(self.params.shape[0])
 
+    def summary(self) -> pd.DataFrame:
+        """One row per manoeuvre and metric: nominal, mean, median, std, interval ``low``/``high``, counts."""
+        return self.metrics.copy()
+
     def to_pandas(self) -> pd.DataFrame:
-        """The metric summary (one row per manoeuvre and metric)."""
-        return self.summary.copy()
+        """Every simulated member's settings and metrics (member 0 = point estimate, 1..N = draws), with a
+        ``manoeuvre`` column."""
+        return pd.concat([self.runs[s.label].to_pandas().rename_axis("member").reset_index().assign(manoeuvre=s.label)
+                          for s in self.manoeuvres], ignore_index=True)
+
+    def _html_title(self) -> str:
+        return f"Manoeuvre prediction ({self.draws} draws, {self.source})"
+
+    def plot(self, ax=None):
+        """One panel per manoeuvre with every draw (turning: tracks; zigzag: heading and rudder [deg]);
+        returns the axes."""
+        import matplotlib.pyplot as plt
+
+        n = len(self.manoeuvres)
+        if ax is None:
+            _, axs = plt.subplots(1, n, figsize=(5 * n, 4), squeeze=False)
+            axs = axs[0]
+        else:
+            axs = np.resize(np.atleast_1d(ax).ravel(), n)
+        for a, spec in zip(axs, self.manoeuvres):
+            self.runs[spec.label].plot(ax=a)
+            a.set_title(spec.label)
+        return axs
 
     def metrics_of(self, label: str) -> pd.DataFrame:
         """Per-draw metrics of one manoeuvre (rows = draws 1..N; the point estimate is row 0)."""
@@ -263,7 +298,7 @@ class ManoeuvrePrediction:
         for spec in self.manoeuvres:
             lab = spec.label
             block = dict(self.nominal[lab])
-            rows = self.summary[self.summary["manoeuvre"] == lab]
+            rows = self.metrics[self.metrics["manoeuvre"] == lab]
             block.update(ci_block(rows))
             block["imo_probability"] = self.imo[lab]
             block["draws"] = {"n": self.draws, **self.failures[lab]}
@@ -271,7 +306,7 @@ class ManoeuvrePrediction:
         return out
 
     def to_json(self, path, *, force: bool = False) -> Path:
-        from ._io import atomic_write_text
+        from .._io import atomic_write_text
 
         return atomic_write_text(path, json.dumps(self.to_dict(), indent=2, allow_nan=False) + "\n", force=force)
 
@@ -361,9 +396,9 @@ def predict_manoeuvres(result, manoeuvres: Sequence = ("turning:35", "zigzag:10/
     -------
     ManoeuvrePrediction
     """
-    from .manoeuvres import turning_circle, zigzag
+    from ..manoeuvres import turning_circle, zigzag
 
-    res = _result_of(result)
+    res = as_result(result)
     if not 0 < level < 1:
         raise ValueError(f"level must be in (0, 1), got {level!r}")
     specs = [parse_manoeuvre(s) for s in manoeuvres]
@@ -385,7 +420,7 @@ def predict_manoeuvres(result, manoeuvres: Sequence = ("turning:35", "zigzag:10/
     for spec in specs:
         spd = None if speed is None else np.full(B, float(speed))
         if spd is None:
-            from .manoeuvres import ship_info
+            from ..manoeuvres import ship_info
 
             u0 = ship_info(model).get("design_speed")
             if u0 is None:
@@ -443,13 +478,14 @@ def replay_draws(model, log, params: np.ndarray, *, lpp: float, kind: str, switc
     Returns ``{"<metric>_ci": [low, high], ..., "imo_probability": {...}, "draws": {...},
     "simulation": SimulationResult}``.
     """
-    from .manoeuvres import metrics
-    from .simulate import replay
+    from ..manoeuvres import metrics
+    from ..simulate import replay
 
     data = log.data if hasattr(log, "data") else log
     if rudder_sign == -1 and "delta" in data.columns:
         data = data.assign(delta=-data["delta"])
     P = np.asarray(params, dtype=float)
+    check_draws_memory(P.shape[0], len(data), model.nx + model.nu)
     if with_nominal:
         P = np.vstack([model.params[None], P])
     with warnings.catch_warnings():

@@ -49,6 +49,9 @@ import pandas as pd
 from scipy.special import ndtri
 from scipy.stats import rankdata
 
+from ..identify.result import as_result
+from ..results import ResultMixin
+
 __all__ = ["sample_posterior", "PosteriorSamples", "load_samples", "split_rhat", "CONVERGENCE",
            "OutputErrorLikelihood"]
 
@@ -165,7 +168,7 @@ class OutputErrorLikelihood:
 
     def __init__(self, model, logs, names, *, meas_std=None, channels=None, prior_mean=None, prior_std=None,
                  substeps: int = 1, input_hold: str = "foh", x0_states=None):
-        from .data import noise_std_from_data, prepare_logs
+        from ..identify.data import noise_std_from_data, prepare_logs
 
         self.model = model
         self.names = list(names)
@@ -265,7 +268,7 @@ class OutputErrorLikelihood:
 
 # ----------------------------------------------------------------------------- samples
 @dataclass
-class PosteriorSamples:
+class PosteriorSamples(ResultMixin):
     """MCMC samples of a model's coefficients and the diagnostics of the chain.
 
     Attributes
@@ -313,6 +316,25 @@ class PosteriorSamples:
             "tau": [d["tau"][n] for n in self.names], "ess": [d["ess"][n] for n in self.names],
             "rhat": [d["rhat"][n] for n in self.names]}, index=self.names)
 
+    def _html_title(self) -> str:
+        return f"Posterior samples of '{self.model}' ({len(self.samples)} draws)"
+
+    def plot(self, ax=None):
+        """Histograms of the marginal draws of the (at most six) most correlated coefficients; returns the axes."""
+        import matplotlib.pyplot as plt
+
+        names = self.most_correlated(6)
+        if ax is None:
+            _, axs = plt.subplots(1, len(names), figsize=(2.6 * len(names), 2.4), squeeze=False)
+            axs = axs[0]
+        else:
+            axs = np.resize(np.atleast_1d(ax).ravel(), len(names))
+        for a, n in zip(axs, names):
+            a.hist(self.samples[:, self.names.index(n)], bins=30, color="C0", alpha=0.8)
+            a.set_xlabel(n)
+        axs[0].set_ylabel("draws")
+        return axs
+
     def cov(self) -> pd.DataFrame:
         return pd.DataFrame(np.cov(self.samples, rowvar=False), index=self.names, columns=self.names)
 
@@ -354,13 +376,12 @@ def load_samples(obj) -> PosteriorSamples:
     if isinstance(obj, dict):
         return PosteriorSamples.from_dict(obj)
     if isinstance(obj, (str, os.PathLike)):
+        from .._io import read_json
+
         p = Path(obj)
-        if not p.is_file():
+        if not p.exists():
             raise FileNotFoundError(f"{p}: no such samples file; write it with `shipid sample`")
-        try:
-            doc = json.loads(p.read_text(encoding="utf-8"))
-        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise ValueError(f"{p}: not a JSON samples file ({exc})") from None
+        doc = read_json(p, "JSON samples file", advice="pass the file written by `shipid sample -o`")
         if not isinstance(doc, dict):
             raise ValueError(f"{p}: not a shipid samples file (top level is not an object)")
         return PosteriorSamples.from_dict(doc, source=str(p))
@@ -448,6 +469,53 @@ def _recorded_prior(res, names):
     return None, None
 
 
+#: Fewest kept steps per walker (after burn-in and thinning) the chain diagnostics need (split-R-hat halves
+#: the chain, the autocorrelation estimate needs a few lags).
+MIN_KEPT_STEPS = 4
+
+
+def _run_mcmc(sampler, state, steps: int, progress):
+    """``sampler.run_mcmc(state, steps)`` with Ctrl-C taken between steps: emcee prints a traceback for any
+    exception raised inside the likelihood (KeyboardInterrupt included) before passing it on, so the
+    interrupt is noted by a handler and raised here, outside the likelihood.  Returns the last state."""
+    import signal
+    import threading
+
+    hit: list = []
+    previous = None
+    if threading.current_thread() is threading.main_thread() and \
+            signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        previous = signal.signal(signal.SIGINT, lambda signum, frame: hit.append(signum))
+    try:
+        last = state
+        for last in sampler.sample(state, iterations=steps, progress=progress):
+            if hit:
+                raise KeyboardInterrupt
+        return last
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+
+
+def _check_sample_size(nw: int, steps: int, burn: int, thin: int, k: int, logs, like) -> None:
+    """Refuse before anything is allocated: a thinning that keeps fewer than :data:`MIN_KEPT_STEPS` steps, and
+    a run whose chain and batched simulations need more memory than :func:`shipid._io.memory_limit_bytes`."""
+    from .._io import check_memory
+
+    kept = -(-(steps - burn) // thin)
+    if kept < MIN_KEPT_STEPS:
+        raise ValueError(f"thin={thin}: keeps {kept} of the {steps - burn} steps after burn-in (steps={steps}, "
+                         f"burn={burn}); the diagnostics need at least {MIN_KEPT_STEPS}: use a smaller thin "
+                         "(--thin) or more steps (--steps)")
+    n_samples = sum(int(np.size(getattr(lg, "t", ()))) for lg in logs) or 1
+    nx = len(getattr(like.model, "state_names", ())) or 6
+    # emcee's chain and log-probabilities (steps x walkers x (dims + 1)), the proposal and its batched
+    # simulation (walkers x samples x states, ~4 arrays of it alive in one RK4 step)
+    need = 8.0 * (steps * nw * (k + 1) + 4 * nw * k + 4 * nw * n_samples * nx)
+    check_memory(need, f"sampling with walkers={nw} x steps={steps}",
+                 "use fewer walkers or steps (--walkers, --steps; the default walkers is max(4 x coefficients, 32))")
+
+
 def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2000, burn: int | None = None,
                      thin: int = 1, seed=0, vectorize: bool = True, channels=None, substeps: int = 1,
                      start_scale: float = 1.0, use_prior: bool = True, moves: str = "de",
@@ -513,9 +581,7 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
         import emcee
     except ImportError:
         raise ValueError("MCMC sampling needs emcee: pip install 'shipid[mcmc]' (or pip install emcee)") from None
-    from ..uncertainty import _result_of
-
-    res = _result_of(result)
+    res = as_result(result)
     model = res.to_model()
     names = list(res.cov.index)
     if not names:
@@ -541,6 +607,7 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
     nw += nw % 2
     if nw < 2 * k:
         raise ValueError(f"walkers={nw}: emcee needs at least 2 x {k} sampled dimensions = {2 * k} walkers")
+    _check_sample_size(nw, steps, burn, thin, k, logs, like)
     rng = np.random.default_rng(seed)
     w, V = np.linalg.eigh(0.5 * (cov + cov.T))
     A = V * np.sqrt(np.clip(w, 0, None))
@@ -573,18 +640,18 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
         pm, pc = _proposal_in_sampler_coordinates(proposal, all_names, like)
         kept = emcee.EnsembleSampler(nw, k, fn, vectorize=vectorize, moves=_independence_move(emcee, pm, pc))
         kept._random = sampler._random
-        kept.run_mcmc(emcee.State(p0, log_prob=lp0), steps, progress=progress)
+        _run_mcmc(kept, emcee.State(p0, log_prob=lp0), steps, progress)
         chain, acceptance = kept.get_chain(discard=burn, thin=thin), kept.acceptance_fraction
     elif moves == "independence":
-        state = sampler.run_mcmc(emcee.State(p0, log_prob=lp0), burn, progress=progress)
+        state = _run_mcmc(sampler, emcee.State(p0, log_prob=lp0), burn, progress)
         pts = sampler.get_chain(discard=burn // 2).reshape(-1, k)
         kept = emcee.EnsembleSampler(nw, k, fn, vectorize=vectorize,
                                      moves=_independence_move(emcee, pts.mean(axis=0), np.cov(pts, rowvar=False)))
         kept._random = sampler._random
-        kept.run_mcmc(state, steps - burn, progress=progress)
+        _run_mcmc(kept, state, steps - burn, progress)
         chain, acceptance = kept.get_chain(thin=thin), kept.acceptance_fraction
     else:
-        sampler.run_mcmc(emcee.State(p0, log_prob=lp0), steps, progress=progress)  # start values evaluated once
+        _run_mcmc(sampler, emcee.State(p0, log_prob=lp0), steps, progress)  # start values evaluated once
         chain, acceptance = sampler.get_chain(discard=burn, thin=thin), sampler.acceptance_fraction
     diag = chain_diagnostics(chain, acceptance, all_names, steps)
     diag["n_simulations"] = int(like.n_sims)
