@@ -13,7 +13,7 @@ from shipid.cli import build_parser, main
 #: (so that a command giving the word another meaning fails here).
 VOCABULARY = {
     "--output": ("the file or folder the command writes", r"."),
-    "--force": ("replace an existing output", r"overwrite|write into"),
+    "--force": ("replace an existing output", r"overwrite|write into|replace|into a used output"),
     "--seed": ("random seed", r"seed"),
     "--dt": ("a time step in seconds", r"\[s\]"),
     "--every": ("a sample stride: use every K-th sample", r"every K|K-th"),

@@ -301,7 +301,7 @@ def _fit(args) -> int:
     opts = fit_options(args, model)
     recipe = _lib_errors(lambda: fit_logs(
         logs, model, lpp=args.lpp, progress=progress_on(args), ekf_options=extra, start_defaults=args.params is None,
-        log=print, **opts))
+        log=None if getattr(args, "quiet", False) else print, **opts))
     fit, ident = recipe, recipe.ekf
     result = fit.result()
     if choice is not None:

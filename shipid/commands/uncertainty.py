@@ -124,7 +124,7 @@ def _sample(args) -> int:
         s = sample_posterior(args.result, logs, walkers=args.walkers, steps=args.steps, burn=args.burn, thin=args.thin,
                              seed=args.seed, vectorize=not args.no_vectorize, channels=chans, moves=args.moves,
                              sample_x0=args.sample_x0, use_prior=not args.no_prior,
-                             progress=progress_on(args))
+                             progress=progress_on(args), log=None if getattr(args, "quiet", False) else print)
     s.to_json(out, force=args.force)
     import pandas as pd
 

@@ -166,7 +166,8 @@ def _horizon_results(args, horizons, logs, model, initial) -> list:
     from ..validation.horizon import horizon_prediction
 
     out = []
-    for lg in logs:
+    for lg in progress_iter(logs, args, f"open-loop predictions over {', '.join(f'{h:g}' for h in horizons)} s, "
+                                        "logs"):
         if not {"x", "y", "psi"} <= set(getattr(lg, "data", lg).columns):
             print(f"note: {getattr(lg, 'name', 'log')}: no x, y, psi channels; horizon prediction skipped",
                   file=sys.stderr)
