@@ -119,7 +119,7 @@ def test_hostile_result_file(build, needles, command, tmp_path, capsys):
     r = build(tmp_path)
     argv = {"simulate": ["simulate", r, "--turning", "35", "-o", tmp_path / "t.csv"],
             "validate": ["validate", r, LOG, "-o", tmp_path / "v.json"],
-            "fit-params": ["fit", LOG, "--params", r, "-o", tmp_path / "f.json", "--no-progress"]}[command]
+            "fit-params": ["fit", LOG, "--model", r, "-o", tmp_path / "f.json", "--no-progress"]}[command]
     _check(argv, tmp_path, needles, capsys)
 
 
@@ -274,13 +274,13 @@ OPTION_CASES = [
      ["dt 1e-09", "GiB", "--dt"]),
     ("glider-speed-nan", ["glider", "launch", "--speed", "nan", "--angle", "45", "-o", "{tmp}/g.json"], ["--speed nan"]),
     ("glider-popsize", ["glider", "optimise", "--popsize", "100000", "-o", "{tmp}/g.json"], ["--popsize 100000"]),
-    ("glider-params-bad", ["glider", "launch", "--speed", "5", "--angle", "45", "--params", "{tmp}/r.json", "-o",
+    ("glider-params-bad", ["glider", "launch", "--speed", "5", "--angle", "45", "--model", "{tmp}/r.json", "-o",
                            "{tmp}/g.json"], ["r.json"]),
-    ("route-seed-negative", ["route", "pso-paper", "--seed", "-3", "-o", "{tmp}/ps.json"], ["--seed -3"]),
+    ("route-seed-negative", ["route", "paper-pso", "--seed", "-3", "-o", "{tmp}/ps.json"], ["--seed -3"]),
     ("validate-output-is-log", ["validate", "{tmp}/r.json", "{log}", "-o", "{log}", "--force"], ["would replace"]),
     ("plan-output-is-problem", ["plan", "{tmp}/p.json", "-o", "{tmp}/p.json", "--force"], ["would replace"]),
-    ("route-output-exists", ["route", "zermelo-paper", "-o", "{tmp}/old.json"], ["old.json", "--force"]),
-    ("route-csv-exists", ["route", "zermelo-paper", "-o", "{tmp}/old2.json"], ["old2.csv", "--force"]),
+    ("route-output-exists", ["route", "paper-zermelo", "-o", "{tmp}/old.json"], ["old.json", "--force"]),
+    ("route-csv-exists", ["route", "paper-zermelo", "-o", "{tmp}/old2.json"], ["old2.csv", "--force"]),
     ("ship-file-deep", ["fit", "{log}", "--ship", "{tmp}/deep.json", "-o", "{tmp}/f.json"], ["deep.json"]),
     ("fit-log-fifo", ["fit", "{tmp}/fifo.csv", "-o", "{tmp}/f.json"], ["fifo.csv"]),
 ]

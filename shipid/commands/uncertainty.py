@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from ._common import add_log_options, add_progress_option, progress_on, read_logs_for_result
+from ._common import add_log_options, add_progress_option, progress_on, read_logs_for_result, renamed_option
 
 
 def _command(sub, name, handler, help, description, *, positional, output_help, output_metavar=None,
@@ -88,11 +88,13 @@ def engine_from(args):
 
 
 def add_draws_option(p) -> None:
-    """``--draws N`` (+ ``--seed``, ``--samples``) for simulate / validate / report."""
+    """``--draws N`` (+ ``--seed``, ``--samples``) for simulate / validate / report (``--draws-seed``: the old
+    spelling of ``--seed``)."""
     p.add_argument("--draws", type=int, default=0, metavar="N",
                    help="propagate the fit's uncertainty: N parameter draws simulated as one batch (95 %% intervals, "
                         "IMO probabilities)")
-    p.add_argument("--draws-seed", type=int, default=0, metavar="SEED", help="seed of the draws (default 0)")
+    p.add_argument("--seed", type=int, default=0, help="random seed of the draws (default 0)")
+    renamed_option(p, "--draws-seed", "--seed", dest="seed", type=int, metavar="SEED")
     p.add_argument("--samples", default=None, metavar="SAMPLES.json",
                    help="draw from MCMC samples (`shipid sample`) instead of the fit's Gaussian posterior")
 
@@ -122,7 +124,7 @@ def _sample(args) -> int:
         s = sample_posterior(args.result, logs, walkers=args.walkers, steps=args.steps, burn=args.burn, thin=args.thin,
                              seed=args.seed, vectorize=not args.no_vectorize, channels=chans, moves=args.moves,
                              sample_x0=args.sample_x0, use_prior=not args.no_prior,
-                             progress=progress_on(args))
+                             progress=progress_on(args), log=None if getattr(args, "quiet", False) else print)
     s.to_json(out, force=args.force)
     import pandas as pd
 
@@ -180,8 +182,8 @@ def simulate_draws(args, model_spec: str) -> int:
         specs = [f"zigzag:{d}/{p or d}:{s}" for s in _sides(args.side)]
     import math
 
-    pred = predict_manoeuvres(model_spec, specs, draws=check_draws(args), seed=args.draws_seed, samples=args.samples,
-                              speed=args.speed, lpp=args.lpp, method=args.method,
+    pred = predict_manoeuvres(model_spec, specs, draws=check_draws(args), seed=args.seed, samples=args.samples,
+                              speed=args.speed, lpp=args.lpp, method=args.integrator,
                               rudder_rate=math.radians(args.rudder_rate) if args.rudder_rate is not None else None)
     tab = pred.summary()
     print(tab[["manoeuvre", "metric", "nominal", "median", "low", "high", "n_nonfinite"]].to_string(
@@ -212,7 +214,7 @@ def validate_draws(args, result_path, vals: list, out: list) -> None:
     model, res = resolve_model(result_path)
     if res is None:
         raise ValueError("--draws needs a fit result (with a covariance), not a model name")
-    P = parameter_draws(res, n, seed=args.draws_seed, samples=args.samples)
+    P = parameter_draws(res, n, seed=args.seed, samples=args.samples)
     for v, d in zip(vals, out):
         if v.measured is None or v.lpp is None or not d.get("predicted"):
             continue

@@ -226,7 +226,8 @@ def resolve_model(result_or_model) -> tuple[Model, Any]:
     Parameters
     ----------
     result_or_model : FitResult, dict, str, os.PathLike or Model
-        A result JSON may carry ``"model_options"`` (keyword arguments of the model class, e.g.
+        A result (or the path of its JSON), a model, or a registered model's name with an optional
+        parameter set (``"mmg:kvlcc2"``).  A result JSON may carry ``"model_options"`` (keyword arguments of the model class, e.g.
         MMG particulars ``{"lpp": 320}``), at top level or under ``"extra"``.
 
     Returns
@@ -235,7 +236,9 @@ def resolve_model(result_or_model) -> tuple[Model, Any]:
     """
     from ..identify.result import model_from
 
-    if isinstance(result_or_model, (str, os.PathLike)) and not Path(result_or_model).is_file():
+    looks_like_file = isinstance(result_or_model, (str, os.PathLike)) and (
+        Path(result_or_model).suffix.lower() == ".json" or os.sep in str(result_or_model))
+    if looks_like_file and not Path(result_or_model).is_file():  # else a registered model name[:set]
         raise FileNotFoundError(f"{result_or_model}: no such result file; run `shipid fit` first or check the path")
     return model_from(result_or_model)
 
