@@ -206,10 +206,10 @@ def read_log(
     return log
 
 
-#: Peak memory of reading a text log per row [bytes], with a margin: measured 0.59 kB a row on a 500 000-row,
-#: 9-column log of 70-byte rows (366 MB peak resident, 73 MB of it the imports; 0.79 kB before the table was
-#: parsed from bytes rather than a 4-byte-a-character StringIO and the file's bytes were dropped once decoded),
-#: against 72 bytes a row in the finished log.
+#: Peak memory of reading a text log per row [bytes], with a margin: ``benchmarks/bench_log_memory.py``
+#: measures 454 bytes a row above the imports on a 500 000-row, 9-column log of 71-byte rows (6.3 x the 72 bytes
+#: a row of the finished log; 671 bytes, 9.3 x, before the table was parsed from bytes rather than a
+#: 4-byte-a-character StringIO and the file's bytes were dropped once decoded).
 LOG_BYTES_PER_ROW = 700
 
 
