@@ -490,7 +490,7 @@ def test_output_naming_a_device_pipe_or_socket_is_refused_even_with_force(kind, 
             "simulate": ["simulate", "kcs-response:synthetic-truth", "--turning", "35"],
             "sample": ["sample", r, LOG, "--steps", "10"], "log": ["log", LOG], "metrics": ["metrics", LOG],
             "sweep": ["sweep", "kcs-response:synthetic-truth", "--rudder", "35"],
-            "plan": ["plan", "paper-1"], "route": ["route", "zermelo-paper"],
+            "plan": ["plan", "paper-1"], "route": ["route", "paper-zermelo"],
             "glider": ["glider", "launch", "--speed", "1", "--angle", "45"]}[command]
     rc = main([str(a) for a in argv] + ["-o", str(out), "--force"])
     err = capsys.readouterr().err.strip()
