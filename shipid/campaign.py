@@ -803,6 +803,7 @@ def run_campaign(campaign, outdir, *, engine: Engine | None = None, force: bool 
     camp = load_campaign(campaign) if not isinstance(campaign, dict) else campaign
     out = Path(outdir)
     check_output_target(out / SUMMARY, "campaign summary")
+    check_output_target(out / JOURNAL, "campaign journal")  # (a FIFO there would block --resume's read)
     if out.exists() and not out.is_dir():
         raise ValueError(f"{out}: exists and is not a folder; give a new or empty output folder")
     fits, sweeps = camp["fits"], camp.get("sweeps", [])

@@ -400,3 +400,15 @@ def test_a_member_that_kills_its_worker_is_retried_then_reported_and_the_others_
     assert out[1].error == (f"its worker process died {MEMBER_RETRIES + 1} times running it (out of memory, or a "
                             "crash); run it alone with --workers 1 to see why")
     assert sorted(o.index for o in seen) == [0, 1, 2]
+
+
+def test_a_journal_that_is_a_fifo_is_refused_not_read(tmp_path, capsys):
+    import os
+
+    logs = _short_logs(tmp_path)
+    p = _campaign(tmp_path, [{"name": "a", "logs": [logs["kcs_zz_m10"]], "passes": 1}])
+    out = tmp_path / "out"
+    out.mkdir()
+    os.mkfifo(out / "campaign.journal")
+    assert main(["campaign", str(p), "-o", str(out), "--workers", "1", "--resume"]) == 2
+    assert "campaign.journal: is a FIFO (named pipe)" in capsys.readouterr().err
