@@ -685,7 +685,18 @@ def member_status(value: dict | None, ok: bool) -> tuple[str, list[str]]:
 
 def fit_exit_status(result: dict) -> tuple[int, list[str]]:
     """``shipid fit``'s exit status for a result dict (0 consistent, 1 not converged, 3 not consistent with its
-    noise model, 4 filter diverged) and the reasons, from the result's own diagnostics."""
+    noise model or a data defect, 4 filter diverged) and the reasons.  A result that carries a graded verdict
+    is judged by the verdict's own mapping (``shipid.identify.verdict.exit_status``), so that a campaign
+    grades a fit exactly as ``shipid fit`` does; otherwise from the result's consistency diagnostics."""
+    if isinstance(result.get("verdict"), dict):
+        try:
+            from .identify.verdict import exit_status, verdict_of
+        except ImportError:
+            pass
+        else:
+            v = verdict_of(result)
+            code = int(exit_status(v))
+            return code, ([str(r) for r in v.reasons] if code else [])
     diag = result.get("diagnostics") or {}
     if result.get("method") == "ekf" and not result.get("success", True):  # the filter did not finish
         return 4, [f"the filter diverged: {result.get('message', '')}"]
@@ -792,6 +803,7 @@ def run_campaign(campaign, outdir, *, engine: Engine | None = None, force: bool 
     camp = load_campaign(campaign) if not isinstance(campaign, dict) else campaign
     out = Path(outdir)
     check_output_target(out / SUMMARY, "campaign summary")
+    check_output_target(out / JOURNAL, "campaign journal")  # (a FIFO there would block --resume's read)
     if out.exists() and not out.is_dir():
         raise ValueError(f"{out}: exists and is not a folder; give a new or empty output folder")
     fits, sweeps = camp["fits"], camp.get("sweeps", [])

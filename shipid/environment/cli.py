@@ -27,7 +27,7 @@ def wind_geometry(spec: str, logs=()) -> WindForce:
     p = Path(spec)
     if not p.exists():
         raise ValueError(f"--wind {spec}: not 'esso-osaka-3m' and no such file")
-    doc = read_json(p, "wind geometry file", advice="give a JSON mapping with lpp, breadth, A_T, A_L, A_OD, C, "
+    doc = read_json(p, "wind geometry", advice="give a JSON mapping with lpp, breadth, A_T, A_L, A_OD, C, "
                     "C_BR, H_BR, H_C")
     return WindForce.from_mapping(doc)
 

@@ -133,9 +133,10 @@ def read_log(
     import hashlib
 
     sha = hashlib.sha256(raw).hexdigest()
-    if not raw.strip():
+    if not raw or raw.isspace():  # (raw.strip() would copy the whole file)
         raise LogError(f"`{p.name}`: file is empty; give a log with a header line and data rows", path=p)
     text = _decode(raw, p)
+    del raw  # the text is what is parsed; the bytes of a long log are not kept beside it
     if fmt not in ("auto", "csv", "marin"):
         raise ValueError(f"fmt={fmt!r}: use 'auto', 'csv' or 'marin'")
     if velocity_frame is not None:
@@ -205,9 +206,11 @@ def read_log(
     return log
 
 
-#: Peak memory of reading a text log per row [bytes]: measured 0.79 kB a row on a 500 000-row, 9-column log of
-#: 70-byte rows (468 MB peak resident, 73 MB of it the imports), against 72 bytes a row in the finished log.
-LOG_BYTES_PER_ROW = 800
+#: Peak memory of reading a text log per row [bytes], with a margin: ``benchmarks/bench_log_memory.py``
+#: measures 454 bytes a row above the imports on a 500 000-row, 9-column log of 71-byte rows (6.3 x the 72 bytes
+#: a row of the finished log; 671 bytes, 9.3 x, before the table was parsed from bytes rather than a
+#: 4-byte-a-character StringIO and the file's bytes were dropped once decoded).
+LOG_BYTES_PER_ROW = 700
 
 
 def check_log_memory(p: Path) -> None:

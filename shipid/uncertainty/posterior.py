@@ -381,7 +381,7 @@ def load_samples(obj) -> PosteriorSamples:
         p = Path(obj)
         if not p.exists():
             raise FileNotFoundError(f"{p}: no such samples file; write it with `shipid sample`")
-        doc = read_json(p, "JSON samples file", advice="pass the file written by `shipid sample -o`")
+        doc = read_json(p, "JSON samples", advice="pass the file written by `shipid sample -o`")
         if not isinstance(doc, dict):
             raise ValueError(f"{p}: not a shipid samples file (top level is not an object)")
         return PosteriorSamples.from_dict(doc, source=str(p))
