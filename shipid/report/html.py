@@ -494,8 +494,9 @@ def plain_summary(result, model, validations, horizons=None) -> str:
               f"the {m} method")
     fitted = (f"fitted by {method} to {n_fit} log(s) ({', '.join(names[:6])}{', ...' if len(names) > 6 else ''})"
               if n_fit else "with no fitted logs recorded")
-    out = [f"This report checks a {model_label(result, model)} model {fitted}, estimating {k} of its {n_par} "
-           "coefficients."]
+    label = model_label(result, model)
+    article = "an" if label[:1].lower() in "aeiou" or label.lower().startswith("mmg") else "a"
+    out = [f"This report checks {article} {label} model {fitted}, estimating {k} of its {n_par} coefficients."]
     verdict = getattr(result, "verdict", None)
     cons = (result.diagnostics or {}).get("consistency") or {}
     if verdict is not None and getattr(verdict, "grade", None):
@@ -514,7 +515,8 @@ def plain_summary(result, model, validations, horizons=None) -> str:
     if track is not None:
         rel = f" ({track / Ls[0]:.2f} ship lengths)" if Ls else ""
         out.append(f"Replayed open loop with each log's own rudder and propeller inputs, it follows the "
-                   f"{len(validations)} log(s) ({len(held)} not used in the fit) with a median track error of "
+                   f"{len(validations)} log(s) ({f'{len(held)} not used in the fit' if held else 'all used in the fit'}) "
+                   "with a median track error of "
                    f"{track:.3g} m{rel}.")
     td = [abs(v.difference("standard").get("tactical_diameter_L") or math.nan) / v.measured.to_dict()
           ["tactical_diameter_L"] * 100 for v in validations if v.manoeuvre == "turning" and v.standard is not None
