@@ -194,7 +194,7 @@ def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: in
 
     if log is not None:
         log(f"recipe: refining {len(est_ref)} coefficients by replaying {len(grid)} log(s) "
-            f"(up to {max_nfev} iterations, {len(est_ref) + 1} replays each) ...")
+            f"(at most {max_nfev} evaluations; each Jacobian takes {len(est_ref) + 1} replays in one batch) ...")
     ref = refine(extra)
     damp = None
     if physical_damping and {"v", "r"} <= set(start_model.state_names):

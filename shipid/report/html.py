@@ -279,7 +279,8 @@ def _section_imo(vals: list[LogValidation]) -> str:
     for v in vals:
         na = ("n/a", "na")
         if v.measured is None:
-            rows.append([_e(v.log.name), "&ndash;", "&ndash;", "&ndash;", na, "&ndash;", na, "&ndash;", na])
+            rows.append([_e(v.log.name), "not a standard manoeuvre: no criterion applies", "", "", na, "", na, "",
+                         na])
             continue
         mi = v.measured.imo()
         pd_ = v.predicted.to_dict() if v.predicted is not None else {}
@@ -424,9 +425,9 @@ def _section_horizon(horizons) -> str:
                          _f(e["n_starts"], "{:.0f}"), (_f(e["n_blowups"], "{:.0f}"), "bad" if e["n_blowups"] else "")])
         fig = figures._figure(4.6, 5.0)
         ax = h.plot(ax=fig.add_subplot(), log=log, every=max(1, len(h.start_times) // 12))
-        ax.set_title(f"{h.name}: predictions over {h.horizons.max():g} s", fontsize=11)
+        ax.set_title(f"{h.name}\npredictions over {h.horizons.max():g} s", fontsize=10)
         ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=2, frameon=False)  # off the tracks
-        fig.subplots_adjust(left=0.17, right=0.97, bottom=0.2, top=0.93)
+        fig.subplots_adjust(left=0.17, right=0.97, bottom=0.2, top=0.9)
         figs.append(_fig(fig, f"predicted vs measured tracks, {h.name}"))
     return ('<h2 id="horizon">Open-loop prediction from the measured state</h2><p>How far ahead the model can be '
             "trusted: from starts every few seconds it runs open loop with the measured inputs, and the table gives "
@@ -530,7 +531,7 @@ def plain_summary(result, model, validations, horizons=None) -> str:
                    + ".")
     by_h: dict = {}
     for h, _log in horizons or []:
-        for e in h.summary():
+        for e in h.to_records():
             by_h.setdefault(float(e["seconds"]), []).append(e.get("position_error_median_m"))
     if by_h:
         sec = 30.0 if 30.0 in by_h else sorted(by_h)[len(by_h) // 2]
@@ -581,7 +582,7 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
     body = [f"<h1>{_e(title)}</h1>",
             _section_verdict(res),
             f"<p class=\"intro\">{_e(plain_summary(res, model, validations, horizons))}</p>",
-            f"<p class=\"note\">Model <b>{_e(res.model)}</b> ({_e(res.method)}; "
+            f"<p class=\"note\">Model <b>{_e(model_label(res, model))}</b> ({_e(res.method)}; "
             f"{'fitted to ' + str(len(res.inputs)) + ' log(s)' if res.inputs else 'no fitted logs recorded'}), "
             f"validated on {len(validations)} log(s) "
             f"({n_ok} replayed with both metric sets). Report written {_e(stamp)} by shipid "
