@@ -20,7 +20,6 @@ PACKAGES = [
     ("shipid.simulate", "Simulation"),
     ("shipid.manoeuvres", "Standard manoeuvres and their metrics"),
     ("shipid.validation", "Validation: replay, metrics, horizon predictions"),
-    ("shipid.validation_horizon", "Open-loop horizon predictions"),
     ("shipid.report", "HTML report"),
     ("shipid.uncertainty", "Uncertainty propagation"),
     ("shipid.campaign", "Campaigns on Dask"),
