@@ -55,7 +55,7 @@ def write(folder: Path) -> None:
     for pkg, title in PACKAGES:
         try:
             mod = importlib.import_module(pkg)
-        except ImportError:
+        except (ImportError, AttributeError):
             continue  # a module that does not exist in this checkout
         own, linked = [], []
         for n in public_names(mod):
@@ -82,6 +82,9 @@ def write(folder: Path) -> None:
         if not page.exists() or page.read_text() != text:
             page.write_text(text)
         pages.append(pkg)
+    for stale in folder.glob("shipid*.rst"):  # a package that no longer exists
+        if stale.stem not in pages:
+            stale.unlink()
     index = ["API reference", "=============", "",
              "Every public name of the package, generated from its docstrings and grouped by package "
              "in the order data flow through shipid: logs, models, identification, simulation and "
