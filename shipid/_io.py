@@ -23,6 +23,7 @@ Reading
 """
 from __future__ import annotations
 
+import atexit
 import hashlib
 import json
 import math
@@ -202,8 +203,6 @@ def install_signal_cleanup() -> dict:
     (SIGINT already raises KeyboardInterrupt, which the writers clean up after.)
     Returns the previous handlers for :func:`restore_signal_handlers`.
     """
-    import atexit
-
     def handler(signum, frame):
         _cleanup_tmp()
         raise SystemExit(128 + signum)
@@ -311,7 +310,7 @@ def read_json(path, what: str = "JSON file", *, advice: str | None = None):
 
 def loads_yaml(text: str, where: str, what: str = "YAML"):
     """``yaml.safe_load`` after a token scan that refuses nesting deeper than :data:`MAX_DEPTH`."""
-    import yaml  # type: ignore
+    import yaml  # type: ignore  # optional (the yaml extra): only for YAML files
 
     depth = 0
     try:

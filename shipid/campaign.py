@@ -45,7 +45,9 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import os
+import pickle
 import re
 import time
 import traceback
@@ -56,6 +58,16 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
+from tqdm.auto import tqdm
+
+from ._io import atomic_write_text
+from .glider import PAPER_SWEEP, sweep
+from .identify import EKFIdentifier, model_from
+from .identify.batch import OutputErrorRefiner
+from .logs import read_log
+from .manoeuvres import ship_info, turning_sweep
+from .models import get_model, model_class
+from .uncertainty import parse_manoeuvre, predict_manoeuvres
 
 __all__ = ["Engine", "Outcome", "member_seeds", "load_campaign", "run_campaign", "run_fit_member", "run_sweep_member",
            "run_member", "member_cost", "warm_fits", "warm_specs", "FIT_KEYS", "SWEEP_KEYS", "dask_available"]
@@ -67,7 +79,7 @@ WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THRE
 
 def dask_available() -> bool:
     try:
-        import distributed  # noqa: F401
+        import distributed  # noqa: F401  # optional (the distributed extra)
     except ImportError:
         return False
     return True
@@ -182,7 +194,7 @@ class Engine:
     def _start(self):
         if self._client is not None or self.mode != "dask":
             return
-        from distributed import Client, LocalCluster
+        from distributed import Client, LocalCluster  # optional (the distributed extra)
 
         if self.scheduler is not None:
             try:
@@ -193,7 +205,7 @@ class Engine:
             # one thread per worker process and one BLAS/OpenMP/numba thread inside it: W workers use W
             # cores, never W x (threads of each library) (Dask's pre-spawn environment sets the BLAS ones
             # already; numba's is added here)
-            import dask
+            import dask  # optional (the distributed extra)
 
             t0 = time.perf_counter()
             with dask.config.set(QUIET_CONFIG if self.quiet else {}):  # the nannies hand it to their workers
@@ -210,8 +222,6 @@ class Engine:
         ``{worker: seconds}``; a warm-up already run on this engine is not repeated."""
         if warm is None or self.mode != "dask":
             return {}
-        import pickle
-
         key = pickle.dumps(warm)
         if key in self._warmed:
             return {}
@@ -252,8 +262,6 @@ class Engine:
         if self.mode == "dask":
             self.warm(warm)
         if self.progress:
-            from tqdm.auto import tqdm
-
             bar = tqdm(total=len(items), desc=desc, unit="member")
         t0, c0 = time.perf_counter(), time.process_time()
         out: list = []
@@ -264,7 +272,7 @@ class Engine:
                     if bar is not None:
                         bar.update(1)
                 return out
-            from distributed import as_completed
+            from distributed import as_completed  # optional (the distributed extra)
 
             self._start()
             cpu0 = self._client.run(_process_cpu)
@@ -336,7 +344,7 @@ def load_campaign(path) -> dict:
     text = p.read_text(encoding="utf-8")
     if p.suffix.lower() in (".yaml", ".yml"):
         try:
-            import yaml
+            import yaml  # optional (the yaml extra): only for YAML campaign files
         except ImportError:
             raise ValueError(f"{p}: YAML campaign files need PyYAML (pip install 'shipid[yaml]'); or write JSON") from None
         try:
@@ -394,8 +402,6 @@ def load_campaign(path) -> dict:
             if k in spec and spec[k] < (1 if k == "passes" else 0):
                 raise ValueError(f"{p}: {label}: '{k}' must be >= {1 if k == 'passes' else 0}, got {spec[k]}")
         if "manoeuvres" in spec:
-            from .uncertainty import parse_manoeuvre
-
             for m in spec["manoeuvres"]:
                 try:
                     parse_manoeuvre(m)
@@ -447,11 +453,6 @@ def _sweep_spec(p: Path, i: int, w, names: set) -> dict:
 def run_fit_member(spec: dict) -> dict:
     """One campaign member: read its logs, fit (EKF, optional output-error refinement) and, with
     ``draws`` > 0, predict its manoeuvres with intervals.  Returns JSON-able dicts (runs on a worker)."""
-    from .logs import read_log
-
-    from .identify import EKFIdentifier, model_from
-    from .models import get_model, model_class
-
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
         logs = [read_log(f, lpp=spec.get("lpp")) for f in spec["logs"]]
@@ -470,14 +471,10 @@ def run_fit_member(spec: dict) -> dict:
                           tune_noise=bool(spec.get("tune_noise", False))).fit(logs)
     result = ident.result()
     if spec.get("refine"):
-        from .identify.batch import OutputErrorRefiner
-
         result = OutputErrorRefiner(ident.to_model(), estimate=ident.estimated_).fit(logs, start=ident).result()
     result.created = ""  # the member's output must not depend on when or where it ran
     out = {"result": result.to_dict(), "prediction": None}
     if int(spec.get("draws", 0)) > 0:
-        from .uncertainty import predict_manoeuvres
-
         pred = predict_manoeuvres(result, spec.get("manoeuvres", ["turning:35", "zigzag:10/10"]),
                                   draws=int(spec["draws"]), seed=int(spec["seed"]),
                                   inflation=float(spec.get("inflation", 1.0)), speed=spec.get("speed"))
@@ -493,17 +490,10 @@ def run_sweep_member(spec: dict):
     (default: the design speed); "glider": :func:`shipid.glider.sweep` over the given factor levels
     (the paper's where omitted).  Returns the sweep's table (DataFrame).
     """
-    import math
-
     if spec["kind"] == "glider":
-        from .glider import PAPER_SWEEP, sweep
-
         levels = {k: spec.get(k, PAPER_SWEEP[k]) for k in PAPER_SWEEP}
         res = sweep(**levels, dt=spec.get("dt"), t_max=float(spec.get("t_max", 60.0)), keep_trajectories=False)
         return res.summary.reset_index(drop=True)
-    from .identify.result import model_from
-    from .manoeuvres import ship_info, turning_sweep
-
     model = model_from(spec["model"])[0]
     lpp = spec.get("lpp")
     if lpp is not None and getattr(model, "lpp", None) not in (None, lpp) and hasattr(model, "scaled"):
@@ -535,8 +525,6 @@ def member_cost(spec: dict) -> float:
     """Estimated run time of a campaign member (:data:`_COST_PER_BYTE_PASS` ...), for scheduling."""
     if spec.get("_member") == "sweep":
         if spec["kind"] == "glider":
-            from .glider import PAPER_SWEEP
-
             return _COST_PER_CASE * float(np.prod([len(spec.get(k, PAPER_SWEEP[k])) for k in PAPER_SWEEP]))
         n = len(spec.get("rudder", [10.0, 15.0, 25.0])) * len(spec.get("speeds", [0]))
         return _COST_PER_CASE * n * (2 if spec.get("side") == "both" else 1)
@@ -587,8 +575,6 @@ def run_campaign(campaign, outdir, *, engine: Engine | None = None, force: bool 
     summary written to ``OUTDIR/campaign.json``: per member ``name``, ``type`` ("fit" or "sweep"),
     ``ok``, ``error``, ``success`` (of the fit; of every row of a sweep), ``seed`` and the files written.
     """
-    from ._io import atomic_write_text
-
     camp = load_campaign(campaign) if not isinstance(campaign, dict) else campaign
     out = Path(outdir)
     if out.exists() and any(out.iterdir()) and not force:

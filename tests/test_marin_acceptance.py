@@ -66,7 +66,7 @@ def test_raw_marin_fit_with_only_lpp_has_physical_damping_signs(tmp_path, capsys
     for k in positive:
         assert coef[k] > 0, (k, coef[k], std[k])
     if res["model"] == "response-nl":
-        from shipid.identify.recipe import _approach_speed
+        from shipid.identify.sampling import _approach_speed
         from shipid.logs import read_log
 
         with warnings.catch_warnings():
@@ -196,7 +196,7 @@ def test_output_error_refinement_of_padded_short_logs_does_not_warn(tmp_path):
 def test_linear_window_ignores_the_drift_angle_near_rest():
     """A log that starts from rest (the Esso Osaka runs do) has |v| ~ u ~ noise there, so atan2(|v|, u) is
     meaningless: those samples neither cut the window nor count; the drift at speed still does."""
-    from shipid.identify.recipe import DRIFT_SPEED_FRACTION, linear_window
+    from shipid.identify.sampling import DRIFT_SPEED_FRACTION, linear_window
     from shipid.logs import TrialLog
 
     rng = np.random.default_rng(3)

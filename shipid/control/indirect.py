@@ -36,9 +36,10 @@ import time
 
 import numpy as np
 from scipy.optimize import minimize
+from tqdm.auto import tqdm
 
 from ..integrate import rk4_step
-from .problem import Problem, one_blas_thread, rk4_sensitivities
+from .problem import Problem, check_problem_size, one_blas_thread, rk4_sensitivities
 from .result import ControlResult
 
 __all__ = ["solve_indirect", "lepf"]
@@ -235,8 +236,6 @@ def solve_indirect(problem: Problem, *, method: str = "bfgs", r0: float = 1.0, c
         raise ValueError(f"solve_indirect: method must be 'bfgs' or 'steepest', got {method!r}")
     if not 0.0 < c_factor < 1.0:
         raise ValueError(f"solve_indirect: c_factor must be in (0, 1), got {c_factor!r}")
-    from .problem import check_problem_size
-
     check_problem_size(problem.model, problem.n_intervals, problem.substeps, problem.name, n_segments=1)
     t0 = time.perf_counter()
     aug = _Augmented(problem)
@@ -257,8 +256,6 @@ def solve_indirect(problem: Problem, *, method: str = "bfgs", r0: float = 1.0, c
     r = r0
     bar = None
     if progress:
-        from tqdm.auto import tqdm
-
         bar = tqdm(total=n_penalty, desc=f"{problem.name} (LEPF stages)", unit="stage", leave=False)
     for stage in range(n_penalty):
         fun = lambda zz, rr=r: aug(zz, rr)  # noqa: E731

@@ -142,7 +142,7 @@ class ControlResult:
 
     def plot(self, axes=None):
         """Plot path (y vs x when the model has x, y), states and inputs against time."""
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         m = self.problem.model
         names = list(m.state_names) + list(m.input_names)

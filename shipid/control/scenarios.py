@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..models import get_model
-from .problem import Problem
+from .problem import Problem, check_problem_size
 
 __all__ = ["paper_problem", "STOP_SPEED", "SCENARIOS"]
 
@@ -50,8 +50,6 @@ def paper_problem(which: str | int, *, model=None, n_intervals: int | None = Non
     m = get_model("planing-boat") if model is None else model
     bounds = {"T": (0.0, 7500.0), "phi_p": (-np.radians(45), np.radians(45))}
     N = n_intervals or (40 if k == 1 else 20)
-    from .problem import check_problem_size
-
     check_problem_size(m, N, substeps or (4 if k == 1 else 8), key)
     # initial guess: full thrust for the first half, then none (no knowledge of the switch)
     guess = np.zeros((N, 2))

@@ -24,11 +24,13 @@ vectorised batch of launches (``vectorized=True``).
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
 from scipy.optimize import differential_evolution
+from tqdm.auto import tqdm
 
 from ..models import get_model
 from ..models.base import Model
@@ -198,16 +200,12 @@ def optimise_launch(
 
     bar = cb = None
     if progress:
-        from tqdm.auto import tqdm
-
         bar = tqdm(total=maxiter, desc="glider DE", unit="gen")
 
         def _tick(intermediate_result):
             bar.update(1)
 
         cb = _tick
-
-    import warnings
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)

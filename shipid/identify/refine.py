@@ -7,6 +7,9 @@ import warnings
 
 import numpy as np
 
+from ..manoeuvres import metrics as manoeuvre_metrics, ship_info, standard_manoeuvre
+from .batch import OutputErrorRefiner
+from .diagnostics import damping_check, DAMPING_MARGIN, damping_penalty
 from .sampling import _head, _lpp_of, _speed_scale, common_grid
 
 __all__ = ["refine_fit", "metric_residuals", "METRIC_TOL", "METRIC_WEIGHT", "REFINE_MODES", "AUTO_REFINE"]
@@ -41,10 +44,6 @@ def metric_residuals(model, logs, *, lpp: float | None = None, tolerances=None, 
     and the names of the logs used (logs without standard-manoeuvre metrics are left out).  The B
     parameter sets of one manoeuvre run as one batch; a manoeuvre a set cannot complete gives 1e3.
     """
-    from ..manoeuvres import metrics as manoeuvre_metrics
-    from ..manoeuvres import ship_info
-    from ..manoeuvres import standard_manoeuvre
-
     L = _lpp_of(logs, lpp)
     tol = {**METRIC_TOL, **(tolerances or {})}
     jobs, used = [], []
@@ -90,8 +89,6 @@ def metric_residuals(model, logs, *, lpp: float | None = None, tolerances=None, 
 
 
 def _kinds(logs, L) -> set:
-    from ..manoeuvres import metrics as manoeuvre_metrics
-
     kinds = set()
     for lg in logs:
         try:
@@ -132,9 +129,6 @@ def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: in
         terms make it up (docs/validation.md, session 8)
     log : callable, optional  called with one line per step
     """
-    from .batch import OutputErrorRefiner
-    from .diagnostics import DAMPING_MARGIN, damping_check, damping_penalty
-
     if mode not in REFINE_MODES:
         raise ValueError(f"mode={mode!r}: use one of {REFINE_MODES}")
     w = METRIC_WEIGHT if metric_weight is None else float(metric_weight)

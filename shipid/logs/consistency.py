@@ -31,6 +31,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from .units import SHIP_CHANNELS, unit_key, UNITS
+
 __all__ = ["Finding", "ConsistencyResult", "check_consistency", "CHECKS"]
 
 #: the checks run by default, in order
@@ -163,8 +165,6 @@ class _Ctx:
         """(significant digits the file's values of ``c`` are printed with, factor file unit -> SI); judged on
         up to 256 values spread over the log.  16 = full precision."""
         if c not in self._sig:
-            from .units import UNITS, unit_key
-
             unit = unit_key(str(self.log.units_in.get(c, "")).split(" (")[0])
             factor = UNITS.get(unit, ("", 1.0))[1]
             a = self.get(c)
@@ -612,8 +612,6 @@ def _check_position_freeze(c: _Ctx) -> None:
 
 
 def _check_glitches(c: _Ctx) -> None:
-    from .units import SHIP_CHANNELS
-
     counts, first = {}, {}
     units = c.log.units()
     names = [ch for ch in c.log.channels if c.get(ch) is not None]

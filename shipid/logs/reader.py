@@ -1,7 +1,9 @@
 """``read_log``: open a log file, pick its format reader, validate into a :class:`TrialLog`."""
 from __future__ import annotations
 
+import hashlib
 import os
+from importlib import resources
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -128,8 +130,6 @@ def read_log(
         raw = p.read_bytes()
     except PermissionError:
         raise LogError(f"`{p}`: cannot read the file (permission denied); check its permissions", path=p) from None
-    import hashlib
-
     sha = hashlib.sha256(raw).hexdigest()
     if not raw.strip():
         raise LogError(f"`{p.name}`: file is empty; give a log with a header line and data rows", path=p)
@@ -189,8 +189,6 @@ def read_log(
 
 def _schema_ship(spec: str) -> ShipParticulars:
     """A schema's ship: a bundled ship name (``shipid/data_ships/NAME.json``) or a ship file path."""
-    from importlib import resources
-
     if resources.files("shipid").joinpath("data_ships", f"{spec}.json").is_file():
         return _bundled_ship(spec)
     return read_ship(spec)

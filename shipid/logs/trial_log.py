@@ -317,7 +317,7 @@ class TrialLog:
 
         Angles and rates are shown in degrees for readability.
         """
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         names = list(channels) if channels is not None else self.channels
         if ax is None:

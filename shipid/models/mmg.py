@@ -79,6 +79,7 @@ all columns in one evaluation of the (complex-safe) equations.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Mapping
@@ -217,8 +218,6 @@ def eq4_mass_matrix(P: MMGParticulars, mx, my, Jz) -> np.ndarray:
 
 
 def _no_default(f) -> bool:
-    import dataclasses
-
     return f.default is dataclasses.MISSING
 
 

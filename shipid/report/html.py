@@ -14,11 +14,12 @@ import sys
 from datetime import datetime, timezone
 from pathlib import Path
 
-
 from .._io import OutputExistsError, atomic_write_text
+from ..identify.result import software_versions
 from ..validation import LogValidation, load_logs, resolve_model, validate_one
 from . import figures
 from ._markup import _e, _f, _fig, _img, _table  # noqa: F401  (_img: the helpers as one set)
+from .uncertainty import uncertainty_section
 
 __all__ = ["render_report", "write_report"]
 
@@ -59,8 +60,6 @@ def _anchor(i: int) -> str:
 
 
 def _versions_now() -> dict:
-    from ..identify.result import software_versions
-
     return software_versions()
 
 
@@ -322,7 +321,7 @@ def _section_horizon(horizons) -> str:
     predicted-vs-measured track overlays; ``horizons`` is a list of ``(HorizonResult, log)``."""
     if not horizons:
         return ""
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
     rows, figs = [], []
     for h, log in horizons:
@@ -368,8 +367,6 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
                        for lg in load_logs(logs, lpp=lpp)]
     extra = []
     if uncertainty:
-        from .uncertainty import uncertainty_section
-
         extra.append(uncertainty_section(res, validations, **uncertainty))
     title = title or f"Validation report: {res.model} model"
     stamp = datetime.now(timezone.utc).isoformat(timespec="seconds")

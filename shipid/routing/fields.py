@@ -132,7 +132,7 @@ class Field:
 
     def plot(self, bbox: Sequence[float], t: float = 0.0, n: int = 21, ax=None, **quiver_kw):
         """Quiver plot over ``bbox = (xmin, xmax, ymin, ymax)`` [m]; returns the axes."""
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         ax = ax or plt.gca()
         xs = np.linspace(bbox[0], bbox[1], n)

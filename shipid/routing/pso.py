@@ -44,11 +44,14 @@ feasible set falls apart into such classes, and one swarm over the whole box
 """
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field as dc_field
 from typing import Callable, Sequence
 
 import numpy as np
 import pandas as pd
+from scipy.optimize import differential_evolution
+from tqdm.auto import tqdm
 
 from .._io import check_memory
 from .energy import PaperUSVModel
@@ -178,7 +181,7 @@ class USVProblem:
 
     def plot(self, ax=None, circles: bool = True):
         """Obstacles, dimension circles (dotted), start and goal; returns the axes."""
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         ax = ax or plt.gca()
         for o in self.obstacles:
@@ -499,7 +502,7 @@ class PlanResult:
 
     def plot(self, ax=None, **kw):
         """Plot the path (north against east); returns the axes."""
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         ax = ax or plt.gca()
         ax.plot(self.points[:, 0], self.points[:, 1], "-s", label=kw.pop("label", self.objective), **kw)
@@ -516,8 +519,6 @@ class PlanResult:
 
 def side_classes(problem: USVProblem, dims=None) -> list[tuple[int, ...]]:
     """All left/right combinations (+1: polar angle above the obstacle centre's, -1: below) of ``dims``."""
-    import itertools
-
     k = problem.n_dims if dims is None else len(dims)
     return list(itertools.product((-1, 1), repeat=k))
 
@@ -623,8 +624,6 @@ def differential_evolution_check(problem: USVProblem, objective: str = "energy",
     values; no gradient polish.  ``signs`` restricts the search to one
     left/right class (:func:`class_bounds`).  Returns scipy's ``OptimizeResult``.
     """
-    from scipy.optimize import differential_evolution
-
     cost = PathCost(problem, objective, t_env=t_env)
 
     def f(X):  # DE vectorised: X has shape (D, S)
@@ -681,7 +680,7 @@ class Voyage:
 
     def plot(self, ax=None, **kw):
         """Energy spent [J] against time [s]; returns the axes."""
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         ax = ax or plt.gca()
         ax.plot(self.t, self.energy, **kw)
@@ -935,8 +934,6 @@ def compare_planners(problem: USVProblem, *, rng=0, n_particles: int = 25, max_i
     rng = np.random.default_rng(rng)
     bar, callback = None, None
     if progress:
-        from tqdm.auto import tqdm
-
         n_replan = len(replan_times if replan_times is not None else
                        set(problem.current.breakpoints) | set(problem.wind.breakpoints))
         bar = tqdm(total=int(max_iter) * (3 + n_replan), desc="route (PSO iterations)", leave=False)

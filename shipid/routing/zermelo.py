@@ -145,7 +145,7 @@ class ZermeloResult:
 
     def plot(self, ax=None, **kw):
         """Plot the route (y against x); returns the axes."""
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         ax = ax or plt.gca()
         ax.plot(self.xy[:, 0], self.xy[:, 1], label=kw.pop("label", f"{self.method}: {self.time:.4g}"), **kw)

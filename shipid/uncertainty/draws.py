@@ -38,7 +38,11 @@ from typing import Any, Sequence
 import numpy as np
 import pandas as pd
 
+from .._io import atomic_write_text
 from ..identify.result import as_result
+from ..manoeuvres import metrics, ship_info, turning_circle, zigzag
+from ..simulate import replay
+from .posterior import load_samples
 
 __all__ = ["ManoeuvreSpec", "parse_manoeuvre", "parameter_draws", "predict_manoeuvres", "ManoeuvrePrediction",
            "summarise_draws", "imo_probability", "METRIC_KEYS", "replay_draws"]
@@ -123,8 +127,6 @@ def parameter_draws(result, draws: int, *, seed=None, samples=None, inflation: f
     model = res.to_model()
     base = model.params.astype(float).copy()
     if samples is not None:
-        from .posterior import load_samples
-
         s = load_samples(samples)
         if s.model != res.model:
             raise ValueError(f"samples are for model '{s.model}', the result for '{res.model}'")
@@ -261,8 +263,6 @@ class ManoeuvrePrediction:
         return out
 
     def to_json(self, path, *, force: bool = False) -> Path:
-        from .._io import atomic_write_text
-
         return atomic_write_text(path, json.dumps(self.to_dict(), indent=2, allow_nan=False) + "\n", force=force)
 
 
@@ -351,8 +351,6 @@ def predict_manoeuvres(result, manoeuvres: Sequence = ("turning:35", "zigzag:10/
     -------
     ManoeuvrePrediction
     """
-    from ..manoeuvres import turning_circle, zigzag
-
     res = as_result(result)
     if not 0 < level < 1:
         raise ValueError(f"level must be in (0, 1), got {level!r}")
@@ -375,8 +373,6 @@ def predict_manoeuvres(result, manoeuvres: Sequence = ("turning:35", "zigzag:10/
     for spec in specs:
         spd = None if speed is None else np.full(B, float(speed))
         if spd is None:
-            from ..manoeuvres import ship_info
-
             u0 = ship_info(model).get("design_speed")
             if u0 is None:
                 raise ValueError(f"model '{model.name}': approach speed unknown; pass speed= [m/s]")
@@ -433,9 +429,6 @@ def replay_draws(model, log, params: np.ndarray, *, lpp: float, kind: str, switc
     Returns ``{"<metric>_ci": [low, high], ..., "imo_probability": {...}, "draws": {...},
     "simulation": SimulationResult}``.
     """
-    from ..manoeuvres import metrics
-    from ..simulate import replay
-
     data = log.data if hasattr(log, "data") else log
     if rudder_sign == -1 and "delta" in data.columns:
         data = data.assign(delta=-data["delta"])

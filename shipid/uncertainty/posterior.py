@@ -49,7 +49,10 @@ import pandas as pd
 from scipy.special import ndtri
 from scipy.stats import rankdata
 
+from .._io import atomic_write_text
+from ..identify.data import noise_std_from_data, prepare_logs
 from ..identify.result import as_result
+from ..simulate import simulate
 
 __all__ = ["sample_posterior", "PosteriorSamples", "load_samples", "split_rhat", "CONVERGENCE",
            "OutputErrorLikelihood"]
@@ -167,8 +170,6 @@ class OutputErrorLikelihood:
 
     def __init__(self, model, logs, names, *, meas_std=None, channels=None, prior_mean=None, prior_std=None,
                  substeps: int = 1, input_hold: str = "foh", x0_states=None):
-        from ..identify.data import noise_std_from_data, prepare_logs
-
         self.model = model
         self.names = list(names)
         self.idx = np.array([model.param_index(n) for n in self.names])
@@ -229,8 +230,6 @@ class OutputErrorLikelihood:
 
     def __call__(self, theta):
         """Log-posterior (up to a constant) of ``theta (B, n_names)`` -> (B,), or of one vector -> float."""
-        from ..simulate import simulate
-
         th = np.asarray(theta, dtype=float)
         single = th.ndim == 1
         th = np.atleast_2d(th)
@@ -332,8 +331,6 @@ class PosteriorSamples:
                 "message": self.message, "settings": self.settings, "created": self.created}
 
     def to_json(self, path, *, force: bool = False) -> Path:
-        from .._io import atomic_write_text
-
         return atomic_write_text(path, json.dumps(self.to_dict(), indent=1, allow_nan=True) + "\n", force=force)
 
     @classmethod
@@ -371,7 +368,7 @@ def load_samples(obj) -> PosteriorSamples:
 
 def chain_diagnostics(chain: np.ndarray, acceptance: np.ndarray, names, n_total_steps: int) -> dict:
     """Diagnostics of an ensemble chain ``(n_steps, n_walkers, n_params)`` and the convergence verdict."""
-    from emcee.autocorr import integrated_time
+    from emcee.autocorr import integrated_time  # optional (the mcmc extra)
 
     n, w, k = chain.shape
     with warnings.catch_warnings():
@@ -512,7 +509,7 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
     PosteriorSamples  (``converged`` False, with the reasons in ``message``, when any check fails)
     """
     try:
-        import emcee
+        import emcee  # optional (the mcmc extra)
     except ImportError:
         raise ValueError("MCMC sampling needs emcee: pip install 'shipid[mcmc]' (or pip install emcee)") from None
     res = as_result(result)
