@@ -63,7 +63,7 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     res = sweep(dt=args.dt)
     t_batch = time.perf_counter() - t0
-    df = res.summary
+    df = res.summary()
     n = len(df)
     idx = np.unique(np.linspace(0, n - 1, min(args.sample, n)).round().astype(int))
 

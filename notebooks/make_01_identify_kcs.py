@@ -25,7 +25,7 @@ if FAST:  # first 40 s of each log
     logs = [shipid.TrialLog.from_arrays(lg.time[:400], name=lg.name, ship=lg.ship,
             **{c: lg[c][:400] for c in lg.channels if c != "time"}) for lg in logs]
 for lg in logs:
-    print(lg.summary().splitlines()[0], len(lg), "samples")"""),
+    print(lg.message)"""),
 md("## Fit\nStart values 30 % away from the truth; the identifier first makes an equation-error least-squares start, then runs two EKF + RTS-smoother passes over all logs jointly."),
 code("""truth = shipid.get_model("kcs-response", "synthetic-truth")
 rng = np.random.default_rng(0)
@@ -67,6 +67,14 @@ for ax, lg in zip(axs, logs):
     ax.set_aspect("equal", adjustable="datalim"); ax.set_title(lg.name, fontsize=9)
 axs[0].legend()
 pd.DataFrame(rows).T"""),
+md("""## Results as notebook cards
+
+Every result shipid returns shows itself as a short card in a notebook -- success, message, key
+numbers and the head of its `summary()` table -- and has `summary()`, `to_pandas()` and `plot()`."""),
+code("""from IPython.display import display
+
+display(logs[0], fit, fit.result(), sim)
+sim.plot();"""),
 md("""## Caveat: the paper's Table 3
 
 The coefficients printed in seed 002 (shipped as the parameter set `table3`) have no stated

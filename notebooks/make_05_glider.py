@@ -76,7 +76,7 @@ if FAST:
     res = sweep([3.0, 5.0], [15.0, 30.0, 45.0, 60.0], [0.0, 5.0, 10.0], [0.0, -0.01])
 else:
     res = sweep()
-df = res.summary
+df = res.summary()
 print(res.message, f"({len(df)} launches)")
 df.pivot_table(index="angle_deg", columns="fin_deg", values="horizontal_m",
                aggfunc="first").round(2) if FAST else df[df.cg_m == 0].pivot_table(
@@ -113,7 +113,7 @@ else:
 pd.Series(opt.x).round(3), opt.launch[["max_depth_m", "horizontal_m", "exit_angle_deg", "J"]]
 """)
 code("""
-paper = launch(5.0, 30.0, 5.0, [0.0, -0.01]).summary
+paper = launch(5.0, 30.0, 5.0, [0.0, -0.01]).summary()
 paper["J"] = launch_objective(paper, opt.depth_ref, opt.horizontal_ref)
 paper[["angle_deg", "fin_deg", "cg_m", "max_depth_m", "horizontal_m", "exit_angle_deg", "J"]].round(3)
 """)

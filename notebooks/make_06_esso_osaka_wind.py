@@ -50,8 +50,8 @@ if HAVE_DATA:
     for name, m in {"dead reckoning": dead_reckoning(), "mmg kvlcc2 3 m": get_model("mmg", "kvlcc2", lpp=3.0),
                     "lowspeed prior": get_model("lowspeed")}.items():
         r = horizon_prediction(m, lg.data.iloc[::2])
-        print(name, [(e["seconds"], round(e["position_error_median_m"], 3)) for e in r.summary()])
-    ax = r.plot(lg.data, every=6)
+        print(name, [(e["seconds"], round(e["position_error_median_m"], 3)) for e in r.to_records()])
+    ax = r.plot(every=6)
     ax.set_title("lowspeed prior: 60 s predictions from every 30 s")"""),
     md("## 3. Fit with and without wind + current, predict held-out runs"),
     code("""if HAVE_DATA:

@@ -65,7 +65,7 @@ code("""
 N = 60 if FAST else 500
 pred = predict_manoeuvres(res, ["turning:35", "zigzag:10/10"], draws=N, seed=1)
 print(pred.message)
-pred.to_pandas()[["manoeuvre", "metric", "nominal", "median", "low", "high", "n_nonfinite"]].round(4)
+pred.summary()[["manoeuvre", "metric", "nominal", "median", "low", "high", "n_nonfinite"]].round(4)
 """)
 code("""
 pd.DataFrame({(lab, crit): v for lab, blk in pred.imo.items() for crit, v in blk.items()}).T[

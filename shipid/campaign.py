@@ -58,6 +58,7 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
+import pandas as pd
 from tqdm.auto import tqdm
 
 from ._io import atomic_write_text
@@ -67,9 +68,10 @@ from .identify.batch import OutputErrorRefiner
 from .logs import read_log
 from .manoeuvres import ship_info, turning_sweep
 from .models import get_model, model_class
+from .results import ResultMixin
 from .uncertainty import parse_manoeuvre, predict_manoeuvres
 
-__all__ = ["Engine", "Outcome", "member_seeds", "load_campaign", "run_campaign", "run_fit_member", "run_sweep_member",
+__all__ = ["Engine", "Outcome", "CampaignResult", "member_seeds", "load_campaign", "run_campaign", "run_fit_member", "run_sweep_member",
            "run_member", "member_cost", "warm_fits", "warm_specs", "FIT_KEYS", "SWEEP_KEYS", "dask_available"]
 
 
@@ -493,7 +495,7 @@ def run_sweep_member(spec: dict):
     if spec["kind"] == "glider":
         levels = {k: spec.get(k, PAPER_SWEEP[k]) for k in PAPER_SWEEP}
         res = sweep(**levels, dt=spec.get("dt"), t_max=float(spec.get("t_max", 60.0)), keep_trajectories=False)
-        return res.summary.reset_index(drop=True)
+        return res.launches.reset_index(drop=True)
     model = model_from(spec["model"])[0]
     lpp = spec.get("lpp")
     if lpp is not None and getattr(model, "lpp", None) not in (None, lpp) and hasattr(model, "scaled"):
@@ -612,4 +614,48 @@ def run_campaign(campaign, outdir, *, engine: Engine | None = None, force: bool 
     summary = {"campaign": camp.get("path"), "seed": camp["seed"], "engine": eng.describe(),
                "n_members": len(members), "n_failed": sum(not m["ok"] for m in members), "members": members}
     atomic_write_text(out / "campaign.json", json.dumps(summary, indent=2) + "\n", force=True)
-    return summary
+    return CampaignResult(summary)
+
+
+class CampaignResult(dict, ResultMixin):
+    """What :func:`run_campaign` wrote to ``campaign.json``: the same dict (``members``, ``n_failed``, ...),
+    with the result contract on top (one row per member in :meth:`summary`)."""
+
+    @property
+    def success(self) -> bool:
+        """Every member ran, and every fit and sweep reports success."""
+        return all(m.get("ok") and m.get("success", True) for m in self.get("members", []))
+
+    @property
+    def message(self) -> str:
+        n, bad = int(self.get("n_members", 0)), int(self.get("n_failed", 0))
+        unsuccessful = sum(1 for m in self.get("members", []) if m.get("ok") and not m.get("success", True))
+        return (f"{n - bad} of {n} member(s) completed ({self.get('engine', '')})"
+                + (f"; {unsuccessful} completed without success" if unsuccessful else ""))
+
+    def summary(self) -> pd.DataFrame:
+        """One row per member: name, type, ok, success, seconds, error, files written."""
+        rows = [{"name": m.get("name"), "type": m.get("type"), "ok": m.get("ok"), "success": m.get("success"),
+                 "seconds": m.get("seconds"), "error": m.get("error"), "files": ", ".join(m.get("files", []))}
+                for m in self.get("members", [])]
+        return pd.DataFrame(rows, columns=["name", "type", "ok", "success", "seconds", "error", "files"])
+
+    def to_pandas(self) -> pd.DataFrame:
+        """Every member's record as written (seed included), one row each."""
+        return pd.DataFrame(self.get("members", []))
+
+    def _html_title(self) -> str:
+        return f"Campaign ({self.get('n_members', 0)} members)"
+
+    def plot(self, ax=None):
+        """Seconds each member took, coloured by outcome (green success, orange no success, red failed); returns the axes."""
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
+
+        df = self.summary()
+        if ax is None:
+            _, ax = plt.subplots(figsize=(6, 0.3 * len(df) + 1.2))
+        colour = ["C3" if not ok else ("C2" if s in (True, None) else "C1") for ok, s in zip(df["ok"], df["success"])]
+        ax.barh(df["name"].astype(str), df["seconds"].astype(float), color=colour)
+        ax.invert_yaxis()
+        ax.set_xlabel("seconds")
+        return ax

@@ -30,6 +30,7 @@ COMMAND_MODULES: list[str] = [
     "shipid.commands.validate",
     "shipid.commands.control",
     "shipid.commands.uncertainty",
+    "shipid.commands.crossval",
 ]
 
 

@@ -1,5 +1,10 @@
 """Integrate a protocol model under an input schedule or a feedback law.
 
+``shipid.simulate`` is this module, and calling it calls :func:`simulate`: ``shipid.simulate(model,
+x0, t, U)`` and ``shipid.simulate.simulate(model, x0, t, U)`` are the same call, and
+``shipid.simulate.replay`` is reachable as documented.  (The package exports the module rather than
+the function so that the function's name does not hide the module's other tools.)
+
 :func:`simulate` is the single forward simulator of the package, vectorised
 over a leading batch axis, with inputs given as samples on the time grid
 (held between samples, or linear between them with ``input_hold="foh"``, as
@@ -16,6 +21,8 @@ laws).  Two integrators:
 """
 from __future__ import annotations
 
+import sys
+import types
 import warnings
 from dataclasses import dataclass, field
 from typing import Callable
@@ -26,6 +33,7 @@ import pandas as pd
 from ._kernel import replay_compiled
 from .integrate import dopri5, hold_steps, interval_steps, rk4_map
 from .models.base import Model
+from .results import ResultMixin, axes_column, in_degrees, plot_series
 
 __all__ = ["simulate", "SimulationResult", "InputLaw", "replay", "replay_errors", "METHODS", "INPUT_HOLDS"]
 
@@ -75,8 +83,8 @@ class InputLaw:
 
 
 @dataclass
-class SimulationResult:
-    """Result of :func:`simulate`.
+class SimulationResult(ResultMixin):
+    """Result of :func:`simulate` (and of :func:`replay`, which also keeps the measured log).
 
     Attributes
     ----------
@@ -90,6 +98,9 @@ class SimulationResult:
         shared-step run fails is integrated member by member, ``meta["per_member"]``);
         ``meta["failed"]`` lists the failed members and ``meta["failed_at"]`` their failure times [s].
     message : str
+    measured : DataFrame or None
+        The log a :func:`replay` reproduces (``time`` and its channels); drawn under the simulation by
+        :meth:`plot` and compared in :meth:`summary`.
     """
 
     t: np.ndarray
@@ -100,6 +111,7 @@ class SimulationResult:
     success: bool = True
     message: str = "integration finished"
     meta: dict = field(default_factory=dict)
+    measured: pd.DataFrame | None = field(default=None, repr=False)
 
     @property
     def batched(self) -> bool:
@@ -124,19 +136,57 @@ class SimulationResult:
         cols.update({n: u[:, i] for i, n in enumerate(self.model.input_names)})
         return pd.DataFrame(cols, index=pd.Index(self.t, name="time"))
 
-    def plot(self, ax=None, member: int | None = 0):
-        """Plot the states against time on one axes per state."""
-        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
+    def summary(self) -> pd.DataFrame:
+        """Per state and input (angles in degrees): unit, start, end, min and max of the run (of every
+        member of a batch, index ``(member, channel)``); a replay adds the ``rmse`` against the log
+        (:func:`replay_errors`, in the same display units) and the track row."""
+        units = self.model.units
+        names = list(self.model.state_names) + list(self.model.input_names)
+        data = np.concatenate([self.x, self.u], axis=-1)
+        members = range(data.shape[0]) if self.batched else [None]
+        rows, index = [], []
+        for b in members:
+            d = data[b] if b is not None else data
+            for j, n in enumerate(names):
+                col, unit = in_degrees(d[:, j], units.get(n, ""))
+                fin = col[np.isfinite(col)]
+                rows.append({"unit": unit, "start": col[0], "end": col[-1],
+                             "min": fin.min() if fin.size else np.nan, "max": fin.max() if fin.size else np.nan})
+                index.append(n if b is None else (b, n))
+        out = pd.DataFrame(rows, index=pd.MultiIndex.from_tuples(index, names=["member", "channel"])
+                           if self.batched else pd.Index(index, name="channel"))
+        if self.measured is not None and not self.batched:
+            err = replay_errors(self, self.measured)
+            out["rmse"] = [float(in_degrees(err.loc[n, "rmse"], units.get(n, ""))[0]) if n in err.index else np.nan
+                           for n in out.index]
+            if "track" in err.index:
+                out.loc["track", ["unit", "rmse"]] = ["m", float(err.loc["track", "rmse"])]
+        return out
 
+    def _key_numbers(self) -> dict:
+        k = {"model": self.model.name, "duration [s]": float(self.t[-1] - self.t[0]) if self.t.size else 0.0,
+             "samples": int(self.t.size)}
+        if self.batched:
+            k["members"] = int(self.x.shape[0])
+        return k
+
+    def _html_title(self) -> str:
+        return "Replay" if self.measured is not None else "Simulation"
+
+    def plot(self, ax=None, member: int | None = 0):
+        """Plot states and inputs against time (one axes each, angles in degrees); a replay draws the
+        measured log under the simulation.  ``member`` picks one run of a batch.  Returns the axes."""
         df = self.to_pandas(member if self.batched else None)
-        names = list(self.model.state_names)
-        if ax is None:
-            fig, axs = plt.subplots(len(names), 1, sharex=True, figsize=(7, 1.6 * len(names)))
-        else:
-            axs = np.atleast_1d(ax)
-        for a, n in zip(axs, names):
-            a.plot(df.index, df[n])
-            a.set_ylabel(f"{n} [{self.model.units.get(n, '')}]")
+        names = list(self.model.state_names) + list(self.model.input_names)
+        axs = axes_column(ax, len(names))
+        if self.measured is not None:
+            m = self.measured
+            plot_series(axs, m["time"].to_numpy(), m, list(self.model.state_names), self.model.units,
+                        color="0.55", lw=1.2, label="measured")
+        plot_series(axs, df.index.to_numpy(), df, names, self.model.units, color="C0", lw=0.9,
+                    label="simulated" if self.measured is not None else None)
+        if self.measured is not None:
+            axs[0].legend(loc="best", fontsize="small")
         axs[-1].set_xlabel("time [s]")
         return axs
 
@@ -517,7 +567,9 @@ def replay(model: Model, log, *, x0=None, substeps: int = 2, params=None, input_
         x0 = np.broadcast_to(np.asarray(x0, dtype=float), (np.shape(params)[0], model.nx))
     if h_max is None:
         h_max = 1.5 * float(np.median(np.diff(t))) / substeps
-    return simulate(model, x0, t, U, substeps=substeps, params=params, input_hold=input_hold, h_max=h_max)
+    sim = simulate(model, x0, t, U, substeps=substeps, params=params, input_hold=input_hold, h_max=h_max)
+    sim.measured = df
+    return sim
 
 
 def replay_errors(sim: SimulationResult, log) -> pd.DataFrame:
@@ -549,3 +601,13 @@ def replay_errors(sim: SimulationResult, log) -> pd.DataFrame:
         if ok.any():
             rows["track"] = {"rmse": float(np.sqrt(np.mean(d2[ok]))), "nrmse": np.nan, "n_samples": int(ok.sum())}
     return pd.DataFrame.from_dict(rows, orient="index")
+
+
+class _CallableModule(types.ModuleType):
+    """This module's type: calling the module calls :func:`simulate`."""
+
+    def __call__(self, *args, **kwargs) -> SimulationResult:
+        return simulate(*args, **kwargs)
+
+
+sys.modules[__name__].__class__ = _CallableModule

@@ -117,7 +117,7 @@ def _replicate(task: dict) -> dict:
     if task["draws"] > 0:
         pred = predict_manoeuvres(fit, task["manoeuvres"], draws=task["draws"], seed=task["seed"] % (2**32),
                                   zigzag_executes=3, inflation=task["inflation"])
-        out["metrics"] = {f"{r.manoeuvre}:{r.metric}": [r.low, r.high, r.nominal] for r in pred.summary.itertuples()}
+        out["metrics"] = {f"{r.manoeuvre}:{r.metric}": [r.low, r.high, r.nominal] for r in pred.metrics.itertuples()}
         out["n_failed_draws"] = {k: v["n_failed"] for k, v in pred.failures.items()}
     if task["mcmc"]:
         kw = dict(task["mcmc_kwargs"])
@@ -137,7 +137,7 @@ def _replicate(task: dict) -> dict:
         if task["draws"] > 0:
             pm = predict_manoeuvres(res, task["manoeuvres"], draws=task["draws"], seed=task["seed"] % (2**32),
                                     samples=s, zigzag_executes=3)
-            out["mcmc"]["metrics"] = {f"{r.manoeuvre}:{r.metric}": [r.low, r.high] for r in pm.summary.itertuples()}
+            out["mcmc"]["metrics"] = {f"{r.manoeuvre}:{r.metric}": [r.low, r.high] for r in pm.metrics.itertuples()}
     out["cpu_s"] = time.process_time() - cpu0
     if task.get("checkpoint"):
         _append_line(task["checkpoint"], {"key": task["key"], **out})

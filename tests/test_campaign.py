@@ -104,7 +104,7 @@ def test_sweeps_are_campaign_members_with_the_direct_results(tmp_path, capsys):
     assert [m["type"] for m in summary["members"]] == ["sweep", "sweep"] and summary["n_failed"] == 0
     td = turning_sweep(get_model("kcs-response", "synthetic-truth"), [35], [1.5, 1.7])
     assert (out / "td" / "sweep.csv").read_text() == td.to_csv(index=False)
-    gl = sweep([1.0, 2.0], [30, 45], [0], [0], keep_trajectories=False).summary.reset_index(drop=True)
+    gl = sweep([1.0, 2.0], [30, 45], [0], [0], keep_trajectories=False).launches.reset_index(drop=True)
     assert (out / "launch" / "sweep.csv").read_text() == gl.to_csv(index=False)
 
 

@@ -19,7 +19,7 @@ def test_horizon_prediction_on_a_measured_run():
 
     lg = read_log(DATA / "berthing" / "berthing_12-Nov-2020_11_07_23.csv", schema="esso-frt")
     r = horizon_prediction(dead_reckoning(), lg)
-    s = r.summary()
+    s = r.to_records()
     assert [e["seconds"] for e in s] == [10.0, 30.0, 60.0]
     assert s[0]["n_starts"] >= s[1]["n_starts"] >= s[2]["n_starts"] > 20
     assert s[0]["position_error_median_m"] < s[1]["position_error_median_m"] < s[2]["position_error_median_m"]
@@ -41,7 +41,7 @@ def test_blowups_are_counted_not_dropped():
     lg = read_log(DATA / "random" / "random_31-Jul-2020_12_29_58.csv", schema="esso-frt")
     bad = get_model("lowspeed").with_params({"Nr": 3.0, "Yv": 2.0})  # unstable: yaw and sway amplify
     r = horizon_prediction(bad, lg.data.iloc[:1500], horizons=(30.0,))
-    e = r.summary()[0]
+    e = r.to_records()[0]
     assert e["n_blowups"] > 0 and not r.success and "blew up" in r.message
     assert e["n_starts"] == int(np.sum(~np.isnan(r.position_error[:, 0])))
 

@@ -1,5 +1,6 @@
 """Launch simulation with surface-return event detection (shipid.glider.launch)."""
 import numpy as np
+import pandas as pd
 import pytest
 
 from shipid.glider import launch, paper_reference_case
@@ -74,21 +75,21 @@ def test_step_size_convergence_and_batch_equals_loop():
     for i in range(4):
         s = launch(sp[i], an[i], fi[i], cg[i], dt=0.01)
         for k in ("max_depth_m", "horizontal_m", "duration_s", "exit_angle_deg"):
-            assert b.summary[k].iloc[i] == pytest.approx(getattr(s, k), rel=1e-10, abs=1e-12)
+            assert b.launches[k].iloc[i] == pytest.approx(getattr(s, k), rel=1e-10, abs=1e-12)
         np.testing.assert_allclose(b.to_pandas(i).to_numpy(), s.to_pandas().to_numpy(), rtol=1e-10, atol=1e-12)
 
 
 def test_unfinished_and_unstable_launches_are_reported_not_raised():
     with pytest.warns(RuntimeWarning, match="still submerged"):
         r = launch(5.0, 45.0, t_max=0.5)
-    assert not r.success and r.status == 1 and r.summary["status"].iloc[0] == "t_max"
+    assert not r.success and r.status == 1 and r.launches["status"].iloc[0] == "t_max"
     assert np.isnan(r.horizontal_m) and r.max_depth_m > 0.5
     big = get_model("glider").with_params({"fin_span": 1.0})   # stiff pitch damping
     with pytest.warns(RuntimeWarning, match="non-finite"):
         r = launch([0.5, 5.0], 45.0, model=big, dt=0.02)
-    assert r.status == 2 and list(r.summary["status"]) == ["surfaced", "non-finite"]
+    assert r.status == 2 and list(r.launches["status"]) == ["surfaced", "non-finite"]
     ok = launch(0.5, 45.0, model=big, dt=0.02)
-    assert r.summary["horizontal_m"].iloc[0] == pytest.approx(ok.horizontal_m, rel=1e-12)
+    assert r.launches["horizontal_m"].iloc[0] == pytest.approx(ok.horizontal_m, rel=1e-12)
     auto = launch(5.0, 45.0, model=big)                        # automatic step handles it
     assert auto.success and auto.dt < 0.005
 
@@ -107,8 +108,10 @@ def test_bad_arguments_name_the_value():
     r = launch([5.0, 3.0], 45.0, keep_trajectories=False)
     with pytest.raises(ValueError, match="not kept"):
         r.to_pandas(0)
-    with pytest.raises(ValueError, match="member=i"):
-        launch([5.0, 3.0], 45.0).to_pandas()
+    both = launch([5.0, 3.0], 45.0)
+    df = both.to_pandas()  # a batch: every launch's rows, labelled
+    assert sorted(df["launch"].unique()) == [0, 1]
+    pd.testing.assert_frame_equal(df[df["launch"] == 1].drop(columns="launch"), both.to_pandas(1))
 
 
 def test_plot_draws_trajectories():

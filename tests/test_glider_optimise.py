@@ -52,6 +52,6 @@ def test_full_optimisation_against_the_papers_choice():
     assert res.objective == pytest.approx(0.78, abs=0.02)
     from shipid.glider import launch
 
-    p = launch(5.0, 30.0, 5.0, 0.0).summary
+    p = launch(5.0, 30.0, 5.0, 0.0).launches
     Jp = launch_objective(p, res.depth_ref, res.horizontal_ref)[0]
     assert Jp == pytest.approx(0.56, abs=0.02)

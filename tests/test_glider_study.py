@@ -10,7 +10,7 @@ from shipid.glider import PAPER_SWEEP, launch, sweep
 def paper_sweep():
     r = sweep()
     assert r.success and len(r) == 7 * 4 * 5 * 4 == 560
-    return r.summary
+    return r.launches
 
 
 def _sel(df, **kw):
@@ -57,7 +57,7 @@ def test_fin_trend_matches_the_paper_qualitatively():
     angle (paper 15 deg, here 10 deg), and 5 deg close to both maxima.  Fins of 10 deg
     and more pitch the glider over so it surfaces behind its entry point (negative
     horizontal travel), which the paper does not report."""
-    r = launch(5.0, 30.0, [0.0, 5.0, 10.0, 15.0, 20.0], 0.01).summary
+    r = launch(5.0, 30.0, [0.0, 5.0, 10.0, 15.0, 20.0], 0.01).launches
     d, h = r["max_depth_m"].to_numpy(), r["horizontal_m"].to_numpy()
     assert np.argmax(h) == 0 and np.argmax(d) == 2
     assert d[1] > 0.97 * d.max() and h[1] > 0.8 * h.max()

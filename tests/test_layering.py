@@ -18,7 +18,7 @@ PKG = Path(__file__).resolve().parents[1] / "shipid"
 #: Floors from the bottom up: each a name and the dotted modules/packages (below ``shipid``) on it.  A module
 #: takes the floor of its longest listed prefix.  ``""`` is the package's own ``__init__`` (the public API).
 FLOORS = [
-    ("foundation", ("_version", "_io", "_blas", "_jit", "datasets", "savitsky", "scaling")),
+    ("foundation", ("_version", "_io", "_blas", "_jit", "datasets", "savitsky", "scaling", "results")),
     ("logs", ("logs",)),
     ("models", ("models",)),
     ("numerics", ("integrate", "_kernel", "simulate")),

@@ -414,7 +414,7 @@ def test_missing_measured_samples_are_nan_and_reported(tmp_path):
     assert log.missing == {"psi": [40], "u": [10, 11]} or log.missing == {"u": [10, 11], "psi": [40]}
     assert np.isnan(log["u"][[8, 9]]).all() and np.isfinite(log["u"]).sum() == 58
     assert np.isnan(log["psi"][38]) and np.isfinite(log["psi"][39])
-    s = log.summary()
+    s = str(log)
     assert "missing samples: " in s and "u 2 (rows 10, 11)" in s
 
 
@@ -425,7 +425,7 @@ def test_time_dropout_reported(tmp_path):
     with pytest.warns(UserWarning, match=r"1 time dropout\(s\) longer than 3 x median dt \(first 14.5-20 s\)"):
         log = read_log(p)
     assert log.dropouts == [(14.5, 20.0)]
-    assert "dropouts (> 3 dt): 1: 14.5-20 s" in log.summary()
+    assert "dropouts (> 3 dt): 1: 14.5-20 s" in str(log)
 
 
 def test_blank_lines_and_comments_keep_file_line_numbers(tmp_path):
@@ -515,7 +515,7 @@ def test_summary_and_plot(tmp_path):
 
     matplotlib.use("Agg")
     log = read_log(write(tmp_path, "trial.csv", csv_text(frame())), lpp=4.36)
-    s = log.summary()
+    s = str(log)
     assert "TrialLog 'trial' (trial.csv, sha256 " in s and "60 samples, t = 0 .. 29.5 s, dt = 0.5 s" in s
     assert "ship: ship Lpp 4.36 m" in s and "missing samples: none" in s and "dropouts: none" in s
     axs = log.plot()

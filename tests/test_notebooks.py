@@ -21,5 +21,10 @@ def test_notebook_runs(path, monkeypatch):
     nb = nbformat.read(path, as_version=4)
     client = nbclient.NotebookClient(nb, timeout=300, kernel_name="python3", resources={"metadata": {"path": str(NB_DIR)}})
     client.execute()
-    errors = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []) if o.output_type == "error"]
+    outputs = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])]
+    errors = [o for o in outputs if o.output_type == "error"]
     assert not errors
+    if path.stem == "01_identify_kcs":  # results render as compact HTML cards (their _repr_html_)
+        cards = [o["data"]["text/html"] for o in outputs if "text/html" in o.get("data", {})
+                 and "shipid-result" in o["data"]["text/html"]]
+        assert len(cards) >= 4 and all(len(c) < 20_000 for c in cards)

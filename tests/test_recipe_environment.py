@@ -115,8 +115,8 @@ def test_cli_fit_of_wind_current_model_is_the_study_setting(tmp_path, capsys):
     from shipid.validation import resolve_model
 
     model, _ = resolve_model(out)
-    mine = horizon_prediction(model, lg, horizons=(30.0,), initial={"cx": cs["cx"], "cy": cs["cy"]}).summary()[0]
-    zero = horizon_prediction(model, lg, horizons=(30.0,)).summary()[0]
+    mine = horizon_prediction(model, lg, horizons=(30.0,), initial={"cx": cs["cx"], "cy": cs["cy"]}).to_records()[0]
+    zero = horizon_prediction(model, lg, horizons=(30.0,)).to_records()[0]
     assert h["position_error_median_m"] == pytest.approx(mine["position_error_median_m"], rel=1e-12)
     assert h["position_error_median_m"] != pytest.approx(zero["position_error_median_m"], rel=1e-6)
     # the replay starts with the same current (session 12; it had started with none)

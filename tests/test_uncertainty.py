@@ -60,7 +60,7 @@ def test_interval_matches_the_delta_method(known_result, kcs_truth):
     """For a small covariance the 95 % interval of the tactical diameter is +-1.96 sqrt(g' C g) (g: the gradient,
     here by central differences in one batched run)."""
     pred = predict_manoeuvres(known_result, ["turning:35"], draws=800, seed=3)
-    row = pred.summary.set_index("metric").loc["tactical_diameter_L"]
+    row = pred.summary().set_index("metric").loc["tactical_diameter_L"]
     assert pred.success and row["n"] == 800 and row["n_nonfinite"] == 0
     idx = [kcs_truth.param_index(n) for n in EST]
     sd = np.sqrt(np.diag(known_result.cov.to_numpy()))
@@ -84,7 +84,7 @@ def test_failed_draws_are_counted(known_result, kcs_truth):
     f = pred.failures["turning_35_starboard"]
     assert f["n_failed"] == 2 and pred.status == 1 and not pred.success
     assert "2/6" in pred.message
-    row = pred.summary.set_index("metric").loc["tactical_diameter_L"]
+    row = pred.summary().set_index("metric").loc["tactical_diameter_L"]
     assert (row["n"], row["n_nonfinite"]) == (4, 2)
     imo = pred.imo["turning_35_starboard"]["tactical_diameter"]
     assert imo["n_met"] == 4 and imo["probability"] == pytest.approx(4 / 6) and imo["probability_evaluated"] == 1.0

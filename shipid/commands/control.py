@@ -60,7 +60,7 @@ def _plan(args) -> int:
             raise ValueError(f"--optimizer {opt} is not available with --method direct; use slsqp, trust-constr or ipopt")
         kw = {} if opt == "ipopt" else {"progress": progress_on(args)}
         res = solve_direct(problem, method=opt or "slsqp", tol=args.tol, **kw)
-    doc = res.summary()
+    doc = res.to_dict()
     doc["trajectory_csv"] = csv.name
     doc["tolerance"] = args.tol
     # the CSV and the JSON are published as a set (both or neither)

@@ -23,11 +23,40 @@ def register(sub) -> None:
                               "channels and likely causes; the result JSON has diagnostics.consistency); "
                               "4 the filter diverged (result = start values, success false).")
     p.add_argument("logs", nargs="+", metavar="LOG", help="trial log files (.csv, MARIN .dat)")
-    p.add_argument("--model", default="kcs-response", help="registered model (see `shipid models`)")
-    p.add_argument("--params", default=None, metavar="SET|RESULT.json",
-                   help="start values: a parameter set of the model or an earlier result JSON")
+    p.add_argument("--model", default="kcs-response",
+                   help="registered model (see `shipid models`), or 'auto' to choose among the models that apply by "
+                        "cross-validation ('auto:mmg:kvlcc2,response-nl' to choose among those; docs/choosing_a_model.md)")
     p.add_argument("-o", "--output", required=True, help="result JSON to write")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    add_fit_options(p)
+    p.add_argument("--cross-validate", action="store_true",
+                   help="also cross-validate the fit over the runs (leave-one-run-out, as `shipid crossval`) and store "
+                        "the block in the result (extra.crossval); `shipid report` shows it")
+    add_engine_options(p)
+    add_progress_option(p)
+    p.set_defaults(handler=_fit)
+
+    d = sub.add_parser("demo", help="fit the bundled synthetic KCS logs and print the results")
+    d.add_argument("-o", "--output-dir", default=None, help="new folder for the outputs (default: shipid-demo-<time>)")
+    d.add_argument("--passes", type=int, default=2, help="EKF passes (default 2)")
+    add_progress_option(d)
+    d.set_defaults(handler=_demo)
+
+
+def add_engine_options(p) -> None:
+    """``--folds``, ``--workers``, ``--scheduler``: how a cross-validation is split and where its folds run."""
+    p.add_argument("--folds", default="loro", metavar="loro|K",
+                   help="cross-validation folds: leave-one-run-out (default) or K folds of runs")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="run the folds on N local Dask worker processes (default: serially)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run the folds on an existing Dask scheduler, e.g. tcp://host:8786")
+
+
+def add_fit_options(p) -> None:
+    """The options of ``shipid fit`` that say how to fit (one copy: ``shipid crossval`` takes them too)."""
+    p.add_argument("--params", default=None, metavar="SET|RESULT.json",
+                   help="start values: a parameter set of the model or an earlier result JSON")
     add_log_options(p)
     p.add_argument("--estimate", action="append", metavar="NAMES", help="comma-separated parameters to estimate")
     p.add_argument("--fixed", action="append", metavar="NAME[=VALUE]", help="parameters to hold fixed")
@@ -75,14 +104,6 @@ def register(sub) -> None:
                    help="measurement noise standard deviation per channel in SI units (m, rad, m/s, rad/s), "
                         "e.g. psi=0.002,r=0.0005; default: the sensor noise the logs' schema declares (esso-frt does), "
                         "else estimated from the data")
-    add_progress_option(p)
-    p.set_defaults(handler=_fit)
-
-    d = sub.add_parser("demo", help="fit the bundled synthetic KCS logs and print the results")
-    d.add_argument("-o", "--output-dir", default=None, help="new folder for the outputs (default: shipid-demo-<time>)")
-    d.add_argument("--passes", type=int, default=2, help="EKF passes (default 2)")
-    add_progress_option(d)
-    d.set_defaults(handler=_demo)
 
 
 def _logs_lpp(logs):
@@ -97,22 +118,10 @@ def _logs_lpp(logs):
 def _start_model(args, lpp=None):
     """The start model at the logs' ship length ``lpp`` (a named parameter set is Froude-scaled to it, an
     earlier result of another length too): a start never comes from another ship's scale."""
-    from ..identify import model_from
-    from ..models import get_model, model_class
+    from ..crossval import start_model
 
-    cls = model_class(args.model)
     L = args.lpp if args.lpp is not None else lpp
-    opts = {"lpp": L} if (L is not None and "lpp" in cls.__init__.__code__.co_varnames) else {}
-    if args.params is None:
-        return cls(**opts)
-    if args.params.endswith(".json") or Path(args.params).is_file():
-        model = model_from(args.params, model=args.model)[0]
-        ml = getattr(model, "lpp", None)
-        if L is not None and ml is not None and abs(ml / L - 1.0) > 1e-9 and hasattr(model, "scaled"):
-            print(f"note: start values {args.params} (Lpp {ml:g} m) Froude-scaled to the logs' {L:g} m", file=sys.stderr)
-            model = model.scaled(L)
-        return model
-    return get_model(args.model, args.params, **opts)
+    return start_model(args.model, args.params, L, say=lambda m: print(m, file=sys.stderr))
 
 
 def _fixed(args, model):
@@ -181,45 +190,117 @@ def _lib_errors(call):
         raise ValueError(msg) from None
 
 
-def _fit(args) -> int:
-    from ..identify.recipe import fit_logs
-
-    out = check_output_path(args.output, force=args.force, inputs=[*args.logs, args.params, args.ship],
-                            what="result")
+def check_fit_args(args) -> None:
+    """The checks of the fit options (before reading any log)."""
     if not 1 <= args.passes <= 100:
         raise ValueError(f"--passes {args.passes if abs(args.passes) < 10**6 else f'{args.passes:.3g}'}: "
                          "give a number of EKF passes from 1 to 100 (default 2)")
     if args.lpp is not None and not (np.isfinite(args.lpp) and args.lpp > 0):
         raise ValueError(f"--lpp {args.lpp}: give the ship length between perpendiculars in metres (a positive number)")
-    meas_std = parse_pairs(args.meas_std, "--meas-std", float) or None
-    for k, v in (meas_std or {}).items():
-        if not (np.isfinite(v) and v > 0):
-            raise ValueError(f"--meas-std {k}={v}: give a positive standard deviation in SI units, e.g. psi=0.002")
     if args.metric_weight is not None and not (np.isfinite(args.metric_weight) and args.metric_weight >= 0):
         raise ValueError(f"--metric-weight {args.metric_weight}: give a finite weight >= 0 (default 0.1)")
     if args.max_nfev < 1:
         raise ValueError(f"--max-nfev must be >= 1, got {args.max_nfev}")
+    if getattr(args, "workers", None) is not None and args.workers < 1:
+        raise ValueError(f"--workers {args.workers}: give a number of worker processes >= 1")
+    folds = getattr(args, "folds", "loro")
+    if folds != "loro" and not (str(folds).isdigit() and int(folds) >= 2):
+        raise ValueError(f"--folds {folds}: give 'loro' or a number of folds >= 2, e.g. --folds 8")
+
+
+def fit_options(args, model) -> dict:
+    """Keyword arguments of :func:`shipid.identify.fit_logs` from the fit options (the same for ``shipid fit``
+    and every fold of ``shipid crossval``); ``model`` is the start model (for ``--fixed NAME``)."""
+    meas_std = parse_pairs(args.meas_std, "--meas-std", float) or None
+    for k, v in (meas_std or {}).items():
+        if not (np.isfinite(v) and v > 0):
+            raise ValueError(f"--meas-std {k}={v}: give a positive standard deviation in SI units, e.g. psi=0.002")
+    return dict(estimate=_names(args.estimate) or None, fixed=_fixed(args, model), start=args.start,
+                neutral=not args.no_neutral, dt=_dt(args), max_drift_deg=_max_drift(args),
+                refine=None if args.refine == "none" else args.refine, metric_weight=args.metric_weight,
+                n_passes=args.passes, max_nfev=args.max_nfev, hold_unresolved=not args.refine_all,
+                sign_bounds=args.sign_bounds, physical_damping=not args.no_physical_damping, tune_noise=args.tune_noise,
+                meas_std=meas_std, drop_repeated=not args.keep_repeated)
+
+
+def _folds(args):
+    return "loro" if args.folds == "loro" else int(args.folds)
+
+
+def _choose(args, logs) -> tuple:
+    """``--model auto[:...]``: cross-validate the candidates, print the table, return (chosen candidate, choice)."""
+    from ..crossval import choose_model, parse_candidates
+
+    given = parse_candidates(args.model)
+    if args.params is not None:
+        raise ValueError("--params cannot be combined with --model auto; name start sets per candidate, e.g. "
+                         "--model auto:mmg:kvlcc2,response-nl")
+    if args.fixed:
+        raise ValueError("--fixed cannot be combined with --model auto (the candidates have different parameters); "
+                         "name a model with --model")
+    choice = _lib_errors(lambda: choose_model(
+        logs, given, folds=_folds(args), lpp=args.lpp, wind=args.wind, current=args.current,
+        fit_options=fit_options(args, None), workers=args.workers, scheduler=args.scheduler,
+        progress=progress_on(args)))
+    for line in choice.why:
+        print(f"model choice: {line}")
+    print_choice(choice)
+    if not choice.success:
+        raise ValueError("--model auto: no candidate model could be cross-validated on these logs (every fold failed); "
+                         "see the table above, or name a model with --model")
+    return choice
+
+
+def print_choice(choice) -> None:
+    import pandas as pd
+
+    with pd.option_context("display.float_format", "{:.3g}".format, "display.width", 160):
+        print("cross-validated candidates (score: mean over left-out runs of the errors over their goals, "
+              "docs/choosing_a_model.md):")
+        print(choice.summary().to_string())
+    print(f"model choice: {choice.message}")
+
+
+def _fit(args) -> int:
+    from ..identify.recipe import fit_logs
+
+    out = check_output_path(args.output, force=args.force, inputs=[*args.logs, args.params, args.ship],
+                            what="result")
+    check_fit_args(args)
     logs = read_logs(args.logs, args)
+    choice = None
+    if args.model == "auto" or args.model.startswith("auto:"):
+        choice = _choose(args, logs)
+        best = choice.chosen
+        args.model, args.params = best.model, best.params
+        args.wind, args.current = best.wind, best.current
     model = _start_model(args, _logs_lpp(logs))
     for lg in logs:
         if lg.missing or lg.dropouts:
-            print(f"note: {lg.summary()}", file=sys.stderr)
+            print(f"note: {lg}", file=sys.stderr)
     extra = None
     if args.wind or args.current:
         # wind/current parts around the ship model: the recipe with the base model's defaults, not refined
         from ..environment.cli import environment_model
 
         model, extra = environment_model(model, logs, wind=args.wind, current=args.current)
+    opts = fit_options(args, model)
     recipe = _lib_errors(lambda: fit_logs(
-        logs, model, lpp=args.lpp, estimate=_names(args.estimate) or None, fixed=_fixed(args, model),
-        start=args.start, neutral=not args.no_neutral, dt=_dt(args), max_drift_deg=_max_drift(args),
-        refine=None if args.refine == "none" else args.refine, metric_weight=args.metric_weight,
-        n_passes=args.passes, max_nfev=args.max_nfev, hold_unresolved=not args.refine_all,
-        sign_bounds=args.sign_bounds, physical_damping=not args.no_physical_damping, tune_noise=args.tune_noise,
-        progress=progress_on(args), meas_std=meas_std, ekf_options=extra, start_defaults=args.params is None,
-        drop_repeated=not args.keep_repeated, log=print))
+        logs, model, lpp=args.lpp, progress=progress_on(args), ekf_options=extra, start_defaults=args.params is None,
+        log=print, **opts))
     fit, ident = recipe, recipe.ekf
     result = fit.result()
+    if choice is not None:
+        result.extra["model_choice"] = choice.to_dict()
+        result.extra["crossval"] = choice.best.to_dict(starts=False)
+    elif args.cross_validate:
+        from ..crossval import cross_validate
+
+        cv = _lib_errors(lambda: cross_validate(
+            logs, args.model, args.params, folds=_folds(args), lpp=args.lpp, wind=args.wind, current=args.current,
+            fit_options=opts, workers=args.workers, scheduler=args.scheduler, progress=progress_on(args)))
+        print(cv.text())
+        result.extra["crossval"] = cv.to_dict(starts=False)
     result.to_json(out, force=args.force)
     _print_result(result)
     print(f"wrote {out}")

@@ -26,7 +26,7 @@ def _log(args) -> int:
     if args.output:  # never over the log itself (nor the ship/schema file), even with --force
         check_output_path(args.output, force=args.force, inputs=[*args.logs, args.ship, args.schema])
     for log in read_logs(args.logs, args):
-        print(log.summary())
+        print(log)
         if args.output:
             out = log.to_csv(args.output, force=args.force)
             print(f"wrote {out} ({len(log)} samples, SI units, radians, body-axis velocities)")

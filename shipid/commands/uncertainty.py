@@ -162,7 +162,7 @@ def simulate_draws(args, model_spec: str) -> int:
     pred = predict_manoeuvres(model_spec, specs, draws=check_draws(args), seed=args.draws_seed, samples=args.samples,
                               speed=args.speed, lpp=args.lpp, method=args.method,
                               rudder_rate=math.radians(args.rudder_rate) if args.rudder_rate is not None else None)
-    tab = pred.to_pandas()
+    tab = pred.summary()
     print(tab[["manoeuvre", "metric", "nominal", "median", "low", "high", "n_nonfinite"]].to_string(
         index=False, float_format=lambda v: f"{v:.4g}"))
     for lab, blk in pred.imo.items():

@@ -116,7 +116,7 @@ def _validate(args) -> int:
         for d, (h, _) in zip(res, _horizon_results(args, horizons, logs, model, initial)):
             if h is None:
                 continue
-            d["horizon"] = h.summary()
+            d["horizon"] = h.to_records()
             print(f"{d['name']}: horizon " + ", ".join(
                 f"{e['seconds']:g} s median {e['position_error_median_m']:.3g} m ({e['n_starts']} starts"
                 f"{', %d blow-ups' % e['n_blowups'] if e['n_blowups'] else ''})"
@@ -126,6 +126,14 @@ def _validate(args) -> int:
         print(_line(d))
         for n in d["notes"]:
             print(f"  note: {n}")
+        miss = d.get("standard_missing") or []
+        if miss:
+            print(f"  closed-loop: {len(miss)} measured metric(s) not predicted: "
+                  + "; ".join(f"{x['metric']}: {x['reason']}" for x in miss))
+    n_miss = sum(len(d.get("standard_missing") or []) for d in res)
+    if n_miss:
+        print(f"closed-loop: {n_miss} measured metric(s) not predicted on "
+              f"{sum(1 for d in res if d.get('standard_missing'))} of {len(res)} logs (standard_missing in the JSON)")
     print(f"wrote {out}")
     bad = [d["name"] for d in res if not d["replay"]["success"]]
     if bad:

@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from ..results import ResultMixin, axes_column, plot_series
 from .problem import Problem, evaluate
 
 __all__ = ["ControlResult", "switch_time"]
@@ -37,7 +38,7 @@ def switch_time(U: np.ndarray, lo: float, hi: float, tf: float, tol: float = 0.0
 
 
 @dataclass
-class ControlResult:
+class ControlResult(ResultMixin):
     """Result of :func:`solve_indirect` / :func:`solve_direct`.
 
     Attributes
@@ -117,8 +118,21 @@ class ControlResult:
         cols.update({n: self.u[:, i] for i, n in enumerate(m.input_names)})
         return pd.DataFrame(cols, index=pd.Index(self.t, name="time"))
 
-    def summary(self) -> dict:
-        """JSON-ready summary (what ``shipid plan`` writes)."""
+    def summary(self) -> pd.DataFrame:
+        """Headline numbers, one row each (``value`` and ``unit``): final time, switch time, cost, largest
+        constraint violation, iterations, evaluations, wall time."""
+        rows = [("final_time", self.final_time, "s"), ("switch_time", self.switch_time, "s"),
+                ("cost", self.cost, ""), ("max_constraint_violation", self.max_constraint_violation, "scaled"),
+                ("n_intervals", self.problem.n_intervals, ""), ("nit", self.nit, ""), ("nfev", self.nfev, ""),
+                ("wall_time", self.wall_time, "s")]
+        return pd.DataFrame({"value": [np.nan if v is None else float(v) for _, v, _ in rows],
+                             "unit": [u for _, _, u in rows]}, index=pd.Index([k for k, _, _ in rows], name="quantity"))
+
+    def _html_title(self) -> str:
+        return f"Optimal control: {self.problem.name} ({self.method})"
+
+    def to_dict(self) -> dict:
+        """JSON-ready record (what ``shipid plan`` writes)."""
         m = self.problem.model
         return {
             "problem": self.problem.name,
@@ -140,21 +154,12 @@ class ControlResult:
             "final_state": dict(zip(m.state_names, map(float, self.x[-1]))),
         }
 
-    def plot(self, axes=None):
-        """Plot path (y vs x when the model has x, y), states and inputs against time."""
-        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
-
+    def plot(self, ax=None):
+        """States and inputs against time (one axes each, angles in degrees); returns the axes."""
         m = self.problem.model
         names = list(m.state_names) + list(m.input_names)
-        n = len(names)
-        if axes is None:
-            fig, axes = plt.subplots((n + 2) // 3, 3, figsize=(11, 2.2 * ((n + 2) // 3)))
-        axes = np.ravel(axes)
+        axs = axes_column(ax, len(names), height=1.3)
         df = self.to_pandas()
-        for ax, name in zip(axes, names):
-            ax.plot(df.index, df[name])
-            ax.set_ylabel(f"{name} [{m.units.get(name, '')}]")
-            ax.set_xlabel("t [s]")
-        for ax in axes[n:]:
-            ax.set_visible(False)
-        return axes
+        plot_series(axs, df.index.to_numpy(), df, names, m.units)
+        axs[-1].set_xlabel("time [s]")
+        return axs

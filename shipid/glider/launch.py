@@ -26,11 +26,12 @@ from tqdm.auto import tqdm
 from .._io import check_memory
 from ..models import get_model
 from ..models.base import Model
+from ..results import ResultMixin
 from ..simulate import simulate
 
 __all__ = ["launch", "launch_state", "LaunchResult", "SUMMARY_COLUMNS"]
 
-#: Columns of :attr:`LaunchResult.summary`.
+#: Columns of :attr:`LaunchResult.launches` (and :meth:`LaunchResult.summary`).
 SUMMARY_COLUMNS = (
     "speed_m_s", "angle_deg", "fin_deg", "cg_m",
     "max_depth_m", "x_at_max_depth_m", "t_at_max_depth_s",
@@ -66,13 +67,13 @@ def launch_state(speed, angle_deg) -> np.ndarray:
 
 
 @dataclass
-class LaunchResult:
+class LaunchResult(ResultMixin):
     """Result of :func:`launch` (one launch or a batch).
 
     Attributes
     ----------
-    summary : pandas.DataFrame
-        One row per launch with :data:`SUMMARY_COLUMNS`: the launch settings,
+    launches : pandas.DataFrame
+        One row per launch (also :meth:`summary`) with :data:`SUMMARY_COLUMNS`: the launch settings,
         maximum depth [m], horizontal travel at surfacing [m], duration [s],
         exit flight-path angle above the horizontal [deg], exit pitch [deg],
         exit speed [m/s], whether it surfaced and a status word (``"surfaced"``,
@@ -98,7 +99,7 @@ class LaunchResult:
     message : str
     """
 
-    summary: pd.DataFrame
+    launches: pd.DataFrame
     t: np.ndarray
     x: np.ndarray | None
     exit_state: np.ndarray
@@ -113,18 +114,26 @@ class LaunchResult:
     meta: dict = field(default_factory=dict)
 
     def __len__(self) -> int:
-        return len(self.summary)
+        return len(self.launches)
+
+    def summary(self) -> pd.DataFrame:
+        """One row per launch: settings, maximum depth, horizontal travel, duration, exit angles and speed,
+        whether it surfaced and its status (the table :attr:`launches`)."""
+        return self.launches
+
+    def _html_title(self) -> str:
+        return "Glider launch" + (f"es ({len(self)})" if len(self) > 1 else "")
 
     def __getattr__(self, name):
         # max_depth_m, horizontal_m, ... as float (single launch) or array (batch)
         if name in _SCALAR_FIELDS:
-            vals = self.summary[name].to_numpy()
+            vals = self.launches[name].to_numpy()
             return float(vals[0]) if self.scalar else vals
         raise AttributeError(name)
 
     def as_dict(self, member: int = 0) -> dict:
         """Summary of one launch as a JSON-ready dict (SI units, degrees for angles)."""
-        row = self.summary.iloc[member]
+        row = self.launches.iloc[member]
         out = {}
         for k in SUMMARY_COLUMNS:
             v = row[k]
@@ -139,20 +148,21 @@ class LaunchResult:
     def to_pandas(self, member: int | None = None) -> pd.DataFrame:
         """Trajectory of one launch: states indexed by time, ending at the exit point.
 
-        Columns ``x, z, theta, u, w, q`` plus ``depth`` (= z) [m].
+        Columns ``x, z, theta, u, w, q`` plus ``depth`` (= z) [m]; for a batch without ``member``, every
+        launch's rows with a ``launch`` column (its row in :attr:`launches`).
         """
         if self.x is None:
             raise ValueError("trajectories were not kept; call launch(..., keep_trajectories=True)")
         if member is None:
             if not self.scalar:
-                raise ValueError("batched result: pass member=i to choose one launch")
+                return pd.concat([self.to_pandas(i).assign(launch=i) for i in range(len(self))])
             member = 0
         X = self.x[member]
         ok = np.isfinite(X[:, 0])
         t = self.t[ok]
         X = X[ok]
         if np.isfinite(self.exit_state[member, 0]):
-            t = np.append(t, self.summary["duration_s"].iloc[member])
+            t = np.append(t, self.launches["duration_s"].iloc[member])
             X = np.vstack([X, self.exit_state[member]])
         df = pd.DataFrame(X, columns=list(self.model.state_names), index=pd.Index(t, name="time"))
         df["depth"] = df["z"]
@@ -171,11 +181,18 @@ class LaunchResult:
 
         if ax is None:
             _, ax = plt.subplots(figsize=(7, 3.5))
+        if self.x is None:  # no trajectories kept: where each launch surfaced against how deep it went
+            ax.plot(self.launches["horizontal_m"], self.launches["max_depth_m"], "o")
+            if not ax.yaxis_inverted():
+                ax.invert_yaxis()
+            ax.set_xlabel("horizontal travel at surfacing [m]")
+            ax.set_ylabel("maximum depth [m]")
+            return ax
         if members is None:
             members = range(min(len(self), 40))
         for i in members:
             df = self.to_pandas(i)
-            row = self.summary.iloc[i]
+            row = self.launches.iloc[i]
             ax.plot(df["x"], df["z"], label=f"{row.speed_m_s:g} m/s, {row.angle_deg:g} deg, fin {row.fin_deg:g}, cg {row.cg_m:g} m")
         ax.axhline(0.0, color="0.5", lw=0.8)
         if not ax.yaxis_inverted():
@@ -401,5 +418,5 @@ def launch(
     if keep_trajectories:
         xs = np.concatenate(pieces + [np.full((B, 1, 6), np.nan)], axis=1) if pieces else np.full((B, 1, 6), np.nan)
         xs[:, 0] = x0
-    return LaunchResult(summary=summary, t=tt, x=xs, exit_state=exit_state, model=model, params=params,
+    return LaunchResult(launches=summary, t=tt, x=xs, exit_state=exit_state, model=model, params=params,
                         fin=fin, dt=dt, scalar=scalar, success=code == 0, status=code, message=msg)

@@ -34,6 +34,7 @@ from tqdm.auto import tqdm
 
 from ..models import get_model
 from ..models.base import Model
+from ..results import ResultMixin
 from .launch import launch
 from .study import sweep
 
@@ -49,7 +50,7 @@ DEFAULT_BOUNDS: dict[str, tuple[float, float]] = {
 
 
 @dataclass
-class GliderOptimum:
+class GliderOptimum(ResultMixin):
     """Result of :func:`optimise_launch` (fields like scipy's OptimizeResult).
 
     Attributes
@@ -82,6 +83,39 @@ class GliderOptimum:
     nit: int
     settings: dict = field(default_factory=dict)
 
+    def summary(self) -> pd.DataFrame:
+        """The optimum's settings, objective, depth and horizontal travel beside the best launch of the grid."""
+        keys = ["speed_m_s", "angle_deg", "fin_deg", "cg_m", "max_depth_m", "horizontal_m", "exit_angle_deg", "surfaced"]
+        opt = {k: self.launch.get(k, np.nan) for k in keys}
+        grid = {k: self.grid_best.get(k, np.nan) for k in keys}
+        opt["objective"], grid["objective"] = float(self.objective), self.grid_best.get("objective", np.nan)
+        return pd.DataFrame({"optimum": pd.Series(opt, dtype=object), "grid_best": pd.Series(grid, dtype=object)})
+
+    def to_pandas(self) -> pd.DataFrame:
+        """The optimum's launch row and the grid's best row side by side (every column of a launch)."""
+        return pd.DataFrame({"optimum": self.launch, "grid_best": self.grid_best})
+
+    def _html_title(self) -> str:
+        return "Glider launch optimum"
+
+    def _key_numbers(self) -> dict:
+        return {"objective J": float(self.objective), "evaluations": int(self.nfev), "iterations": int(self.nit)}
+
+    def plot(self, ax=None):
+        """The optimum and the grid's best launch in the (horizontal travel, maximum depth) plane; returns the axes."""
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
+
+        if ax is None:
+            _, ax = plt.subplots(figsize=(5, 3.5))
+        for row, label, mk in ((self.launch, "optimum", "o"), (self.grid_best, "grid best", "s")):
+            ax.plot([row.get("horizontal_m", np.nan)], [row.get("max_depth_m", np.nan)], mk, label=label)
+        if not ax.yaxis_inverted():
+            ax.invert_yaxis()
+        ax.set_xlabel("horizontal travel at surfacing [m]")
+        ax.set_ylabel("maximum depth [m]")
+        ax.legend(loc="best", fontsize="small")
+        return ax
+
     def as_dict(self) -> dict:
         """JSON-ready dict."""
         def clean(s):
@@ -105,7 +139,7 @@ def launch_objective(summary: pd.DataFrame, depth_ref: float, horizontal_ref: fl
     Parameters
     ----------
     summary : DataFrame
-        :attr:`LaunchResult.summary`.
+        :attr:`LaunchResult.launches`.
     depth_ref, horizontal_ref : float
         Normalisers [m] (> 0).
     max_exit_angle_deg : float or None
@@ -174,7 +208,7 @@ def optimise_launch(
 
     # normalisers: best depth and best horizontal travel on the paper's grid at the top speed
     top = b["speed"][1]
-    grid = sweep([top], model=model).summary
+    grid = sweep([top], model=model).launches
     depth_ref = float(np.nanmax(grid["max_depth_m"]))
     horizontal_ref = float(np.nanmax(grid["horizontal_m"]))
     if not (depth_ref > 0 and horizontal_ref > 0):
@@ -196,7 +230,7 @@ def optimise_launch(
     def f(X):
         c = unpack(X)
         r = launch(c["speed"], c["angle_deg"], c["fin_deg"], c["cg_m"], model=model, keep_trajectories=False)
-        return -launch_objective(r.summary, depth_ref, horizontal_ref, max_exit_angle_deg)
+        return -launch_objective(r.launches, depth_ref, horizontal_ref, max_exit_angle_deg)
 
     bar = cb = None
     if progress:
@@ -224,8 +258,8 @@ def optimise_launch(
     c = unpack(xbest[:, None] if xbest.size else np.zeros((0, 1)))
     best = {k: float(c[k][0]) for k in names}
     r = launch(best["speed"], best["angle_deg"], best["fin_deg"], best["cg_m"], model=model, keep_trajectories=False)
-    row = r.summary.iloc[0].copy()
-    J = float(launch_objective(r.summary, depth_ref, horizontal_ref, max_exit_angle_deg)[0])
+    row = r.launches.iloc[0].copy()
+    J = float(launch_objective(r.launches, depth_ref, horizontal_ref, max_exit_angle_deg)[0])
     row["J"] = J
     return GliderOptimum(
         x=best, objective=J, launch=row, depth_ref=depth_ref, horizontal_ref=horizontal_ref,

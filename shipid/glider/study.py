@@ -57,7 +57,7 @@ def sweep(
     Returns
     -------
     LaunchResult
-        ``summary`` has one row per combination, ordered with ``cg_m``
+        ``launches`` (and ``summary()``) has one row per combination, ordered with ``cg_m``
         varying fastest.
     """
     levels = [np.atleast_1d(np.asarray(v, dtype=float)) for v in (speed, angle_deg, fin_deg, cg_m)]

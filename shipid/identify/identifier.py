@@ -12,6 +12,7 @@ from tqdm.auto import tqdm
 
 from ..integrate import STEP_TANGENTS
 from ..models.base import Model
+from ..results import ResultMixin, coefficient_table, plot_coefficients, verdict_grade
 from ..simulate import simulate
 from .data import LogArrays, frozen_mask, noise_std_from_data, prepare_logs, resolution_std
 from .diagnostics import coefficient_plausibility, consistency, identifiability
@@ -42,7 +43,7 @@ def _as_dict(value, names, what) -> dict:
 TRACK_START_SAMPLES = 20
 
 
-class EKFIdentifier:
+class EKFIdentifier(ResultMixin):
     """Identify model parameters from trial logs with an augmented-state EKF.
 
     The estimated parameters are appended to the model state as random walks;
@@ -758,16 +759,49 @@ class EKFIdentifier:
         self._check_fitted()
         return self.model.with_params(self.coef_.to_numpy())
 
+    @property
+    def success(self) -> bool:
+        """``success_`` of a fitted identifier (False before :meth:`fit`)."""
+        return bool(getattr(self, "success_", False))
+
+    @property
+    def message(self) -> str:
+        """``message_`` of a fitted identifier."""
+        return getattr(self, "message_", "not fitted yet: call fit(logs) first")
+
     def summary(self) -> pd.DataFrame:
-        """Coefficient table: value, std, relative std, 95 % interval, prior std."""
+        """Coefficient table: value, std, relative std, 95 % interval, prior std (``attrs["verdict"]``: the
+        verdict grade when the fit has one)."""
         self._check_fitted()
         est = self.estimated_
-        v = self.coef_[est]
-        sd = self.coef_std_[est]
-        return pd.DataFrame({
-            "value": v, "std": sd, "rel_std_%": 100 * sd / v.abs().where(v.abs() > 0),
-            "ci95_low": v - 1.96 * sd, "ci95_high": v + 1.96 * sd, "prior_std": self.prior_std_[est],
-        })
+        tab = coefficient_table(self.coef_[est], self.coef_std_[est])
+        tab["prior_std"] = self.prior_std_[est]
+        grade = verdict_grade(self)
+        if grade is not None:
+            tab.attrs["verdict"] = grade
+        return tab
+
+    def to_pandas(self) -> pd.DataFrame:
+        """The smoothed states of every log, one after the other, with a ``log`` column (the log's name)."""
+        self._check_fitted()
+        names = [m.get("name", str(i)) for i, m in enumerate(self.logs_)]
+        return pd.concat([st.assign(log=n) for st, n in zip(self.states_, names)])
+
+    def plot(self, ax=None):
+        """Each estimated coefficient's 95 % interval relative to its value; returns the axes."""
+        return plot_coefficients(self.summary(), ax, title=f"{self.model.name} (EKF)")
+
+    def _html_title(self) -> str:
+        return f"EKF fit of '{self.model.name}'" + ("" if hasattr(self, "coef_") else " (not fitted)")
+
+    def _key_numbers(self) -> dict:
+        if not hasattr(self, "coef_"):
+            return {}
+        k = {"logs": len(self.logs_), "estimated": len(self.estimated_), "passes": int(self.n_passes)}
+        cons = self.diagnostics_.get("consistency")
+        if verdict_grade(self) is None and isinstance(cons, dict) and "consistent" in cons:
+            k["consistent with the noise model"] = bool(cons["consistent"])
+        return k
 
     def sensor_noise_cov(self) -> pd.DataFrame:
         """The coefficients' covariance of this fit re-evaluated under sensor noise only.

@@ -71,6 +71,7 @@ import pandas as pd
 from .._blas import one_blas_thread
 from ..logs.overlap import drop_contained, repeated_samples
 from ..models import get_model, Model, model_class
+from ..results import ResultMixin, coefficient_table, plot_coefficients, verdict_grade
 from .diagnostics import damping_check
 from .identifier import EKFIdentifier
 from .refine import AUTO_REFINE, METRIC_TOL, METRIC_WEIGHT, REFINE_MODES, _kinds, metric_residuals, refine_fit
@@ -87,7 +88,7 @@ _FROUDE_EXP = {"x": 0.75, "y": 0.75, "psi": -0.25, "u": 0.25, "v": 0.25, "r": -0
 
 
 @dataclass
-class RecipeFit:
+class RecipeFit(ResultMixin):
     """What :func:`fit_logs` did and made.
 
     Attributes
@@ -122,7 +123,59 @@ class RecipeFit:
 
     @property
     def success(self) -> bool:
+        """True when the EKF stage and the refinement (when run) both succeeded; the result JSON says the same."""
         return bool(self.ekf.success_) and (self.refiner is None or bool(self.refiner.success_))
+
+    @property
+    def success_(self) -> bool:
+        """The same as :attr:`success` (one truth for the whole recipe, not only its last stage)."""
+        return self.success
+
+    @property
+    def message(self) -> str:
+        """The last stage's message; when the EKF stage failed under a refinement, that first."""
+        if self.refiner is not None and not self.ekf.success_:
+            return f"EKF stage failed ({self.ekf.message_}); refinement: {self.refiner.message_}"
+        return self.final.message_
+
+    @property
+    def message_(self) -> str:
+        return self.message
+
+    @property
+    def verdict(self):
+        """The fit's verdict from its EKF stage (None when the identifier has none)."""
+        return getattr(self.ekf, "verdict", None) or getattr(self.ekf, "verdict_", None)
+
+    def summary(self) -> pd.DataFrame:
+        """The last stage's coefficient table (value, std, relative std, 95 % interval; ``attrs["verdict"]``
+        the verdict grade when there is one)."""
+        f = self.final
+        tab = self.ekf.summary() if self.refiner is None else coefficient_table(f.coef_[f.estimated_], f.coef_std_[f.estimated_])
+        grade = verdict_grade(self)
+        if grade is not None:
+            tab.attrs["verdict"] = grade
+        return tab
+
+    def recipe(self) -> pd.DataFrame:
+        """The recipe's steps, one row each: ``step``, ``value``, ``reason``."""
+        return pd.DataFrame([{"step": s["step"], "value": s["value"], "reason": s["reason"]} for s in self.steps],
+                            columns=["step", "value", "reason"])
+
+    def to_pandas(self) -> pd.DataFrame:
+        """The EKF stage's smoothed states of every log (see :meth:`EKFIdentifier.to_pandas`)."""
+        return self.ekf.to_pandas()
+
+    def plot(self, ax=None):
+        """Each estimated coefficient's 95 % interval relative to its value (last stage); returns the axes."""
+        return plot_coefficients(self.summary(), ax, title=f"{self.ekf.model.name} (recipe)")
+
+    def _html_title(self) -> str:
+        return f"Recipe fit of '{self.ekf.model.name}'" + (" (EKF + refinement)" if self.refiner is not None else "")
+
+    def _key_numbers(self) -> dict:
+        return {"logs": len(self.logs) or len(getattr(self.final, "logs_", [])), "Lpp [m]": self.lpp,
+                "recipe steps": len(self.steps)}
 
     def to_model(self):
         return self.final.to_model()
@@ -151,7 +204,8 @@ class RecipeFit:
             res.diagnostics["damping"] = damping_check(self.final.to_model(), self.logs)
         return res
 
-    def summary(self) -> str:
+    def __str__(self) -> str:
+        """The recipe's steps as text, one ``recipe: step: value -- reason`` line each."""
         return "\n".join(f"recipe: {s['step']}: {s['value']} -- {s['reason']}" for s in self.steps)
 
 

@@ -15,6 +15,7 @@ import pandas as pd
 from .._io import (as_bool, as_mapping, as_number, as_string, atomic_write_text, dumps_json, read_json, short)
 from .._version import __version__
 from ..models import available_models, get_model, Model
+from ..results import ResultMixin, coefficient_table, plot_coefficients, verdict_grade
 
 __all__ = ["FitResult", "load_result", "as_result", "model_from", "software_versions", "diagnostics_to_json", "fitted_ship"]
 
@@ -78,7 +79,7 @@ def software_versions() -> dict:
 
 
 @dataclass
-class FitResult:
+class FitResult(ResultMixin):
     """Serialisable result of an identification.
 
     Attributes
@@ -179,11 +180,42 @@ class FitResult:
                              f"{short(self.model_options, 80)}: {exc}") from None
 
     def summary(self) -> pd.DataFrame:
+        """Estimated coefficients: value, std, relative std [%], 95 % interval.  ``attrs["verdict"]`` holds the
+        fit's verdict grade when it has one."""
         est = list(self.cov.index)
-        v = pd.Series({k: self.coef[k] for k in est})
-        sd = pd.Series({k: self.coef_std.get(k, np.nan) for k in est})
-        return pd.DataFrame({"value": v, "std": sd, "rel_std_%": 100 * sd / v.abs().where(v.abs() > 0),
-                             "ci95_low": v - 1.96 * sd, "ci95_high": v + 1.96 * sd})
+        tab = coefficient_table(pd.Series({k: self.coef[k] for k in est}, dtype=float),
+                                pd.Series({k: self.coef_std.get(k, np.nan) for k in est}, dtype=float))
+        grade = verdict_grade(self)
+        if grade is not None:
+            tab.attrs["verdict"] = grade
+        return tab
+
+    def to_pandas(self) -> pd.DataFrame:
+        """Every parameter of the model (estimated and fixed): ``value``, ``std`` and ``estimated``."""
+        est = set(self.cov.index)
+        return pd.DataFrame({"value": pd.Series(self.coef, dtype=float),
+                             "std": pd.Series({k: self.coef_std.get(k, 0.0) for k in self.coef}, dtype=float),
+                             "estimated": pd.Series({k: k in est for k in self.coef}, dtype=bool)})
+
+    def plot(self, ax=None):
+        """Each estimated coefficient's 95 % interval relative to its value; returns the axes."""
+        return plot_coefficients(self.summary(), ax, title=f"{self.model} ({self.method})")
+
+    def _html_title(self) -> str:
+        return f"Fit of '{self.model}' ({self.method})"
+
+    def _key_numbers(self) -> dict:
+        k = {"logs": ", ".join(str(i.get("name", "?")) for i in self.inputs[:6]) + (" ..." if len(self.inputs) > 6 else ""),
+             "estimated": len(self.cov.index)}
+        if self.ship.get("lpp"):
+            k["Lpp [m]"] = float(self.ship["lpp"])
+        cons = self.diagnostics.get("consistency") if isinstance(self.diagnostics, dict) else None
+        if verdict_grade(self) is None and isinstance(cons, dict) and "consistent" in cons:
+            k["consistent with the noise model"] = bool(cons["consistent"])
+        warn = self.diagnostics.get("warnings") if isinstance(self.diagnostics, dict) else None
+        if warn:
+            k["warnings"] = len(warn)
+        return k
 
 
 def model_from(spec, *, model: str | None = None):

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from ..results import ResultMixin
 from .units import SHIP_CHANNELS, unit_key, UNITS
 
 __all__ = ["Finding", "ConsistencyResult", "check_consistency", "CHECKS"]
@@ -76,7 +77,7 @@ class Finding:
 
 
 @dataclass
-class ConsistencyResult:
+class ConsistencyResult(ResultMixin):
     """Findings of :func:`check_consistency` for one log.
 
     ``success`` is False when there is an error; ``status`` is ``"ok"``,
@@ -115,6 +116,33 @@ class ConsistencyResult:
         return pd.DataFrame([{"level": f.level, "check": f.check, "channels": ", ".join(f.channels),
                               "message": f.message} for f in self.findings],
                             columns=["level", "check", "channels", "message"])
+
+    def summary(self) -> pd.DataFrame:
+        """One row per finding (level, check, channels, message); empty when the channels are consistent."""
+        return self.to_pandas()
+
+    def _html_title(self) -> str:
+        return f"Channel consistency of '{self.name}'"
+
+    def _key_numbers(self) -> dict:
+        return {"checks": ", ".join(self.checks), "errors": len(self.errors), "warnings": len(self.warnings)}
+
+    def plot(self, ax=None):
+        """Findings per check, stacked by level (error, warning, info); returns the axes."""
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
+
+        if ax is None:
+            _, ax = plt.subplots(figsize=(6, 2.5))
+        checks = list(self.checks)
+        bottom = np.zeros(len(checks))
+        for level, colour in (("error", "C3"), ("warning", "C1"), ("info", "C0")):
+            n = np.array([sum(f.level == level and f.check == c for f in self.findings) for c in checks], dtype=float)
+            ax.bar(checks, n, bottom=bottom, color=colour, label=level)
+            bottom += n
+        ax.set_ylabel("findings")
+        ax.tick_params(axis="x", labelrotation=30)
+        ax.legend(loc="best", fontsize="small")
+        return ax
 
     def to_dict(self) -> dict:
         return {"name": self.name, "success": self.success, "status": self.status, "message": self.message,

@@ -19,6 +19,7 @@ import numpy as np
 import pandas as pd
 
 from .._io import atomic_write_text
+from ..results import ResultMixin, axes_column, in_degrees
 from .consistency import check_consistency
 from .errors import LogError, _fmt_value, _Where
 from .ship import ShipParticulars, _as_ship
@@ -38,7 +39,7 @@ _RPM_SCORE = 200.0                    # n sqrt(Lpp) [rps m^0.5] above this looks
 # --------------------------------------------------------------------------------------
 
 
-class TrialLog:
+class TrialLog(ResultMixin):
     """A validated trial log in SI units and radians.
 
     Build one with :func:`read_log` or :meth:`TrialLog.from_arrays`; both run
@@ -278,7 +279,42 @@ class TrialLog:
         src = self.path.name if self.path is not None else "arrays"
         return f"TrialLog(name={self.name!r}, source={src!r}, samples={len(self)}, channels={self.channels})"
 
-    def summary(self) -> str:
+    @property
+    def success(self) -> bool:
+        """False when the channel-consistency checks found an error (:attr:`consistency`)."""
+        return self.consistency is None or bool(self.consistency.success)
+
+    @property
+    def message(self) -> str:
+        """One line: samples, time span and the consistency status."""
+        t = self.time
+        span = f", t = {t[0]:g} .. {t[-1]:g} s" if len(t) else ""
+        cons = f"; {self.consistency.message.split(': ', 1)[-1]}" if self.consistency is not None else ""
+        return f"log '{self.name}': {len(self)} samples{span}{cons}"
+
+    def summary(self) -> pd.DataFrame:
+        """One row per channel (angles in degrees): unit, finite samples, missing samples, min, mean, max."""
+        u = self.units()
+        rows = {}
+        for c in self.channels:
+            y, unit = in_degrees(self[c], u.get(c, ""))
+            y = np.asarray(y, dtype=float)
+            fin = y[np.isfinite(y)]
+            rows[c] = {"unit": unit, "samples": int(fin.size), "missing": len(self.missing.get(c, [])),
+                       "min": fin.min() if fin.size else np.nan, "mean": fin.mean() if fin.size else np.nan,
+                       "max": fin.max() if fin.size else np.nan}
+        return pd.DataFrame.from_dict(rows, orient="index", columns=["unit", "samples", "missing", "min", "mean", "max"])
+
+    def _html_title(self) -> str:
+        src = self.path.name if self.path is not None else "arrays"
+        return f"TrialLog '{self.name}' ({src})"
+
+    def _key_numbers(self) -> dict:
+        k = {"samples": len(self), "dt [s] (median)": self.dt if len(self) > 1 else float("nan"),
+             "ship": str(self.ship) if self.ship is not None else "not given", "dropouts": len(self.dropouts)}
+        return k
+
+    def __str__(self) -> str:
         """Short text: source, samples, time span, channels, ship, missing samples, dropouts, notes."""
         t = self.time
         u = self.units()

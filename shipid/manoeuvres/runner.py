@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 
 from ..models.base import Model
+from ..results import ResultMixin
 from ..simulate import METHODS, SimulationResult, simulate
 
 _REQUIRED_STATES = ("x", "y", "psi", "u", "v", "r")
@@ -105,7 +106,7 @@ def steady_rps(model: Model, speed, *, params=None, n_max: float = 1e3, xtol: fl
 
 
 @dataclass
-class ManoeuvreResult:
+class ManoeuvreResult(ResultMixin):
     """A batch of simulated standard manoeuvres.
 
     Attributes
@@ -138,6 +139,57 @@ class ManoeuvreResult:
     def member(self, i: int) -> pd.DataFrame:
         """Time series of member ``i`` (states and inputs)."""
         return self.simulation.to_pandas(member=i)
+
+    #: Columns of :meth:`summary` (those a member's metrics have), after the settings.
+    _SUMMARY_METRICS = ("advance_L", "transfer_L", "tactical_diameter_L", "steady_diameter_L", "speed_loss",
+                        "overshoot1_deg", "overshoot2_deg", "initial_turning_L", "success")
+
+    def summary(self) -> pd.DataFrame:
+        """One row per member: its settings and the headline metrics (turning: advance, transfer, tactical
+        and steady diameter in ship lengths, speed loss; zigzag: first and second overshoot [deg], initial
+        turning [L]); every metric is in :meth:`to_pandas`."""
+        df = self.to_pandas()
+        keep = list(self.settings.columns) + [c for c in self._SUMMARY_METRICS if c in df.columns]
+        return df[[c for c in dict.fromkeys(keep) if c in df.columns]]
+
+    def _html_title(self) -> str:
+        return f"{self.kind.capitalize()} manoeuvre" + (f"s ({len(self.metrics)} members)" if len(self.metrics) > 1 else "")
+
+    def _key_numbers(self) -> dict:
+        return {"model": self.simulation.model.name, "members": len(self.metrics)}
+
+    def plot(self, ax=None):
+        """Turning: the tracks in ship lengths (x/L up, y/L right, as a trial chart); zigzag: heading and rudder
+        angle [deg] against time.  One line per member; returns the axes."""
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
+
+        sim, model = self.simulation, self.simulation.model
+        if ax is None:
+            _, ax = plt.subplots(figsize=(6, 5) if self.kind == "turning" else (8, 3.5))
+        X = sim.x if sim.batched else sim.x[None]
+        U = sim.u if sim.batched else sim.u[None]
+        labels = [", ".join(f"{k} {v:g}" if isinstance(v, (int, float, np.floating)) else f"{v}" for k, v in row.items()
+                            if k in ("rudder_deg", "switch_deg", "side", "first", "speed"))
+                  for row in self.settings.to_dict("records")]
+        if self.kind == "turning":
+            L = self.metrics[0].lpp if self.metrics else 1.0
+            ix, iy = model.state_index("x"), model.state_index("y")
+            for b in range(X.shape[0]):
+                ax.plot(X[b, :, iy] / L, X[b, :, ix] / L, lw=1.0, label=labels[b] if b < len(labels) else None)
+            ax.set_xlabel("y / L (transfer)")
+            ax.set_ylabel("x / L (advance)")
+            ax.set_aspect("equal", adjustable="datalim")
+        else:
+            ipsi, idl = model.state_index("psi"), model.input_index("delta")
+            for b in range(X.shape[0]):
+                line, = ax.plot(sim.t, np.degrees(X[b, :, ipsi] - X[b, 0, ipsi]), lw=1.0,
+                                label=f"heading, {labels[b]}" if b < len(labels) else None)
+                ax.plot(sim.t, np.degrees(U[b, :, idl]), lw=0.8, ls="--", color=line.get_color())
+            ax.set_xlabel("time [s]")
+            ax.set_ylabel("heading change (solid), rudder (dashed) [deg]")
+        if X.shape[0] <= 8:
+            ax.legend(loc="best", fontsize="small")
+        return ax
 
 
 def _resolve(model, speed, n, rudder_rate, lpp, params):

@@ -316,6 +316,44 @@ def _section_versions(result) -> str:
 
 
 # ----------------------------------------------------------------------------- public
+#: Units of the cross-validated metrics (``shipid crossval``).
+_CV_UNITS = {"tactical_diameter_pct": "%", "advance_pct": "%", "overshoot1_deg": "deg", "overshoot2_deg": "deg",
+             "steady_diameter_pct": "%", "time_360_pct": "%"}
+
+
+def _section_crossval(result) -> str:
+    """The cross-validation stored in the result (``shipid fit --cross-validate`` or ``--model auto``): the
+    candidates' scores when the model was chosen, the per-metric median and worst error on left-out runs."""
+    extra = getattr(result, "extra", None) or {}
+    cv, choice = extra.get("crossval"), extra.get("model_choice")
+    if not cv and not choice:
+        return ""
+    out = ['<h2 id="crossval">Expected error on runs not used for fitting (cross-validation)</h2>']
+    if choice:
+        rows = [[_e(r["candidate"]), _f(r.get("score"), "{:.3g}"), _e(r.get("worst_run") or ""),
+                 _f(r.get("worst"), "{:.3g}"), _f(r.get("failed_folds"), "{:.0f}"), _f(r.get("blowups"), "{:.0f}"),
+                 _f(r.get("missing"), "{:.0f}")] for r in choice.get("table", [])]
+        out.append(f"<p>Model chosen by cross-validation ({_e(choice.get('message', ''))}; score: mean over the "
+                   "left-out runs of the errors over their goals, TD 5 %, overshoots 2 and 3 deg, 30 s position "
+                   "0.1 L; 1 = at the goals).</p>")
+        out.append(_table(["candidate", "score", "worst run", "its score", "failed folds", "blow-ups",
+                           "not predicted"], rows))
+    if cv:
+        rows = []
+        for r in cv.get("summary", []):
+            unit = _CV_UNITS.get(r["metric"], "m" if r["metric"].startswith("position_") else "")
+            if r["metric"] in ("blowups", "failed_folds"):
+                rows.append([_e(r["metric"].replace("_", " ")), "", _f(r.get("worst"), "{:.0f}"), "", ""])
+                continue
+            rows.append([_e(f"{r['metric']} [{unit}]"), _f(r.get("median"), "{:.3g}"), _f(r.get("worst"), "{:+.3g}"),
+                         _e(r.get("worst_run") or ""), _f(r.get("n"), "{:.0f}")])
+        out.append(f"<p>{_e(cv.get('candidate', ''))}: {_e(cv.get('message', ''))}. Each run was predicted by a fit "
+                   "on the other runs (closed-loop standard manoeuvres with the run's own rudder and check angles; "
+                   "open-loop position errors from the measured state); errors are predicted minus measured.</p>")
+        out.append(_table(["metric", "median |error|", "worst", "worst run", "runs"], rows))
+    return "".join(out)
+
+
 def _section_horizon(horizons) -> str:
     """Multi-start open-loop prediction errors (:func:`shipid.validation.horizon.horizon_prediction`) and
     predicted-vs-measured track overlays; ``horizons`` is a list of ``(HorizonResult, log)``."""
@@ -325,11 +363,11 @@ def _section_horizon(horizons) -> str:
 
     rows, figs = [], []
     for h, log in horizons:
-        for e in h.summary():
+        for e in h.to_records():
             rows.append([_e(h.name), _f(e["seconds"], "{:g}"), _f(e["position_error_median_m"], "{:.3f}"),
                          _f(e["position_error_p90_m"], "{:.3f}"), _f(e["heading_error_median_deg"], "{:.2f}"),
                          _f(e["n_starts"], "{:.0f}"), (_f(e["n_blowups"], "{:.0f}"), "bad" if e["n_blowups"] else "")])
-        ax = h.plot(log, every=max(1, len(h.start_times) // 12))
+        ax = h.plot(log=log, every=max(1, len(h.start_times) // 12))
         ax.set_title(f"{h.name}: predictions over {h.horizons.max():g} s")
         figs.append(_fig(ax.figure, f"predicted vs measured tracks, {h.name}"))
         plt.close(ax.figure)
@@ -384,7 +422,7 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
             *[f"<p class=\"intro\">{_e(par.strip())}</p>" for par in (intro or "").split("\n\n") if par.strip()],
             f"<nav>{nav}</nav>",
             _section_summary(validations), _section_horizon(horizons), _section_imo(validations),
-            *extra,
+            _section_crossval(res), *extra,
             _section_coefficients(res),
             _section_identifiability(res), _section_model(res, model),
             "<h2 id=\"logs\">Measured vs simulated, per log</h2>",

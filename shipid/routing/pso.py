@@ -54,6 +54,7 @@ from scipy.optimize import differential_evolution
 from tqdm.auto import tqdm
 
 from .._io import check_memory
+from ..results import ResultMixin
 from .energy import PaperUSVModel
 from .fields import Field, PiecewiseTimeField, UniformField, as_field
 
@@ -339,7 +340,7 @@ class PathCost:
 
 # ---------------------------------------------------------------- optimiser
 @dataclass
-class PSOResult:
+class PSOResult(ResultMixin):
     """Result of :func:`pso` (fields as scipy's ``OptimizeResult``)."""
 
     x: np.ndarray
@@ -350,6 +351,26 @@ class PSOResult:
     status: int
     message: str
     history: np.ndarray
+
+    def summary(self) -> pd.DataFrame:
+        """Best objective, iterations, evaluations and the best position (``x[i]``), one row each."""
+        rows = {"fun": float(self.fun), "nit": int(self.nit), "nfev": int(self.nfev)}
+        rows.update({f"x[{i}]": float(v) for i, v in enumerate(np.ravel(self.x))})
+        return pd.DataFrame({"value": pd.Series(rows, dtype=float)}).rename_axis("quantity")
+
+    def to_pandas(self) -> pd.DataFrame:
+        """Best objective after each iteration (column ``best``, index ``iteration``)."""
+        return pd.DataFrame({"best": np.asarray(self.history, dtype=float)}, index=pd.RangeIndex(len(self.history), name="iteration"))
+
+    def plot(self, ax=None):
+        """Best objective against iteration; returns the axes."""
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
+
+        ax = ax or plt.subplots(figsize=(5, 3))[1]
+        ax.plot(np.arange(len(self.history)), self.history)
+        ax.set_xlabel("iteration")
+        ax.set_ylabel("best objective")
+        return ax
 
 
 def pso(cost: Callable[[np.ndarray], np.ndarray], lb, ub, *, n_particles: int = 40, max_iter: int = 150,
@@ -466,7 +487,7 @@ def pso(cost: Callable[[np.ndarray], np.ndarray], lb, ub, *, n_particles: int = 
 
 # ------------------------------------------------------------------ plans
 @dataclass
-class PlanResult:
+class PlanResult(ResultMixin):
     """A planned path.
 
     Attributes
@@ -509,7 +530,17 @@ class PlanResult:
         ax.set_aspect("equal")
         return ax
 
+    def summary(self) -> pd.DataFrame:
+        """Length [m], predicted energy [J] and voyage time [s], waypoints, optimiser iterations."""
+        rows = {"length_m": self.length, "energy_J": self.energy, "time_s": self.time,
+                "waypoints": float(len(self.rho)), "nit": float(self.opt.nit), "nfev": float(self.opt.nfev)}
+        return pd.DataFrame({"value": pd.Series(rows, dtype=float)}).rename_axis("quantity")
+
+    def _html_title(self) -> str:
+        return f"Planned path ({self.objective})"
+
     def to_pandas(self, origin=None) -> pd.DataFrame:
+        """The path's points ``x, y`` [m] (east, north); with ``origin=(lon, lat)`` also ``lon, lat``."""
         df = pd.DataFrame({"x": self.points[:, 0], "y": self.points[:, 1]})
         if origin is not None:
             ll = local_to_lonlat(self.points, *origin)
@@ -640,7 +671,7 @@ def differential_evolution_check(problem: USVProblem, objective: str = "energy",
 
 # ----------------------------------------------------------------- voyage
 @dataclass
-class Voyage:
+class Voyage(ResultMixin):
     """Sailing a polyline through time-varying fields.
 
     Attributes
@@ -675,8 +706,15 @@ class Voyage:
         return bool(self.arrived)
 
     def to_pandas(self) -> pd.DataFrame:
+        """The records: ``t`` [s], ``x, y`` [m], ``energy_J`` and ``leg``."""
         return pd.DataFrame({"t": self.t, "x": self.xy[:, 0], "y": self.xy[:, 1], "energy_J": self.energy,
                              "leg": self.leg})
+
+    def summary(self) -> pd.DataFrame:
+        """Whether it arrived, duration [s], energy [J], legs sailed."""
+        rows = {"arrived": bool(self.arrived), "duration_s": self.duration, "energy_J": self.total_energy,
+                "legs": int(self.leg.max()) + 1 if len(self.leg) else 0}
+        return pd.DataFrame({"value": pd.Series(rows, dtype=object)}).rename_axis("quantity")
 
     def plot(self, ax=None, **kw):
         """Energy spent [J] against time [s]; returns the axes."""
@@ -736,7 +774,7 @@ def sail(problem: USVProblem, points, *, t0: float = 0.0, e0: float = 0.0, stop_
 
 # ------------------------------------------------------------------ OCPSO
 @dataclass
-class OCPSOResult:
+class OCPSOResult(ResultMixin):
     """Online replanning result.
 
     Attributes
@@ -772,6 +810,31 @@ class OCPSOResult:
     def length(self) -> float:
         d = np.diff(self.points, axis=0)
         return float(np.sum(np.hypot(d[:, 0], d[:, 1])))
+
+    def summary(self) -> pd.DataFrame:
+        """Energy spent [J] and voyage time [s] of the sailed path against the initial plan's prediction,
+        path length [m], replanning events and how many changed the plan."""
+        rows = {"energy_J": self.energy, "initial_plan_energy_J": self.initial.energy, "duration_s": self.voyage.duration,
+                "length_m": self.length, "replanning_events": float(len(self.events)),
+                "plans_changed": float(sum(bool(e["replanned"]) for e in self.events))}
+        return pd.DataFrame({"value": pd.Series(rows, dtype=float)}).rename_axis("quantity")
+
+    def _html_title(self) -> str:
+        return "Online replanned path (OCPSO)"
+
+    def to_pandas(self) -> pd.DataFrame:
+        """The replanning events, one row each (time, position, target waypoint, energies, replanned)."""
+        return pd.DataFrame(self.events)
+
+    def plot(self, ax=None, **kw):
+        """The initial plan (dotted) and the path sailed (north against east); returns the axes."""
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
+
+        ax = ax or plt.gca()
+        ax.plot(self.initial.points[:, 0], self.initial.points[:, 1], ":", color="0.5", label="initial plan")
+        ax.plot(self.points[:, 0], self.points[:, 1], "-s", label=kw.pop("label", "sailed"), **kw)
+        ax.set_aspect("equal")
+        return ax
 
 
 def plan_ocpso(problem: USVProblem, *, replan_times: Sequence[float] | None = None, rng=None,

@@ -45,6 +45,7 @@ from scipy.optimize import minimize
 
 from ..integrate import rk4_step
 from ..models.base import Model
+from ..results import ResultMixin
 from .fields import HOUR, KNOT, NM, Field, as_field, course_from_math, linear_shear
 
 __all__ = ["ZermeloProblem", "ZermeloResult", "solve_pmp", "solve_transcription", "paper_problem",
@@ -93,7 +94,7 @@ class ZermeloProblem:
 
 
 @dataclass
-class ZermeloResult:
+class ZermeloResult(ResultMixin):
     """Time-optimal route.
 
     Attributes
@@ -143,8 +144,19 @@ class ZermeloResult:
             "course_deg": np.degrees(self.course),
         })
 
+    def summary(self) -> pd.DataFrame:
+        """Headline numbers (``value``): time to the target, whether it was reached, the miss distance,
+        the start and final course [deg] and the route's points (units are the problem's)."""
+        c = np.degrees(self.course) if len(self.heading) else np.array([np.nan])
+        rows = {"time": self.time, "reached": bool(self.reached), "miss": self.miss,
+                "course_start_deg": float(c[0]), "course_end_deg": float(c[-1]), "points": int(len(self.t))}
+        return pd.DataFrame({"value": pd.Series(rows, dtype=object)}).rename_axis("quantity")
+
+    def _html_title(self) -> str:
+        return f"Zermelo route ({self.method})"
+
     def plot(self, ax=None, **kw):
-        """Plot the route (y against x); returns the axes."""
+        """Plot the route (y against x); ``kw`` go to matplotlib's ``plot``.  Returns the axes."""
         import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         ax = ax or plt.gca()

@@ -52,6 +52,7 @@ from scipy.stats import rankdata
 from .._io import atomic_write_text
 from ..identify.data import noise_std_from_data, prepare_logs
 from ..identify.result import as_result
+from ..results import ResultMixin
 from ..simulate import simulate
 
 __all__ = ["sample_posterior", "PosteriorSamples", "load_samples", "split_rhat", "CONVERGENCE",
@@ -266,7 +267,7 @@ class OutputErrorLikelihood:
 
 # ----------------------------------------------------------------------------- samples
 @dataclass
-class PosteriorSamples:
+class PosteriorSamples(ResultMixin):
     """MCMC samples of a model's coefficients and the diagnostics of the chain.
 
     Attributes
@@ -313,6 +314,25 @@ class PosteriorSamples:
             "median": np.median(s, axis=0), "q97.5": np.quantile(s, 0.975, axis=0),
             "tau": [d["tau"][n] for n in self.names], "ess": [d["ess"][n] for n in self.names],
             "rhat": [d["rhat"][n] for n in self.names]}, index=self.names)
+
+    def _html_title(self) -> str:
+        return f"Posterior samples of '{self.model}' ({len(self.samples)} draws)"
+
+    def plot(self, ax=None):
+        """Histograms of the marginal draws of the (at most six) most correlated coefficients; returns the axes."""
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
+
+        names = self.most_correlated(6)
+        if ax is None:
+            _, axs = plt.subplots(1, len(names), figsize=(2.6 * len(names), 2.4), squeeze=False)
+            axs = axs[0]
+        else:
+            axs = np.resize(np.atleast_1d(ax).ravel(), len(names))
+        for a, n in zip(axs, names):
+            a.hist(self.samples[:, self.names.index(n)], bins=30, color="C0", alpha=0.8)
+            a.set_xlabel(n)
+        axs[0].set_ylabel("draws")
+        return axs
 
     def cov(self) -> pd.DataFrame:
         return pd.DataFrame(np.cov(self.samples, rowvar=False), index=self.names, columns=self.names)

@@ -7,9 +7,9 @@
   not standard manoeuvres, against dead reckoning (:func:`horizon_prediction`).
 """
 from .horizon import DEFAULT_HORIZONS, DeadReckoning, HorizonResult, dead_reckoning, horizon_prediction
-from .replay import (DIFF_EXCLUDE, LogValidation, load_logs, resolve_model, standard_manoeuvre, validate,
+from .replay import (DIFF_EXCLUDE, DURATION_MULTIPLE, LogValidation, load_logs, resolve_model, standard_manoeuvre, validate,
                      validate_logs, validate_one)
 
 __all__ = ["validate", "validate_logs", "validate_one", "LogValidation", "resolve_model", "load_logs", "DIFF_EXCLUDE",
            "standard_manoeuvre", "horizon_prediction", "HorizonResult", "DeadReckoning", "dead_reckoning",
-           "DEFAULT_HORIZONS"]
+           "DEFAULT_HORIZONS", "DURATION_MULTIPLE"]

@@ -23,6 +23,7 @@ import pandas as pd
 from ..identify.data import measured_states
 from ..models.base import Model
 from ..models.kinematics import planar_rates
+from ..results import ResultMixin
 from ..simulate import simulate
 
 __all__ = ["horizon_prediction", "HorizonResult", "DeadReckoning", "dead_reckoning", "DEFAULT_HORIZONS"]
@@ -51,7 +52,7 @@ def dead_reckoning() -> DeadReckoning:
 
 
 @dataclass
-class HorizonResult:
+class HorizonResult(ResultMixin):
     """Result of :func:`horizon_prediction` for one log.
 
     Attributes
@@ -69,7 +70,8 @@ class HorizonResult:
         |predicted - measured heading| wrapped to [0, 180] deg.
     blowup : ndarray (nS,) of bool
     tracks : dict
-        ``t`` (nT,) relative times and ``x`` (nS, nT, nx) predicted states, for track overlays.
+        ``t`` (nT,) relative times, ``x`` (nS, nT, nx) predicted states and ``measured`` (n, 2) the
+        log's ``x, y`` [m], for track overlays.
     success : bool
         False when any prediction blew up.
     message : str
@@ -85,7 +87,15 @@ class HorizonResult:
     success: bool = True
     message: str = ""
 
-    def summary(self) -> list[dict]:
+    def summary(self) -> pd.DataFrame:
+        """One row per horizon (index ``seconds``): ``n_starts``, ``n_blowups``, ``position_error_median_m``,
+        ``position_error_p90_m``, ``heading_error_median_deg`` (the rows of :meth:`to_records`)."""
+        return pd.DataFrame(self.to_records()).set_index("seconds")
+
+    def _html_title(self) -> str:
+        return f"Horizon prediction '{self.name}'"
+
+    def to_records(self) -> list[dict]:
         """The per-log JSON entry: one dict per horizon with ``seconds``, ``position_error_median_m``,
         ``position_error_p90_m``, ``heading_error_median_deg``, ``n_starts``, ``n_blowups``."""
         out = []
@@ -113,14 +123,22 @@ class HorizonResult:
         cols["blowup"] = self.blowup
         return pd.DataFrame(cols, index=pd.Index(self.start_times, name="start_time"))
 
-    def plot(self, log, ax=None, every: int = 4):
-        """Measured track with every ``every``-th predicted track overlaid (longest horizon)."""
+    def plot(self, ax=None, log=None, every: int = 4):
+        """Measured track with every ``every``-th predicted track overlaid (longest horizon); returns the axes.
+
+        ``log`` (TrialLog or DataFrame with ``x, y``) replaces the measured track kept in :attr:`tracks`.
+        """
         import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         if ax is None:
             _, ax = plt.subplots(figsize=(6, 6))
-        df = log if isinstance(log, pd.DataFrame) else log.data
-        ax.plot(df["y"], df["x"], "k-", lw=1.5, label="measured")
+        if log is not None:
+            df = log if isinstance(log, pd.DataFrame) else log.data
+            xy = np.column_stack([df["x"].to_numpy(dtype=float), df["y"].to_numpy(dtype=float)])
+        else:
+            xy = self.tracks.get("measured")
+        if xy is not None:
+            ax.plot(xy[:, 1], xy[:, 0], "k-", lw=1.5, label="measured")
         X = self.tracks.get("x")
         if X is not None:
             for i in range(0, X.shape[0], every):
@@ -236,4 +254,4 @@ def horizon_prediction(model: Model, log, *, horizons=DEFAULT_HORIZONS, start_ev
     msg = (f"{starts.size} starts every {step * dt:g} s, horizons {', '.join(f'{h:g}' for h in H)} s"
            + (f"; {nb} prediction(s) blew up (counted with infinite error)" if nb else ""))
     return HorizonResult(name=str(name), horizons=H, start_times=t[starts], position_error=pe, heading_error=he,
-                         blowup=blow, tracks={"t": tt, "x": X}, success=nb == 0, message=msg)
+                         blowup=blow, tracks={"t": tt, "x": X, "measured": np.column_stack([meas["x"], meas["y"]])}, success=nb == 0, message=msg)
