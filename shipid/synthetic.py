@@ -47,7 +47,7 @@ class TrialRecipe:
     rpm_steps: tuple = ((0.0, 10.0),)
     psi_deg: float = 0.0
     dt_s: float = 0.1
-    rudder_rate_deg_s: float = 16.8  # KCS model, SPEC section 1
+    rudder_rate_deg_s: float = 16.8  # KCS model
     n_rate: float = 1.0  # rps per second
     execute_s: float = 5.0
 

@@ -1,4 +1,4 @@
-"""Issue 11 acceptance: ``shipid fit`` on the raw MARIN KVLCC2 runs with nothing but ``--lpp 320``.
+"""Acceptance on measured data: ``shipid fit`` on the raw MARIN KVLCC2 runs with nothing but ``--lpp 320``.
 
 The four training runs (tc+-35, zz+-10; the zz+-20 hold-outs are never read here) as the files are, through
 the CLI exactly as a user types it: the fit never diverges, exits 0 (consistent) or 3 (the consistency
@@ -8,7 +8,7 @@ the response models: b1, c2 < 0 and c3 > 0 (the rudder's yaw moment with shipid'
 rudder) -- and the fitted model's own sway and yaw damping (``diagnostics.damping``) is negative along the
 logged states.
 
-``response-nl`` meets it through the recipe's own-damping constraint (session 8): unconstrained, its
+``response-nl`` meets it through the recipe's own-damping constraint: unconstrained, its
 refinement gives b1 +0.0177 and the cross-flow term b6 +0.0124, and its own sway damping is positive on
 ~17 % of the logged states and at rest (self-excited sway in the slow part of the turns); the recipe then
 solves again with d(dv/dt)/dv, d(dr/dt)/dr <= -0.02 U/L at the logged states and at rest

@@ -1,4 +1,4 @@
-"""The README's commands run as written, in order, in a fresh folder (issue 16).
+"""The README's commands run as written, in order, in a fresh folder.
 
 Every line of every ```bash block is a command (``#`` starts a comment; ``a && b`` is
 two commands).  ``pip install`` and the test-suite command itself are not run here

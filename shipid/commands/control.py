@@ -1,4 +1,4 @@
-"""``shipid plan``: time-optimal manoeuvres (seed 000's scenarios or a PROBLEM.json)."""
+"""``shipid plan``: time-optimal manoeuvres (Ghorbani et al.'s scenarios or a PROBLEM.json)."""
 from __future__ import annotations
 
 import numpy as np
@@ -12,7 +12,7 @@ def register(sub) -> None:
         description="Solve a minimum-time optimal-control problem and write plan.json plus the trajectory "
                     "as CSV beside it (same name, .csv).",
     )
-    p.add_argument("problem", help="paper-1, paper-2, paper-3 (seed 000's scenarios) or a PROBLEM.json file")
+    p.add_argument("problem", help="paper-1, paper-2, paper-3 (Ghorbani et al.'s scenarios) or a PROBLEM.json file")
     p.add_argument("--method", choices=("indirect", "direct"), default="direct",
                    help="indirect: costates + LEPF (the paper's method); direct: multiple shooting (default)")
     p.add_argument("--optimizer", "--solver", dest="optimizer", choices=("bfgs", "steepest", "slsqp", "trust-constr", "ipopt"),

@@ -1,4 +1,4 @@
-"""``shipid glider launch`` and ``shipid glider optimise`` (seed 004 launch study)."""
+"""``shipid glider launch`` and ``shipid glider optimise`` (Divsalar et al. launch study)."""
 from __future__ import annotations
 
 import math

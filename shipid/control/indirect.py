@@ -1,8 +1,8 @@
-"""Indirect (Hamiltonian) solver of seed 000: discretised controls, costates
+"""Indirect (Hamiltonian) solver of Ghorbani et al.: discretised controls, costates
 integrated backwards for the gradient, steepest descent or BFGS, constraints
 by the linear extended penalty function (LEPF).
 
-Augmented cost (seed 000, eqs. (11)-(15), after Rao 2009 sec. 7.13)::
+Augmented cost (Ghorbani et al., eqs. (11)-(15), after Rao 2009 sec. 7.13)::
 
     J_a = J + w(r) sum_j h_j^2 + r int_0^tf sum_i C(c_i(x)) dt + r sum_rate C(c_rate)
 
@@ -26,7 +26,7 @@ The gradient is exact for the discretised problem: the costate recursion
 the model's ``jac_x``) is the discrete form of ``lambda' = -dH/dx``, and
 ``dJ_a/du_j = sum_k B_k^T lambda_{k+1}`` over the steps of interval ``j``, the
 discrete ``dH/du``.  A free final time enters through the step size
-(time normalised by ``t_f``, seed 000 eqs. (19)-(21)).  The paper updates with
+(time normalised by ``t_f``, Ghorbani et al. eqs. (19)-(21)).  The paper updates with
 a constant step ``eta``; we backtrack (Armijo) from the previous step, since a
 constant step either diverges or crawls on this problem.
 """

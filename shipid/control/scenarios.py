@@ -1,4 +1,4 @@
-"""The three scenarios of seed 000 (SPEC.md section 2) as :class:`Problem` objects.
+"""The three scenarios of Ghorbani et al. as :class:`Problem` objects.
 
 Common: the planing boat of Table 1 starts at rest at the origin; target
 ``x = 300 m, y = 0`` reached "stopped"; cost = final time (free).  Controls
@@ -29,7 +29,7 @@ _PATH = {"u": (None, 20.0), "p": (-np.radians(10), np.radians(10)), "r": (-np.ra
 
 
 def paper_problem(which: str | int, *, model=None, n_intervals: int | None = None, substeps: int | None = None) -> Problem:
-    """Problem of seed 000's scenario ``which`` (1, 2, 3 or "paper-1".."paper-3").
+    """Problem of Ghorbani et al.'s scenario ``which`` (1, 2, 3 or "paper-1".."paper-3").
 
     Scenario 1 holds ``phi_p = 0`` (thrust is its only control, paper eqs. 23-24) and has no
     ``y`` condition (``y`` stays 0 by symmetry).

@@ -169,7 +169,7 @@ def kcs_turn_problem(model=None, *, heading_change_deg: float = 90.0, u0: float 
 
     Starts on a straight course at ``u0`` with ``n0`` and the rudder amidships;
     ends on the new heading with zero yaw rate.  Limits: rudder angle, rudder
-    rate (SPEC: 16.8 deg/s for the 4.36 m model) on consecutive control values,
+    rate (16.8 deg/s for the 4.36 m model) on consecutive control values,
     propeller revolutions ``n_bounds`` [rps].
     """
     m = get_model("kcs-response") if model is None else model

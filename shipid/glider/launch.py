@@ -2,10 +2,10 @@
 
 The glider starts on the free surface (``x = z = 0``) moving along its hull
 axis at the launch speed, nose down at the launch angle **measured from the
-vertical** (seed 004, figure 10: 15 deg is a steep dive, 60 deg a shallow
+vertical** (Divsalar et al., figure 10: 15 deg is a steep dive, 60 deg a shallow
 one), so the initial pitch is ``theta0 = -(90 deg - angle)``.  The fin
 incidence is held constant; the CG offset ``x_g`` (positive towards the nose,
-seed 004 figure 12) is set per launch as a model parameter, so any number of
+Divsalar et al. figure 12) is set per launch as a model parameter, so any number of
 launches run as one batch through :func:`shipid.simulate.simulate`.
 
 Surface return is an event detected on the RK4 grid: the first step where the

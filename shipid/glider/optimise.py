@@ -2,7 +2,7 @@
 
 Objective (stated, not fitted to the paper's answer)
 ----------------------------------------------------
-Seed 004 picks its launch by a trade-off it describes in words: a higher
+Divsalar et al. picks its launch by a trade-off it describes in words: a higher
 launch speed is better for both depth and horizontal travel (section 6-3-1);
 the fin angle is chosen because it gives "values close to the maximum of
 each" of depth and horizontal travel (section 6-3-3); the angle because it

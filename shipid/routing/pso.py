@@ -1,4 +1,4 @@
-"""Energy-optimal USV path planning around circular obstacles by particle swarm optimisation (seed 003).
+"""Energy-optimal USV path planning around circular obstacles by particle swarm optimisation (Li et al.).
 
 Encoding (the paper's "dimension circles")
 ------------------------------------------
@@ -41,6 +41,9 @@ by a :class:`numpy.random.Generator`.  The planners run one swarm per
 left/right class of passing the obstacles (:func:`stratified_init`): the
 feasible set falls apart into such classes, and one swarm over the whole box
 (the paper's set-up, ``stratify=False``) often settles in the wrong one.
+
+Reference: Li, Liao, Liu, Jia, Li & Zhai (Harbin Engineering University, in Chinese): energy-optimal
+path planning of an unmanned surface vehicle by particle swarm optimisation.
 """
 from __future__ import annotations
 
@@ -99,7 +102,7 @@ class Obstacle:
 
 @dataclass
 class USVProblem:
-    """A planning problem of seed 003.
+    """A planning problem of Li et al..
 
     Parameters
     ----------
@@ -940,14 +943,14 @@ def forbidden_arcs(problem: USVProblem, prev_point, dim: int, n: int = 3601) -> 
 
 
 # ------------------------------------------------------------ the paper case
-#: Seed 003's start and goal (lon, lat) [deg] near Zhanjiang.
+#: Li et al.'s start and goal (lon, lat) [deg] near Zhanjiang.
 PAPER_START_LONLAT = (110.421910, 21.263390)
 PAPER_GOAL_LONLAT = (110.422070, 21.260650)
 
 
 def paper_scenario(*, time_scale: float = 0.1, kinematics: str = "paper",
                    current_courses_deg: tuple[float, float, float] = (90.0, 0.0, 270.0)) -> USVProblem:
-    """The seed-003 scenario with our stated obstacles and current directions.
+    """The Li et al. scenario with our stated obstacles and current directions.
 
     Start/goal are the paper's (305 m apart, goal almost due south).  Wind
     from the east at 7 m/s; current 1.2 m/s.  The obstacle positions and the

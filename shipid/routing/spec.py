@@ -10,7 +10,7 @@ Zermelo::
      "current": FIELD, "solver": "pmp" | "transcription" | "both",
      "units": "si" | "nautical", "n": 40}
 
-PSO (seed 003)::
+PSO (Li et al.)::
 
     {"type": "pso", "start": [x, y] | "start_lonlat": [lon, lat],
      "goal": [x, y] | "goal_lonlat": [lon, lat],

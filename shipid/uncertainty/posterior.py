@@ -21,7 +21,7 @@ centred on the values its first pass started from (``result.settings["prior_mean
 with its prior standard deviations (``result.settings["prior_std"]``, >= 100 % of
 each start value).  A result without a recorded prior (written before the centre
 was recorded, or an output-error refinement) is sampled under a flat prior, with a
-warning: centring the prior on the fit's own estimate, as before session 8, used the
+warning: centring the prior on the fit's own estimate would use the
 data twice (with 16 coefficients it moved posterior means by up to 0.4 sigma,
 docs/uncertainty.md sect. 2).  ``use_prior=False`` samples the likelihood alone.
 
