@@ -1,4 +1,4 @@
-"""Hold-out validation on the measured MARIN KVLCC2 runs (issues 3 and 12).
+"""Hold-out validation on the measured MARIN KVLCC2 runs.
 
 Fit on tc+-35 and zz+-10 with ``shipid fit`` (the fit recipe, default settings), predict zz+-20 with
 ``shipid validate`` (each model's closed-loop zigzag).  Goals: first overshoot within 2 deg and second
