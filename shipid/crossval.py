@@ -1,3 +1,4 @@
+# Why one file: cross-validation and model choice share one fold loop, its scoring rule and its table.
 """How well will a model predict a run it has not seen?  Cross-validation over runs, and model choice.
 
 :func:`cross_validate` fits a model on all runs but one (or one fold of runs) and predicts the runs left out,

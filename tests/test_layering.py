@@ -256,3 +256,17 @@ def test_the_local_import_check_wants_a_reason(tmp_path):
                   "c.py": "def f():\n    # optional extras, only when plotting\n    import matplotlib\n    import numba\n",
                   "commands/__init__.py": "", "commands/x.py": "def f():\n    import json\n"})
     assert unexplained_local_imports(root) == ["pkg/a.py:2 imports json inside a function"]
+
+
+#: Longest module (lines) that needs no stated reason.
+MAX_LINES = 700
+
+
+def test_long_modules_say_why_they_are_one_file():
+    """A newcomer finds a room by its name; a module past ~700 lines holds several rooms unless it says why it
+    does not: its first line is ``# Why one file: <reason>``."""
+    bad = [f"{f.relative_to(PKG.parent)} ({n} lines)" for f in sorted(PKG.rglob("*.py"))
+           if (n := len(f.read_text().splitlines())) > MAX_LINES
+           and not f.read_text().startswith("# Why one file: ")]
+    assert not bad, ("split these modules by job, or give the reason on their first line "
+                     "('# Why one file: ...'):\n" + "\n".join(bad))

@@ -1,3 +1,4 @@
+# Why one file: EKFIdentifier is one estimator (settings, fit, learned attributes, result); its parts live in data.py, initial.py and ekf.py.
 """The augmented-state EKF identifier (an estimator: settings in ``__init__``,
 learning in :meth:`EKFIdentifier.fit`, learned attributes end in ``_``)."""
 from __future__ import annotations

@@ -1,3 +1,4 @@
+# Why one file: the channel-consistency checks run as one set on one log, each a short function with its message.
 """Channel-consistency checks of a trial log, before any fit.
 
 Aircraft system identification calls this *data compatibility analysis*: the

@@ -1,3 +1,4 @@
+# Why one file: TrialLog and the checks every reader applies to a log (units, channels, heading) are one contract.
 """The :class:`TrialLog` object, :class:`LogError`, and the validation every reader shares.
 
 Every reader (and :meth:`TrialLog.from_arrays`) converts its channels to SI with

@@ -1,3 +1,4 @@
+# Why one file: the PSO planners (DOPSO, EOPSO, OCPSO), their swarm and the voyage that judges them share one method's problem, cost and geometry (Li et al.).
 """Energy-optimal USV path planning around circular obstacles by particle swarm optimisation (Li et al.).
 
 Encoding (the paper's "dimension circles")
