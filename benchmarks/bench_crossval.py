@@ -70,7 +70,7 @@ class _Stages:
         setattr(owner, name, timed)
 
     def install(self):
-        import shipid.validation.horizon as hz
+        import shipid.validation as hz  # (the name a fold imports)
         import shipid.validation.replay as val
         from shipid.identify.batch import OutputErrorRefiner
         from shipid.identify.identifier import EKFIdentifier

@@ -38,6 +38,7 @@ from .environment.model import WIND_INPUTS
 from .identify import fit_logs, model_from
 from .logs.overlap import drop_contained, repeated_samples
 from .models import available_models, get_model, model_class
+from .results import ResultMixin, verdict_grade
 from .validation import horizon_prediction, load_logs, validate_one
 
 __all__ = ["cross_validate", "CrossValidation", "choose_model", "ModelChoice", "Candidate", "candidates_for",
@@ -316,9 +317,9 @@ def _run_entry(v, h, L, fold: int) -> dict:
 
 def _grade(fit, result) -> tuple[str, list]:
     """The fit's grade: the result's verdict where it has one, else diverged / consistent / not consistent."""
-    verdict = getattr(result, "verdict", None)
-    if verdict is not None and getattr(verdict, "grade", None):
-        return str(verdict.grade), list(getattr(verdict, "reasons", []))
+    grade = verdict_grade(result)
+    if grade is not None:
+        return grade, list(getattr(getattr(result, "verdict", None), "reasons", None) or [])
     if not fit.ekf.success_:
         return "diverged", [str(fit.ekf.message_)]
     cons = result.diagnostics.get("consistency") or {}
@@ -406,7 +407,7 @@ def score_runs(runs: Sequence[dict], failed_runs: Sequence[str] = ()) -> dict:
 
 # ----------------------------------------------------------------------------- results
 @dataclass
-class CrossValidation:
+class CrossValidation(ResultMixin):
     """Result of :func:`cross_validate` for one model.
 
     Attributes
@@ -519,12 +520,15 @@ class CrossValidation:
         ax.set_title(f"{self.candidate}: left-out runs")
         return ax
 
-    def _repr_html_(self) -> str:
-        s = self.score.get("score")
-        head = f"<b>cross-validation of {self.candidate}</b>: {self.message}"
-        if s is not None:
-            head += f"; score {s:.3g} (worst run {self.score['worst_run']} {self.score['worst']:.3g})"
-        return f"<p>{head}</p>" + self.summary().to_html(float_format=lambda v: f"{v:.3g}", na_rep="")
+    def _html_title(self) -> str:
+        return f"cross-validation of {self.candidate}"
+
+    def _key_numbers(self) -> dict:
+        sc = self.score
+        out = {"folds": len(self.folds), "left-out runs": len(self.runs)}
+        if sc.get("score") is not None:
+            out.update({"score": f"{sc['score']:.3g}", "worst run": f"{sc['worst_run']} ({sc['worst']:.3g})"})
+        return out
 
     def to_dict(self, *, starts: bool = True) -> dict:
         """JSON-able: ``candidate``, ``success``, ``message``, ``score``, ``summary`` (list of rows), ``runs``,
@@ -657,7 +661,7 @@ def _jsonable(d):
 
 
 @dataclass
-class ModelChoice:
+class ModelChoice(ResultMixin):
     """Result of :func:`choose_model`: every candidate's :class:`CrossValidation`, the ranking and the winner."""
 
     results: list
@@ -732,9 +736,11 @@ class ModelChoice:
         ax.set_xlabel("cross-validated score (1 = at the goals)")
         return ax
 
-    def _repr_html_(self) -> str:
-        return f"<p><b>model choice</b>: {self.message}</p>" + self.summary().to_html(
-            float_format=lambda v: f"{v:.3g}", na_rep="")
+    def _html_title(self) -> str:
+        return "model choice by cross-validation"
+
+    def _key_numbers(self) -> dict:
+        return {"candidates": len(self.results), "chosen": self.best.candidate if self.success else "none"}
 
     def to_dict(self) -> dict:
         tab = self.summary().reset_index()

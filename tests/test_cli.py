@@ -220,7 +220,7 @@ def test_fit_meas_std_bad_values(bad, needle, tmp_path, capsys):
 
 @pytest.mark.parametrize("argv,needle", [
     (["fit", "{log}", "-o", "{log}", "--force"], "would replace the input file"),
-    (["fit", "{log}", "--params", "{res}", "-o", "{res}", "--force"], "would replace the input file"),
+    (["fit", "{log}", "--model", "{res}", "-o", "{res}", "--force"], "would replace the input file"),
     (["metrics", "{log}", "-o", "{log}", "--force"], "would replace the input file"),
     (["simulate", "{res}", "--turning", "35", "-o", "{res}", "--force"], "would replace the input file"),
     (["fit", "{log}", "-o", ""], "empty file name"),

@@ -217,3 +217,19 @@ def test_cross_validation_sits_above_fitting_and_validation():
             if any(n.split(".")[-1] == "crossval" for n in names):
                 bad.append(f"{p.relative_to(REPO)}:{node.lineno}")
     assert not bad, bad
+
+
+def test_results_follow_the_result_contract(kcs_cv):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import pandas as pd
+
+    choice = cvm.ModelChoice([kcs_cv], [cvm.Candidate("kcs-response")], [])
+    for r in (kcs_cv, choice):
+        assert r.success is True and isinstance(r.message, str) and r.message
+        assert isinstance(r.summary(), pd.DataFrame) and isinstance(r.to_pandas(), pd.DataFrame)
+        assert r.plot() is not None
+        card = r._repr_html_()
+        assert card.startswith("<") and len(card) < 20000
+    assert choice.chosen == cvm.Candidate("kcs-response")

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import add_log_options, add_progress_option, check_output_path, parse_pairs, progress_on, read_logs
+from ._common import (add_log_options, add_progress_option, check_output_path, parse_pairs, progress_on, read_logs,
+                      renamed_option, split_model_option)
 
 
 def _names(items) -> list[str]:
@@ -23,9 +24,8 @@ def register(sub) -> None:
                               "channels and likely causes; the result JSON has diagnostics.consistency); "
                               "4 the filter diverged (result = start values, success false).")
     p.add_argument("logs", nargs="+", metavar="LOG", help="trial log files (.csv, MARIN .dat)")
-    p.add_argument("--model", default="kcs-response",
-                   help="registered model (see `shipid models`), or 'auto' to choose among the models that apply by "
-                        "cross-validation ('auto:mmg:kvlcc2,response-nl' to choose among those; docs/choosing_a_model.md)")
+    p.add_argument("--model", default="kcs-response", metavar="MODEL",
+                   help=FIT_MODEL_HELP)
     p.add_argument("-o", "--output", required=True, help="result JSON to write")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     add_fit_options(p)
@@ -36,8 +36,13 @@ def register(sub) -> None:
     add_progress_option(p)
     p.set_defaults(handler=_fit)
 
-    d = sub.add_parser("demo", help="fit the bundled synthetic KCS logs and print the results")
-    d.add_argument("-o", "--output-dir", default=None, help="new folder for the outputs (default: shipid-demo-<time>)")
+    d = sub.add_parser("demo", help="fit the bundled synthetic KCS logs and print the results",
+                       description="Fit the bundled synthetic KCS logs (known truth) and print the coefficients "
+                                   "against the truth; writes the result JSON, a validation and an HTML report into "
+                                   "a new folder.")
+    d.add_argument("-o", "--output", default=None, metavar="FOLDER",
+                   help="new folder for the outputs (default: shipid-demo-<time>)")
+    renamed_option(d, "--output-dir", "--output", dest="output", metavar="FOLDER")
     d.add_argument("--passes", type=int, default=2, help="EKF passes (default 2)")
     add_progress_option(d)
     d.set_defaults(handler=_demo)
@@ -53,10 +58,17 @@ def add_engine_options(p) -> None:
                    help="run the folds on an existing Dask scheduler, e.g. tcp://host:8786")
 
 
+#: ``--model`` of ``shipid fit`` and ``shipid crossval``: the model and its start values, or the choice.
+FIT_MODEL_HELP = ("the model and its start values: MODEL[:SET] (a registered model, see `shipid models`, with a "
+                  "parameter set), an earlier fit RESULT.json, or 'auto' to choose among the models that apply by "
+                  "cross-validation ('auto:mmg:kvlcc2,response-nl' to choose among those; docs/choosing_a_model.md)")
+
+
 def add_fit_options(p) -> None:
     """The options of ``shipid fit`` that say how to fit (one copy: ``shipid crossval`` takes them too)."""
-    p.add_argument("--params", default=None, metavar="SET|RESULT.json",
-                   help="start values: a parameter set of the model or an earlier result JSON")
+    p.set_defaults(params=None)
+    renamed_option(p, "--params", "--model", dest="params", metavar="SET|RESULT.json",
+                   note="MODEL:SET or --model RESULT.json")
     add_log_options(p)
     p.add_argument("--estimate", action="append", metavar="NAMES", help="comma-separated parameters to estimate")
     p.add_argument("--fixed", action="append", metavar="NAME[=VALUE]", help="parameters to hold fixed")
@@ -82,9 +94,10 @@ def add_fit_options(p) -> None:
     p.add_argument("--no-physical-damping", action="store_true",
                    help="do not constrain the refinement when the refined model's own sway or yaw damping is positive "
                         "along the logged states (default: solve again with d(dv/dt)/dv, d(dr/dt)/dr <= -0.02 U/L there)")
-    p.add_argument("--dt", default="auto", metavar="auto|K",
+    p.add_argument("--every", default="auto", metavar="auto|K",
                    help="use every K-th sample; default auto: >= 25 steps per fastest time constant of the model (mmg: 50; "
                         "lowspeed: 2 s at 3 m, Froude-scaled)")
+    renamed_option(p, "--dt", "--every", dest="every", metavar="auto|K", note="the sample stride K")
     p.add_argument("--max-drift", default="auto", metavar="auto|DEG|none",
                    help="models linear in v and r (kcs-response): use each log until its drift angle first exceeds "
                         "DEG (default auto: 10 deg for such models, every sample for the others; none: every sample)")
@@ -151,14 +164,14 @@ def _fixed(args, model):
 
 
 def _dt(args):
-    if args.dt == "auto":
+    if args.every == "auto":
         return "auto"
     try:
-        k = int(args.dt)
+        k = int(args.every)
     except ValueError:
         k = 0
     if k < 1:
-        raise ValueError(f"--dt {args.dt}: give 'auto' or a positive whole number of samples, e.g. --dt 4")
+        raise ValueError(f"--every {args.every}: give 'auto' or a positive whole number of samples, e.g. --every 4")
     return k
 
 
@@ -264,6 +277,7 @@ def print_choice(choice) -> None:
 def _fit(args) -> int:
     from ..identify.recipe import fit_logs
 
+    split_model_option(args)
     out = check_output_path(args.output, force=args.force, inputs=[*args.logs, args.params, args.ship],
                             what="result")
     check_fit_args(args)
@@ -381,7 +395,7 @@ def _demo(args) -> int:
     paths = bundled_kcs_logs()
     if not paths:
         raise ValueError(f"no bundled logs found in {bundled_data_dir()}; reinstall shipid")
-    outdir = _new_dir(args.output_dir)
+    outdir = _new_dir(args.output)
     print(f"shipid demo: fitting kcs-response to {len(paths)} bundled synthetic logs ({bundled_data_dir()})")
     logs = [read_log(p) for p in paths]
     truth = get_model("kcs-response", "synthetic-truth")

@@ -10,7 +10,10 @@ import math
 import sys
 from pathlib import Path
 
-from ._common import add_log_options, check_output_path, parse_zigzag, read_logs
+from ._common import add_log_options, check_output_path, parse_zigzag, read_logs, renamed_option
+
+#: Help text of a MODEL argument (one way to name a model in every command).
+MODEL_HELP = "a registered model, optionally with a parameter set (MODEL[:SET], e.g. mmg:kvlcc2), or a fit RESULT.json"
 
 #: Keys printed in the short metric summaries.
 SUMMARY_KEYS = ("advance_L", "transfer_L", "tactical_diameter_L", "steady_diameter_L", "speed_loss",
@@ -18,7 +21,11 @@ SUMMARY_KEYS = ("advance_L", "transfer_L", "tactical_diameter_L", "steady_diamet
 
 
 def register(sub) -> None:
-    p = sub.add_parser("metrics", help="standard-manoeuvre metrics (ITTC/IMO) of measured logs -> JSON list")
+    p = sub.add_parser("metrics", help="standard-manoeuvre metrics (ITTC/IMO) of measured logs -> JSON list",
+                       description="Standard-manoeuvre metrics of measured logs (turning circle: advance, transfer, "
+                                   "tactical and steady diameter; zigzag: overshoots, initial turning; ITTC 7.5-04-02-01 "
+                                   "and the IMO MSC.137(76) criteria); a run that is no standard manoeuvre gives its "
+                                   "steady turn when it holds one.  Prints a JSON list, one object per log.")
     p.add_argument("logs", nargs="+", metavar="LOG", help="trial logs (CSV or MARIN .dat)")
     add_log_options(p)   # --lpp (default: from the log's particulars), --schema, --units, ...
     p.add_argument("--kind", choices=("auto", "turning", "zigzag"), default="auto",
@@ -33,8 +40,11 @@ def register(sub) -> None:
     p.add_argument("--force", action="store_true", help="overwrite the output file")
     p.set_defaults(handler=_metrics)
 
-    p = sub.add_parser("simulate", help="simulate a standard manoeuvre with a model (prints its metrics)")
-    p.add_argument("model", metavar="MODEL", help="fit-result JSON or model name[:parameter-set]")
+    p = sub.add_parser("simulate", help="simulate a standard manoeuvre with a model (prints its metrics)",
+                       description="Simulate a turning circle or a zigzag with a model (a fit result or a registered "
+                                   "model with a parameter set) from a steady approach, and print its metrics with the "
+                                   "IMO criteria; --draws propagates the fit's uncertainty to the metrics.")
+    p.add_argument("model", metavar="MODEL", help=MODEL_HELP)
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--turning", type=float, metavar="DEG", help="turning circle with this rudder angle [deg]")
     g.add_argument("--zigzag", metavar="D/C", help="zigzag rudder/check (heading) angles [deg], e.g. 20/20 or 10/5")
@@ -51,11 +61,14 @@ def register(sub) -> None:
                    help="with --draws: JSON of the metrics with 95 %% intervals and IMO probabilities")
     p.set_defaults(handler=_simulate)
 
-    p = sub.add_parser("sweep", help="turning-diameter sweep over rudder angle x approach speed (one batch)")
-    p.add_argument("model", metavar="MODEL", help="fit-result JSON or model name[:parameter-set]")
+    p = sub.add_parser("sweep", help="turning-diameter sweep over rudder angle x approach speed (one batch)",
+                       description="Turning circles of a model over every rudder angle x approach speed, simulated "
+                                   "as one batch; prints (or writes) one CSV row per turn with its metrics.")
+    p.add_argument("model", metavar="MODEL", help=MODEL_HELP)
     p.add_argument("--rudder", default="10,15,25", help="rudder angles [deg], comma separated")
     p.add_argument("--speed", default=None, help="approach speeds [m/s], comma separated (default: design speed)")
-    p.add_argument("--side", choices=("both", "starboard", "port"), default="starboard")
+    p.add_argument("--side", choices=("both", "starboard", "port"), default="starboard",
+                   help="turning side (default starboard; both: each angle to either side)")
     p.add_argument("--lpp", type=float, default=None,
                    help="ship length [m]: Froude-scale the model to this ship (default: the length it was fitted at)")
     p.add_argument("--rudder-rate", type=float, default=None, metavar="DEG_S", help="rudder rate [deg/s]")
@@ -74,9 +87,10 @@ def _common(p):
 
 
 def _integrator(p):
-    p.add_argument("--method", choices=("rk4", "dopri5"), default="rk4",
+    p.add_argument("--integrator", choices=("rk4", "dopri5"), default="rk4",
                    help="integrator: fixed-step RK4 (default) or adaptive Dormand-Prince 5(4) (faster at equal accuracy)")
-    p.add_argument("--rtol", type=float, default=1e-6, help="relative tolerance of --method dopri5 (default 1e-6)")
+    renamed_option(p, "--method", "--integrator", dest="integrator", choices=("rk4", "dopri5"))
+    p.add_argument("--rtol", type=float, default=1e-6, help="relative tolerance of --integrator dopri5 (default 1e-6)")
 
 
 def _rtol(args) -> float:
@@ -133,7 +147,15 @@ def _metrics(args) -> int:
                          "of midship in metres (a finite number)")
     out = []
     rud, chk = parse_zigzag(args.zigzag) if args.zigzag else (None, None)
-    for f, log in zip(args.logs, read_logs(args.logs, args)):
+    logs = read_logs(args.logs, args)
+    for f, log in zip(args.logs, logs):  # the logged point lies on the ship (bow sensors reach past the FP)
+        L = args.lpp or getattr(getattr(log, "ship", None), "lpp", None)
+        off = args.reference_offset
+        if off is not None and abs(off) > (0.6 * L if L else 500.0):
+            lim = f"within +/-0.6 Lpp = +/-{0.6 * L:.3g} m of midship" if L else "within 500 m of midship"
+            raise ValueError(f"--reference-offset {off:.3g}: {Path(f).name}: the logged point must lie on the ship "
+                             f"({lim}); give its distance forward of midship in metres")
+    for f, log in zip(args.logs, logs):
         try:
             m = metrics(log, lpp=args.lpp, kind=args.kind, reference_offset=args.reference_offset, name=Path(f).name,
                         rudder_deg=rud, check_deg=chk)
@@ -207,11 +229,11 @@ def _simulate(args) -> int:
         if not (math.isfinite(args.turning) and 0 < args.turning <= 90):
             raise ValueError(f"--turning {args.turning}: give the rudder angle in degrees, 0 < angle <= 90 (use --side)")
         res = turning_circle(model, args.turning, speed=args.speed, side=args.side, rudder_rate=rate, lpp=args.lpp,
-                             method=args.method, rtol=_rtol(args))
+                             method=args.integrator, rtol=_rtol(args))
     else:
         d, p = parse_zigzag(args.zigzag)
         res = zigzag(model, d, p, speed=args.speed, first=args.side, rudder_rate=rate, lpp=args.lpp,
-                     method=args.method, rtol=_rtol(args))
+                     method=args.integrator, rtol=_rtol(args))
     for m in res.metrics:
         print(_summary(model.name, m.to_dict()))
     if args.output:
@@ -255,7 +277,7 @@ def _sweep(args) -> int:
         raise ValueError("--rudder and --speed values must be positive (use --side for port)")
     rate = math.radians(args.rudder_rate) if args.rudder_rate is not None else None
     df = turning_sweep(model, rud, speeds, side=args.side, rudder_rate=rate, lpp=args.lpp,
-                       method=args.method, rtol=_rtol(args))
+                       method=args.integrator, rtol=_rtol(args))
     from ._common import units_header
 
     table = units_header(df, units=SWEEP_UNITS)

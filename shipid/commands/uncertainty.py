@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from ._common import add_log_options, add_progress_option, progress_on, read_logs_for_result
+from ._common import add_log_options, add_progress_option, progress_on, read_logs_for_result, renamed_option
 
 
 def _command(sub, name, handler, help, description, *, positional, output_help, output_metavar=None,
@@ -61,7 +61,12 @@ def register(sub) -> None:
                  "sweep and OUTDIR/campaign.json.",
                  positional=[("campaign", "CAMPAIGN", "campaign file (.json, .yaml)")],
                  output_help="output folder (new or empty)", output_metavar="OUTDIR",
-                 force_help="write into a non-empty output folder")
+                 force_help="run every member again into a used output folder (removes the members' old files)")
+    c.add_argument("--resume", action="store_true",
+                   help="finish a campaign that was stopped: members OUTDIR/campaign.journal lists as finished "
+                        "(files unchanged) are kept, the others run")
+    c.epilog = ("exit status: 0 every member ok; 3 some fits flagged (`shipid fit` would exit 3 or 4 on them: not "
+                "consistent with their noise model, or diverged) and none failed; 1 some members failed; 2 bad input")
     add_engine_options(c)
 
 
@@ -83,11 +88,13 @@ def engine_from(args):
 
 
 def add_draws_option(p) -> None:
-    """``--draws N`` (+ ``--seed``, ``--samples``) for simulate / validate / report."""
+    """``--draws N`` (+ ``--seed``, ``--samples``) for simulate / validate / report (``--draws-seed``: the old
+    spelling of ``--seed``)."""
     p.add_argument("--draws", type=int, default=0, metavar="N",
                    help="propagate the fit's uncertainty: N parameter draws simulated as one batch (95 %% intervals, "
                         "IMO probabilities)")
-    p.add_argument("--draws-seed", type=int, default=0, metavar="SEED", help="seed of the draws (default 0)")
+    p.add_argument("--seed", type=int, default=0, help="random seed of the draws (default 0)")
+    renamed_option(p, "--draws-seed", "--seed", dest="seed", type=int, metavar="SEED")
     p.add_argument("--samples", default=None, metavar="SAMPLES.json",
                    help="draw from MCMC samples (`shipid sample`) instead of the fit's Gaussian posterior")
 
@@ -102,9 +109,12 @@ def check_draws(args) -> int:
 def _sample(args) -> int:
     from ..uncertainty.posterior import sample_posterior
 
-    out = Path(args.output)
-    if out.exists() and not args.force:
-        raise ValueError(f"{out}: output exists; choose another name or pass --force to overwrite it")
+    from ._common import check_output_path
+
+    out = check_output_path(args.output, force=args.force, inputs=[args.result, *args.logs], what="samples")
+    for opt, v, low in (("--walkers", args.walkers, 2), ("--steps", args.steps, 10), ("--thin", args.thin, 1)):
+        if v is not None and v < low:
+            raise ValueError(f"{opt} {v}: give a whole number >= {low}")
     logs = read_logs_for_result(args)  # as validate reads them (a wind-aware fit: true wind from apparent-only logs)
     chans = [c.strip() for c in args.channels.split(",") if c.strip()] if args.channels else None
     import warnings
@@ -128,19 +138,32 @@ def _sample(args) -> int:
     return 0 if s.converged else 1
 
 
-def _campaign(args) -> int:
-    from ..campaign import load_campaign, run_campaign
+def _member_line(m: dict) -> str:
+    if m["status"] == "failed":
+        return f"{m['name']}: FAILED: {m['error']}"
+    if m["status"] == "flagged":
+        why = "; ".join(m.get("reasons") or [])
+        return f"{m['name']}: flagged: {why[:200]}{'...' if len(why) > 200 else ''}"
+    note = "" if m.get("success", True) else " (did not converge)"
+    return f"{m['name']}: ok{note}"
 
+
+def _campaign(args) -> int:
+    from ..campaign import campaign_exit_status, load_campaign, run_campaign
+
+    if args.force and args.resume:
+        raise ValueError("--force and --resume: give one (--resume keeps finished members, --force runs them again)")
     camp = load_campaign(args.campaign)  # validate before starting any worker
     with engine_from(args) as eng:
-        summary = run_campaign(camp, args.output, engine=eng, force=args.force)
+        summary = run_campaign(camp, args.output, engine=eng, force=args.force, resume=args.resume,
+                               on_member=lambda m: print(_member_line(m), flush=True))
     for m in summary["members"]:
-        bad = "fit did not converge" if m.get("type", "fit") == "fit" else "some runs of the sweep failed"
-        state = ("ok" if m.get("success", True) else bad) if m["ok"] else f"FAILED: {m['error']}"
-        print(f"{m['name']}: {state}")
-    print(f"{summary['n_members'] - summary['n_failed']}/{summary['n_members']} members completed "
-          f"({summary['engine']}); wrote {Path(args.output) / 'campaign.json'}")
-    return 1 if summary["n_failed"] else 0
+        for w in m.get("warnings", [])[:3]:
+            print(f"{m['name']}: warning: {w}", file=sys.stderr)
+    resumed = f", {summary['n_resumed']} kept from the earlier run" if summary.get("n_resumed") else ""
+    print(f"{summary['n_members']} members: {summary['n_ok']} ok, {summary['n_flagged']} flagged, "
+          f"{summary['n_failed']} failed{resumed} ({summary['engine']}); wrote {Path(args.output) / 'campaign.json'}")
+    return campaign_exit_status(summary)
 
 
 # ----------------------------------------------------------------------------- --draws hunks
@@ -159,8 +182,8 @@ def simulate_draws(args, model_spec: str) -> int:
         specs = [f"zigzag:{d}/{p or d}:{s}" for s in _sides(args.side)]
     import math
 
-    pred = predict_manoeuvres(model_spec, specs, draws=check_draws(args), seed=args.draws_seed, samples=args.samples,
-                              speed=args.speed, lpp=args.lpp, method=args.method,
+    pred = predict_manoeuvres(model_spec, specs, draws=check_draws(args), seed=args.seed, samples=args.samples,
+                              speed=args.speed, lpp=args.lpp, method=args.integrator,
                               rudder_rate=math.radians(args.rudder_rate) if args.rudder_rate is not None else None)
     tab = pred.summary()
     print(tab[["manoeuvre", "metric", "nominal", "median", "low", "high", "n_nonfinite"]].to_string(
@@ -191,7 +214,7 @@ def validate_draws(args, result_path, vals: list, out: list) -> None:
     model, res = resolve_model(result_path)
     if res is None:
         raise ValueError("--draws needs a fit result (with a covariance), not a model name")
-    P = parameter_draws(res, n, seed=args.draws_seed, samples=args.samples)
+    P = parameter_draws(res, n, seed=args.seed, samples=args.samples)
     for v, d in zip(vals, out):
         if v.measured is None or v.lpp is None or not d.get("predicted"):
             continue

@@ -13,8 +13,12 @@ from pathlib import Path
 from ._common import add_log_options, add_progress_option, progress_iter, read_logs_for_result
 
 
-def _common(p) -> None:
-    p.add_argument("result", metavar="RESULT.json", help="fit result written by `shipid fit -o`")
+def _common(p, model: bool = False) -> None:
+    if model:
+        p.add_argument("result", metavar="MODEL", help="the model to validate: a fit RESULT.json (written by `shipid "
+                                                       "fit -o`) or a registered model MODEL[:SET], e.g. mmg:kvlcc2")
+    else:
+        p.add_argument("result", metavar="RESULT.json", help="fit result written by `shipid fit -o`")
     p.add_argument("logs", nargs="+", metavar="LOG", help="trial logs to replay (.csv, MARIN .dat)")
     # --lpp (default: from the log, then the model), --rudder-sign (-1: the file's rudder is positive to port;
     # the MARIN reader flips by itself), --schema, --units, ...: read exactly as `shipid fit` reads
@@ -37,7 +41,7 @@ def register(sub) -> None:
                        description="Replay a fitted model with each log's recorded inputs from its initial state and "
                                    "compare with the measurement: per-channel RMSE/NRMSE, track error, and the "
                                    "ITTC/IMO manoeuvre metrics of the log and of the replay.")
-    _common(p)
+    _common(p, model=True)
     p.add_argument("-o", "--output", required=True, help="JSON file to write (a list, one object per log)")
     from .uncertainty import add_draws_option
 
@@ -101,11 +105,13 @@ def _line(d: dict) -> str:
 def _validate(args) -> int:
     from .._io import atomic_write_text, dumps_json
     from ..validation import resolve_model, validate_one
-    from .uncertainty import validate_draws
+    from .uncertainty import check_draws, validate_draws
 
     out = _check(args)
     horizons = _horizons(args.horizon)
     model, result = resolve_model(args.result)  # read once
+    if result is None and check_draws(args):
+        raise ValueError(f"--draws needs a fit RESULT.json (the draws come from its covariance); {args.result} is a model")
     logs = read_logs_for_result(args, model)
     initial = _current_start(model, result)  # the replay and the horizon predictions start with it
     vals = [validate_one(model, lg, lpp=args.lpp, closed_loop=not args.no_closed_loop, zigzag_angles=_zigzag(args),
@@ -200,7 +206,7 @@ def _report(args) -> int:
             for lg in progress_iter(logs, args, "replaying logs")]
     from .uncertainty import check_draws
 
-    unc = {"draws": check_draws(args), "seed": args.draws_seed, "samples": args.samples} if check_draws(args) else None
+    unc = {"draws": check_draws(args), "seed": args.seed, "samples": args.samples} if check_draws(args) else None
     horizons = _horizons(args.horizon)
     hz = [h for h in _horizon_results(args, horizons, logs, model, initial) if h[0] is not None] if horizons else None
     text = render_report(res, args.logs, title=args.title, validations=vals, uncertainty=unc, horizons=hz)

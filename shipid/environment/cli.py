@@ -1,10 +1,10 @@
 """What ``shipid fit --wind --current`` builds (kept here so the command stays a thin layer)."""
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
+from .._io import read_json
 from .model import WIND_INPUTS, with_environment
 from .wind import WindForce, true_wind_from_apparent
 
@@ -24,12 +24,10 @@ def wind_geometry(spec: str, logs=()) -> WindForce:
     if spec == "esso-osaka-3m":
         return WindForce.esso_osaka_3m()
     p = Path(spec)
-    if not p.is_file():
+    if not p.exists():
         raise ValueError(f"--wind {spec}: not 'esso-osaka-3m' and no such file")
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"--wind {spec}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+    doc = read_json(p, "wind geometry file", advice="give a JSON mapping with lpp, breadth, A_T, A_L, A_OD, C, "
+                    "C_BR, H_BR, H_C")
     return WindForce.from_mapping(doc)
 
 

@@ -39,6 +39,8 @@ from __future__ import annotations
 
 import json
 import os
+import signal
+import threading
 import warnings
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -49,7 +51,7 @@ import pandas as pd
 from scipy.special import ndtri
 from scipy.stats import rankdata
 
-from .._io import atomic_write_text
+from .._io import atomic_write_text, check_memory, read_json
 from ..identify.data import noise_std_from_data, prepare_logs
 from ..identify.result import as_result
 from ..results import ResultMixin
@@ -374,12 +376,9 @@ def load_samples(obj) -> PosteriorSamples:
         return PosteriorSamples.from_dict(obj)
     if isinstance(obj, (str, os.PathLike)):
         p = Path(obj)
-        if not p.is_file():
+        if not p.exists():
             raise FileNotFoundError(f"{p}: no such samples file; write it with `shipid sample`")
-        try:
-            doc = json.loads(p.read_text(encoding="utf-8"))
-        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise ValueError(f"{p}: not a JSON samples file ({exc})") from None
+        doc = read_json(p, "JSON samples file", advice="pass the file written by `shipid sample -o`")
         if not isinstance(doc, dict):
             raise ValueError(f"{p}: not a shipid samples file (top level is not an object)")
         return PosteriorSamples.from_dict(doc, source=str(p))
@@ -465,6 +464,48 @@ def _recorded_prior(res, names):
                   f"{', '.join(n for n, m, s in zip(names, mean, std) if not (np.isfinite(m) and s > 0))} "
                   "(an older result, or a refinement): flat prior", UserWarning, stacklevel=3)
     return None, None
+
+
+#: Fewest kept steps per walker (after burn-in and thinning) the chain diagnostics need (split-R-hat halves
+#: the chain, the autocorrelation estimate needs a few lags).
+MIN_KEPT_STEPS = 4
+
+
+def _run_mcmc(sampler, state, steps: int, progress):
+    """``sampler.run_mcmc(state, steps)`` with Ctrl-C taken between steps: emcee prints a traceback for any
+    exception raised inside the likelihood (KeyboardInterrupt included) before passing it on, so the
+    interrupt is noted by a handler and raised here, outside the likelihood.  Returns the last state."""
+    hit: list = []
+    previous = None
+    if threading.current_thread() is threading.main_thread() and \
+            signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        previous = signal.signal(signal.SIGINT, lambda signum, frame: hit.append(signum))
+    try:
+        last = state
+        for last in sampler.sample(state, iterations=steps, progress=progress):
+            if hit:
+                raise KeyboardInterrupt
+        return last
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+
+
+def _check_sample_size(nw: int, steps: int, burn: int, thin: int, k: int, logs, like) -> None:
+    """Refuse before anything is allocated: a thinning that keeps fewer than :data:`MIN_KEPT_STEPS` steps, and
+    a run whose chain and batched simulations need more memory than :func:`shipid._io.memory_limit_bytes`."""
+    kept = -(-(steps - burn) // thin)
+    if kept < MIN_KEPT_STEPS:
+        raise ValueError(f"thin={thin}: keeps {kept} of the {steps - burn} steps after burn-in (steps={steps}, "
+                         f"burn={burn}); the diagnostics need at least {MIN_KEPT_STEPS}: use a smaller thin "
+                         "(--thin) or more steps (--steps)")
+    n_samples = sum(int(np.size(getattr(lg, "t", ()))) for lg in logs) or 1
+    nx = len(getattr(like.model, "state_names", ())) or 6
+    # emcee's chain and log-probabilities (steps x walkers x (dims + 1)), the proposal and its batched
+    # simulation (walkers x samples x states, ~4 arrays of it alive in one RK4 step)
+    need = 8.0 * (steps * nw * (k + 1) + 4 * nw * k + 4 * nw * n_samples * nx)
+    check_memory(need, f"sampling with walkers={nw} x steps={steps}",
+                 "use fewer walkers or steps (--walkers, --steps; the default walkers is max(4 x coefficients, 32))")
 
 
 def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2000, burn: int | None = None,
@@ -558,6 +599,7 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
     nw += nw % 2
     if nw < 2 * k:
         raise ValueError(f"walkers={nw}: emcee needs at least 2 x {k} sampled dimensions = {2 * k} walkers")
+    _check_sample_size(nw, steps, burn, thin, k, logs, like)
     rng = np.random.default_rng(seed)
     w, V = np.linalg.eigh(0.5 * (cov + cov.T))
     A = V * np.sqrt(np.clip(w, 0, None))
@@ -590,18 +632,18 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
         pm, pc = _proposal_in_sampler_coordinates(proposal, all_names, like)
         kept = emcee.EnsembleSampler(nw, k, fn, vectorize=vectorize, moves=_independence_move(emcee, pm, pc))
         kept._random = sampler._random
-        kept.run_mcmc(emcee.State(p0, log_prob=lp0), steps, progress=progress)
+        _run_mcmc(kept, emcee.State(p0, log_prob=lp0), steps, progress)
         chain, acceptance = kept.get_chain(discard=burn, thin=thin), kept.acceptance_fraction
     elif moves == "independence":
-        state = sampler.run_mcmc(emcee.State(p0, log_prob=lp0), burn, progress=progress)
+        state = _run_mcmc(sampler, emcee.State(p0, log_prob=lp0), burn, progress)
         pts = sampler.get_chain(discard=burn // 2).reshape(-1, k)
         kept = emcee.EnsembleSampler(nw, k, fn, vectorize=vectorize,
                                      moves=_independence_move(emcee, pts.mean(axis=0), np.cov(pts, rowvar=False)))
         kept._random = sampler._random
-        kept.run_mcmc(state, steps - burn, progress=progress)
+        _run_mcmc(kept, state, steps - burn, progress)
         chain, acceptance = kept.get_chain(thin=thin), kept.acceptance_fraction
     else:
-        sampler.run_mcmc(emcee.State(p0, log_prob=lp0), steps, progress=progress)  # start values evaluated once
+        _run_mcmc(sampler, emcee.State(p0, log_prob=lp0), steps, progress)  # start values evaluated once
         chain, acceptance = sampler.get_chain(discard=burn, thin=thin), sampler.acceptance_fraction
     diag = chain_diagnostics(chain, acceptance, all_names, steps)
     diag["n_simulations"] = int(like.n_sims)
