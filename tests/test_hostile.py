@@ -1,4 +1,4 @@
-"""Hostile input corpus (issue 16): every file the CLI reads is treated as hostile.
+"""Hostile input corpus: every file the CLI reads is treated as hostile.
 
 Each case builds its files in a fresh folder and runs ``shipid ...`` in-process.
 The contract, checked for every case by :func:`_check`: exit code 2, exactly one

@@ -1,8 +1,10 @@
 """Text-file helpers shared by the format readers (path checks, decoding, header cells, numbers)."""
 from __future__ import annotations
 
+import importlib.util
 import io
 import json
+import os
 import re
 from pathlib import Path
 from typing import Sequence
@@ -10,6 +12,7 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
+from .._io import loads_json, loads_yaml
 from .errors import LogError, _Where
 
 #: cell texts read as a missing sample (compared in lower case): blanks, NaN spellings, a dash, Excel's #N/A
@@ -20,8 +23,6 @@ _DELIMS = {",": "comma", ";": "semicolon", "\t": "tab", "whitespace": "whitespac
 
 def _check_path(p: Path, what: str = "log file") -> None:
     if not p.exists() and p.is_symlink():
-        import os
-
         try:
             target = os.readlink(p)
         except OSError:
@@ -249,15 +250,11 @@ _MAX_MAPPING_BYTES = 1_000_000
 def parse_mapping_text(s: str, source: str, *, yaml_text: bool, what: str = "file") -> object:
     """JSON (or YAML) text -> the parsed object, through the guarded readers of :mod:`shipid._io` (syntax,
     nesting deeper than ``_io.MAX_DEPTH`` and size give one-line ValueErrors naming ``source``)."""
-    from .._io import loads_json, loads_yaml
-
     if len(s) > _MAX_MAPPING_BYTES:
         raise ValueError(f"{source}: {len(s)} characters is far too large for a {what} "
                          f"(limit {_MAX_MAPPING_BYTES}); give a small mapping")
     kind = what.removesuffix(" file")
     if yaml_text:
-        import importlib.util
-
         if importlib.util.find_spec("yaml") is None:
             raise ValueError(f"{source}: reading YAML needs PyYAML (pip install pyyaml); or write the "
                              f"{what} as JSON")
