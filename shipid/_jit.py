@@ -30,6 +30,7 @@ import contextlib
 import importlib.util
 import os
 import types
+from importlib.metadata import PackageNotFoundError, version
 
 __all__ = ["available", "enabled", "disabled", "rebind", "compiled", "path", "compile_notice", "fallback_notice",
            "set_notices"]
@@ -62,8 +63,6 @@ def path() -> str:
         return "numpy path: SHIPID_JIT=0"
     if _off[0]:
         return "numpy path: compilation disabled"
-    from importlib.metadata import PackageNotFoundError, version
-
     try:
         return f"compiled path: numba {version('numba')}"
     except PackageNotFoundError:  # importable but without metadata (a source checkout)

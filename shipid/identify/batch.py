@@ -23,6 +23,7 @@ import numpy as np
 import pandas as pd
 from scipy.linalg import qr
 from scipy.optimize import least_squares
+from tqdm.auto import tqdm
 
 from .._blas import one_blas_thread
 from ..integrate import hold_steps, rk4_step_tangent
@@ -426,8 +427,6 @@ class OutputErrorRefiner:
             return np.where(np.isfinite(r), np.clip(r, -1e6, 1e6), 1e6)
 
         if self.progress:  # a bar counting the replays (one per parameter set), on stderr; closed below
-            from tqdm.auto import tqdm
-
             bar = tqdm(desc="output-error refinement", unit="replay", leave=False)
             _residual_batch = residual_batch
 

@@ -416,8 +416,6 @@ def _section_horizon(horizons) -> str:
     predicted-vs-measured track overlays; ``horizons`` is a list of ``(HorizonResult, log)``."""
     if not horizons:
         return ""
-    import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
-
     rows, figs = [], []
     for h, log in horizons:
         for e in h.to_records():

@@ -1,3 +1,4 @@
+# Why one file: the sampler, its chain diagnostics, the early stop and the samples' result share one chain layout and its checks.
 """Posterior sampling of model coefficients by MCMC over the output-error likelihood.
 
 The EKF's Gaussian (Laplace) posterior is an approximation; for non-linear,
@@ -38,6 +39,7 @@ called converged only when every check passes (:data:`CONVERGENCE`).
 from __future__ import annotations
 
 import json
+import logging
 import os
 import signal
 import threading
@@ -389,8 +391,6 @@ def _tau(chain: np.ndarray) -> np.ndarray:
     """emcee's integrated autocorrelation time per parameter of ``chain (n_steps, n_walkers, n_params)``, without
     its multi-line "chain is shorter than 50 tau" log record (the length check of :func:`chain_diagnostics`
     says that in one line)."""
-    import logging
-
     from emcee.autocorr import integrated_time  # optional (the mcmc extra)
 
     log = logging.getLogger("emcee.autocorr")
