@@ -608,6 +608,7 @@ def test_sample_refuses_a_thinning_that_keeps_too_few_steps_and_a_run_beyond_mem
     assert not (tmp_path / "s.json").exists()
 
 
+@pytest.mark.slow
 def test_ctrl_c_during_sample_is_one_line(tmp_path):
     """SIGINT while the walkers run: 'shipid: interrupted', exit 130, no traceback (emcee prints one for any
     exception inside the likelihood, so the interrupt is taken between steps)."""
