@@ -674,7 +674,7 @@ def fit_exit_status(result: dict) -> tuple[int, list[str]]:
     grades a fit exactly as ``shipid fit`` does; otherwise from the result's consistency diagnostics."""
     if isinstance(result.get("verdict"), dict):
         try:
-            from .identify.verdict import exit_status, verdict_of
+            from .identify.verdict import exit_status, verdict_of  # optional: the graded verdict, where it exists
         except ImportError:
             pass
         else:
