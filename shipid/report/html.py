@@ -15,11 +15,12 @@ import sys
 from datetime import datetime, timezone
 from pathlib import Path
 
-
 from .._io import OutputExistsError, atomic_write_text
+from ..identify.result import software_versions
 from ..validation import LogValidation, load_logs, resolve_model, validate_one
 from . import figures
 from ._markup import _e, _f, _fig, _img, _table  # noqa: F401  (_img: the helpers as one set)
+from .uncertainty import uncertainty_section
 
 __all__ = ["render_report", "write_report"]
 
@@ -60,8 +61,6 @@ def _anchor(i: int) -> str:
 
 
 def _versions_now() -> dict:
-    from ..identify.result import software_versions
-
     return software_versions()
 
 
@@ -571,8 +570,6 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
                        for lg in load_logs(logs, lpp=lpp)]
     extra = []
     if uncertainty:
-        from .uncertainty import uncertainty_section
-
         extra.append(uncertainty_section(res, validations, **uncertainty))
     title = title or default_title(res, model, validations)
     stamp = datetime.now(timezone.utc).isoformat(timespec="seconds")
