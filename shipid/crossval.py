@@ -612,6 +612,14 @@ def _engine(engine, workers, scheduler, progress):
     return Engine(workers if workers is not None else 1, scheduler=scheduler, progress=progress), True
 
 
+def _map(eng, specs, desc):
+    """The folds on the engine, longest first; Dask's note that the members' logs make a large task graph is
+    not shown (the logs are the members' input: a fold needs them on its worker)."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Sending large graph")
+        return eng.map(run_fold, specs, desc=desc, cost=[_fold_cost(s) for s in specs])
+
+
 def _fold_cost(spec) -> float:
     return float(sum(lg.data.shape[0] for lg in spec["train"]))
 
@@ -647,7 +655,7 @@ def cross_validate(logs, model: str = "mmg", params=None, *, folds="loro", lpp: 
     specs = _specs(cand, plan, lpp, fit_options, horizons, start_every)
     eng, own = _engine(engine, workers, scheduler, progress)
     try:
-        outs = eng.map(run_fold, specs, desc=f"folds of {cand.label}", cost=[_fold_cost(s) for s in specs])
+        outs = _map(eng, specs, f"folds of {cand.label}")
     finally:
         if own:
             eng.close()
@@ -765,7 +773,7 @@ def choose_model(logs, candidates: Sequence[Candidate] | None = None, *, folds="
     flat = [s for ss in per for s in ss]
     eng, own = _engine(engine, workers, scheduler, progress)
     try:
-        outs = eng.map(run_fold, flat, desc="folds x candidates", cost=[_fold_cost(s) for s in flat])
+        outs = _map(eng, flat, "folds x candidates")
     finally:
         if own:
             eng.close()

@@ -13,7 +13,7 @@ from shipid.cli import build_parser, main
 #: (so that a command giving the word another meaning fails here).
 VOCABULARY = {
     "--output": ("the file or folder the command writes", r"."),
-    "--force": ("replace an existing output", r"overwrite|write into"),
+    "--force": ("replace an existing output", r"overwrite|write into|replace|into a used output"),
     "--seed": ("random seed", r"seed"),
     "--dt": ("a time step in seconds", r"\[s\]"),
     "--every": ("a sample stride: use every K-th sample", r"every K|K-th"),
@@ -147,7 +147,7 @@ def test_old_spelling_works_and_names_its_replacement(argv, dest, value, new, ca
 
 
 def test_old_problem_name_works_and_names_its_replacement(tmp_path, capsys, monkeypatch):
-    import shipid.commands.routing as routing
+    import shipid.commands.route as routing
 
     seen = []
     monkeypatch.setattr(routing, "_zermelo", lambda args, spec, base, out, csv: seen.append((args.problem, spec)) or 0)

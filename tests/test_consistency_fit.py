@@ -251,7 +251,7 @@ def test_cli_inconsistent_fit_exits_3_with_one_warning_and_strict_json(tmp_path,
 
 
 def test_inconsistency_warning_names_the_ekf_stage_after_a_refinement():
-    from shipid.commands.identify import _inconsistency_warning
+    from shipid.commands.fit import _inconsistency_warning
 
     verdict = {"consistent": False, "channels": {"r": {}}, "reasons": ["coefficient c3 = 4 +- 0.1 is 11 times the "
                                                                       "model's value 0.3: channel 'r' in the wrong units?"]}

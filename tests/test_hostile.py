@@ -263,7 +263,7 @@ def test_route_replan_times_are_used(tmp_path, capsys):
 
 
 def test_route_pso_paper_says_what_the_default_is():
-    from shipid.commands.routing import PSO_FRAMING, PSO_PAPER_NOTE
+    from shipid.commands.route import PSO_FRAMING, PSO_PAPER_NOTE
 
     assert "worst of the 64" in PSO_FRAMING and "10.37" in PSO_FRAMING and PSO_FRAMING[:20].lower() in PSO_PAPER_NOTE.lower()
 

@@ -214,15 +214,27 @@ def check_output_path(path, *, force: bool, inputs=(), what: str = "output"):
 
 
 def add_progress_option(p) -> None:
-    """``--progress`` / ``--no-progress``; default: on when stderr is a terminal."""
+    """``--progress`` / ``--no-progress`` (bars on stderr; default: on when stderr is a terminal) and ``--quiet``
+    (no bars, no stage lines, no notices: only the results)."""
     p.add_argument("--progress", dest="progress", action="store_true", default=None,
-                   help="show progress (default: on when stderr is a terminal)")
-    p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress output")
+                   help="show progress bars (default: on when stderr is a terminal; otherwise one line per stage)")
+    p.add_argument("--no-progress", dest="progress", action="store_false",
+                   help="no progress bars (the stage lines stay)")
+    p.add_argument("--quiet", action="store_true", help="print the results only: no progress bars, stage lines or notices")
+
+
+def say(args, line: str) -> None:
+    """Print a stage line (what starts now and how big it is) unless ``--quiet``."""
+    if not getattr(args, "quiet", False):
+        print(line, flush=True)
 
 
 def progress_iter(items, args, desc: str):
-    """``items`` wrapped in a tqdm bar when :func:`progress_on` (else unchanged)."""
+    """``items`` wrapped in a tqdm bar when :func:`progress_on`; otherwise unchanged, after one stage line
+    ("DESC (N) ...") unless ``--quiet``."""
     if not progress_on(args):
+        items = list(items)
+        say(args, f"{desc} ({len(items)}) ...")
         return items
     from tqdm.auto import tqdm
 
@@ -233,6 +245,8 @@ def progress_on(args) -> bool:
     """Whether to show progress for ``args`` (see :func:`add_progress_option`)."""
     import sys
 
+    if getattr(args, "quiet", False):
+        return False
     value = getattr(args, "progress", None)
     if value is None:
         return bool(getattr(sys.stderr, "isatty", lambda: False)())

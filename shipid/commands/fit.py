@@ -1,9 +1,7 @@
-"""``shipid fit`` and ``shipid demo``: identification from the shell."""
+"""``shipid fit``: identification from the shell."""
 from __future__ import annotations
 
 import sys
-from datetime import datetime
-from pathlib import Path
 
 import numpy as np
 
@@ -35,17 +33,6 @@ def register(sub) -> None:
     add_engine_options(p)
     add_progress_option(p)
     p.set_defaults(handler=_fit)
-
-    d = sub.add_parser("demo", help="fit the bundled synthetic KCS logs and print the results",
-                       description="Fit the bundled synthetic KCS logs (known truth) and print the coefficients "
-                                   "against the truth; writes the result JSON, a validation and an HTML report into "
-                                   "a new folder.")
-    d.add_argument("-o", "--output", default=None, metavar="FOLDER",
-                   help="new folder for the outputs (default: shipid-demo-<time>)")
-    renamed_option(d, "--output-dir", "--output", dest="output", metavar="FOLDER")
-    d.add_argument("--passes", type=int, default=2, help="EKF passes (default 2)")
-    add_progress_option(d)
-    d.set_defaults(handler=_demo)
 
 
 def add_engine_options(p) -> None:
@@ -301,7 +288,7 @@ def _fit(args) -> int:
     opts = fit_options(args, model)
     recipe = _lib_errors(lambda: fit_logs(
         logs, model, lpp=args.lpp, progress=progress_on(args), ekf_options=extra, start_defaults=args.params is None,
-        log=print, **opts))
+        log=None if getattr(args, "quiet", False) else print, **opts))
     fit, ident = recipe, recipe.ekf
     result = fit.result()
     if choice is not None:
@@ -366,136 +353,3 @@ def _print_result(result) -> None:
             print(f"warning: {w}")
 
 
-def _new_dir(base: str | None) -> Path:
-    if base is not None:
-        p = Path(base)
-        if p.exists():
-            raise ValueError(f"{p}: output folder exists; choose a new name (the demo never overwrites)")
-        p.mkdir(parents=True)
-        return p
-    stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
-    p = Path(f"shipid-demo-{stamp}")
-    i = 1
-    while p.exists():
-        i += 1
-        p = Path(f"shipid-demo-{stamp}-{i}")
-    p.mkdir()
-    return p
-
-
-def _demo(args) -> int:
-    import pandas as pd
-
-    from ..datasets import bundled_data_dir, bundled_kcs_logs
-    from ..identify import EKFIdentifier
-    from ..logs import read_log
-    from ..models import get_model
-    from ..simulate import replay, replay_errors
-
-    paths = bundled_kcs_logs()
-    if not paths:
-        raise ValueError(f"no bundled logs found in {bundled_data_dir()}; reinstall shipid")
-    outdir = _new_dir(args.output)
-    print(f"shipid demo: fitting kcs-response to {len(paths)} bundled synthetic logs ({bundled_data_dir()})")
-    logs = [read_log(p) for p in paths]
-    truth = get_model("kcs-response", "synthetic-truth")
-    # start far from the truth: every coefficient off by a seeded random 30 %
-    rng = np.random.default_rng(0)
-    start = truth.with_params(truth.params * (1 + 0.3 * rng.standard_normal(truth.np)))
-    ident = EKFIdentifier(start, n_passes=args.passes, init="equation-error", progress=progress_on(args)).fit(logs)
-    result = ident.result()
-    result.to_json(outdir / "result.json")
-    _print_result(result)
-    tab = result.summary()
-    tab["truth"] = truth.params_series()[tab.index]
-    tab["error_sigma"] = (tab["value"] - tab["truth"]) / tab["std"]
-    from .._io import atomic_write_text
-
-    atomic_write_text(outdir / "coefficients.csv", tab.to_csv(float_format="%.10g"))
-    inside = int((tab["error_sigma"].abs() < 3).sum())
-    print(f"\nagainst the known truth: {inside}/{len(tab)} coefficients within 3 sigma")
-    rows = []
-    fitted = ident.to_model()
-    for lg in logs:
-        err = replay_errors(replay(fitted, lg), lg)
-        rows.append(pd.Series({f"{ch}_rmse": err.loc[ch, "rmse"] for ch in ("u", "v", "r") if ch in err.index}, name=lg.name))
-    rep = pd.DataFrame(rows)
-    print("\nreplay of each log with its recorded inputs (RMSE against the noisy log):")
-    print(rep.to_string(float_format=lambda v: f"{v:.4g}"))
-    rep.columns = [c.replace("u_rmse", "u_rmse [m/s]").replace("v_rmse", "v_rmse [m/s]")
-                   .replace("r_rmse", "r_rmse [rad/s]") for c in rep.columns]
-    atomic_write_text(outdir / "replay_rmse.csv", rep.to_csv(float_format="%.10g"))
-    _demo_figure(ident, logs, fitted, outdir)
-    from ..report import write_report
-
-    write_report(result, logs, outdir / "report_known_truth.html", identifier=ident,
-                 title="shipid demo, part 1: kcs-response identified from logs with a known truth",
-                 intro=DEMO_INTRO_1.format(inside=inside, n=len(tab)))
-    _demo_mmg(args, outdir)
-    print(f"\noutputs in {outdir}/: result.json, coefficients.csv, replay_rmse.csv, replay.png, "
-          "report_known_truth.html (part 1), mmg_result.json, report.html (part 2)")
-    return 0
-
-
-#: What the demo's two reports demonstrate (shown at the top of each).
-DEMO_INTRO_1 = (
-    "Part 1 of the demo: the bundled synthetic KCS logs were generated by the kcs-response model itself with "
-    "known coefficients (data/README.md) plus sensor noise, and the fit started 30 % away from them. This "
-    "checks the identification: {inside}/{n} coefficients are within 3 standard deviations of the truth, "
-    "and the replays should match the logs to the sensor noise.\n\n"
-    "Part 2 (report.html) shows the harder, realistic case: logs from a different (MMG) model.")
-DEMO_INTRO_2 = (
-    "Part 2 of the demo: the logs were generated by the MMG model, which the kcs-response model cannot "
-    "represent exactly, as with real ship data. Four logs were fitted; {held} was held out. A poor replay "
-    "here is an honest result: it shows how far this simple model is from the one that made the data, and "
-    "the identifiability section shows which coefficients these manoeuvres do not determine.\n\n"
-    "Part 1 (report_known_truth.html) shows the same method on logs with a known truth.")
-
-
-def _demo_mmg(args, outdir: Path) -> None:
-    """Part 2: logs from the MMG model (structurally different, as real data are):
-    fit on four, validate on all five (one held out), write the HTML report."""
-    from ..datasets import bundled_kcs_logs
-    from ..identify import EKFIdentifier
-    from ..logs import read_log
-    from ..models import get_model
-    from ..report import write_report
-
-    paths = bundled_kcs_logs("mmg")
-    if not paths:
-        return
-    logs = [read_log(p) for p in paths]
-    held_out = [lg for lg in logs if lg.name.endswith("zz_p10")]
-    train = [lg for lg in logs if lg not in held_out]
-    print(f"\npart 2: kcs-response fitted to {len(train)} logs generated by the MMG model "
-          f"(held out: {', '.join(lg.name for lg in held_out)})")
-    ident = EKFIdentifier(get_model("kcs-response"), n_passes=args.passes, progress=progress_on(args)).fit(train)
-    res = ident.result()
-    res.to_json(outdir / "mmg_result.json")
-    _print_result(res)
-    write_report(res, logs, outdir / "report.html", identifier=ident,
-                 title="shipid demo, part 2: kcs-response identified from MMG-generated KCS logs",
-                 intro=DEMO_INTRO_2.format(held=", ".join(lg.name for lg in held_out) or "none"))
-
-
-def _demo_figure(ident, logs, fitted, outdir: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from ..simulate import replay
-
-    fig, axs = plt.subplots(1, len(logs), figsize=(4 * len(logs), 4))
-    for ax, lg in zip(np.atleast_1d(axs), logs):
-        sim = replay(fitted, lg)
-        ax.plot(lg["y"], lg["x"], ".", ms=1, label="log")
-        ax.plot(sim.state("y"), sim.state("x"), "-", label="fitted model")
-        ax.set_aspect("equal", adjustable="datalim")
-        ax.set_title(lg.name, fontsize=9)
-        ax.set_xlabel("y [m]")
-    np.atleast_1d(axs)[0].set_ylabel("x [m]")
-    np.atleast_1d(axs)[0].legend()
-    fig.tight_layout()
-    fig.savefig(outdir / "replay.png", dpi=90)
-    plt.close(fig)
