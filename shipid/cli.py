@@ -21,15 +21,20 @@ MAX_MESSAGE = 300
 
 #: Modules that add sub-commands (each has ``register(subparsers)``).
 COMMAND_MODULES: list[str] = [
-    "shipid.commands.core",
-    "shipid.commands.identify",
-    "shipid.commands.logs",
-    "shipid.commands.manoeuvre",
-    "shipid.commands.routing",
+    "shipid.commands.models",
+    "shipid.commands.fit",
+    "shipid.commands.demo",
+    "shipid.commands.log",
+    "shipid.commands.metrics",
+    "shipid.commands.simulate",
+    "shipid.commands.sweep",
+    "shipid.commands.route",
     "shipid.commands.glider",
     "shipid.commands.validate",
-    "shipid.commands.control",
-    "shipid.commands.uncertainty",
+    "shipid.commands.report",
+    "shipid.commands.plan",
+    "shipid.commands.sample",
+    "shipid.commands.campaign",
     "shipid.commands.crossval",
 ]
 

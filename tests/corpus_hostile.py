@@ -564,8 +564,9 @@ def summarise(records: list[dict]) -> dict:
             "inputs_modified": sum(bool(r["input_modified"]) for r in records),
             "escaped": sum(bool(r["escaped"]) for r in records),
             "devices_replaced": sum(bool(r["device_replaced"]) for r in records),
-            "outputs_lost": sum(r["lost"] for r in records)
-            + sum(1 for r in records if r.get("resume") and not (r["resume"]["complete"] and r["resume"]["kept"]))}
+            "outputs_lost": sum(r["lost"] for r in records),
+            "resumes_incomplete": sum(1 for r in records
+                                      if r.get("resume") and not (r["resume"]["complete"] and r["resume"]["kept"]))}
 
 
 def run_all(selected: list[Case], jobs: int = 1, seed: int = 0, verbose: bool = True) -> list[dict]:

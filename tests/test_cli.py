@@ -283,7 +283,7 @@ def test_models_lists_meanings_and_units(capsys):
 
 def test_models_kcs_equation_text_matches_the_model():
     """The equations `shipid models` prints for kcs-response are the model's (evaluated and compared)."""
-    from shipid.commands.core import PARAMETER_NOTES
+    from shipid.commands.models import PARAMETER_NOTES
     from shipid.models import get_model
 
     m = get_model("kcs-response", "synthetic-truth")

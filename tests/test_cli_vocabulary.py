@@ -147,7 +147,7 @@ def test_old_spelling_works_and_names_its_replacement(argv, dest, value, new, ca
 
 
 def test_old_problem_name_works_and_names_its_replacement(tmp_path, capsys, monkeypatch):
-    import shipid.commands.routing as routing
+    import shipid.commands.route as routing
 
     seen = []
     monkeypatch.setattr(routing, "_zermelo", lambda args, spec, base, out, csv: seen.append((args.problem, spec)) or 0)

@@ -1,4 +1,4 @@
-"""Channel-consistency checks (issue 11 item 2): each defect is built from a bundled log and its message
+"""Channel-consistency checks: each defect is built from a bundled log and its message
 asserted; clean bundled logs and every MARIN and Esso Osaka file raise no error (false alarms counted)."""
 from __future__ import annotations
 

@@ -284,7 +284,7 @@ def test_refinement_keeps_the_own_damping_negative():
 def test_speed_scale_of_the_damping_margin():
     """The own-damping margin's speed: the approach speed; the median speed when the logs start from rest (the
     approach speed below a tenth of it, e.g. the Esso Osaka runs); none when nothing moves."""
-    from shipid.identify.recipe import _speed_scale
+    from shipid.identify.sampling import _speed_scale
 
     t = np.arange(200.0)
     moving = TrialLog.from_arrays(t, name="m", u=np.full(200, 2.0), v=np.zeros(200), r=np.zeros(200))

@@ -7,7 +7,7 @@ from ._common import add_progress_option, check_output_path, progress_on, read_l
 
 
 def register(sub) -> None:
-    from .identify import add_engine_options, add_fit_options
+    from .fit import add_engine_options, add_fit_options
 
     p = sub.add_parser("crossval", help="cross-validate a model over runs: fit on all runs but one, predict the one left out",
                        description="Leave-one-run-out (or K-fold over runs) cross-validation through the path of "
@@ -37,7 +37,7 @@ def _crossval(args) -> int:
 
     from .._io import atomic_write_text, dumps_json
     from ..crossval import choose_model, cross_validate, parse_candidates
-    from .identify import _folds, _lib_errors, _logs_lpp, _start_model, check_fit_args, fit_options, print_choice
+    from .fit import _folds, _lib_errors, _logs_lpp, _start_model, check_fit_args, fit_options, print_choice
     from .validate import _horizons
 
     split_model_option(args)

@@ -1,6 +1,6 @@
-"""``shipid validate`` and ``shipid report``: check a fitted model against measured logs.
+"""``shipid validate``: check a fitted model against measured logs (and the options ``shipid report`` shares).
 
-Both replay the model with each log's recorded rudder and propeller inputs
+``validate`` and ``report`` both replay the model with each log's recorded rudder and propeller inputs
 (:mod:`shipid.validation`); ``validate`` writes the comparison as a JSON list,
 ``report`` as one self-contained HTML page.
 """
@@ -43,22 +43,10 @@ def register(sub) -> None:
                                    "ITTC/IMO manoeuvre metrics of the log and of the replay.")
     _common(p, model=True)
     p.add_argument("-o", "--output", required=True, help="JSON file to write (a list, one object per log)")
-    from .uncertainty import add_draws_option
+    from ._draws import add_draws_option
 
     add_draws_option(p)
     p.set_defaults(handler=_validate)
-
-    r = sub.add_parser("report", help="write a self-contained HTML validation report of a fitted model",
-                       description="One HTML file (figures embedded, no network): coefficients with sigma and 95 % "
-                                   "intervals, correlation heat-map, identifiability warnings, measured vs replayed "
-                                   "time series and tracks, residuals, the IMO table, versions and input hashes.")
-    _common(r)
-    r.add_argument("-o", "--output", required=True, help="HTML file to write")
-    r.add_argument("--title", default=None, help="report title")
-    from .uncertainty import add_draws_option
-
-    add_draws_option(r)
-    r.set_defaults(handler=_report)
 
 
 def _check(args) -> Path:
@@ -105,7 +93,7 @@ def _line(d: dict) -> str:
 def _validate(args) -> int:
     from .._io import atomic_write_text, dumps_json
     from ..validation import resolve_model, validate_one
-    from .uncertainty import check_draws, validate_draws
+    from ._draws import check_draws, validate_draws
 
     out = _check(args)
     horizons = _horizons(args.horizon)
@@ -210,27 +198,3 @@ def _current_start(model, result):
     return {"cx": float(start["cx"]), "cy": float(start["cy"])}
 
 
-def _report(args) -> int:
-    from .._io import atomic_write_text
-    from ..report import render_report
-    from ..validation import resolve_model, validate_one
-
-    out = _check(args)
-    model, res = resolve_model(args.result)
-    _print_grade(res)
-    logs = read_logs_for_result(args, model)
-    initial = _current_start(model, res)
-    vals = [validate_one(model, lg, lpp=args.lpp, closed_loop=not args.no_closed_loop,
-                         zigzag_angles=_zigzag(args), initial=initial)
-            for lg in progress_iter(logs, args, "replaying logs")]
-    from .uncertainty import check_draws
-
-    unc = {"draws": check_draws(args), "seed": args.seed, "samples": args.samples} if check_draws(args) else None
-    horizons = _horizons(args.horizon)
-    hz = [h for h in _horizon_results(args, horizons, logs, model, initial) if h[0] is not None] if horizons else None
-    text = render_report(res, args.logs, title=args.title, validations=vals, uncertainty=unc, horizons=hz)
-    atomic_write_text(out, text, force=args.force)
-    for v in vals:
-        print(_line(v.to_dict()))
-    print(f"wrote {out}")
-    return 0 if all(v.simulation.success for v in vals) else 1

@@ -16,6 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+from scipy.special import chdtrc, gammaincinv
+
+from .data import prepare_logs
 
 __all__ = ["identifiability", "consistency", "ljung_box", "CONSISTENCY_RULES"]
 
@@ -127,8 +130,6 @@ def ljung_box(x_segments, lags: int):
     Returns ``(Q, p_value, rho (L,), n)``; ``p`` from the chi-square distribution with ``L`` degrees of
     freedom (no fitted ARMA terms are subtracted: the innovations are tested as they are).
     """
-    from scipy.special import chdtrc
-
     num = np.zeros(lags)
     den = 0.0
     n = 0
@@ -164,8 +165,6 @@ def damping_states(model, logs, max_points: int = 2000):
     (:func:`shipid.identify.data.prepare_logs`: inputs required, states by name; a state a log lacks counts
     as 0); rows with a non-finite value are left out.  Returns ``(X (N, nx), U (N, nu))``.
     """
-    from .data import prepare_logs
-
     arrays, meas = prepare_logs(model, logs)
     cols = [model.state_index(s) for s in meas]
     X, U = [], []
@@ -349,8 +348,6 @@ def consistency(names, innov, S_diag, gated, segments, replay_ratio=None, dynami
     (largest |autocorrelation| over the lags), ``replay_ratio``, ``n_gated``, ``gated_fraction``.
     Non-finite values are None (the JSON stays strict).
     """
-    from scipy.special import gammaincinv
-
     # chi2.ppf(q, df) is 2 gammaincinv(df / 2, q) (scipy.stats' own formula; called directly, ~30x cheaper)
     chi2_ppf = lambda q, df: 2.0 * gammaincinv(df / 2.0, q)  # noqa: E731
     r = dict(CONSISTENCY_RULES)

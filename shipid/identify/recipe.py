@@ -68,7 +68,12 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from .._blas import one_blas_thread
+from ..logs.overlap import drop_contained, repeated_samples
+from ..models import get_model, Model, model_class
 from ..results import ResultMixin, coefficient_table, plot_coefficients, verdict_grade
+from .diagnostics import damping_check
+from .identifier import EKFIdentifier
 from .refine import AUTO_REFINE, METRIC_TOL, METRIC_WEIGHT, REFINE_MODES, _kinds, metric_residuals, refine_fit
 from .sampling import (LINEAR_DRIFT_DEG, MIN_WINDOW_SAMPLES, SAMPLES_PER_TAU, _every, _log_step, every_kth,
                        _lpp_of, choose_sampling, common_grid, linear_sway_yaw, linear_window)
@@ -201,8 +206,6 @@ class RecipeFit(ResultMixin):
                 res.success = False
                 res.message = f"EKF stage failed ({self.ekf.message_}); refinement: {res.message}"
         if self.logs:
-            from .diagnostics import damping_check
-
             res.diagnostics["damping"] = damping_check(self.final.to_model(), self.logs)
         from .verdict import verdict_from_recipe
 
@@ -310,8 +313,6 @@ def _check_under_way(logs, L: float) -> None:
 
 # ----------------------------------------------------------------------------- the recipe
 def _start_model(model, params, L):
-    from ..models import Model, get_model, model_class
-
     if isinstance(model, Model):
         m = model
         ml = getattr(m, "lpp", None)
@@ -378,8 +379,6 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
     refinement then give the same answer whatever the machine's thread setting (on the MARIN ``response-nl``
     fit, 1 and 2 OpenBLAS threads had ended the refinement in different minima).
     """
-    from .._blas import one_blas_thread
-
     with one_blas_thread():
         return _fit_logs(logs, model, params, lpp=lpp, estimate=estimate, fixed=fixed, start=start, neutral=neutral,
                          free_neutral=free_neutral, estimate_neutral=estimate_neutral, dt=dt,
@@ -412,8 +411,6 @@ def _repeated_runs(logs, drop: bool, step) -> list:
     """Step 0: a log whose every sample is a sample of another (a trimmed copy of the same run) is dropped when
     ``drop`` (it would count that run twice), else kept with a warning; logs that share part of their samples
     (overlapping segments) are kept with a warning.  A step is recorded only when something was found."""
-    from ..logs.overlap import drop_contained, repeated_samples
-
     if len(logs) < 2:
         return logs
     rows = repeated_samples(logs)  # (one comparison of the samples for both kinds of finding)
@@ -442,8 +439,6 @@ def _repeated_runs(logs, drop: bool, step) -> list:
 def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free_neutral, estimate_neutral, dt,
               max_drift_deg, refine, metric_weight, n_passes, max_nfev, tune_noise, progress, meas_std, ekf_options,
               hold_unresolved, sign_bounds, physical_damping, start_defaults, drop_repeated, log) -> RecipeFit:
-    from .identifier import EKFIdentifier
-
     logs = list(logs)
     if not logs:
         raise ValueError("fit_logs: no logs given")
@@ -589,8 +584,6 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         est = [p for p in est if p not in fix]
     # staged start
     if start == "staged" and defaults.seed_model is not None:
-        from ..models import get_model
-
         seed_model = get_model(defaults.seed_model, lpp=L)
         seed_fix = {k2: v for k2, v in fix.items() if k2 in seed_model.param_names}
         # the seed is linear in v and r: fitted on the linear range (step 2b) unless that is switched off

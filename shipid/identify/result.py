@@ -13,6 +13,8 @@ import numpy as np
 import pandas as pd
 
 from .._io import (as_bool, as_mapping, as_number, as_string, atomic_write_text, dumps_json, read_json, short)
+from .._version import __version__
+from ..models import available_models, get_model, Model
 from ..results import ResultMixin, coefficient_table, plot_coefficients, verdict_grade
 
 __all__ = ["FitResult", "load_result", "as_result", "model_from", "software_versions", "diagnostics_to_json", "fitted_ship"]
@@ -66,11 +68,10 @@ def diagnostics_to_json(d: dict) -> dict:
 
 def software_versions() -> dict:
     """Versions of Python and the packages a result depends on."""
+    # imported here only to read their versions: filterpy and matplotlib are not loaded otherwise
     import filterpy
     import matplotlib
     import scipy
-
-    from .._version import __version__
 
     return {"shipid": __version__, "python": platform.python_version(), "numpy": np.__version__,
             "scipy": scipy.__version__, "pandas": pd.__version__, "filterpy": filterpy.__version__,
@@ -176,8 +177,6 @@ class FitResult(ResultMixin):
 
     def to_model(self):
         """The registered model with these coefficients (and its options, e.g. MMG particulars)."""
-        from ..models import get_model
-
         if not isinstance(self.coef, dict):
             raise ValueError("fit result: 'coef' must be a mapping name -> value")
         try:
@@ -249,10 +248,6 @@ def model_from(spec, *, model: str | None = None):
     -------
     (Model, FitResult or None)
     """
-    import os
-
-    from ..models import Model, available_models, get_model
-
     res = None
     if isinstance(spec, Model):
         m = spec

@@ -8,6 +8,9 @@ import warnings
 
 import numpy as np
 
+from ..logs import TrialLog
+from ..manoeuvres import steady_rps
+
 __all__ = ["choose_sampling", "fastest_time_constant", "common_grid", "linear_sway_yaw", "linear_window", "LINEAR_DRIFT_DEG", "SAMPLES_PER_TAU"]
 
 #: Samples per fastest time constant of the model at the EKF step (RK4 with h = tau/25 is accurate to ~1e-7
@@ -130,8 +133,6 @@ def linear_window(log, max_drift_deg: float = LINEAR_DRIFT_DEG):
     Near rest the drift angle is undefined (a log that starts from rest, as the Esso Osaka runs do, has
     |v| ~ u ~ noise there), so samples slower than :data:`DRIFT_SPEED_FRACTION` of the log's 90th-percentile
     speed are not tested: they neither cut the log nor count as drift."""
-    from ..logs import TrialLog
-
     if "v" not in log.channels:
         return log
     u, v = np.asarray(log["u"], dtype=float), np.asarray(log["v"], dtype=float)
@@ -153,8 +154,6 @@ def _every(log, k: int):
     """The log with every ``k``-th sample, keeping its name, ship and provenance (path, sha256)."""
     if k == 1:
         return log
-    from ..logs import TrialLog
-
     return TrialLog(log.data.iloc[::k].reset_index(drop=True), name=log.name, ship=log.ship, path=log.path,
                     sha256=log.sha256, rows=log.rows[::k], units_in=log.units_in,
                     notes=list(log.notes) + [f"{every_kth(k)} (fit recipe)"], fmt=log.fmt,
@@ -163,8 +162,6 @@ def _every(log, k: int):
 
 def _head(log, n: int):
     """The first ``n`` samples of a log, keeping its name, ship and provenance."""
-    from ..logs import TrialLog
-
     return TrialLog(log.data.iloc[:n].reset_index(drop=True), name=log.name, ship=log.ship, path=log.path,
                     sha256=log.sha256, rows=log.rows[:n], units_in=log.units_in, notes=list(log.notes), fmt=log.fmt,
                     meas_std=getattr(log, "meas_std", None))
@@ -175,8 +172,6 @@ def common_grid(logs, dt: float) -> list:
     all as long as the longest: past the end of a shorter log its measured channels are NaN (missing, not
     fitted) and its inputs ``delta, n`` hold their last value.  Logs on one grid are simulated as one batch
     by the output-error refinement."""
-    from ..logs import TrialLog
-
     if not dt > 0:
         raise ValueError(f"dt must be a positive time step [s], got {dt}")
     span = max(lg.time[-1] - lg.time[0] for lg in logs)

@@ -1,3 +1,4 @@
+# Why one file: the channel-consistency checks run as one set on one log, each a short function with its message.
 """Channel-consistency checks of a trial log, before any fit.
 
 Aircraft system identification calls this *data compatibility analysis*: the
@@ -32,6 +33,7 @@ import numpy as np
 import pandas as pd
 
 from ..results import ResultMixin
+from .units import SHIP_CHANNELS, unit_key, UNITS
 
 __all__ = ["Finding", "ConsistencyResult", "check_consistency", "CHECKS"]
 
@@ -130,7 +132,7 @@ class ConsistencyResult(ResultMixin):
 
     def plot(self, ax=None):
         """Findings per check, stacked by level (error, warning, info); returns the axes."""
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         if ax is None:
             _, ax = plt.subplots(figsize=(6, 2.5))
@@ -194,8 +196,6 @@ class _Ctx:
         """(significant digits the file's values of ``c`` are printed with, factor file unit -> SI); judged on
         up to 256 values spread over the log.  16 = full precision."""
         if c not in self._sig:
-            from .units import UNITS, unit_key
-
             unit = unit_key(str(self.log.units_in.get(c, "")).split(" (")[0])
             factor = UNITS.get(unit, ("", 1.0))[1]
             a = self.get(c)
@@ -785,8 +785,6 @@ def _check_position_freeze(c: _Ctx) -> None:
 
 
 def _check_glitches(c: _Ctx) -> None:
-    from .units import SHIP_CHANNELS
-
     counts, first = {}, {}
     units = c.log.units()
     names = [ch for ch in c.log.channels if c.get(ch) is not None]

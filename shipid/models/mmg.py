@@ -46,7 +46,7 @@ Rudder, eqs. (17)-(28): ``X_R = -(1 - t_R) F_N sin(delta)``,
 ``Y_R = -(1 + a_H) F_N cos(delta)``,
 ``N_R = -(x_R + a_H x_H) F_N cos(delta)`` with **dimensional**
 ``x_R = x'_R L`` and ``x_H = x'_H L`` (this is where the ``shipmmg`` package
-was wrong, its issue #31), ``F_N = 1/2 rho A_R U_R^2 f_alpha sin(alpha_R)``,
+was wrong: github.com/ShipMMG/shipmmg/issues/31), ``F_N = 1/2 rho A_R U_R^2 f_alpha sin(alpha_R)``,
 ``alpha_R = delta - delta_0 - atan(v_R/u_R)``, ``v_R = U gamma_R beta_R``,
 ``beta_R = beta - l'_R r'`` (``gamma_R`` = ``gammaR_m`` for beta_R < 0,
 ``gammaR_p`` otherwise),
@@ -79,6 +79,7 @@ all columns in one evaluation of the (complex-safe) equations.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Mapping
@@ -230,8 +231,6 @@ def eq4_mass_matrix(P: MMGParticulars, mx, my, Jz) -> np.ndarray:
 
 
 def _no_default(f) -> bool:
-    import dataclasses
-
     return f.default is dataclasses.MISSING
 
 

@@ -1,4 +1,4 @@
-"""KCS 3-DOF response model of free-running identification by augmented-state EKF (eq. (3) of its paper).
+"""KCS 3-DOF response model of Hajizadeh et al.
 
 States ``x, y, psi, u, v, r`` (earth-fixed position [m], heading [rad],
 body-axis surge/sway [m/s], yaw rate [rad/s]); inputs ``delta`` [rad] (positive
@@ -13,6 +13,9 @@ and ``n`` [rps]; 16 parameters::
 plus kinematics ``x' = u cos psi - v sin psi``, ``y' = u sin psi + v cos psi``,
 ``psi' = r``.  The equations are linear in the parameters, so ``jac_p`` is the
 regressor matrix; both Jacobians are analytic.
+
+Reference: Hajizadeh, Seif & Mehdigholi (Sharif University of Technology, in Persian): ship manoeuvring
+coefficients by system identification from free-running model tests (KCS, augmented-state EKF).
 """
 from __future__ import annotations
 
@@ -54,7 +57,7 @@ PRIME_EXPONENTS = {
 
 
 class KCSResponseModel(FroudeScaled, Model):
-    """The KCS response model of free-running identification by augmented-state EKF (16 coefficients a1..a9, b1..b4, c1..c3).
+    """The Hajizadeh et al. KCS response model (16 coefficients a1..a9, b1..b4, c1..c3).
 
     Parameter sets shipped: ``"synthetic-truth"`` (default; the documented set
     the bundled synthetic logs were generated with, see ``data/README.md``) and

@@ -1,4 +1,4 @@
-"""``response-nl``: the KCS response model plus speed-dependent non-linear damping.
+"""``response-nl``: the response model of Hajizadeh et al. plus speed-dependent non-linear damping.
 
 The seed's linear sway/yaw equations cannot represent turning circles and
 zigzags at once (the yaw damping does not grow with drift and yaw rate, and

@@ -93,13 +93,17 @@ def time_series_figure(log_frame: pd.DataFrame, sim_frame: pd.DataFrame, title: 
     rate and the wind where they vary during the log (e.g. berthing runs that go astern)."""
     chans = [c for c in TIME_SERIES_CHANNELS if c[0] in log_frame.columns or c[0] in sim_frame.columns]
     chans += [c for c in VARYING_INPUTS if c[0] in log_frame.columns and _varies(log_frame[c[0]].to_numpy(float))]
+    wrap = {"wind_dir_true"}  # directions in (-180, 180] deg: a wind from about north does not jump 0 <-> 360
     fig = _figure(8.5, 1.45 * len(chans) + 0.8)
     axs = fig.subplots(len(chans), 1, sharex=True, squeeze=False)[:, 0]
     t_log = log_frame["time"].to_numpy(float)
     t_sim = sim_frame["time"].to_numpy(float)
     for ax, (ch, label, f) in zip(axs, chans):
         if ch in log_frame.columns:
-            ax.plot(t_log, f * log_frame[ch].to_numpy(float), ".", ms=1.5, color="0.35", label="measured")
+            y = f * log_frame[ch].to_numpy(float)
+            if ch in wrap:
+                y = 180.0 - np.mod(180.0 - y, 360.0)
+            ax.plot(t_log, y, ".", ms=1.5, color="0.35", label="measured")
         if ch in sim_frame.columns and ch not in ("delta", "n") and not ch.startswith("wind"):
             ax.plot(t_sim, f * sim_frame[ch].to_numpy(float), "-", lw=1.2, color="C3", label="replay (model)")
         ax.set_ylabel(label, fontsize=11)

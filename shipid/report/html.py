@@ -15,12 +15,13 @@ import sys
 from datetime import datetime, timezone
 from pathlib import Path
 
-
 from .._io import OutputExistsError, atomic_write_text
+from ..identify.result import software_versions
 from ..identify.verdict import plain_message, verdict_of
 from ..validation import LogValidation, load_logs, resolve_model, validate_one
 from . import figures
 from ._markup import _e, _f, _fig, _img, _table  # noqa: F401  (_img: the helpers as one set)
+from .uncertainty import uncertainty_section
 
 __all__ = ["render_report", "write_report"]
 
@@ -61,8 +62,6 @@ def _anchor(i: int) -> str:
 
 
 def _versions_now() -> dict:
-    from ..identify.result import software_versions
-
     return software_versions()
 
 
@@ -296,7 +295,8 @@ def _section_imo(vals: list[LogValidation]) -> str:
     for v in vals:
         na = ("n/a", "na")
         if v.measured is None:
-            rows.append([_e(v.log.name), "&ndash;", "&ndash;", "&ndash;", na, "&ndash;", na, "&ndash;", na])
+            rows.append([_e(v.log.name), "not a standard manoeuvre: no criterion applies", "", "", na, "", na, "",
+                         na])
             continue
         mi = v.measured.imo()
         pd_ = v.predicted.to_dict() if v.predicted is not None else {}
@@ -441,9 +441,9 @@ def _section_horizon(horizons) -> str:
                          _f(e["n_starts"], "{:.0f}"), (_f(e["n_blowups"], "{:.0f}"), "bad" if e["n_blowups"] else "")])
         fig = figures._figure(4.6, 5.0)
         ax = h.plot(ax=fig.add_subplot(), log=log, every=max(1, len(h.start_times) // 12))
-        ax.set_title(f"{h.name}: predictions over {h.horizons.max():g} s", fontsize=11)
+        ax.set_title(f"{h.name}\npredictions over {h.horizons.max():g} s", fontsize=10)
         ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=2, frameon=False)  # off the tracks
-        fig.subplots_adjust(left=0.17, right=0.97, bottom=0.2, top=0.93)
+        fig.subplots_adjust(left=0.17, right=0.97, bottom=0.2, top=0.9)
         figs.append(_fig(fig, f"predicted vs measured tracks, {h.name}"))
     return ('<h2 id="horizon">Open-loop prediction from the measured state</h2><p>How far ahead the model can be '
             "trusted: from starts every few seconds it runs open loop with the measured inputs, and the table gives "
@@ -500,8 +500,9 @@ def plain_summary(result, model, validations, horizons=None) -> str:
               f"the {m} method")
     fitted = (f"fitted by {method} to {n_fit} log(s) ({', '.join(names[:6])}{', ...' if len(names) > 6 else ''})"
               if n_fit else "with no fitted logs recorded")
-    out = [f"This report checks a {model_label(result, model)} model {fitted}, estimating {k} of its {n_par} "
-           "coefficients."]
+    label = model_label(result, model)
+    article = "an" if label[:1].lower() in "aeiou" or label.lower().startswith("mmg") else "a"
+    out = [f"This report checks {article} {label} model {fitted}, estimating {k} of its {n_par} coefficients."]
     verdict = getattr(result, "verdict", None)
     cons = (result.diagnostics or {}).get("consistency") or {}
     if verdict is not None and getattr(verdict, "grade", None):
@@ -520,7 +521,8 @@ def plain_summary(result, model, validations, horizons=None) -> str:
     if track is not None:
         rel = f" ({track / Ls[0]:.2f} ship lengths)" if Ls else ""
         out.append(f"Replayed open loop with each log's own rudder and propeller inputs, it follows the "
-                   f"{len(validations)} log(s) ({len(held)} not used in the fit) with a median track error of "
+                   f"{len(validations)} log(s) ({f'{len(held)} not used in the fit' if held else 'all used in the fit'}) "
+                   "with a median track error of "
                    f"{track:.3g} m{rel}.")
     td = [abs(v.difference("standard").get("tactical_diameter_L") or math.nan) / v.measured.to_dict()
           ["tactical_diameter_L"] * 100 for v in validations if v.manoeuvre == "turning" and v.standard is not None
@@ -575,8 +577,6 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
                        for lg in load_logs(logs, lpp=lpp)]
     extra = []
     if uncertainty:
-        from .uncertainty import uncertainty_section
-
         extra.append(uncertainty_section(res, validations, **uncertainty))
     title = title or default_title(res, model, validations)
     stamp = datetime.now(timezone.utc).isoformat(timespec="seconds")
@@ -588,7 +588,7 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
     body = [f"<h1>{_e(title)}</h1>",
             verdict_banner(res),
             f"<p class=\"intro\">{_e(plain_summary(res, model, validations, horizons))}</p>",
-            f"<p class=\"note\">Model <b>{_e(res.model)}</b> ({_e(res.method)}; "
+            f"<p class=\"note\">Model <b>{_e(model_label(res, model))}</b> ({_e(res.method)}; "
             f"{'fitted to ' + str(len(res.inputs)) + ' log(s)' if res.inputs else 'no fitted logs recorded'}), "
             f"validated on {len(validations)} log(s) "
             f"({n_ok} replayed with both metric sets). Report written {_e(stamp)} by shipid "

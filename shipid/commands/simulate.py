@@ -1,4 +1,4 @@
-"""Manoeuvre sub-commands: ``metrics``, ``simulate`` and ``sweep``.
+"""``shipid simulate``: a standard manoeuvre of a model, and the model helpers ``metrics`` and ``sweep`` share.
 
 ``MODEL`` arguments accept either a fit-result JSON (``{"model": name, "coef": {...}}``, optionally
 ``"model_options"`` passed to the model, e.g. MMG particulars) or a registered model name with an
@@ -8,9 +8,8 @@ from __future__ import annotations
 
 import math
 import sys
-from pathlib import Path
 
-from ._common import add_log_options, check_output_path, parse_zigzag, read_logs, renamed_option
+from ._common import check_output_path, parse_zigzag, renamed_option
 
 #: Help text of a MODEL argument (one way to name a model in every command).
 MODEL_HELP = "a registered model, optionally with a parameter set (MODEL[:SET], e.g. mmg:kvlcc2), or a fit RESULT.json"
@@ -21,25 +20,6 @@ SUMMARY_KEYS = ("advance_L", "transfer_L", "tactical_diameter_L", "steady_diamet
 
 
 def register(sub) -> None:
-    p = sub.add_parser("metrics", help="standard-manoeuvre metrics (ITTC/IMO) of measured logs -> JSON list",
-                       description="Standard-manoeuvre metrics of measured logs (turning circle: advance, transfer, "
-                                   "tactical and steady diameter; zigzag: overshoots, initial turning; ITTC 7.5-04-02-01 "
-                                   "and the IMO MSC.137(76) criteria); a run that is no standard manoeuvre gives its "
-                                   "steady turn when it holds one.  Prints a JSON list, one object per log.")
-    p.add_argument("logs", nargs="+", metavar="LOG", help="trial logs (CSV or MARIN .dat)")
-    add_log_options(p)   # --lpp (default: from the log's particulars), --schema, --units, ...
-    p.add_argument("--kind", choices=("auto", "turning", "zigzag"), default="auto",
-                   help="manoeuvre in the log: turning circle, zigzag, or auto (detected from the rudder "
-                        "history, default)")
-    p.add_argument("--zigzag", metavar="D/C", default=None,
-                   help="nominal rudder/check angles [deg] of zigzag logs, e.g. 10/5 (default: read from each log, "
-                        "the check angle from the heading deviation at the rudder reversals)")
-    p.add_argument("--reference-offset", type=float, default=None, metavar="M",
-                   help="logged point's distance forward of midship [m]; positions are moved to midship")
-    p.add_argument("-o", "--output", default=None, help="JSON file to write (default: print)")
-    p.add_argument("--force", action="store_true", help="overwrite the output file")
-    p.set_defaults(handler=_metrics)
-
     p = sub.add_parser("simulate", help="simulate a standard manoeuvre with a model (prints its metrics)",
                        description="Simulate a turning circle or a zigzag with a model (a fit result or a registered "
                                    "model with a parameter set) from a steady approach, and print its metrics with the "
@@ -54,28 +34,12 @@ def register(sub) -> None:
     p.add_argument("-o", "--output", default=None,
                    help="CSV of the time series, units in the headers (with --side both: both turns, column 'run')")
     p.add_argument("--force", action="store_true", help="overwrite the output file")
-    from .uncertainty import add_draws_option
+    from ._draws import add_draws_option
 
     add_draws_option(p)
     p.add_argument("--metrics-output", default=None, metavar="FILE",
                    help="with --draws: JSON of the metrics with 95 %% intervals and IMO probabilities")
     p.set_defaults(handler=_simulate)
-
-    p = sub.add_parser("sweep", help="turning-diameter sweep over rudder angle x approach speed (one batch)",
-                       description="Turning circles of a model over every rudder angle x approach speed, simulated "
-                                   "as one batch; prints (or writes) one CSV row per turn with its metrics.")
-    p.add_argument("model", metavar="MODEL", help=MODEL_HELP)
-    p.add_argument("--rudder", default="10,15,25", help="rudder angles [deg], comma separated")
-    p.add_argument("--speed", default=None, help="approach speeds [m/s], comma separated (default: design speed)")
-    p.add_argument("--side", choices=("both", "starboard", "port"), default="starboard",
-                   help="turning side (default starboard; both: each angle to either side)")
-    p.add_argument("--lpp", type=float, default=None,
-                   help="ship length [m]: Froude-scale the model to this ship (default: the length it was fitted at)")
-    p.add_argument("--rudder-rate", type=float, default=None, metavar="DEG_S", help="rudder rate [deg/s]")
-    _integrator(p)
-    p.add_argument("-o", "--output", default=None, help="CSV to write (default: print)")
-    p.add_argument("--force", action="store_true", help="overwrite the output file")
-    p.set_defaults(handler=_sweep)
 
 
 def _common(p):
@@ -135,59 +99,6 @@ def _write_or_print(text: str, output, force: bool):
         sys.stdout.write(text)
 
 
-def _metrics(args) -> int:
-    from .._io import dumps_json
-    from ..manoeuvres import NotStandardManoeuvre, metrics
-
-    if args.output:
-        check_output_path(args.output, force=args.force, inputs=args.logs)
-    _positive_lpp(args.lpp)
-    if args.reference_offset is not None and not math.isfinite(args.reference_offset):
-        raise ValueError(f"--reference-offset {args.reference_offset}: give the logged point's distance forward "
-                         "of midship in metres (a finite number)")
-    out = []
-    rud, chk = parse_zigzag(args.zigzag) if args.zigzag else (None, None)
-    logs = read_logs(args.logs, args)
-    for f, log in zip(args.logs, logs):  # the logged point lies on the ship (bow sensors reach past the FP)
-        L = args.lpp or getattr(getattr(log, "ship", None), "lpp", None)
-        off = args.reference_offset
-        if off is not None and abs(off) > (0.6 * L if L else 500.0):
-            lim = f"within +/-0.6 Lpp = +/-{0.6 * L:.3g} m of midship" if L else "within 500 m of midship"
-            raise ValueError(f"--reference-offset {off:.3g}: {Path(f).name}: the logged point must lie on the ship "
-                             f"({lim}); give its distance forward of midship in metres")
-    for f, log in zip(args.logs, logs):
-        try:
-            m = metrics(log, lpp=args.lpp, kind=args.kind, reference_offset=args.reference_offset, name=Path(f).name,
-                        rudder_deg=rud, check_deg=chk)
-        except NotStandardManoeuvre as exc:  # a run, not a bad input: its steady turn if it turns, else the reason
-            out.append(_not_standard(f, log, args.lpp, exc))
-            continue
-        out.append({"file": str(f), **m.to_dict()})
-    _write_or_print(dumps_json(out), args.output, args.force)
-    if args.output:
-        for d in out:
-            print(_summary(d["file"], d))
-    bad = [Path(d["file"]).name for d in out
-           if d["manoeuvre"] is None or (d["manoeuvre"] == "steady turn" and not d["success"])]
-    if bad:
-        print(f"shipid metrics: warning: no standard-manoeuvre metrics or steady turn for {', '.join(bad)} (see "
-              "their notes; judge such runs by shipid validate --horizon)", file=sys.stderr)
-        return 1
-    return 0
-
-
-def _not_standard(f, log, lpp, exc) -> dict:
-    """The entry of a run that is not a standard manoeuvre: the steady turn of its rudder hold when the hold turns
-    at least STEADY_REPORT_DEG (manoeuvre "steady turn"), else no metrics (manoeuvre None); the reason in "note"."""
-    from ..manoeuvres.run_metrics import reported_steady_turn
-
-    print(f"note: {exc}", file=sys.stderr)
-    st = reported_steady_turn(log, lpp=lpp, name=Path(f).name)
-    if st is None:
-        return {"file": str(f), "manoeuvre": None, "note": str(exc)}
-    return {"file": str(f), "manoeuvre": "steady turn", **st.to_dict(), "note": str(exc)}
-
-
 def _summary(label, d) -> str:
     if d["manoeuvre"] is None:
         return f"{label}: no standard manoeuvre"
@@ -216,7 +127,7 @@ def _check_common(args) -> None:
 
 def _simulate(args) -> int:
     from ..manoeuvres import turning_circle, zigzag
-    from .uncertainty import check_draws, simulate_draws
+    from ._draws import check_draws, simulate_draws
 
     _check_common(args)
     if check_draws(args):
@@ -254,34 +165,3 @@ def _simulate(args) -> int:
     return 0
 
 
-#: Units of the ``sweep`` CSV columns (``_L``: lengths divided by Lpp; speed loss: 1 - U_steady / U_approach).
-SWEEP_UNITS = {"rudder_deg": "deg", "speed": "m/s", "n": "rps", "advance_L": "Lpp", "transfer_L": "Lpp",
-               "tactical_diameter_L": "Lpp", "steady_diameter_L": "Lpp", "tactical_diameter": "m",
-               "steady_diameter": "m", "speed_loss": "-"}
-
-
-def _sweep(args) -> int:
-    from ..manoeuvres import ship_info, turning_sweep
-
-    _check_common(args)
-    model = load_model(args.model, args.lpp)
-    rud = _floats(args.rudder, "--rudder")
-    if args.speed is None:
-        u0 = ship_info(model).get("design_speed")
-        if u0 is None:
-            raise ValueError(f"model '{model.name}' has no design speed; pass --speed")
-        speeds = [u0]
-    else:
-        speeds = _floats(args.speed, "--speed")
-    if any(r <= 0 for r in rud) or any(s <= 0 for s in speeds):
-        raise ValueError("--rudder and --speed values must be positive (use --side for port)")
-    rate = math.radians(args.rudder_rate) if args.rudder_rate is not None else None
-    df = turning_sweep(model, rud, speeds, side=args.side, rudder_rate=rate, lpp=args.lpp,
-                       method=args.integrator, rtol=_rtol(args))
-    from ._common import units_header
-
-    table = units_header(df, units=SWEEP_UNITS)
-    _write_or_print(table.to_csv(index=False, float_format="%.10g"), args.output, args.force)
-    if args.output:
-        print(df[["rudder_deg", "speed", "n", "tactical_diameter_L", "steady_diameter_L"]].to_string(index=False))
-    return 0 if bool(df["success"].all()) else 1
