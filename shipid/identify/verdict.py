@@ -54,9 +54,15 @@ commands (campaigns, cross-validation folds) import it so that every command gra
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from ..logs.consistency import check_consistency
+from ..manoeuvres import steady_rps
+from ..models.base import STERN_RUDDER_SIGNS
+from ..simulate import replay
 
 __all__ = ["CONSISTENCY_RULES", "Verdict", "GRADES", "EXIT_STATUS", "exit_status", "verdict_of", "assess", "physics_findings",
            "RANGE_FACTOR", "warning_line", "clip", "time_constant_at", "verdict_from_identifier", "verdict_from_recipe", "plain_message"]
@@ -257,8 +263,6 @@ def time_constant_at(model, speed: float) -> float:
     """The fastest time constant [s] of ``model``'s surge, sway and yaw (its Jacobian's largest decay rate) in
     straight running at ``speed`` [m/s], with the propeller rate that holds that speed.  ValueError when it has
     no decaying mode."""
-    from ..manoeuvres import steady_rps
-
     n = float(steady_rps(model, speed)[0]) if "n" in model.input_names else 0.0
     x = np.zeros(model.nx)
     x[model.state_index("u")] = speed
@@ -350,8 +354,6 @@ def physics_findings(model, coef: dict, coef_std: dict, prior_std: dict, speed: 
                                        f"{option_r}"})
     # a stern rudder's sway term with the wrong sign while its yaw term has the right one: the rudder's sign is
     # fine (it would flip both), the sway velocity's is not
-    from ..models.base import STERN_RUDDER_SIGNS
-
     sway = [n for n in signs if signs[n] is STERN_RUDDER_SIGNS["sway"]]
     yaw = [n for n in signs if signs[n] is STERN_RUDDER_SIGNS["yaw"]]
     wrong = {f["coefficient"] for f in out if f["kind"] == "physics_sign"}
@@ -435,8 +437,6 @@ def _consistency_findings(cons: dict, rules: dict) -> list[dict]:
 def log_findings(logs) -> list[dict]:
     """Channel-consistency errors of the logs (:func:`shipid.logs.check_consistency`, the result the reader
     kept, else run here) as verdict findings, one per check kind."""
-    from ..logs.consistency import check_consistency
-
     out = []
     for lg in logs or []:
         res = getattr(lg, "consistency", None)
@@ -464,10 +464,6 @@ def replay_numbers(model, logs, lpp=None, meas_std=None) -> tuple[dict, dict, li
     """Replay ``model`` on every log (its recorded inputs, from its first samples) and return
     ``(channels, track, runs)`` of :class:`Verdict`: RMSE per channel in user units, the fraction of the
     logged variance left unexplained, the track RMSE in m and ship lengths, the runs worst first."""
-    import warnings
-
-    from ..simulate import replay
-
     sq: dict = {}
     var: dict = {}
     cnt: dict = {}
