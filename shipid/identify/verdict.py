@@ -360,9 +360,11 @@ def physics_findings(model, coef: dict, coef_std: dict, prior_std: dict, speed: 
     if yaw and not wrong & set(yaw) and yaw[0] in coef:
         for f in out:
             if f["coefficient"] in sway and f["kind"] == "physics_sign":
-                f.update(channels=["v"], option="--sign v=-1",
-                         message=f["message"].split(": ")[0] + f" while {yaw[0]} has the rudder's sign: v logged "
-                                 "positive to port? pass --sign v=-1")
+                # the sway equation's fit alone is wrong: model-form error does that (a response model fitted to
+                # logs of another model form), so it is a defect only with a velocity-frame doubt about v's sign
+                f.update(kind="sway_sign", grade="model_error", channels=["v"], option="--sign v=-1",
+                         message=f["message"].split(": ")[0] + f" while {yaw[0]} has the rudder's sign: the sway "
+                                 "equation misses the logs, or v is logged positive to port (--sign v=-1)")
     return sorted(out, key=lambda f: f["coefficient"])
 
 
@@ -446,6 +448,9 @@ def log_findings(logs) -> list[dict]:
             except Exception:  # noqa: BLE001 -- a check that cannot run on this log has no finding
                 continue
         for f in res.findings:
+            if f.level == "warning" and f.check == "velocity_frame":   # supporting evidence only (a note)
+                out.append({"kind": "log_velocity_frame_doubt", "grade": "note", "channels": list(f.channels),
+                            "option": "", "message": f.message})
             if f.level != "error":
                 continue
             out.append({"kind": f"log_{f.check}", "grade": "defect", "channels": list(f.channels),
@@ -553,7 +558,7 @@ def assess(*, consistency: dict | None, diverged: bool = False, message: str = "
     r = dict(CONSISTENCY_RULES)
     r.update(rules or {})
     channels, track, runs = dict(channels or {}), dict(track or {}), list(runs or [])
-    findings = [dict(f, grade="defect") for f in (logs_found or [])]
+    findings = [dict(f, grade=f.get("grade", "defect")) for f in (logs_found or [])]
     step, tau = (sampling or {}).get("log_step"), (sampling or {}).get("time_constant")
     if step and tau and step > 0.5 * tau:
         findings.append({"kind": "sampling", "grade": "defect", "channels": [], "option": "",
@@ -567,6 +572,10 @@ def assess(*, consistency: dict | None, diverged: bool = False, message: str = "
             return Verdict("defect", _group(findings) + [text], findings + [div], channels, track, runs)
         return Verdict("diverged", [text], [div], channels, track, runs)
     findings += [dict(f, grade=f.get("grade", "defect")) for f in (physics or [])]
+    if any(f["kind"] == "log_velocity_frame_doubt" for f in findings):
+        for f in findings:   # the sway term's sign and a doubt about u, v from the channels: v's sign
+            if f["kind"] == "sway_sign":
+                f["grade"] = "defect"
     if damping and damping.get("physical") is False:
         what = [s for s in ("v", "r") if (damping.get(s) or {}).get("fraction_positive") not in (None, 0.0)
                 and damping[s]["fraction_positive"] > 0.01]
