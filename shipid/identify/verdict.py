@@ -27,7 +27,9 @@ Every fit result carries a :class:`Verdict` with one of four grades:
       rudder, rudder lift and thrust positive), or whose non-dimensional value lies outside
       ``Model.physics_ranges`` (the span of the published ship sets widened by :data:`RANGE_FACTOR`, chosen so
       that a degree/radian confusion, a factor 57.3, always leaves it): a linear-in-the-input term absorbs a
-      sign or scale error of its input exactly, with white innovations, so only physics can see it;
+      sign or scale error of its input exactly, with white innovations, so only physics can see it.  (The
+      rudder's sway term alone with the other sign, its yaw term right, is model error: a response model
+      fitted to logs of the MMG model gets it; a defect only when the channel checks doubt u, v);
     * a log step longer than half the start model's fastest time constant at the logs' speed (fewer than two
       samples per time constant: the sampling theorem's limit for the fastest motion the model has; a log
       decimated or time in the wrong unit);
