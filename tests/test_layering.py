@@ -27,7 +27,7 @@ FLOORS = [
     ("synthetic logs", ("synthetic",)),
     ("results", ("identify.result",)),
     ("identification", ("identify",)),
-    ("validation", ("validation", "validation_horizon")),
+    ("validation", ("validation",)),
     ("uncertainty", ("uncertainty",)),
     ("report", ("report",)),
     ("applications", ("control", "routing", "glider")),

@@ -1,4 +1,4 @@
-# Why one file: the sampler, its chain diagnostics, the early stop and the samples' result share one chain layout and its checks.
+# Why one file: the likelihood, the sampler's moves, its convergence checks and the samples' result are one MCMC method.
 """Posterior sampling of model coefficients by MCMC over the output-error likelihood.
 
 The EKF's Gaussian (Laplace) posterior is an approximation; for non-linear,
@@ -380,7 +380,7 @@ def load_samples(obj) -> PosteriorSamples:
         p = Path(obj)
         if not p.exists():
             raise FileNotFoundError(f"{p}: no such samples file; write it with `shipid sample`")
-        doc = read_json(p, "JSON samples", advice="pass the file written by `shipid sample -o`")
+        doc = read_json(p, "JSON samples file", advice="pass the file written by `shipid sample -o`")
         if not isinstance(doc, dict):
             raise ValueError(f"{p}: not a shipid samples file (top level is not an object)")
         return PosteriorSamples.from_dict(doc, source=str(p))
