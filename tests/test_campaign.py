@@ -220,7 +220,7 @@ def test_force_removes_a_failed_members_old_result(tmp_path, capsys):
 
 
 def test_members_carry_the_fits_verdict(tmp_path, capsys):
-    """A fit that `shipid fit` would reject (exit 3: here a log whose v has the wrong sign) is flagged, not ok;
+    """A fit that `shipid fit` grades a defect (exit 3: here a log whose v has the wrong sign) is flagged, not ok;
     the summary counts ok / flagged / failed and the exit status is 3."""
     import pandas as pd
 
@@ -235,7 +235,7 @@ def test_members_carry_the_fits_verdict(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["campaign", str(p), "-o", str(out), "--workers", "1"]) == 3
     text = capsys.readouterr().out
-    assert "good: ok" in text and "vflip: flagged: " in text
+    assert "good: ok" in text and "vflip: flagged: " in text and "--sign v=-1" in text
     assert "2 members: 1 ok, 1 flagged, 0 failed" in text
     s = json.loads((out / "campaign.json").read_text())
     st = {m["name"]: m for m in s["members"]}

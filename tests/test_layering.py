@@ -25,7 +25,7 @@ FLOORS = [
     ("environment", ("environment",)),
     ("manoeuvres", ("manoeuvres",)),
     ("synthetic logs", ("synthetic",)),
-    ("results", ("identify.result",)),
+    ("results", ("identify.result", "identify.verdict")),
     ("identification", ("identify",)),
     ("validation", ("validation",)),
     ("uncertainty", ("uncertainty",)),

@@ -88,7 +88,7 @@ def test_cli_fit_of_wind_current_model_is_the_study_setting(tmp_path, capsys):
                "-o", str(out)])
     text = capsys.readouterr().out
     assert rc in (0, 3), text  # 3: not consistent with the noise model (the study's fits are not either)
-    assert "recipe: sampling: 20 -- every 20. sample (2 s)" in text and "2 RK4 substeps" in text
+    assert "recipe: sampling: 20 -- every 20th sample (2 s)" in text and "2 RK4 substeps" in text
     assert "schema meas_std" in text and "refinement: none" in text
     res = json.loads(out.read_text())
     # the study's fit of the same runs

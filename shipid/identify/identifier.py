@@ -16,7 +16,7 @@ from ..models.base import Model
 from ..results import ResultMixin, coefficient_table, plot_coefficients, verdict_grade
 from ..simulate import simulate
 from .data import LogArrays, frozen_mask, noise_std_from_data, prepare_logs, resolution_std
-from .diagnostics import coefficient_plausibility, consistency, identifiability
+from .diagnostics import consistency, identifiability
 from .ekf import INPUT_HOLDS, EKFOutput, EKFProblem, bf_smooth, gain_covariance, rts_smooth, run_ekf
 from .initial import equation_error_fit
 from .result import FitResult
@@ -271,6 +271,9 @@ class EKFIdentifier(ResultMixin):
         """
         self._check_settings()
         model = self.model
+        # the trial logs themselves (not frames): the verdict reads their channel-consistency findings
+        self._trial_logs = [lg for lg in (logs if isinstance(logs, (list, tuple)) else [logs])
+                            if hasattr(lg, "channels") and hasattr(lg, "data")]
         arrays, meas = prepare_logs(model, logs)
         p_base, est_idx, est_names = self._parameters()
         nx = model.nx
@@ -654,6 +657,7 @@ class EKFIdentifier(ResultMixin):
         # per-log smoothed states and innovations: tables built when first read (states_, innovations_)
         self._tables = (zs[0, :, :nx], var_x[0], out.innov[0], out.S_diag[0])
         self.__dict__.pop("_tables_built", None)
+        self.__dict__.pop("_verdict_cache", None)
         notes = []
         hook = getattr(model, "identifiability_notes", None)
         if hook is not None:
@@ -701,12 +705,9 @@ class EKFIdentifier(ResultMixin):
                     sq += np.where(ok, np.where(np.isfinite(e), e, np.inf) ** 2, 0.0).sum(axis=0)
                     cnt += ok.sum(axis=0)
             ratio = {m: float(np.sqrt(sq[j] / cnt[j]) / sig[j]) if cnt[j] else float("nan") for j, m in enumerate(meas)}
-        est = s["est_idx"]
-        coef_reasons = coefficient_plausibility(s["est_names"], self.coef_.to_numpy()[est],
-                                                self.coef_std_.to_numpy()[est], s["p_base"][est],
-                                                self.prior_std_.to_numpy())
+        # (the coefficients' physics is judged by the verdict, from the model's declared signs and ranges)
         res = consistency(meas, out.innov[0], out.S_diag[0], out.gated[0], pieces, replay_ratio=ratio,
-                          dynamic=dynamic, extra_reasons=coef_reasons)
+                          dynamic=dynamic)
         res["dynamic_channels"] = dynamic
         res["gaps"] = list(self.gap_notes_)
         if not self.success_:
@@ -773,6 +774,17 @@ class EKFIdentifier(ResultMixin):
     def message(self) -> str:
         """``message_`` of a fitted identifier."""
         return getattr(self, "message_", "not fitted yet: call fit(logs) first")
+
+    @property
+    def verdict_(self):
+        """The fit's graded verdict (:func:`shipid.identify.verdict.verdict_from_identifier`; computed once)."""
+        self._check_fitted()
+        v = self.__dict__.get("_verdict_cache")
+        if v is None:
+            from .verdict import verdict_from_identifier
+
+            v = self._verdict_cache = verdict_from_identifier(self)
+        return v
 
     def summary(self) -> pd.DataFrame:
         """Coefficient table: value, std, relative std, 95 % interval, prior std (``attrs["verdict"]``: the

@@ -142,7 +142,8 @@ def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: in
         if log is not None:
             log(f"recipe: {name}: {value} -- {reason}")
 
-    out = type(fit)(ekf=fit.ekf, steps=steps, logs=fit.logs, free_in_refine=list(fit.free_in_refine), lpp=fit.lpp)
+    out = type(fit)(ekf=fit.ekf, steps=steps, logs=fit.logs, free_in_refine=list(fit.free_in_refine), lpp=fit.lpp,
+                    source_logs=list(fit.source_logs), sampling=dict(fit.sampling))
     ekf, used, L = fit.ekf, fit.logs, fit.lpp
     if not ekf.success_:
         step("refinement", "skipped", f"the EKF stage failed ({ekf.message_}): no refinement from a diverged filter")

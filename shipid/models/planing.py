@@ -138,7 +138,7 @@ def slender_body_derivatives(hull: PlaningHull, speed: float = 9.0, gm: float = 
 
 
 class PlaningBoatModel(Model):
-    """Seed-000 planing boat (4 DOF) with Savitsky resistance.
+    """Planing boat (4 DOF) with Savitsky resistance, time-optimal manoeuvring study.
 
     Parameters
     ----------

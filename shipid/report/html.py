@@ -17,6 +17,7 @@ from pathlib import Path
 
 from .._io import OutputExistsError, atomic_write_text
 from ..identify.result import software_versions
+from ..identify.verdict import plain_message, verdict_of
 from ..validation import LogValidation, load_logs, resolve_model, validate_one
 from . import figures
 from ._markup import _e, _f, _fig, _img, _table  # noqa: F401  (_img: the helpers as one set)
@@ -65,6 +66,21 @@ def _versions_now() -> dict:
 
 
 # ----------------------------------------------------------------------------- sections
+#: Banner colours per grade (background, border).
+_BANNER = {"consistent": ("#eaf6ea", "#3a8a3a"), "model_error": ("#fdf6e3", "#b58900"),
+           "defect": ("#fbeaea", "#b03030"), "diverged": ("#fbeaea", "#b03030")}
+
+
+def verdict_banner(result) -> str:
+    """The report's opening banner: the fit's grade, each reason as a sentence, and what to do."""
+    v = verdict_of(result)
+    bg, border = _BANNER[v.grade]
+    items = "".join(f"<li>{_e(r)}</li>" for r in v.reasons)
+    return (f"<div class=\"verdict\" id=\"verdict\" style=\"background:{bg};border-left:6px solid {border};"
+            f"padding:6px 12px;margin:8px 0\"><p><b>Verdict: {_e(v.grade.replace('_', ' '))}.</b> {_e(v.advice)}</p>"
+            + (f"<ul>{items}</ul>" if items else "") + "</div>")
+
+
 _ROLE = re.compile(r":[a-z]+:`~?([^`]+)`")
 
 
@@ -103,8 +119,9 @@ def _section_model(result, model) -> str:
     s = result.settings or {}
     rows = [("registered model", _e(result.model)), ("description", _e(doc)),
             ("states", _e(", ".join(model.state_names))), ("inputs", _e(", ".join(model.input_names))),
-            ("method", _e(result.method)), ("fit status", _e(("success" if result.success else "FAILED") +
-                                                              (f": {result.message}" if result.message else ""))),
+            ("method", _e(result.method)), ("verdict", _e(verdict_of(result).grade.replace("_", " "))),
+            ("optimiser", _e(("converged" if result.success else "did not converge") +
+                             (f": {plain_message(result.message)}" if result.message else ""))),
             ("log-likelihood", _f(result.loglik, "{:.6g}")), ("created (UTC)", _e(result.created))]
     for key, label in (("n_passes", "EKF passes"), ("discretisation", "discretisation"), ("substeps", "RK4 substeps"),
                        ("param_walk", "parameter random walk")):
@@ -463,16 +480,6 @@ def default_title(result, model, validations) -> str:
     return f"{ship} — {model_label(result, model)} model on {_data_set(validations)}"
 
 
-def _section_verdict(result) -> str:
-    """The fit's graded verdict (``result.verdict``: grade, reasons) right under the title, when it has one."""
-    verdict = getattr(result, "verdict", None)
-    if verdict is None or not getattr(verdict, "grade", None):
-        return ""
-    reasons = "".join(f"<li>{_e(r)}</li>" for r in (getattr(verdict, "reasons", None) or []))
-    return (f"<div class=\"warn\"><b>Verdict: {_e(verdict.grade.replace('_', ' '))}</b>"
-            + (f"<ul>{reasons}</ul>" if reasons else "") + "</div>")
-
-
 def _median(xs):
     xs = sorted(x for x in xs if x is not None and math.isfinite(x))
     if not xs:
@@ -579,7 +586,7 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
         ("identifiability", "Identifiability"), ("model", "Model"), ("logs", "Logs"), ("inputs", "Inputs"),
         ("versions", "Software")))
     body = [f"<h1>{_e(title)}</h1>",
-            _section_verdict(res),
+            verdict_banner(res),
             f"<p class=\"intro\">{_e(plain_summary(res, model, validations, horizons))}</p>",
             f"<p class=\"note\">Model <b>{_e(model_label(res, model))}</b> ({_e(res.method)}; "
             f"{'fitted to ' + str(len(res.inputs)) + ' log(s)' if res.inputs else 'no fitted logs recorded'}), "
