@@ -105,6 +105,10 @@ def _result(root, name="r.json"):
     """A fit result of the bundled zigzag (made once per corpus run)."""
     if "r" not in _RESULT_CACHE:
         d = Path(tempfile.mkdtemp(prefix="corpus-result-"))
+        import atexit
+        import shutil
+
+        atexit.register(shutil.rmtree, d, True)
         subprocess.run([sys.executable, "-m", "shipid", "fit", str(LOG), "-o", str(d / "r.json")], cwd=REPO,
                        capture_output=True, timeout=300)
         _RESULT_CACHE["r"] = (d / "r.json").read_bytes()
