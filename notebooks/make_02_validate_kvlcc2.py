@@ -95,7 +95,7 @@ rudder neutral angle `delta0`; `response-nl` holds its propeller terms `b0 n², 
         for name, fit in fits.items():
             z = zigzag(fit.to_model(), rudder_deg=20.0, speed=float(lg["u"][0]), first=first)
             df = z.member(0)
-            t0 = z.metrics[0].to_dict().get("execute_time_s", 0.0) or 0.0
+            t0 = z.metrics[0].execute_time  # the simulated first execute [s]: both curves from their execute
             ax.plot(df.index - t0, np.rad2deg(df["psi"]), label=f"{name} (closed loop)")
         ax.set_title(k); ax.set_xlabel("time from first execute [s]"); ax.set_ylabel("heading change [deg]")
     axs[0].legend()"""),

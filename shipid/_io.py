@@ -28,6 +28,7 @@ import json
 import math
 import os
 import signal
+import stat
 import tempfile
 from pathlib import Path
 
@@ -37,7 +38,8 @@ __all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_write_set", "sha25
            "dumps_json", "to_jsonable", "read_json", "loads_yaml", "short", "check_keys", "as_number", "as_int",
            "as_mapping", "as_string", "as_bool", "check_output_path", "install_signal_cleanup", "MAX_DEPTH",
            "check_memory", "memory_limit_bytes", "loads_json", "restore_signal_handlers",
-           "MAX_FILE_BYTES"]
+           "MAX_FILE_BYTES", "read_structured", "MAX_YAML_BYTES", "MAX_ALIASES",
+           "MAX_EXPANDED_NODES", "check_output_target"]
 
 #: Deepest nesting accepted in a JSON/YAML file the program reads.
 MAX_DEPTH = 64
@@ -61,6 +63,25 @@ def _exists_message(path: Path) -> str:
     return f"{path}: output exists; choose another name or pass --force (force=True) to overwrite it"
 
 
+_KINDS = {stat.S_IFIFO: "a FIFO (named pipe)", stat.S_IFCHR: "a character device", stat.S_IFBLK: "a block device",
+          stat.S_IFSOCK: "a socket", stat.S_IFDIR: "a folder"}
+
+
+def check_output_target(path, what: str = "output") -> None:
+    """ValueError when ``path`` exists and is not a regular file or a symbolic link (its own entry is what
+    ``--force`` replaces): a folder, FIFO, device or socket is never replaced by an output, even with
+    ``--force`` (``-o /dev/null --force`` run as root would otherwise replace the system's /dev/null)."""
+    try:
+        mode = os.lstat(path).st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        return
+    if stat.S_ISREG(mode) or stat.S_ISLNK(mode):
+        return
+    kind = _KINDS.get(stat.S_IFMT(mode), "not a regular file")
+    raise ValueError(f"{path}: is {kind}; the {what} is written as a regular file only (never over a device, "
+                     "pipe, socket or folder, even with --force); give a file name")
+
+
 def check_output_path(path, *, force: bool = False, inputs=(), what: str = "output") -> Path:
     """Check an output name *before* a long computation.
 
@@ -73,11 +94,12 @@ def check_output_path(path, *, force: bool = False, inputs=(), what: str = "outp
     p = Path(path)
     if p.is_dir():
         raise ValueError(f"{p}: is a folder; give a file name for the {what}")
+    check_output_target(p, what)
     rp = p.resolve()
     for q in inputs:
         if q is not None and Path(q).exists() and Path(q).resolve() == rp:
             raise ValueError(f"{p}: the {what} would replace the input file {q}; choose another name")
-    if p.exists() and not force:
+    if (p.exists() or p.is_symlink()) and not force:
         raise OutputExistsError(_exists_message(p))
     folder = p.parent
     if not folder.exists():
@@ -119,6 +141,7 @@ def _drop(tmp: str) -> None:
 def _publish(tmp: str, path: Path, force: bool) -> None:
     """Move ``tmp`` to ``path``: rename with ``force``, else create ``path`` exclusively (hard link)."""
     if force:
+        check_output_target(path)  # again just before the rename: the name may have changed since the check
         os.replace(tmp, path)
         _LIVE_TMP.discard(tmp)
         return
@@ -147,6 +170,7 @@ def atomic_write_set(items, *, force: bool = False) -> list[Path]:
     for p, _ in items:
         if str(p).strip() in ("", "."):
             raise ValueError("output: empty file name; give a file name, e.g. -o result.json")
+        check_output_target(p)
         if p.exists() and not force:
             raise OutputExistsError(_exists_message(p))
         if not p.parent.exists():
@@ -268,6 +292,9 @@ def _depth_ok(doc, max_depth: int) -> bool:
 
 def _read_text(path: Path, what: str) -> str:
     if not path.exists():
+        if path.is_symlink():
+            raise FileNotFoundError(f"{path}: a symbolic link to a missing file or a loop of links "
+                                    f"({short(os.readlink(path), 60)}); give the {what} file itself")
         raise FileNotFoundError(f"{path}: no such {what} file; check the path")
     if path.is_dir():
         raise ValueError(f"{path}: is a folder, not a {what} file")
@@ -278,7 +305,11 @@ def _read_text(path: Path, what: str) -> str:
         raise ValueError(f"{path}: {size / 2**20:.0f} MiB is too large for a {what} file "
                          f"(limit {MAX_FILE_BYTES // 2**20} MiB)")
     try:
-        return path.read_text(encoding="utf-8")
+        with open(path, "rb") as fh:  # at most the limit, even if the file grows after the check
+            data = fh.read(MAX_FILE_BYTES + 1)
+        if len(data) > MAX_FILE_BYTES:
+            raise ValueError(f"{path}: more than {MAX_FILE_BYTES // 2**20} MiB; too large for a {what} file")
+        return data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise ValueError(f"{path}: not UTF-8 text (byte {exc.start}); give a {what} file") from None
 
@@ -309,31 +340,123 @@ def read_json(path, what: str = "JSON file", *, advice: str | None = None):
     return loads_json(_read_text(path, what), str(path), what, advice=advice)
 
 
-def loads_yaml(text: str, where: str, what: str = "YAML"):
-    """``yaml.safe_load`` after a token scan that refuses nesting deeper than :data:`MAX_DEPTH`."""
+#: Largest YAML file accepted (bytes): YAML is parsed by Python code (PyYAML), a few MB/s, and the files the
+#: program reads as YAML (schema, ship, campaign) are a few kB.
+MAX_YAML_BYTES = 4 * 1024 * 1024
+#: Most aliases (``*name``) a YAML file may use; anchors and aliases are for a few shared ``defaults``.
+MAX_ALIASES = 256
+#: Most nodes a YAML document may stand for with every alias expanded (computed without expanding them).
+MAX_EXPANDED_NODES = 1_000_000
+
+
+def _yaml_loader():
     import yaml  # type: ignore
 
-    depth = 0
+    return getattr(yaml, "CSafeLoader", None) or yaml.SafeLoader
+
+
+def _yaml_bounds(text: str, where: str, what: str) -> None:
+    """Refuse a YAML text whose aliases, nesting or expanded size exceed the limits, from its parse events.
+
+    PyYAML warns that aliases let a small document stand for an exponentially large one ("billion laughs"):
+    nine lines of nine aliases each stand for 9**9 nodes.  The events are read once, in order, and each
+    anchored node's nesting height and expanded size are recorded when it closes, so an alias costs one
+    look-up: the check is linear in the text and never builds the expanded document.
+    """
+    import yaml  # type: ignore
+
+    stack: list[list] = []  # open collections: [anchor, size, height of the children]
+    size: dict = {}
+    height: dict = {}
+    aliases = 0
+    depth_msg = f"{where}: nested more than {MAX_DEPTH} levels deep (aliases counted expanded); not a {what} file"
+
+    def close(anchor, n, h):
+        if anchor is not None:
+            size[anchor], height[anchor] = n, h
+        if stack:
+            stack[-1][1] += n
+            stack[-1][2] = max(stack[-1][2], h)
+            if len(stack) + h > MAX_DEPTH:
+                raise ValueError(depth_msg)
+        elif n > MAX_EXPANDED_NODES:
+            raise ValueError(f"{where}: its aliases expand to {n:.3g} nodes (limit {MAX_EXPANDED_NODES:.0e}); "
+                             f"write the {what} without aliases")
+
+    for ev in yaml.parse(text, Loader=_yaml_loader()):
+        kind = type(ev).__name__
+        if kind in ("SequenceStartEvent", "MappingStartEvent"):
+            stack.append([ev.anchor, 1, 0])
+            if len(stack) > MAX_DEPTH:
+                raise ValueError(depth_msg)
+        elif kind in ("SequenceEndEvent", "MappingEndEvent"):
+            anchor, n, h = stack.pop()
+            close(anchor, n, h + 1)
+        elif kind == "ScalarEvent":
+            close(ev.anchor, 1, 0)
+        elif kind == "AliasEvent":
+            aliases += 1
+            if aliases > MAX_ALIASES:
+                raise ValueError(f"{where}: more than {MAX_ALIASES} YAML aliases (*name); write the {what} "
+                                 "with fewer aliases (or as JSON)")
+            if ev.anchor not in size:  # an alias to its own enclosing node (a recursive document)
+                raise ValueError(f"{where}: YAML alias *{str(ev.anchor)[:30]} refers to a node that contains it; "
+                                 f"not a {what} file")
+            close(None, size[ev.anchor], height[ev.anchor])
+        if stack and stack[0][1] > MAX_EXPANDED_NODES:
+            raise ValueError(f"{where}: its aliases expand to more than {MAX_EXPANDED_NODES:.0e} nodes, the limit; "
+                             f"write the {what} without aliases")
+
+
+def loads_yaml(text: str, where: str, what: str = "YAML"):
+    """``yaml.safe_load`` after bounds read from the parse events (:func:`_yaml_bounds`): at most
+    :data:`MAX_ALIASES` aliases, nesting at most :data:`MAX_DEPTH` and at most :data:`MAX_EXPANDED_NODES`
+    nodes with the aliases expanded, each counted without expanding anything; every refusal is one line."""
+    import yaml  # type: ignore
+
+    if len(text) > MAX_YAML_BYTES:
+        raise ValueError(f"{where}: {len(text) / 2**20:.1f} MiB is too large for a YAML {what} file "
+                         f"(limit {MAX_YAML_BYTES // 2**20} MiB)")
     try:
-        for tok in yaml.scan(text, Loader=yaml.SafeLoader):
-            name = type(tok).__name__
-            if name in ("BlockSequenceStartToken", "BlockMappingStartToken", "FlowSequenceStartToken",
-                        "FlowMappingStartToken"):
-                depth += 1
-                if depth > MAX_DEPTH:
-                    raise ValueError(f"{where}: nested more than {MAX_DEPTH} levels deep; not a {what} file")
-            elif name in ("BlockEndToken", "FlowSequenceEndToken", "FlowMappingEndToken"):
-                depth -= 1
-        doc = yaml.safe_load(text)
+        _yaml_bounds(text, where, what)
+        doc = yaml.load(text, Loader=_yaml_loader())  # noqa: S506 - a safe loader
     except yaml.YAMLError as exc:
+        if "nesting depth" in str(getattr(exc, "problem", "")):  # libyaml's own limit (1000) is above ours
+            raise ValueError(f"{where}: nested more than {MAX_DEPTH} levels deep; not a {what} file") from None
         mark = getattr(exc, "problem_mark", None)
         at = f" at line {mark.line + 1} column {mark.column + 1}" if mark is not None else ""
         raise ValueError(f"{where}: not valid YAML ({getattr(exc, 'problem', None) or 'syntax error'}{at})") from None
     except RecursionError:
         raise ValueError(f"{where}: nested too deeply; not a {what} file") from None
-    if not _depth_ok(doc, MAX_DEPTH):  # aliases can nest without tokens
-        raise ValueError(f"{where}: nested more than {MAX_DEPTH} levels deep; not a {what} file")
     return doc
+
+
+def read_structured(path, what: str, *, advice: str | None = None, yaml_ok: bool | None = None):
+    """The one reader of the structured files the program is given (schema, ship, result, campaign, problem,
+    route, samples, wind): a regular UTF-8 file of at most :data:`MAX_FILE_BYTES` (checked before reading),
+    YAML for a ``.yaml``/``.yml`` name (bounded by :func:`loads_yaml`) else JSON (nesting at most
+    :data:`MAX_DEPTH`).  ``yaml_ok=False`` refuses YAML.  Every refusal is one line naming the file."""
+    path = Path(path)
+    is_yaml = path.suffix.lower() in (".yaml", ".yml")
+    if is_yaml and yaml_ok is False:
+        raise ValueError(f"{path}: a {what} is read as JSON; convert the YAML to JSON")
+    if is_yaml:
+        import importlib.util
+
+        if importlib.util.find_spec("yaml") is None:
+            raise ValueError(f"{path}: reading YAML needs PyYAML (pip install pyyaml); or write the {what} as JSON")
+        _check_size(path, what, MAX_YAML_BYTES)
+        return loads_yaml(_read_text(path, what), str(path), what)
+    return loads_json(_read_text(path, what), str(path), what, advice=advice)
+
+
+def _check_size(path: Path, what: str, limit: int) -> None:
+    try:
+        size = path.stat().st_size
+    except OSError:
+        return  # _read_text says what is wrong
+    if path.is_file() and size > limit:
+        raise ValueError(f"{path}: {size / 2**20:.1f} MiB is too large for a {what} (limit {limit / 2**20:g} MiB)")
 
 
 def memory_limit_bytes() -> float:

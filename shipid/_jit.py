@@ -8,14 +8,17 @@ complex-step-safe ones for Jacobians -- and :func:`compiled` hands them to
 numba.  There is no second copy of any equation: every path executes, or
 compiles, the one source.
 
-numba is optional.  Without it (or with the environment variable
-``SHIPID_JIT=0``, or inside :func:`disabled`) :func:`compiled` returns
-``None`` and the models use their numpy/math paths, which give the same
-values (``tests/test_mmg.py`` compares both).
+numba is a dependency on the platforms it publishes wheels for.  Without it
+(a platform without wheels: one notice, :func:`fallback_notice`), with the
+environment variable ``SHIPID_JIT=0``, or inside :func:`disabled`,
+:func:`compiled` returns ``None`` and the models use their numpy/math paths,
+which give the same values (``tests/test_mmg.py`` compares both).
+:func:`path` says which path is active (``shipid --version`` prints it).
 
 Compiled code is cached on disk by numba (``__pycache__`` beside the source,
-or numba's user cache directory), so only the first run compiles (a few
-seconds for a ship model).  numba invalidates a cached function when *its*
+numba's user cache directory, or ``NUMBA_CACHE_DIR``), so only the first run
+compiles (about 20-35 s for a ship model's filter, said once on stderr by
+:func:`compile_notice`; later runs load it in well under a second).  numba invalidates a cached function when *its*
 source file changes, not when a helper in another file does: the tests
 compare the compiled and pure paths, so a stale cache shows there; delete
 the ``*.nbi``/``*.nbc`` files after changing a compiled helper in another file
@@ -28,7 +31,8 @@ import importlib.util
 import os
 import types
 
-__all__ = ["available", "enabled", "disabled", "rebind", "compiled"]
+__all__ = ["available", "enabled", "disabled", "rebind", "compiled", "path", "compile_notice", "fallback_notice",
+           "set_notices"]
 
 _numba = None  # the numba module once imported (lazily: importing it takes ~0.6 s)
 _HAVE_NUMBA = importlib.util.find_spec("numba") is not None
@@ -47,6 +51,73 @@ def available() -> bool:
 def enabled() -> bool:
     """Compiled paths are in use: numba available, ``SHIPID_JIT`` not ``0``, not inside :func:`disabled`."""
     return _HAVE_NUMBA and not _ENV_OFF and not _off[0]
+
+
+def path() -> str:
+    """Which path runs the equations, in words: ``"compiled path: numba 0.68.1"``, ``"numpy path: SHIPID_JIT=0"``
+    or ``"numpy path: numba not installed"`` (what ``shipid --version`` prints)."""
+    if not _HAVE_NUMBA:
+        return "numpy path: numba not installed"
+    if _ENV_OFF:
+        return "numpy path: SHIPID_JIT=0"
+    if _off[0]:
+        return "numpy path: compilation disabled"
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return f"compiled path: numba {version('numba')}"
+    except PackageNotFoundError:  # importable but without metadata (a source checkout)
+        return "compiled path: numba"
+
+
+#: Where notices go (a callable taking one line, or None: silent); :func:`set_notices`.
+_notify = [None]
+_said: set = set()
+
+
+def set_notices(fn) -> None:
+    """Send this module's one-line notices (compiling, fallback) to ``fn`` (e.g. ``print``), or nowhere with
+    ``None`` (the default of the library; the CLI passes a function writing to stderr unless ``--quiet``)."""
+    _notify[0] = fn
+
+
+def _say(key: str, line: str) -> None:
+    if key in _said or _notify[0] is None:
+        return
+    _said.add(key)
+    _notify[0](line)
+
+
+def fallback_notice() -> None:
+    """One line, once per process, when numba is not installed: the numpy path runs (same results, slower)."""
+    if not _HAVE_NUMBA:
+        _say("fallback", "numba is not installed for this Python/platform: running the numpy path (same results, "
+                         "about 3-8x slower); pip install numba to compile")
+
+
+#: Measured compile time of a ship model's filter with an empty cache (2-core machine, numba 0.68):
+#: kcs-response ~20 s, mmg ~30 s (``benchmarks/bench_fit_cold_warm.py`` prints it); the notice rounds up.
+COMPILE_SECONDS = 30
+
+
+def compile_notice(dispatcher, what: str, seconds: float = COMPILE_SECONDS) -> bool:
+    """Say once per ``what`` "compiling WHAT (first run only, about N s)" when ``dispatcher`` (a numba
+    function) is about to compile: not yet compiled in this process and no index of it in numba's disk cache
+    (where numba would load it from instead).  Returns whether it said so.  Reading the cache location uses
+    numba's internals; when they are not as expected nothing is said."""
+    if getattr(dispatcher, "signatures", None):
+        return False
+    try:
+        index = dispatcher._cache._cache_file._index_path
+    except AttributeError:
+        return False
+    if os.path.exists(index):
+        return False
+    key = "compile:" + what
+    if key in _said:
+        return False
+    _say(key, f"compiling {what} (first run only, about {seconds:.0f} s; cached for later runs)")
+    return True
 
 
 @contextlib.contextmanager
@@ -125,7 +196,7 @@ def _import_numba():
     global _numba
     if _numba is None:
         if not _HAVE_NUMBA:
-            raise RuntimeError("numba is not installed: pip install 'shipid[fast]'")
+            raise RuntimeError("numba is not installed: pip install numba")
         import numba
 
         _numba = numba

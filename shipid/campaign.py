@@ -40,6 +40,16 @@ and sweeps (the batched studies of ``shipid sweep`` and the glider launch sweep)
 :func:`run_campaign` writes ``OUTDIR/<name>/result.json`` (and
 ``predictions.json`` when ``draws`` > 0) per fit, ``OUTDIR/<name>/sweep.csv`` per
 sweep and ``OUTDIR/campaign.json`` with every member's status and error.
+
+Every file name a campaign file supplies is treated as hostile (as git and rsync never write outside the
+destination): a member name is a plain file name (letters, digits, ``_ . -``, not starting with ``.`` or
+``-``; not ``campaign.json``, ``campaign.journal`` or a device name), checked before anything runs, and a
+member folder that is a link or resolves outside OUTDIR is refused.  A member's files are written as soon as
+it finishes and a line is appended to ``OUTDIR/campaign.journal``; ``--resume`` keeps the members it lists
+(files unchanged) and runs the others, so a kill at any point loses no finished member.  A member is ``ok``,
+``flagged`` (its fit would make ``shipid fit`` exit 3 or 4: not consistent with its noise model, or diverged;
+a sweep with failed runs) or ``failed`` (it raised, or its worker died :data:`MEMBER_RETRIES` + 1 times); the
+command exits 0, 3 (some flagged, none failed) or 1 (some failed).
 """
 from __future__ import annotations
 
@@ -58,6 +68,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 import pandas as pd
 
+from ._io import short
 from .results import ResultMixin
 
 __all__ = ["Engine", "Outcome", "CampaignResult", "member_seeds", "load_campaign", "run_campaign", "run_fit_member", "run_sweep_member",
@@ -155,9 +166,12 @@ class Engine:
 
     def __init__(self, workers: int | None = None, *, scheduler: str | None = None, progress: bool = True,
                  quiet: bool = True):
-        if workers is not None and int(workers) < 1:
-            raise ValueError(f"workers must be >= 1, got {workers}")
-        self.workers = int(workers) if workers is not None else (os.cpu_count() or 1)
+        cpus = os.cpu_count() or 1
+        if workers is not None and not 1 <= int(workers) <= cpus:
+            shown = f"{int(workers)}" if abs(int(workers)) < 10**9 else f"{float(workers):.3g}"
+            raise ValueError(f"--workers {shown}: give 1 to {cpus} (this machine has {cpus} CPUs; each worker is a "
+                             "process that uses one); or --scheduler ADDRESS for a larger cluster")
+        self.workers = int(workers) if workers is not None else cpus
         self.scheduler = scheduler
         self.progress = progress
         self.quiet = bool(quiet)
@@ -188,10 +202,7 @@ class Engine:
         from distributed import Client, LocalCluster
 
         if self.scheduler is not None:
-            try:
-                self._client = Client(self.scheduler, timeout="10s")
-            except (OSError, TimeoutError) as exc:
-                raise ValueError(f"--scheduler {self.scheduler}: cannot connect ({exc}); check the address") from None
+            self._client = _connect(self.scheduler)
         else:
             # one thread per worker process and one BLAS/OpenMP/numba thread inside it: W workers use W
             # cores, never W x (threads of each library) (Dask's pre-spawn environment sets the BLAS ones
@@ -199,7 +210,8 @@ class Engine:
             import dask
 
             t0 = time.perf_counter()
-            with dask.config.set(QUIET_CONFIG if self.quiet else {}):  # the nannies hand it to their workers
+            with dask.config.set({**(QUIET_CONFIG if self.quiet else {}),
+                                  "distributed.scheduler.allowed-failures": MEMBER_RETRIES}):
                 self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
                                              host="127.0.0.1", dashboard_address=None, silence_logs=logging.ERROR,
                                              env=dict(WORKER_ENV))
@@ -243,8 +255,14 @@ class Engine:
 
     # -- work
     def map(self, func: Callable, items: Sequence, *, desc: str = "members", warm: Callable | None = None,
-            cost: Sequence[float] | None = None) -> list[Outcome]:
+            cost: Sequence[float] | None = None, on_result: Callable | None = None) -> list[Outcome]:
         """``[Outcome(func(item))]`` in the order of ``items``; ``func`` must be importable (top level).
+
+        ``on_result(outcome)`` is called in this process as each member finishes (a campaign writes the
+        member's files then, so that a kill loses no finished member).  A member whose worker process dies
+        is started again on another worker up to :data:`MEMBER_RETRIES` times (an embedded cluster; an
+        existing cluster keeps its own ``allowed-failures``), then reported as that member's failure while
+        the others complete.
 
         ``warm``: see :meth:`warm` (run on every worker before the members).  ``cost``: an estimate of
         each member's run time (any unit); on Dask the members start in order of decreasing cost (longest
@@ -264,6 +282,8 @@ class Engine:
             if self.mode == "serial":
                 for i, it in enumerate(items):
                     out.append(_call(func, it, i))
+                    if on_result is not None:
+                        on_result(out[-1])
                     if bar is not None:
                         bar.update(1)
                 return out
@@ -274,11 +294,17 @@ class Engine:
             rank = np.argsort(-np.asarray(cost, float), kind="stable") if cost is not None else range(len(items))
             rank = [int(i) for i in rank]  # client.map gives its tasks priority in the order submitted
             futs = self._client.map(_call, [func] * len(items), [items[i] for i in rank], rank, pure=False)
+            index = {f.key: i for f, i in zip(futs, rank)}
             out = [None] * len(items)
             ends = {}
             for fut in as_completed(futs):
-                o = fut.result()
+                try:
+                    o = fut.result()
+                except Exception as exc:  # noqa: BLE001 - KilledWorker and other losses: that member's failure
+                    o = Outcome(index[fut.key], False, None, _lost_member_message(exc), None)
                 out[o.index] = o
+                if on_result is not None:
+                    on_result(o)
                 ends[o.worker] = time.perf_counter() - t0
                 if bar is not None:
                     bar.update(1)
@@ -293,6 +319,47 @@ class Engine:
             self.stats["member_cpu"] = [o.cpu_seconds for o in done]
             if bar is not None:
                 bar.close()
+
+
+#: Times a member is started again after its worker process died (Dask's ``allowed-failures``), then it is
+#: reported as failed: a member that kills its worker twice (memory, a crash in compiled code) will again.
+MEMBER_RETRIES = 2
+#: Seconds to wait for an existing scheduler to answer (``--scheduler``).
+SCHEDULER_TIMEOUT = 20.0
+
+
+def _lost_member_message(exc) -> str:
+    name = type(exc).__name__
+    if name == "KilledWorker":
+        return (f"its worker process died {MEMBER_RETRIES + 1} times running it (out of memory, or a crash); "
+                "run it alone with --workers 1 to see why")
+    return f"{name}: {' '.join(str(exc).split())[:200]}"
+
+
+def _connect(address: str):
+    """A Client of the scheduler at ``address``, or a one-line error within :data:`SCHEDULER_TIMEOUT` s
+    (also for a port that accepts the connection but never answers: the attempt runs in a daemon thread)."""
+    import threading
+
+    from distributed import Client
+
+    box: dict = {}
+
+    def attempt():
+        try:
+            box["client"] = Client(address, timeout=f"{SCHEDULER_TIMEOUT:g}s")
+        except BaseException as exc:  # noqa: BLE001 - said below
+            box["error"] = exc
+
+    th = threading.Thread(target=attempt, daemon=True)
+    th.start()
+    th.join(SCHEDULER_TIMEOUT + 5.0)
+    if "client" in box:
+        return box["client"]
+    why = (f"no answer within {SCHEDULER_TIMEOUT:g} s" if th.is_alive()
+           else " ".join(str(box.get("error") or "").split())[:120] or type(box.get("error")).__name__)
+    raise ValueError(f"--scheduler {address}: cannot connect ({why}); check the address and that the scheduler "
+                     "is running")
 
 
 # ----------------------------------------------------------------------------- campaign files
@@ -311,7 +378,24 @@ SWEEP_KEYS: dict[str, dict[str, tuple]] = {
                "cg_m": (list,), "t_max": (int, float), "dt": (int, float)},
 }
 _TOP_KEYS = {"seed": (int,), "defaults": (dict,), "fits": (list,), "sweeps": (list,), "description": (str,)}
-_NAME_RE = re.compile(r"^[A-Za-z0-9_.-]+$")
+#: A member name is a plain file name: letters, digits, '_', '.', '-', not starting with '.' or '-' (so never
+#: '.', '..' or a hidden file), at most 100 characters; matched to the end of the text (no trailing newline).
+_NAME_RE = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,99}")
+#: Files of the campaign itself in OUTDIR (no member may be named so, in any letter case).
+SUMMARY, JOURNAL = "campaign.json", "campaign.journal"
+#: Names Windows reserves for devices (a member folder so named cannot be created or read there).
+_RESERVED = {"con", "prn", "aux", "nul", *(f"com{i}" for i in range(1, 10)), *(f"lpt{i}" for i in range(1, 10))}
+
+
+def check_member_name(name, where: str) -> str:
+    """``name`` if it is a plain file name for a member's folder (see :data:`_NAME_RE`), else a one-line ValueError."""
+    if not isinstance(name, str) or not _NAME_RE.fullmatch(name):
+        raise ValueError(f"{where}: name {short(name, 40)} must be a plain file name: letters, digits, '_', '.', '-', "
+                         "not starting with '.' or '-', at most 100 characters")
+    if name.lower() in (SUMMARY, JOURNAL) or name.split(".")[0].lower() in _RESERVED:
+        raise ValueError(f"{where}: name '{name}' is reserved ({SUMMARY}, {JOURNAL} and device names such as 'nul'); "
+                         "choose another")
+    return name
 
 
 def _type_name(types) -> str:
@@ -322,7 +406,7 @@ def _type_name(types) -> str:
 def _check_type(src, where, key, value, types):
     ok = isinstance(value, types) and not (isinstance(value, bool) and bool not in types)
     if not ok:
-        raise ValueError(f"{src}: {where}'{key}' must be {_type_name(types)}, got {value!r}")
+        raise ValueError(f"{src}: {where}'{key}' must be {_type_name(types)}, got {short(value, 40)}")
 
 
 def load_campaign(path) -> dict:
@@ -333,24 +417,10 @@ def load_campaign(path) -> dict:
     log or result files and bad sweep levels are one-line ValueErrors naming the file, the member
     and the key.
     """
+    from ._io import read_structured
+
     p = Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(f"{p}: no such campaign file")
-    text = p.read_text(encoding="utf-8")
-    if p.suffix.lower() in (".yaml", ".yml"):
-        try:
-            import yaml
-        except ImportError:
-            raise ValueError(f"{p}: YAML campaign files need PyYAML (pip install 'shipid[yaml]'); or write JSON") from None
-        try:
-            doc = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            raise ValueError(f"{p}: not valid YAML ({' '.join(str(exc).split())})") from None
-    else:
-        try:
-            doc = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"{p}: not valid JSON ({exc})") from None
+    doc = read_structured(p, "campaign", advice="see the campaign format in the shipid.campaign module docstring")
     if not isinstance(doc, dict):
         raise ValueError(f"{p}: the campaign must be a mapping with a 'fits' and/or a 'sweeps' list")
     for k, v in doc.items():
@@ -368,7 +438,7 @@ def load_campaign(path) -> dict:
     for i, f in enumerate(doc.get("fits") or []):
         if not isinstance(f, dict):
             raise ValueError(f"{p}: fits[{i}] must be a mapping (name, logs, ...), got {f!r}")
-        label = f"fits[{i}]" + (f" ('{f['name']}')" if isinstance(f.get("name"), str) else "")
+        label = f"fits[{i}]" + (f" ({short(f['name'], 40)})" if isinstance(f.get("name"), str) else "")
         for k, v in f.items():
             if k not in FIT_KEYS:
                 raise ValueError(f"{p}: {label}: unknown key '{k}'; allowed: {', '.join(FIT_KEYS)}")
@@ -377,9 +447,11 @@ def load_campaign(path) -> dict:
         for req in ("name", "logs"):
             if req not in spec:
                 raise ValueError(f"{p}: {label}: '{req}' is required")
-        if not _NAME_RE.match(spec["name"]) or spec["name"] in names:
-            raise ValueError(f"{p}: {label}: name '{spec['name']}' must be unique and use only letters, digits, '_', '.', '-'")
-        names.add(spec["name"])
+        check_member_name(spec["name"], f"{p}: {label}")
+        if spec["name"].lower() in names:
+            raise ValueError(f"{p}: {label}: name '{spec['name']}' is used twice (names are compared ignoring case); "
+                             "give every member its own name")
+        names.add(spec["name"].lower())
         logs = []
         for j, lg in enumerate(spec["logs"]):
             if not isinstance(lg, str):
@@ -396,6 +468,13 @@ def load_campaign(path) -> dict:
         for k in ("passes", "draws"):
             if k in spec and spec[k] < (1 if k == "passes" else 0):
                 raise ValueError(f"{p}: {label}: '{k}' must be >= {1 if k == 'passes' else 0}, got {spec[k]}")
+        if spec.get("draws"):
+            from .uncertainty.draws import check_draws_memory
+
+            try:
+                check_draws_memory(int(spec["draws"]))
+            except ValueError as exc:
+                raise ValueError(f"{p}: {label}: {exc}") from None
         if "manoeuvres" in spec:
             from .uncertainty import parse_manoeuvre
 
@@ -413,7 +492,7 @@ def _sweep_spec(p: Path, i: int, w, names: set) -> dict:
     """One validated sweep member of campaign file ``p`` (``names``: member names so far, updated)."""
     if not isinstance(w, dict):
         raise ValueError(f"{p}: sweeps[{i}] must be a mapping (name, kind, levels ...), got {w!r}")
-    label = f"sweeps[{i}]" + (f" ('{w['name']}')" if isinstance(w.get("name"), str) else "")
+    label = f"sweeps[{i}]" + (f" ({short(w['name'], 40)})" if isinstance(w.get("name"), str) else "")
     kind = w.get("kind", "turning")
     if kind not in SWEEP_KEYS:
         raise ValueError(f"{p}: {label}: 'kind' must be one of {', '.join(SWEEP_KEYS)}, got {kind!r}")
@@ -424,9 +503,11 @@ def _sweep_spec(p: Path, i: int, w, names: set) -> dict:
         _check_type(p, f"{label}: ", k, v, keys[k])
     if "name" not in w:
         raise ValueError(f"{p}: {label}: 'name' is required")
-    if not _NAME_RE.match(w["name"]) or w["name"] in names:
-        raise ValueError(f"{p}: {label}: name '{w['name']}' must be unique and use only letters, digits, '_', '.', '-'")
-    names.add(w["name"])
+    check_member_name(w["name"], f"{p}: {label}")
+    if w["name"].lower() in names:
+        raise ValueError(f"{p}: {label}: name '{w['name']}' is used twice (names are compared ignoring case); "
+                         "give every member its own name")
+    names.add(w["name"].lower())
     spec = {**w, "kind": kind}
     for k, v in w.items():
         if keys[k] == (list,):
@@ -455,9 +536,14 @@ def run_fit_member(spec: dict) -> dict:
     from .identify import EKFIdentifier, model_from
     from .models import get_model, model_class
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", UserWarning)
         logs = [read_log(f, lpp=spec.get("lpp")) for f in spec["logs"]]
+    kept = []
+    for w in caught:  # the readers' warnings go into the member's result (one line each, no repeats)
+        line = " ".join(str(w.message).split())
+        if issubclass(w.category, UserWarning) and line not in kept:
+            kept.append(line)
     model_name = spec.get("model", "kcs-response")
     cls = model_class(model_name)
     opts = {"lpp": spec["lpp"]} if ("lpp" in spec and "lpp" in cls.__init__.__code__.co_varnames) else {}
@@ -477,7 +563,9 @@ def run_fit_member(spec: dict) -> dict:
 
         result = OutputErrorRefiner(ident.to_model(), estimate=ident.estimated_).fit(logs, start=ident).result()
     result.created = ""  # the member's output must not depend on when or where it ran
-    out = {"result": result.to_dict(), "prediction": None}
+    if kept:
+        result.extra = {**(result.extra or {}), "reader_warnings": kept}
+    out = {"result": result.to_dict(), "prediction": None, "warnings": kept}
     if int(spec.get("draws", 0)) > 0:
         from .uncertainty import predict_manoeuvres
 
@@ -583,53 +671,214 @@ def warm_specs(specs: Sequence[dict]) -> tuple:
     return tuple(out.values())
 
 
-def run_campaign(campaign, outdir, *, engine: Engine | None = None, force: bool = False) -> dict:
+def member_status(value: dict | None, ok: bool) -> tuple[str, list[str]]:
+    """``("ok" | "flagged" | "failed", reasons)`` of one finished member: the one rule the campaign's summary and
+    exit status use.  A fit member is ``flagged`` when ``shipid fit`` would exit 3 or 4 on its result
+    (:func:`fit_exit_status`), a sweep member when some of its runs failed; ``failed`` when it raised."""
+    if not ok:
+        return "failed", []
+    if value is None or "result" not in value:
+        return "ok", []
+    code, reasons = fit_exit_status(value["result"])
+    return ("flagged" if code in (3, 4) else "ok"), reasons
+
+
+def fit_exit_status(result: dict) -> tuple[int, list[str]]:
+    """``shipid fit``'s exit status for a result dict (0 consistent, 1 not converged, 3 not consistent with its
+    noise model, 4 filter diverged) and the reasons, from the result's own diagnostics."""
+    diag = result.get("diagnostics") or {}
+    if result.get("method") == "ekf" and not result.get("success", True):  # the filter did not finish
+        return 4, [f"the filter diverged: {result.get('message', '')}"]
+    verdict = diag.get("consistency") or {}
+    if isinstance(verdict, dict) and not verdict.get("consistent", True):
+        return 3, [str(r) for r in verdict.get("reasons", [])] or ["not consistent with its noise model"]
+    if not result.get("success", True):
+        return 1, [str(result.get("message", "not converged"))]
+    return 0, []
+
+
+#: Exit status of ``shipid campaign``: every member ok; some flagged (none failed); some failed.
+EXIT_OK, EXIT_FLAGGED, EXIT_FAILED = 0, 3, 1
+
+
+def campaign_exit_status(summary: dict) -> int:
+    """:data:`EXIT_FAILED` when a member failed, else :data:`EXIT_FLAGGED` when one is flagged, else 0."""
+    if summary.get("n_failed"):
+        return EXIT_FAILED
+    return EXIT_FLAGGED if summary.get("n_flagged") else EXIT_OK
+
+
+#: Files a member may write in its folder (the only names ``--force`` and ``--resume`` remove).
+MEMBER_FILES = ("result.json", "predictions.json", "sweep.csv")
+
+
+def _member_dir(out: Path, name: str, create: bool) -> Path:
+    """``OUTDIR/name``, refused when it is a symbolic link or resolves outside OUTDIR."""
+    d = out / name
+    if d.is_symlink() or (d.exists() and not d.is_dir()):
+        raise ValueError(f"{d}: exists and is not a folder of this campaign (a link or a file); remove it or "
+                         "choose another output folder")
+    if create:
+        d.mkdir(exist_ok=True)
+    if d.exists() and d.resolve().parent != out.resolve():
+        raise ValueError(f"{d}: resolves outside the output folder {out}; choose another output folder")
+    return d
+
+
+def _clear_member(out: Path, name: str) -> None:
+    d = out / name
+    if not d.exists():
+        return
+    _member_dir(out, name, create=False)
+    for f in MEMBER_FILES:
+        try:
+            os.unlink(d / f)
+        except FileNotFoundError:
+            pass
+
+
+def _fingerprint(specs) -> str:
+    import hashlib
+
+    text = json.dumps([{k: v for k, v in sp.items()} for sp in specs], sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _read_journal(path: Path, fingerprint: str) -> dict:
+    """``{name: record}`` of the members a journal says finished (lines cut by a kill are skipped)."""
+    from ._io import sha256_file
+
+    done: dict = {}
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except FileNotFoundError:
+        return done
+    for i, line in enumerate(lines):
+        try:
+            rec = json.loads(line)
+        except ValueError:
+            continue  # the last line of a run killed while appending it
+        if i == 0:
+            if rec.get("fingerprint") != fingerprint:
+                raise ValueError(f"{path}: written for another version of the campaign (its members or settings "
+                                 "changed); run it into a new output folder, or pass --force to start again")
+            continue
+        if isinstance(rec, dict) and "name" in rec:
+            files = rec.get("sha256", {})
+            if all((path.parent / f).is_file() and sha256_file(path.parent / f) == h for f, h in files.items()):
+                done[rec["name"]] = rec
+    return done
+
+
+def run_campaign(campaign, outdir, *, engine: Engine | None = None, force: bool = False, resume: bool = False,
+                 on_member: Callable | None = None) -> dict:
     """Run every fit and sweep of a campaign (file path or :func:`load_campaign` dict) and write the outputs.
 
-    Fits and sweeps are members of one map over the engine (fits first, in file order).  Returns the
-    summary written to ``OUTDIR/campaign.json``: per member ``name``, ``type`` ("fit" or "sweep"),
-    ``ok``, ``error``, ``success`` (of the fit; of every row of a sweep), ``seed`` and the files written.
+    Fits and sweeps are members of one map over the engine (fits first, in file order).  Each member's files
+    are written as soon as it finishes, then a line is appended to ``OUTDIR/campaign.journal`` (its record and
+    the SHA-256 of its files); ``resume=True`` skips the members the journal holds whose files are unchanged,
+    so a campaign killed at any point loses no finished member.  Without ``force`` or ``resume`` the output
+    folder must be new or empty; ``force`` first removes the members' old files (:data:`MEMBER_FILES`), the
+    journal and the summary, and runs every member again.  Every write stays inside OUTDIR (member names are
+    plain file names; a member folder that is a link or resolves elsewhere is refused).
+
+    Returns the summary written to ``OUTDIR/campaign.json``: per member ``name``, ``type`` ("fit" or
+    "sweep"), ``status`` ("ok", "flagged", "failed"; :func:`member_status`), ``ok`` (it ran), ``error``,
+    ``reasons``, ``warnings`` (of reading its logs), ``success``, ``seed``, ``files``; and ``n_ok``,
+    ``n_flagged``, ``n_failed``.  ``on_member(record)`` is called as each member's files are written.
     """
-    from ._io import atomic_write_text
+    from ._io import atomic_write_text, check_output_target, sha256_file
 
     camp = load_campaign(campaign) if not isinstance(campaign, dict) else campaign
     out = Path(outdir)
-    if out.exists() and any(out.iterdir()) and not force:
-        raise ValueError(f"{out}: output folder exists and is not empty; choose a new one or pass --force")
-    out.mkdir(parents=True, exist_ok=True)
+    check_output_target(out / SUMMARY, "campaign summary")
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"{out}: exists and is not a folder; give a new or empty output folder")
     fits, sweeps = camp["fits"], camp.get("sweeps", [])
     seeds = member_seeds(camp["seed"], len(fits) + len(sweeps))  # fits keep the seeds of a fits-only campaign
     specs = [{**f, "seed": int(f.get("seed", s))} for f, s in zip(fits, seeds)]
     specs += [{**w, "seed": s, "_member": "sweep"} for w, s in zip(sweeps, seeds[len(fits):])]
+    for sp in specs:
+        check_member_name(sp["name"], f"{camp.get('path', 'campaign')}: member")
+    fingerprint = _fingerprint(specs)
+    journal = out / JOURNAL
+    busy = out.exists() and any(out.iterdir())
+    if busy and not (force or resume):
+        raise ValueError(f"{out}: output folder exists and is not empty; choose a new one, pass --resume to finish "
+                         "a campaign run into it, or --force to run every member again")
+    done = _read_journal(journal, fingerprint) if (resume and not force) else {}
+    if resume and not force and busy and not journal.exists():
+        raise ValueError(f"{out}: no {JOURNAL} in this folder, so nothing to resume; choose a new output folder, "
+                         "or pass --force to run every member into it again")
+    out.mkdir(parents=True, exist_ok=True)
+    for sp in specs:
+        _member_dir(out, sp["name"], create=False)  # every member folder checked before anything runs
+    if force or not done:
+        for f in (journal, out / SUMMARY):
+            if f.is_symlink() or f.is_file():
+                os.unlink(f)
+    for sp in specs:
+        if sp["name"] not in done:
+            _clear_member(out, sp["name"])
+    if not journal.exists():
+        atomic_write_text(journal, json.dumps({"fingerprint": fingerprint, "campaign": camp.get("path")}) + "\n")
+    todo = [sp for sp in specs if sp["name"] not in done]
+    records: dict = {name: rec["record"] for name, rec in done.items()}
+
+    def finished(o: Outcome) -> None:
+        spec = todo[o.index]
+        rec = _write_member(out, spec, o)
+        records[spec["name"]] = rec
+        sums = {f: sha256_file(out / f) for f in rec["files"]}
+        with open(journal, "a", encoding="utf-8") as fh:  # one line per finished member, flushed to disk
+            fh.write(json.dumps({"name": spec["name"], "record": rec, "sha256": sums}) + "\n")
+            fh.flush()
+            os.fsync(fh.fileno())
+        if on_member is not None:
+            on_member(rec)
+
     eng = engine or Engine(1, progress=False)
-    outcomes = eng.map(run_member, specs, desc="campaign members", warm=partial(warm_fits, warm_specs(specs)),
-                       cost=[member_cost(sp) for sp in specs])
-    members = []
-    for spec, o in zip(specs, outcomes):
-        kind = spec.get("_member", "fit")
-        rec = {"name": spec["name"], "type": kind, "ok": o.ok, "error": o.error, "seed": spec["seed"],
-               "seconds": round(o.seconds, 3), "files": []}
-        if o.ok and kind == "sweep":
-            d = out / spec["name"]
-            d.mkdir(exist_ok=True)
-            atomic_write_text(d / "sweep.csv", o.value.to_csv(index=False), force=True)
-            rec["files"].append(f"{spec['name']}/sweep.csv")
-            ok_col = "success" if "success" in o.value else "surfaced"  # turning rows / glider launches
-            rec["success"] = bool(o.value[ok_col].all())
-        elif o.ok:
-            d = out / spec["name"]
-            d.mkdir(exist_ok=True)
-            atomic_write_text(d / "result.json", json.dumps(o.value["result"], indent=2, allow_nan=True) + "\n", force=True)
-            rec["files"].append(f"{spec['name']}/result.json")
-            rec["success"] = bool(o.value["result"]["success"])
-            if o.value["prediction"] is not None:
-                atomic_write_text(d / "predictions.json", json.dumps(o.value["prediction"], indent=2) + "\n", force=True)
-                rec["files"].append(f"{spec['name']}/predictions.json")
-        members.append(rec)
+    if todo:
+        eng.map(run_member, todo, desc="campaign members", warm=partial(warm_fits, warm_specs(todo)),
+                cost=[member_cost(sp) for sp in todo], on_result=finished)
+    members = [records[sp["name"]] for sp in specs]
     summary = {"campaign": camp.get("path"), "seed": camp["seed"], "engine": eng.describe(),
-               "n_members": len(members), "n_failed": sum(not m["ok"] for m in members), "members": members}
-    atomic_write_text(out / "campaign.json", json.dumps(summary, indent=2) + "\n", force=True)
+               "n_members": len(members), "n_ok": sum(m["status"] == "ok" for m in members),
+               "n_flagged": sum(m["status"] == "flagged" for m in members),
+               "n_failed": sum(m["status"] == "failed" for m in members), "n_resumed": len(done),
+               "members": members}
+    atomic_write_text(out / SUMMARY, json.dumps(summary, indent=2) + "\n", force=True)
     return CampaignResult(summary)
+
+
+def _write_member(out: Path, spec: dict, o: Outcome) -> dict:
+    """Write one finished member's files (exclusively: its old ones were removed before it ran); its record."""
+    from ._io import atomic_write_text, dumps_json
+
+    kind = spec.get("_member", "fit")
+    value = o.value if o.ok else None
+    status, reasons = member_status(value if kind == "fit" else None, o.ok)
+    rec = {"name": spec["name"], "type": kind, "ok": o.ok, "status": status, "error": o.error, "reasons": reasons,
+           "warnings": (value or {}).get("warnings", []) if kind == "fit" else [], "seed": spec["seed"],
+           "seconds": round(o.seconds, 3), "files": []}
+    if not o.ok:
+        return rec
+    d = _member_dir(out, spec["name"], create=True)
+    if kind == "sweep":
+        atomic_write_text(d / "sweep.csv", o.value.to_csv(index=False))
+        rec["files"].append(f"{spec['name']}/sweep.csv")
+        ok_col = "success" if "success" in o.value else "surfaced"  # turning rows / glider launches
+        rec["success"] = bool(o.value[ok_col].all())
+        if not rec["success"]:
+            rec["status"], rec["reasons"] = "flagged", ["some runs of the sweep failed"]
+        return rec
+    atomic_write_text(d / "result.json", json.dumps(o.value["result"], indent=2, allow_nan=True) + "\n")
+    rec["files"].append(f"{spec['name']}/result.json")
+    rec["success"] = bool(o.value["result"]["success"])
+    if o.value["prediction"] is not None:
+        atomic_write_text(d / "predictions.json", dumps_json(o.value["prediction"]))
+        rec["files"].append(f"{spec['name']}/predictions.json")
+    return rec
 
 
 class CampaignResult(dict, ResultMixin):
@@ -638,22 +887,26 @@ class CampaignResult(dict, ResultMixin):
 
     @property
     def success(self) -> bool:
-        """Every member ran, and every fit and sweep reports success."""
-        return all(m.get("ok") and m.get("success", True) for m in self.get("members", []))
+        """Every member ran and is ``ok`` (none flagged, none failed; :func:`member_status`), and every fit and
+        sweep reports success."""
+        return all(m.get("ok") and m.get("status", "ok") == "ok" and m.get("success", True)
+                   for m in self.get("members", []))
 
     @property
     def message(self) -> str:
-        n, bad = int(self.get("n_members", 0)), int(self.get("n_failed", 0))
+        n = int(self.get("n_members", 0))
         unsuccessful = sum(1 for m in self.get("members", []) if m.get("ok") and not m.get("success", True))
-        return (f"{n - bad} of {n} member(s) completed ({self.get('engine', '')})"
+        return (f"{n} member(s): {self.get('n_ok', 0)} ok, {self.get('n_flagged', 0)} flagged, "
+                f"{self.get('n_failed', 0)} failed ({self.get('engine', '')})"
                 + (f"; {unsuccessful} completed without success" if unsuccessful else ""))
 
     def summary(self) -> pd.DataFrame:
-        """One row per member: name, type, ok, success, seconds, error, files written."""
-        rows = [{"name": m.get("name"), "type": m.get("type"), "ok": m.get("ok"), "success": m.get("success"),
-                 "seconds": m.get("seconds"), "error": m.get("error"), "files": ", ".join(m.get("files", []))}
-                for m in self.get("members", [])]
-        return pd.DataFrame(rows, columns=["name", "type", "ok", "success", "seconds", "error", "files"])
+        """One row per member: name, type, status, ok, success, seconds, error, files written."""
+        cols = ["name", "type", "status", "ok", "success", "seconds", "error", "files"]
+        rows = [{"name": m.get("name"), "type": m.get("type"), "status": m.get("status"), "ok": m.get("ok"),
+                 "success": m.get("success"), "seconds": m.get("seconds"), "error": m.get("error"),
+                 "files": ", ".join(m.get("files", []))} for m in self.get("members", [])]
+        return pd.DataFrame(rows, columns=cols)
 
     def to_pandas(self) -> pd.DataFrame:
         """Every member's record as written (seed included), one row each."""
@@ -663,13 +916,15 @@ class CampaignResult(dict, ResultMixin):
         return f"Campaign ({self.get('n_members', 0)} members)"
 
     def plot(self, ax=None):
-        """Seconds each member took, coloured by outcome (green success, orange no success, red failed); returns the axes."""
+        """Seconds each member took, coloured by outcome (green ok, orange flagged or no success, red failed);
+        returns the axes."""
         import matplotlib.pyplot as plt
 
         df = self.summary()
         if ax is None:
             _, ax = plt.subplots(figsize=(6, 0.3 * len(df) + 1.2))
-        colour = ["C3" if not ok else ("C2" if s in (True, None) else "C1") for ok, s in zip(df["ok"], df["success"])]
+        colour = ["C3" if not ok else ("C2" if s in (True, None) and st in ("ok", None) else "C1")
+                  for ok, s, st in zip(df["ok"], df["success"], df["status"])]
         ax.barh(df["name"].astype(str), df["seconds"].astype(float), color=colour)
         ax.invert_yaxis()
         ax.set_xlabel("seconds")

@@ -21,15 +21,20 @@ MAX_MESSAGE = 300
 
 #: Modules that add sub-commands (each has ``register(subparsers)``).
 COMMAND_MODULES: list[str] = [
-    "shipid.commands.core",
-    "shipid.commands.identify",
-    "shipid.commands.logs",
-    "shipid.commands.manoeuvre",
-    "shipid.commands.routing",
+    "shipid.commands.models",
+    "shipid.commands.fit",
+    "shipid.commands.demo",
+    "shipid.commands.log",
+    "shipid.commands.metrics",
+    "shipid.commands.simulate",
+    "shipid.commands.sweep",
+    "shipid.commands.route",
     "shipid.commands.glider",
     "shipid.commands.validate",
-    "shipid.commands.control",
-    "shipid.commands.uncertainty",
+    "shipid.commands.report",
+    "shipid.commands.plan",
+    "shipid.commands.sample",
+    "shipid.commands.campaign",
     "shipid.commands.crossval",
 ]
 
@@ -45,10 +50,10 @@ class _UsageError(Exception):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from . import __version__
+    from . import __version__, _jit
 
     parser = _Parser(prog="shipid", description="Identify, validate and use ship manoeuvring models.")
-    parser.add_argument("--version", action="version", version=f"shipid {__version__}")
+    parser.add_argument("--version", action="version", version=f"shipid {__version__} ({_jit.path()})")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for mod in COMMAND_MODULES:
         importlib.import_module(mod).register(sub)
@@ -100,6 +105,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     handlers = install_signal_cleanup()
     prog = f"shipid {args.command}"
+    from . import _jit
+
+    old_notices = _jit._notify[0]
+    if not getattr(args, "quiet", False):  # "compiling ... (first run only)", "numba is not installed ..."
+        _jit.set_notices(lambda line: print(f"shipid: {line}", file=sys.stderr, flush=True))
     old_show = warnings.showwarning
     warnings.showwarning = _show_warning(prog)
     try:
@@ -128,6 +138,7 @@ def main(argv: list[str] | None = None) -> int:
         print("shipid: interrupted", file=sys.stderr)
         return 130
     finally:
+        _jit.set_notices(old_notices)
         warnings.showwarning = old_show
         restore_signal_handlers(handlers)
 

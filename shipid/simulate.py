@@ -247,9 +247,18 @@ def simulate(
     SimulationResult
         ``meta`` holds ``method`` and, for ``dopri5``, ``n_steps``, ``n_rejected``, ``n_fev``, ``h_last``.
     """
+    _check_model(model, "model")
     t = np.asarray(t, dtype=float)
-    if t.ndim != 1 or t.size < 2 or np.any(np.diff(t) <= 0):
-        raise ValueError("t must be a strictly increasing 1-D array with at least two times")
+    if t.ndim != 1 or t.size < 2:
+        raise ValueError(f"t must be a 1-D array of at least two times; got shape {t.shape}")
+    if not np.all(np.isfinite(t)):
+        i = int(np.flatnonzero(~np.isfinite(t))[0])
+        raise ValueError(f"t must be finite; t[{i}] = {t[i]}")
+    if np.any(np.diff(t) <= 0):
+        i = int(np.flatnonzero(np.diff(t) <= 0)[0])
+        raise ValueError(f"t must be strictly increasing; t[{i + 1}] = {t[i + 1]:g} follows t[{i}] = {t[i]:g}")
+    if x0 is None:
+        raise ValueError(f"x0 must be the initial state, shape ({model.nx},) for {list(model.state_names)}; got None")
     if (inputs is None) == (controller is None):
         raise ValueError("give exactly one of inputs= (sampled inputs) or controller= (feedback law)")
     if substeps < 1:
@@ -261,8 +270,11 @@ def simulate(
     if method == "dopri5" and not (0 < rtol < 1):
         raise ValueError(f"rtol must be in (0, 1), got {rtol}")
     x0 = np.asarray(x0, dtype=float)
-    if x0.shape[-1] != model.nx or x0.ndim > 2:
+    if x0.ndim == 0 or x0.shape[-1] != model.nx or x0.ndim > 2:
         raise ValueError(f"x0 must have shape ({model.nx},) or (B, {model.nx}) for {model.state_names}; got {x0.shape}")
+    if x0.ndim == 1 and not np.all(np.isfinite(x0)):
+        i = int(np.flatnonzero(~np.isfinite(x0))[0])
+        raise ValueError(f"x0 must be finite; x0[{i}] ('{model.state_names[i]}') = {x0[i]}")
     p = model.params if params is None else np.asarray(params, dtype=float)
     batch = x0.shape[:-1]
     n_t = t.size
@@ -297,9 +309,20 @@ def simulate(
 
         Xc = replay_compiled(model, x0.reshape(-1, model.nx), t, U.reshape(-1, n_t, model.nu), p, n_int, foh)
         if Xc is not None:
-            meta = {"method": "rk4", **({"failed": [], "failed_at": []} if batch else {})}
-            return SimulationResult(t=t, x=Xc.reshape(batch + (n_t, model.nx)), u=np.array(U), model=model,
-                                    params=np.array(p), success=True, message="integration finished", meta=meta)
+            Xc = Xc.reshape(batch + (n_t, model.nx))
+            bad = ~np.all(np.isfinite(Xc), axis=-1)  # (batch..., n_t): a member that became non-finite
+            failed_at = np.where(bad.any(axis=-1), t[np.argmax(bad, axis=-1)], np.nan)
+            ok = not bad.any()
+            if not ok:  # NaN from the first non-finite sample on, and said (as the interpreted loop does)
+                Xc = np.where((np.cumsum(bad, axis=-1) > 0)[..., None], np.nan, Xc)
+                warnings.warn(_failure_message(t, failed_at), RuntimeWarning, stacklevel=2)
+            meta = {"method": "rk4"}
+            if batch:
+                meta["failed"] = [int(i) for i in np.flatnonzero(np.isfinite(failed_at.ravel()))]
+                meta["failed_at"] = [float(v) for v in failed_at.ravel()[meta["failed"]]]
+            return SimulationResult(t=t, x=Xc, u=np.array(U), model=model, params=np.array(p), success=ok,
+                                    message="integration finished" if ok else _failure_message(t, failed_at),
+                                    meta=meta)
     X = np.full(batch + (n_t, model.nx), np.nan)
     Uout = np.full(batch + (n_t, model.nu), np.nan)
     x = x0.copy()
@@ -347,6 +370,14 @@ def simulate(
         meta["failed"] = [int(i) for i in np.flatnonzero(np.isfinite(failed_at.ravel()))]
         meta["failed_at"] = [float(v) for v in failed_at.ravel()[meta["failed"]]]
     return SimulationResult(t=t, x=X, u=Uout, model=model, params=np.array(p), success=ok, message=msg, meta=meta)
+
+
+def _check_model(model, name: str = "model") -> None:
+    """TypeError naming the argument when ``model`` is not a model object (e.g. a model's name)."""
+    if not all(hasattr(model, a) for a in ("nx", "state_names", "params")):
+        hint = f"; build it with shipid.models.get_model({model!r})" if isinstance(model, str) else ""
+        raise TypeError(f"{name} must be a model object (shipid.models), got {type(model).__name__}"
+                        f" {str(model)[:40]!r}{hint}")
 
 
 def _failure_message(t, failed_at) -> str:
@@ -540,6 +571,8 @@ def replay(model: Model, log, *, x0=None, substeps: int = 2, params=None, input_
         Start values of named states in place of the default ``x0``'s (e.g. the current ``cx``, ``cy`` of a
         model with current states, which no log carries); not with ``x0``.
     """
+    if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
+        raise ValueError(f"substeps must be a whole number >= 1 (RK4 steps per log sample), got {substeps!r}")
     if initial and x0 is not None:
         raise ValueError("replay: give x0 or initial, not both")
     bad = [k for k in (initial or {}) if k not in model.state_names]

@@ -41,7 +41,7 @@ MEASURED_README = {
     "zz_10": {"overshoot1_deg": 9.4}, "zz_-10": {"overshoot1_deg": 8.1},
     "zz_20": {"overshoot1_deg": 15.6}, "zz_-20": {"overshoot1_deg": 12.7},
 }
-#: Start parameter set of each model (``shipid fit --params``): the published KVLCC2 MMG set for ``mmg``,
+#: Start parameter set of each model (``shipid fit --model MODEL:SET``): the published KVLCC2 MMG set for ``mmg``,
 #: the shipped sets (Froude-scaled to the logs' length by the recipe) for the others.
 START = {"mmg": "kvlcc2", "response-nl": None, "kcs-response": None}
 #: Goal tolerances of the issues: tactical diameter [%], first and second overshoot [deg].

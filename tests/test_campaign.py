@@ -47,7 +47,7 @@ def _fits(tmp_path):
     ([{"name": "a", "logs": [str(DATA / "kcs_zz_m10.csv")], "refine": 1}], {}, r"'refine' must be true/false"),
     ([{"logs": [str(DATA / "kcs_zz_m10.csv")]}], {}, r"'name' is required"),
     ([{"name": "a", "logs": [str(DATA / "kcs_zz_m10.csv")], "manoeuvres": ["circle:3"]}], {}, r"manoeuvre 'circle:3'"),
-    ([{"name": "a", "logs": [str(DATA / "kcs_zz_m10.csv")]}] * 2, {}, r"must be unique"),
+    ([{"name": "a", "logs": [str(DATA / "kcs_zz_m10.csv")]}] * 2, {}, r"name .a. is used twice"),
     ([{"name": "a", "logs": [str(DATA / "kcs_zz_m10.csv")]}], {"seeds": 1}, r"unknown top-level key 'seeds'"),
     ([], {"sweeps": [{"name": "s", "model": "kcs-response", "rudder": [10, "x"]}]},
      r"sweeps\[0\] \('s'\): 'rudder' must be a non-empty list of finite numbers"),
@@ -57,7 +57,7 @@ def _fits(tmp_path):
     ([], {"sweeps": [{"name": "s", "rudder": [10]}]}, r"'model' is required"),
     ([], {"sweeps": [{"name": "s", "model": "nofile.json"}]}, r"model 'nofile.json' not found"),
     ([{"name": "a", "logs": [str(DATA / "kcs_zz_m10.csv")]}], {"sweeps": [{"name": "a", "model": "kcs-response"}]},
-     r"sweeps\[0\] \('a'\): name 'a' must be unique"),
+     r"sweeps\[0\] \('a'\): name 'a' is used twice"),
     ([], {}, r"no members"),
 ])
 def test_campaign_file_errors_are_one_line(tmp_path, fits, top, match):
@@ -162,8 +162,238 @@ def test_campaign_cli_serial(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["campaign", str(p), "-o", str(out), "--workers", "1", "--no-progress"]) == 1  # one member failed
     text = capsys.readouterr().out
-    assert "bad: FAILED" in text and "zz: ok" in text and "1/2 members completed" in text
+    assert "bad: FAILED" in text and "zz: ok" in text and "2 members: 1 ok, 0 flagged, 1 failed" in text
     summary = json.loads((out / "campaign.json").read_text())
     assert summary["n_failed"] == 1 and (out / "zz" / "result.json").is_file()
     assert main(["campaign", str(p), "-o", str(out), "--workers", "1"]) == 2  # not empty, no --force
     assert "not empty" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- a campaign stays in its folder
+@pytest.mark.parametrize("name, match", [
+    ("..", "must be a plain file name"), (".", "must be a plain file name"), ("a\n", "must be a plain file name"),
+    (".hidden", "must be a plain file name"), ("a/b", "must be a plain file name"), ("-rf", "must be a plain file name"),
+    ("campaign.json", "is reserved"), ("Campaign.Journal", "is reserved"), ("nul", "is reserved"), ("x" * 101, "plain"),
+])
+def test_member_names_are_plain_file_names(tmp_path, name, match):
+    p = _campaign(tmp_path, [{"name": name, "logs": [str(DATA / "kcs_zz_m10.csv")]}])
+    with pytest.raises(ValueError, match=match) as e:
+        load_campaign(p)
+    assert "\n" not in str(e.value) and str(p) in str(e.value)
+
+
+def test_names_that_differ_only_in_case_are_one_name(tmp_path):
+    log = str(DATA / "kcs_zz_m10.csv")
+    p = _campaign(tmp_path, [{"name": "Run", "logs": [log]}, {"name": "run", "logs": [log]}])
+    with pytest.raises(ValueError, match="name 'run' is used twice"):
+        load_campaign(p)
+
+
+def test_a_member_folder_that_links_out_is_refused_before_anything_runs(tmp_path, capsys):
+    logs = _short_logs(tmp_path)
+    p = _campaign(tmp_path, [{"name": "zz", "logs": [logs["kcs_zz_m10"]], "passes": 1}])
+    out, elsewhere = tmp_path / "out", tmp_path / "elsewhere"
+    out.mkdir()
+    elsewhere.mkdir()
+    (out / "zz").symlink_to(elsewhere)
+    assert main(["campaign", str(p), "-o", str(out), "--workers", "1", "--force"]) == 2
+    err = capsys.readouterr().err
+    assert "zz: exists and is not a folder of this campaign (a link or a file)" in err
+    assert list(elsewhere.iterdir()) == [] and not (out / "campaign.json").exists()
+
+
+def test_force_removes_a_failed_members_old_result(tmp_path, capsys):
+    """--force runs every member again: a member that now fails keeps no stale result beside the summary."""
+    logs = _short_logs(tmp_path)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time,x\n0,1\n")
+    p = _campaign(tmp_path, [{"name": "zz", "logs": [logs["kcs_zz_m10"]], "passes": 1},
+                             {"name": "m", "logs": [str(bad)]}])
+    out = tmp_path / "out"
+    (out / "m").mkdir(parents=True)
+    (out / "m" / "result.json").write_text('{"old": true}')
+    (out / "m" / "notes.txt").write_text("mine")  # not a file the campaign writes: kept
+    assert main(["campaign", str(p), "-o", str(out), "--workers", "1", "--force"]) == 1
+    text = capsys.readouterr().out
+    assert "m: FAILED" in text and "2 members: 1 ok, 0 flagged, 1 failed" in text
+    assert not (out / "m" / "result.json").exists() and (out / "m" / "notes.txt").read_text() == "mine"
+
+
+def test_members_carry_the_fits_verdict(tmp_path, capsys):
+    """A fit that `shipid fit` would reject (exit 3: here a log whose v has the wrong sign) is flagged, not ok;
+    the summary counts ok / flagged / failed and the exit status is 3."""
+    import pandas as pd
+
+    lines = (DATA / "kcs_zz_m10.csv").read_text().splitlines()
+    head = [ln for ln in lines if ln.startswith("#")]
+    df = pd.read_csv(DATA / "kcs_zz_m10.csv", comment="#")
+    df["v [m/s]"] = -df["v [m/s]"]
+    flip = tmp_path / "vflip.csv"
+    flip.write_text("\n".join(head) + "\n" + df.to_csv(index=False))
+    p = _campaign(tmp_path, [{"name": "good", "logs": [str(DATA / "kcs_zz_m10.csv")], "passes": 1},
+                             {"name": "vflip", "logs": [str(flip)]}])
+    out = tmp_path / "out"
+    assert main(["campaign", str(p), "-o", str(out), "--workers", "1"]) == 3
+    text = capsys.readouterr().out
+    assert "good: ok" in text and "vflip: flagged: channel" in text
+    assert "2 members: 1 ok, 1 flagged, 0 failed" in text
+    s = json.loads((out / "campaign.json").read_text())
+    st = {m["name"]: m for m in s["members"]}
+    assert st["vflip"]["status"] == "flagged" and st["vflip"]["reasons"] and s["n_flagged"] == 1
+    from shipid.campaign import fit_exit_status
+
+    r = json.loads((out / "vflip" / "result.json").read_text())
+    assert fit_exit_status(r)[0] == 3 and fit_exit_status(json.loads((out / "good" / "result.json").read_text()))[0] == 0
+
+
+def test_readers_warnings_are_kept_in_the_members_result(tmp_path):
+    import pandas as pd
+
+    lines = (DATA / "kcs_zz_m10.csv").read_text().splitlines()
+    head = [ln for ln in lines if ln.startswith("#")]
+    df = pd.read_csv(DATA / "kcs_zz_m10.csv", comment="#")
+    df["n [rps]"] = 0.0
+    dead = tmp_path / "n0.csv"
+    dead.write_text("\n".join(head) + "\n" + df.to_csv(index=False))
+    p = _campaign(tmp_path, [{"name": "n0", "logs": [str(dead)], "passes": 1}])
+    s = run_campaign(p, tmp_path / "out")
+    w = s["members"][0]["warnings"]
+    assert any("reads 0 in 100 % of the samples" in x for x in w), w
+    r = json.loads((tmp_path / "out" / "n0" / "result.json").read_text())
+    assert r["extra"]["reader_warnings"] == w
+
+
+def test_workers_bounded_by_the_machine():
+    import os
+
+    from shipid.campaign import Engine
+
+    n = os.cpu_count() or 1
+    with pytest.raises(ValueError, match=rf"--workers 100000: give 1 to {n} \(this machine has {n} CPUs"):
+        Engine(100000)
+    with pytest.raises(ValueError, match=r"--workers 0: give 1 to"):
+        Engine(0)
+
+
+def test_a_scheduler_that_never_answers_is_an_error_in_stated_time(monkeypatch):
+    pytest.importorskip("distributed")
+    import socket
+    import time
+
+    import shipid.campaign as C
+
+    monkeypatch.setattr(C, "SCHEDULER_TIMEOUT", 2.0)
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(4)
+    try:
+        t0 = time.monotonic()
+        with pytest.raises(ValueError, match=r"--scheduler tcp://127\.0\.0\.1:\d+: cannot connect \(no answer within 2 s"):
+            C.Engine(scheduler=f"tcp://127.0.0.1:{srv.getsockname()[1]}", progress=False)._start()
+        assert time.monotonic() - t0 < 2.0 + 5.0 + 5.0
+    finally:
+        srv.close()
+
+
+# --------------------------------------------------------------------------- nothing finished is lost
+def _kill_campaign(tmp_path, p, out, sig, at: float):
+    """Run the campaign CLI in a child, send ``sig`` after ``at`` s; returns the members it reported finished."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    proc = subprocess.Popen([sys.executable, "-m", "shipid", "campaign", str(p), "-o", str(out), "--workers", "1"],
+                            cwd=Path(__file__).resolve().parents[1], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    time.sleep(at)
+    if proc.poll() is None:
+        os.kill(proc.pid, sig)
+    so, se = proc.communicate(timeout=600)
+    assert "Traceback" not in se, se
+    if sig == signal.SIGTERM and proc.returncode not in (0, 1, 3):
+        assert proc.returncode == 128 + signal.SIGTERM
+    return [ln.split(":")[0] for ln in so.splitlines() if ln.endswith(": ok") or ": flagged" in ln]
+
+
+def _kill_and_resume(tmp_path, sig, at, ref=None):
+    logs = _short_logs(tmp_path)
+    names = ["a", "b", "c"]
+    p = _campaign(tmp_path, [{"name": n, "logs": [logs["kcs_zz_m10"]], "passes": 1, "estimate": EST[:4 + i]}
+                             for i, n in enumerate(names)])
+    out = tmp_path / f"out-{sig}-{at:.1f}"
+    done = _kill_campaign(tmp_path, p, out, sig, at)
+    kept = {n: (out / n / "result.json").read_bytes() for n in done}  # every member said finished has its file
+    assert main(["campaign", str(p), "-o", str(out), "--workers", "1", "--resume", "--no-progress"]) == 0
+    for n in names:
+        assert (out / n / "result.json").is_file()
+    for n, b in kept.items():
+        assert (out / n / "result.json").read_bytes() == b
+    s = json.loads((out / "campaign.json").read_text())
+    assert s["n_ok"] == 3 and s["n_resumed"] >= len(done)
+    if ref is not None:  # the same results as a run that was never interrupted
+        for n in names:
+            assert (out / n / "result.json").read_bytes() == (ref / n / "result.json").read_bytes()
+    return done
+
+
+def test_sigkill_then_resume_loses_no_finished_member(tmp_path, capsys):
+    import signal
+
+    done = _kill_and_resume(tmp_path, signal.SIGKILL, 9.0)
+    capsys.readouterr()
+    assert isinstance(done, list)
+
+
+@pytest.mark.slow
+def test_kills_at_random_points_then_resume(tmp_path, capsys):
+    """SIGTERM and SIGKILL at random times (seeded) over the run; after --resume every member is there, those
+    finished before the kill unchanged, all equal to an uninterrupted run's."""
+    import random
+    import signal
+
+    logs = _short_logs(tmp_path)
+    ref = tmp_path / "ref"
+    p = _campaign(tmp_path, [{"name": n, "logs": [logs["kcs_zz_m10"]], "passes": 1, "estimate": EST[:4 + i]}
+                             for i, n in enumerate(["a", "b", "c"])])
+    assert main(["campaign", str(p), "-o", str(ref), "--workers", "1", "--no-progress"]) == 0
+    rng = random.Random(29)
+    seen = set()
+    for sig in (signal.SIGTERM, signal.SIGKILL) * 3:
+        seen.add(len(_kill_and_resume(tmp_path, sig, rng.uniform(3.0, 20.0), ref)))
+    capsys.readouterr()
+    assert len(seen) >= 2  # the kills fell at different stages of the run
+
+
+def test_resume_refuses_a_changed_campaign_and_a_folder_without_journal(tmp_path, capsys):
+    logs = _short_logs(tmp_path)
+    p = _campaign(tmp_path, [{"name": "a", "logs": [logs["kcs_zz_m10"]], "passes": 1}])
+    out = tmp_path / "out"
+    assert main(["campaign", str(p), "-o", str(out), "--workers", "1", "--no-progress"]) == 0
+    p.write_text(json.dumps({"fits": [{"name": "a", "logs": [logs["kcs_zz_m10"]], "passes": 2}]}))
+    assert main(["campaign", str(p), "-o", str(out), "--workers", "1", "--resume"]) == 2
+    assert "written for another version of the campaign" in capsys.readouterr().err
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "x.txt").write_text("mine")
+    assert main(["campaign", str(p), "-o", str(other), "--workers", "1", "--resume"]) == 2
+    assert "no campaign.journal in this folder, so nothing to resume" in capsys.readouterr().err
+    assert main(["campaign", str(p), "-o", str(out), "--workers", "1", "--resume", "--force"]) == 2
+    assert "--force and --resume: give one" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_a_member_that_kills_its_worker_is_retried_then_reported_and_the_others_complete():
+    """A member whose worker process dies is started again MEMBER_RETRIES times, then reported as that
+    member's failure (Dask's KilledWorker, one line); the other members complete."""
+    pytest.importorskip("distributed")
+    from shipid.campaign import MEMBER_RETRIES
+
+    seen = []
+    with Engine(2, progress=False) as eng:
+        out = eng.map(eval, ["1 + 1", "__import__('os')._exit(3)", "2 + 2"], on_result=seen.append)
+    assert [o.ok for o in out] == [True, False, True] and out[0].value == 2 and out[2].value == 4
+    assert out[1].error == (f"its worker process died {MEMBER_RETRIES + 1} times running it (out of memory, or a "
+                            "crash); run it alone with --workers 1 to see why")
+    assert sorted(o.index for o in seen) == [0, 1, 2]

@@ -220,7 +220,7 @@ def test_fit_meas_std_bad_values(bad, needle, tmp_path, capsys):
 
 @pytest.mark.parametrize("argv,needle", [
     (["fit", "{log}", "-o", "{log}", "--force"], "would replace the input file"),
-    (["fit", "{log}", "--params", "{res}", "-o", "{res}", "--force"], "would replace the input file"),
+    (["fit", "{log}", "--model", "{res}", "-o", "{res}", "--force"], "would replace the input file"),
     (["metrics", "{log}", "-o", "{log}", "--force"], "would replace the input file"),
     (["simulate", "{res}", "--turning", "35", "-o", "{res}", "--force"], "would replace the input file"),
     (["fit", "{log}", "-o", ""], "empty file name"),
@@ -280,7 +280,7 @@ def test_models_lists_meanings_and_units(capsys):
 
 def test_models_kcs_equation_text_matches_the_model():
     """The equations `shipid models` prints for kcs-response are the model's (evaluated and compared)."""
-    from shipid.commands.core import PARAMETER_NOTES
+    from shipid.commands.models import PARAMETER_NOTES
     from shipid.models import get_model
 
     m = get_model("kcs-response", "synthetic-truth")

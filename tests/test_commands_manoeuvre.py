@@ -79,12 +79,12 @@ def test_simulate_and_sweep_with_the_adaptive_integrator(tmp_path, capsys):
 
     assert main(["simulate", "mmg:kvlcc2", "--turning", "35", "--side", "starboard"]) == 0
     rk4 = metrics(capsys.readouterr().out)
-    assert main(["simulate", "mmg:kvlcc2", "--turning", "35", "--side", "starboard", "--method", "dopri5", "--rtol", "1e-5"]) == 0
+    assert main(["simulate", "mmg:kvlcc2", "--turning", "35", "--side", "starboard", "--integrator", "dopri5", "--rtol", "1e-5"]) == 0
     dp = metrics(capsys.readouterr().out)
     for key in ("advance_L", "tactical_diameter_L", "steady_diameter_L"):
         assert float(dp[key]) == pytest.approx(float(rk4[key]), rel=5e-3), key
     out = tmp_path / "sweep.csv"
-    assert main(["sweep", "mmg:kcs", "--rudder", "15,25", "--speed", "1.7", "--method", "dopri5", "-o", str(out)]) == 0
+    assert main(["sweep", "mmg:kcs", "--rudder", "15,25", "--speed", "1.7", "--integrator", "dopri5", "-o", str(out)]) == 0
     assert len(pd.read_csv(out)) == 2
-    assert main(["simulate", "mmg:kvlcc2", "--turning", "35", "--method", "dopri5", "--rtol", "0"]) == 2
+    assert main(["simulate", "mmg:kvlcc2", "--turning", "35", "--integrator", "dopri5", "--rtol", "0"]) == 2
     assert "--rtol" in capsys.readouterr().err

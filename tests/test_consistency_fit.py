@@ -235,7 +235,7 @@ def test_cli_inconsistent_fit_exits_3_with_one_warning_and_strict_json(tmp_path,
     out = tmp_path / "r.json"
     # the reader's own rudder-sign check would refuse this file first (exit 2): switch it off to reach the fit's
     # verdict; the logs are the 4.36 m KCS model's (the recipe needs the ship length)
-    rc = main(["fit", str(p), "--params", "synthetic-truth", "--passes", "1", "-o", str(out), "--no-progress",
+    rc = main(["fit", str(p), "--model", "kcs-response:synthetic-truth", "--passes", "1", "-o", str(out), "--no-progress",
                "--lpp", "4.36", "--no-consistency-checks"])
     err = capsys.readouterr().err
     assert rc == 3
@@ -251,7 +251,7 @@ def test_cli_inconsistent_fit_exits_3_with_one_warning_and_strict_json(tmp_path,
 
 
 def test_inconsistency_warning_names_the_ekf_stage_after_a_refinement():
-    from shipid.commands.identify import _inconsistency_warning
+    from shipid.commands.fit import _inconsistency_warning
 
     verdict = {"consistent": False, "channels": {"r": {}}, "reasons": ["coefficient c3 = 4 +- 0.1 is 11 times the "
                                                                       "model's value 0.3: channel 'r' in the wrong units?"]}
@@ -280,7 +280,7 @@ def test_cli_diverged_fit_exits_4_and_refinement_from_it_fails(tmp_path, capsys,
     # the CLI: an absurd start that diverges
     p = _write_csv(tmp_path / "tc.csv", noisy)
     (tmp_path / "start.json").write_text(json.dumps({"model": "kcs-response", "coef": bad.params_series().to_dict()}))
-    rc = main(["fit", str(p), "--params", str(tmp_path / "start.json"), "--estimate", "a1", "--passes", "1",
+    rc = main(["fit", str(p), "--model", str(tmp_path / "start.json"), "--estimate", "a1", "--passes", "1",
                "-o", str(tmp_path / "r.json"), "--no-progress", "--lpp", "4.36"])
     assert rc == 4
 

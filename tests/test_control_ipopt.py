@@ -83,7 +83,7 @@ def test_ipopt_kcs_turn_with_rate_limits_and_running_cost():
 
 def test_cli_plan_solver_ipopt(tmp_path, analytic):
     out = tmp_path / "plan.json"
-    assert main(["plan", "paper-1", "--solver", "ipopt", "--intervals", "6", "--substeps", "8", "-o", str(out)]) == 0
+    assert main(["plan", "paper-1", "--optimizer", "ipopt", "--intervals", "6", "--substeps", "8", "-o", str(out)]) == 0
     doc = json.loads(out.read_text())
     assert doc["method"] == "direct-ipopt" and doc["max_constraint_violation"] <= 1e-2
     # 6 intervals are coarse (+2.4 % above the analytic time, as SLSQP on the same grid); the 1 % check is above

@@ -34,17 +34,17 @@ def test_launch_with_a_fit_result_and_bad_inputs(tmp_path, capsys):
     fit = tmp_path / "fit.json"
     fit.write_text(json.dumps({"model": "glider", "coef": {"c": 0.9, "CL_alpha": 4.0}}))
     out = tmp_path / "o.json"
-    assert main(["glider", "launch", "--speed", "5", "--angle", "45", "--params", str(fit), "-o", str(out)]) == 0
+    assert main(["glider", "launch", "--speed", "5", "--angle", "45", "--model", str(fit), "-o", str(out)]) == 0
     doc = json.loads(out.read_text())
     assert doc["params"]["c"] == 0.9 and doc["max_depth_m"] < 1.64     # more drag, less depth
     wrong = tmp_path / "wrong.json"
     wrong.write_text(json.dumps({"model": "kcs-response", "coef": {}}))
-    assert main(["glider", "launch", "--speed", "5", "--angle", "45", "--params", str(wrong), "-o", str(tmp_path / "x.json")]) == 2
+    assert main(["glider", "launch", "--speed", "5", "--angle", "45", "--model", str(wrong), "-o", str(tmp_path / "x.json")]) == 2
     assert "expected 'glider'" in capsys.readouterr().err
     assert main(["glider", "launch", "--speed", "-2", "--angle", "45", "-o", str(tmp_path / "y.json")]) == 2
     err = capsys.readouterr().err
     assert "speed = -2.0" in err and "Traceback" not in err
-    assert main(["glider", "launch", "--speed", "5", "--angle", "45", "--params", str(tmp_path / "none.json"), "-o", str(tmp_path / "z.json")]) == 2
+    assert main(["glider", "launch", "--speed", "5", "--angle", "45", "--model", str(tmp_path / "none.json"), "-o", str(tmp_path / "z.json")]) == 2
     assert "not found" in capsys.readouterr().err
     assert not (tmp_path / "y.json").exists()
 

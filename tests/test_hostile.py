@@ -119,7 +119,7 @@ def test_hostile_result_file(build, needles, command, tmp_path, capsys):
     r = build(tmp_path)
     argv = {"simulate": ["simulate", r, "--turning", "35", "-o", tmp_path / "t.csv"],
             "validate": ["validate", r, LOG, "-o", tmp_path / "v.json"],
-            "fit-params": ["fit", LOG, "--params", r, "-o", tmp_path / "f.json", "--no-progress"]}[command]
+            "fit-params": ["fit", LOG, "--model", r, "-o", tmp_path / "f.json", "--no-progress"]}[command]
     _check(argv, tmp_path, needles, capsys)
 
 
@@ -263,7 +263,7 @@ def test_route_replan_times_are_used(tmp_path, capsys):
 
 
 def test_route_pso_paper_says_what_the_default_is():
-    from shipid.commands.routing import PSO_FRAMING, PSO_PAPER_NOTE
+    from shipid.commands.route import PSO_FRAMING, PSO_PAPER_NOTE
 
     assert "worst of the 64" in PSO_FRAMING and "10.37" in PSO_FRAMING and PSO_FRAMING[:20].lower() in PSO_PAPER_NOTE.lower()
 
@@ -274,13 +274,13 @@ OPTION_CASES = [
      ["dt 1e-09", "GiB", "--dt"]),
     ("glider-speed-nan", ["glider", "launch", "--speed", "nan", "--angle", "45", "-o", "{tmp}/g.json"], ["--speed nan"]),
     ("glider-popsize", ["glider", "optimise", "--popsize", "100000", "-o", "{tmp}/g.json"], ["--popsize 100000"]),
-    ("glider-params-bad", ["glider", "launch", "--speed", "5", "--angle", "45", "--params", "{tmp}/r.json", "-o",
+    ("glider-params-bad", ["glider", "launch", "--speed", "5", "--angle", "45", "--model", "{tmp}/r.json", "-o",
                            "{tmp}/g.json"], ["r.json"]),
-    ("route-seed-negative", ["route", "pso-paper", "--seed", "-3", "-o", "{tmp}/ps.json"], ["--seed -3"]),
+    ("route-seed-negative", ["route", "paper-pso", "--seed", "-3", "-o", "{tmp}/ps.json"], ["--seed -3"]),
     ("validate-output-is-log", ["validate", "{tmp}/r.json", "{log}", "-o", "{log}", "--force"], ["would replace"]),
     ("plan-output-is-problem", ["plan", "{tmp}/p.json", "-o", "{tmp}/p.json", "--force"], ["would replace"]),
-    ("route-output-exists", ["route", "zermelo-paper", "-o", "{tmp}/old.json"], ["old.json", "--force"]),
-    ("route-csv-exists", ["route", "zermelo-paper", "-o", "{tmp}/old2.json"], ["old2.csv", "--force"]),
+    ("route-output-exists", ["route", "paper-zermelo", "-o", "{tmp}/old.json"], ["old.json", "--force"]),
+    ("route-csv-exists", ["route", "paper-zermelo", "-o", "{tmp}/old2.json"], ["old2.csv", "--force"]),
     ("ship-file-deep", ["fit", "{log}", "--ship", "{tmp}/deep.json", "-o", "{tmp}/f.json"], ["deep.json"]),
     ("fit-log-fifo", ["fit", "{tmp}/fifo.csv", "-o", "{tmp}/f.json"], ["fifo.csv"]),
 ]
@@ -449,3 +449,183 @@ def test_cli_restores_the_signal_handlers(tmp_path):
     before = signal.getsignal(signal.SIGTERM)
     main(["models"])
     assert signal.getsignal(signal.SIGTERM) is before
+
+
+# --------------------------------------------------------------------------- outputs are regular files
+def _special(kind: str, p: Path) -> bool:
+    """Make ``p`` a FIFO, a character device (a private copy of /dev/null; root only) or a socket."""
+    import socket
+    import stat
+
+    if kind == "fifo":
+        os.mkfifo(p)
+    elif kind == "device":
+        try:
+            os.mknod(p, 0o666 | stat.S_IFCHR, os.makedev(1, 3))
+        except (PermissionError, AttributeError):
+            return False
+    else:
+        s = socket.socket(socket.AF_UNIX)
+        s.bind(str(p))
+        s.close()
+    return True
+
+
+_KIND_WORDS = {"fifo": "a FIFO (named pipe)", "device": "a character device", "socket": "a socket"}
+
+
+@pytest.mark.parametrize("kind", ["fifo", "device", "socket"])
+@pytest.mark.parametrize("command", ["fit", "validate", "report", "simulate", "sample", "log", "metrics", "sweep",
+                                     "plan", "route", "glider"])
+def test_output_naming_a_device_pipe_or_socket_is_refused_even_with_force(kind, command, tmp_path, capsys):
+    import stat
+
+    out = tmp_path / ("X.json" if command in ("plan", "route") else "X")
+    if not hasattr(os, "mkfifo") or not _special(kind, out):
+        pytest.skip(f"cannot make a {kind} here")
+    mode = os.lstat(out).st_mode
+    r = tmp_path / "r.json"
+    r.write_text(json.dumps(_good_result()))
+    argv = {"fit": ["fit", LOG], "validate": ["validate", r, LOG], "report": ["report", r, LOG],
+            "simulate": ["simulate", "kcs-response:synthetic-truth", "--turning", "35"],
+            "sample": ["sample", r, LOG, "--steps", "10"], "log": ["log", LOG], "metrics": ["metrics", LOG],
+            "sweep": ["sweep", "kcs-response:synthetic-truth", "--rudder", "35"],
+            "plan": ["plan", "paper-1"], "route": ["route", "zermelo-paper"],
+            "glider": ["glider", "launch", "--speed", "1", "--angle", "45"]}[command]
+    rc = main([str(a) for a in argv] + ["-o", str(out), "--force"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and "Traceback" not in err and len(err.splitlines()) == 1, err
+    assert f"{out.name}: is {_KIND_WORDS[kind]}; the " in err and "written as a regular file only" in err, err
+    assert stat.S_IFMT(os.lstat(out).st_mode) == stat.S_IFMT(mode)
+
+
+def test_force_replaces_a_links_own_entry_never_its_target(tmp_path):
+    target = tmp_path / "target.json"
+    target.write_text("keep")
+    link = tmp_path / "out.json"
+    link.symlink_to(target)
+    with pytest.raises(_io.OutputExistsError):
+        _io.atomic_write_text(link, "new")
+    _io.atomic_write_text(link, "new", force=True)
+    assert not link.is_symlink() and link.read_text() == "new" and target.read_text() == "keep"
+
+
+def test_writers_refuse_a_special_file_appearing_at_the_last_moment(tmp_path):
+    p = tmp_path / "late.json"
+    os.mkfifo(p)
+    with pytest.raises(ValueError, match="late.json: is a FIFO"):
+        _io.atomic_write_set([(tmp_path / "a.json", "{}"), (p, "{}")], force=True)
+    assert not (tmp_path / "a.json").exists() and not list(tmp_path.glob(".*.tmp"))
+
+
+# --------------------------------------------------------------------------- bounded structured files
+BOMB = "".join(f"{a}: &{a} [" + ", ".join([f"*{p}" if p else "x"] * 9) + "]\n"
+               for a, p in zip("abcdefghi", [None, *"abcdefgh"]))
+
+
+def test_yaml_alias_bomb_is_refused_without_expanding_it():
+    import time
+
+    t0 = time.perf_counter()
+    with pytest.raises(ValueError) as e:
+        _io.loads_yaml(BOMB, "c.yaml", "campaign")
+    assert str(e.value) == ("c.yaml: its aliases expand to more than 1e+06 nodes, the limit; write the campaign "
+                            "without aliases")
+    assert time.perf_counter() - t0 < 5.0  # counted from the parse events (9 x 9 aliases), never expanded
+
+
+def test_yaml_alias_limits():
+    few = "base: &b {passes: 1}\nfits:\n  - {name: a, defaults: *b}\n  - {name: c, defaults: *b}\n"
+    assert _io.loads_yaml(few, "c.yaml")["fits"][1]["defaults"] == {"passes": 1}
+    many = "a: &a 1\nb: [" + ", ".join(["*a"] * (_io.MAX_ALIASES + 1)) + "]\n"
+    with pytest.raises(ValueError, match=rf"c.yaml: more than {_io.MAX_ALIASES} YAML aliases \(\*name\)"):
+        _io.loads_yaml(many, "c.yaml")
+    deep = "a: &a " + "[" * 40 + "1" + "]" * 40 + "\nb: " + "[" * 40 + "*a" + "]" * 40 + "\n"
+    with pytest.raises(ValueError, match="c.yaml: nested more than 64 levels deep"):
+        _io.loads_yaml(deep, "c.yaml")  # 41 + 41 levels once the alias is expanded; each part alone is fine
+    with pytest.raises(ValueError, match="c.yaml: YAML alias \\*a refers to a node that contains it"):
+        _io.loads_yaml("a: &a [1, *a]\n", "c.yaml")
+
+
+@pytest.mark.parametrize("name, what", [("c.yaml", "campaign"), ("c.json", "campaign"), ("r.json", "result")])
+def test_a_huge_sparse_file_is_refused_before_it_is_read(tmp_path, name, what):
+    p = tmp_path / name
+    with open(p, "wb") as fh:
+        fh.truncate(2**30)
+    with pytest.raises(ValueError, match=rf"{name}: .* MiB is too large for a {what}"):
+        _io.read_structured(p, what)
+
+
+def test_campaign_yaml_bomb_from_the_cli(tmp_path, capsys):
+    p = tmp_path / "c.yaml"
+    p.write_text("fits:\n  - name: m1\n    logs: [x.csv]\n    fixed:\n" + "".join("      " + ln + "\n" for ln in BOMB.splitlines()))
+    assert main(["campaign", str(p), "-o", str(tmp_path / "out")]) == 2
+    assert "its aliases expand to more than 1e+06 nodes, the limit" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+# --------------------------------------------------------------------------- the library's entry points
+def test_public_entry_points_check_their_arguments():
+    from shipid.identify import EKFIdentifier
+    from shipid.simulate import simulate
+    from shipid.validation import validate
+
+    m = get_model("kcs-response", "synthetic-truth")
+    t = np.arange(0, 10, 0.1)
+    U = np.zeros((t.size, 2)) + [0.0, 9.0]
+    with pytest.raises(ValueError, match=r"substeps must be a whole number >= 1 .*got 0"):
+        validate(m, [str(LOG)], substeps=0)
+    with pytest.raises(ValueError, match=r"x0 must be the initial state, shape \(6,\) .*got None"):
+        simulate(m, None, t, U)
+    with pytest.raises(TypeError, match=r"model must be a model object .*got str 'kcs-response'; build it with "
+                                        r"shipid.models.get_model\('kcs-response'\)"):
+        EKFIdentifier("kcs-response")
+    bad_t = t.copy()
+    bad_t[5] = np.nan
+    with pytest.raises(ValueError, match=r"t must be finite; t\[5\] = nan"):
+        simulate(m, [0, 0, 0, 1.7, 0, 0], bad_t, U)
+    with pytest.raises(ValueError, match=r"x0 must be finite; x0\[3\] \('u'\) = inf"):
+        simulate(m, [0, 0, 0, np.inf, 0, 0], t, U)
+
+
+def test_a_batch_member_that_goes_non_finite_is_flagged():
+    from shipid.simulate import simulate
+
+    m = get_model("kcs-response", "synthetic-truth")
+    t = np.arange(0, 10, 0.1)
+    x0 = np.array([[0, 0, 0, 1.7, 0, 0], [0, 0, 0, np.inf, 0, 0]], float)
+    with pytest.warns(RuntimeWarning, match="non-finite in 1 of 2 batch member"):
+        r = simulate(m, x0, t, np.zeros((t.size, 2)) + [0.0, 9.0])
+    assert not r.success and r.meta["failed"] == [1] and np.isfinite(r.x[0]).all()
+
+
+def test_sample_refuses_a_thinning_that_keeps_too_few_steps_and_a_run_beyond_memory(tmp_path, capsys):
+    r = tmp_path / "r.json"
+    assert main(["fit", str(LOG), "-o", str(r), "--passes", "1"]) in (0, 3)
+    capsys.readouterr()
+    rc = main(["sample", str(r), str(LOG), "-o", str(tmp_path / "s.json"), "--thin", "1000", "--steps", "30"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "thin=1000: keeps 1 of the 20 steps after burn-in" in err and "(--thin)" in err
+    rc = main(["sample", str(r), str(LOG), "-o", str(tmp_path / "s.json"), "--walkers", "1000000000", "--steps", "30"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "sampling with walkers=1000000000 x steps=30 needs about" in err and "--walkers" in err
+    assert not (tmp_path / "s.json").exists()
+
+
+def test_ctrl_c_during_sample_is_one_line(tmp_path):
+    """SIGINT while the walkers run: 'shipid: interrupted', exit 130, no traceback (emcee prints one for any
+    exception inside the likelihood, so the interrupt is taken between steps)."""
+    import subprocess
+    import sys
+    import time
+
+    r = tmp_path / "r.json"
+    assert main(["fit", str(LOG), "-o", str(r), "--passes", "1"]) in (0, 3)
+    proc = subprocess.Popen([sys.executable, "-m", "shipid", "sample", str(r), str(LOG), "-o", str(tmp_path / "s.json"),
+                             "--steps", "100000"], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    time.sleep(12.0)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130 and "Traceback" not in err and err.strip().endswith("shipid: interrupted"), err[-500:]
+    assert not (tmp_path / "s.json").exists() and not list(tmp_path.glob(".*.tmp"))

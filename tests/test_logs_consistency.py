@@ -160,7 +160,8 @@ def _measured_files():
 @pytest.mark.skipif(not all(_measured_files()), reason=f"MARIN/Esso data not found under {SHARED}")
 def test_measured_files_raise_no_error_false_alarms_counted():
     """0 errors on the 6 MARIN and 33 Esso files; the warnings are real defects of the Esso files (GNSS
-    freezes on 31 files, 4 u spikes in one) and none on MARIN."""
+    freezes on 31 files, 4 u spikes in one, the gyro's 1.3 % scale in the 4 runs long enough to resolve it:
+    tests/test_logs_sensors.py) and none on MARIN."""
     marin, esso = _measured_files()
     counts = {"error": 0, "warning": 0}
     kinds = set()
@@ -173,8 +174,8 @@ def test_measured_files_raise_no_error_false_alarms_counted():
                 counts[f.level] += 1
                 kinds.add((p.suffix, f.check))
     assert counts["error"] == 0
-    assert kinds <= {(".csv", "position_freeze"), (".csv", "glitches")}, kinds
-    assert counts["warning"] <= 33
+    assert kinds <= {(".csv", "position_freeze"), (".csv", "glitches"), (".csv", "yaw_rate_scale")}, kinds
+    assert counts["warning"] <= 33 + 4
     res = check_consistency(log)
     assert res.message.startswith(f"log '{log.name}'")
 

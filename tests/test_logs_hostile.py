@@ -142,3 +142,27 @@ def test_units_given_twice(tmp_path, capsys):
     _cli_one_line(["fit", str(SRC), "--units", "psi=deg,psi=rad", "--model", "kcs-response",
                    "-o", str(tmp_path / "r.json")], capsys,
                   "--units: 'psi' is given twice (psi=deg and psi=rad); give it once")
+
+
+def test_a_log_too_large_for_memory_is_refused_before_it_is_read(tmp_path, monkeypatch, capsys):
+    """Estimated from the file's size and its first rows (about 0.8 kB of memory a row while reading)."""
+    p = tmp_path / "long.csv"
+    lines = _lines()
+    with open(p, "w") as fh:
+        fh.write("\n".join(lines) + "\n")
+        fh.truncate(200 * 2**20)  # the rest of a 200 MiB log (sparse)
+    monkeypatch.setenv("SHIPID_MEMORY_LIMIT_GB", "1")
+    err = _cli_one_line(["log", str(p)], capsys, "`long.csv`: reading about")
+    assert "rows (200 MiB) needs about" in err and "(limit 1 GiB" in err and "split the log into shorter runs" in err
+
+
+def test_heading_in_radians_under_a_deg_header_is_blamed_on_psi(tmp_path, capsys):
+    lines = [ln.replace("psi [rad]", "psi [deg]") for ln in (bundled_data_dir() / "kcs_zz_m10.csv").read_text().splitlines()]
+    p = _write(tmp_path, "h.csv", lines)
+    err = _cli_one_line(["log", str(p)], capsys, "`h.csv` column 'psi'")
+    assert "declared in deg looks like radians" in err and "--units psi=rad" in err
+
+
+def test_reference_offset_must_lie_on_the_ship(capsys):
+    err = _cli_one_line(["metrics", str(SRC), "--reference-offset", "1e308"], capsys, "--reference-offset 1e+308")
+    assert "the logged point must lie on the ship (within +/-0.6 Lpp = +/-2.62 m of midship)" in err

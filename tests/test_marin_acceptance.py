@@ -54,7 +54,7 @@ def _fit(tmp_path, *model_args):
 @pytest.mark.parametrize("model_args, negative, positive", [
     (("--model", "kcs-response"), ("b1", "c2"), ("c3",)),
     (("--model", "response-nl"), ("b1", "c2"), ("c3",)),
-    (("--model", "mmg", "--params", "kvlcc2"), ("Yv", "Nv", "Nr"), ()),
+    (("--model", "mmg:kvlcc2"), ("Yv", "Nv", "Nr"), ()),
 ], ids=["kcs-response", "response-nl", "mmg"])
 def test_raw_marin_fit_with_only_lpp_has_physical_damping_signs(tmp_path, capsys, model_args, negative, positive):
     rc, res = _fit(tmp_path, *model_args)

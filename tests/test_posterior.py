@@ -62,6 +62,25 @@ def test_short_chain_is_not_called_converged(small_problem):
     assert 1 + 2 * 30 <= s.diagnostics["n_likelihood_calls"] <= 1 + 4 * 30 + 20
 
 
+def test_too_small_a_budget_stops_early_and_says_how_many_steps(small_problem, caplog, monkeypatch):
+    from shipid.uncertainty import posterior
+
+    res, log = small_problem
+    # this 2-coefficient posterior mixes in a few steps: stop as soon as 50 tau exceeds half the budget
+    monkeypatch.setattr(posterior, "EARLY_STOP_FACTOR", 0.5)
+    lines = []
+    with pytest.warns(RuntimeWarning, match="NOT converged: stopped after"):
+        s = sample_posterior(res, log, walkers=8, steps=60, seed=1, check_every=10, log=lines.append)
+    stop = s.diagnostics["stopped_early"]
+    assert stop["at"] < 60 and s.diagnostics["n_steps_run"] == stop["at"] and not s.converged
+    assert stop["at"] == 40  # the first check with 20 kept steps: 20 + 50 tau >= 70 > 30
+    assert stop["needed"] > 0.5 * 60 and stop["suggest"] >= stop["needed"]
+    assert f"run again with --steps {stop['suggest']}" in s.message and "\n" not in s.message
+    assert not [r for r in caplog.records if r.name.startswith("emcee")]  # emcee's own text never reaches the user
+    assert lines[0] == "sampling: 8 walkers x 60 steps (2 dimensions, 20 steps of burn-in), checked every 10 steps ..."
+    assert len(lines) == 1 + stop["at"] // 10
+
+
 def test_vectorised_and_serial_likelihood_agree(small_problem, kcs_truth):
     res, log = small_problem
     like = OutputErrorLikelihood(res.to_model(), log, ["c2", "c3"])

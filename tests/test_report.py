@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import base64
 import hashlib
+import html
 import io
 import os
 import re
@@ -108,9 +109,10 @@ def test_report_structure_and_content(report):
     # coefficient table: every estimated coefficient with its value, sigma and 95 % interval
     for name in EST:
         v, sd = res.coef[name], res.coef_std[name]
-        row = re.search(rf'<tr><td class="l">{name}</td>((?:<td>[^<]*</td>)+)</tr>', text)
+        row = re.search(rf'<tr><td class="l">{name}</td><td class="l">([^<]*)</td>((?:<td>[^<]*</td>)+)</tr>', text)
         assert row, name
-        cells = [float(c) for c in re.findall(r"<td>([^<]*)</td>", row.group(1))]
+        assert html.unescape(row.group(1)) == UNITS[name], name  # every coefficient with its SI unit
+        cells = [float(c) for c in re.findall(r"<td>([^<]*)</td>", row.group(2))]
         # value, sigma, CI low, CI high, relative sigma [%]
         np.testing.assert_allclose(cells[:4], [v, sd, v - 1.96 * sd, v + 1.96 * sd], rtol=5.01e-3)  # 3-5 significant digits
         assert cells[4] == pytest.approx(100 * sd / abs(v), abs=0.051)  # printed with one decimal
@@ -136,6 +138,49 @@ def test_report_structure_and_content(report):
     for kind in ("time series", "track", "residuals"):
         assert sum(a.startswith(kind) for a in alts) == 2, kind
     assert "was not part of the identifier" in plain
+
+
+def test_report_reads_as_a_hand_over_document(fitted, tmp_path):
+    """Default title naming the ship and the logs' folder, a plain-language summary first, one sentence under
+    each section heading, no markup or Python reprs, and tracks in metres only."""
+    ident, log = fitted
+    path = tmp_path / "r.html"
+    write_report(ident.result(), [PATHS["kcs_zz_p20_rpm"], PATHS["kcs_tc_p35"]], path, identifier=ident)
+    text = path.read_text(encoding="utf-8")
+    doc = _parse(text)
+    title = re.search(r"<h1>([^<]*)</h1>", text).group(1)
+    assert html.unescape(title) == "KCS model 1:52.67 — kcs-response model on 2 log(s) from data"
+    intro = re.search(r'</h1>\s*<p class="intro">([^<]*)</p>', text)
+    assert intro, "the summary paragraph follows the title"
+    summary = html.unescape(intro.group(1))
+    assert summary.startswith("This report checks a kcs-response model fitted by an extended Kalman filter to 1 "
+                              "log(s) (kcs_zz_p20_rpm), estimating 7 of its 16 coefficients.")
+    assert "median track error of" in summary and "(1 not used in the fit)" in summary
+    for sec in re.findall(r"<h2 [^>]*>[^<]*</h2>(.{0,12})", text):
+        assert sec.startswith("<p"), sec  # each section opens with a sentence
+    plain = " ".join(doc.text)
+    assert ":func:" not in plain and "{'" not in plain and "``" not in plain
+    tracks = re.findall(r'alt="track [^"]*"', text)
+    assert len(tracks) == 2
+
+
+#: The unit column's text for each kcs-response coefficient: the model's SI unit, "–" when non-dimensional.
+UNITS = {k: "–" if u in ("-", "1") else u.replace("^2", "²") for k, u in get_model("kcs-response").units.items()}
+
+
+def test_model_label_and_plain_text():
+    from shipid.environment import with_environment
+    from shipid.report.html import _options_text, model_label, plain
+
+    class R:
+        model = "with-environment"
+    env = with_environment(get_model("lowspeed"), wind="esso-osaka-3m", current="constant")
+    assert model_label(R(), env) == "lowspeed with wind and current"
+    assert plain("Wind and current as parts of the model protocol: :func:`with_environment` / "
+                 ":class:`~shipid.environment.model.EnvironmentModel`.") == (
+        "Wind and current as parts of the model protocol: with_environment / EnvironmentModel.")
+    assert _options_text({"lpp": 3.0, "wind": {"kind": "fujiwara", "AL": 0.5}, "current": True}) == (
+        "lpp: 3; wind: (kind fujiwara, AL 0.5); current: True")
 
 
 def log_sha(p: Path) -> str:

@@ -10,7 +10,7 @@ from shipid.cli import main
 
 def test_zermelo_paper(tmp_path, capsys):
     out = tmp_path / "z.json"
-    assert main(["route", "zermelo-paper", "-o", str(out)]) == 0
+    assert main(["route", "paper-zermelo", "-o", str(out)]) == 0
     doc = json.loads(out.read_text())
     assert doc["time_h"] == pytest.approx(10.9157305, rel=1e-7)
     assert doc["solvers"]["transcription"]["time_h"] == pytest.approx(doc["solvers"]["pmp"]["time_h"], rel=1e-6)
@@ -20,10 +20,10 @@ def test_zermelo_paper(tmp_path, capsys):
     np.testing.assert_allclose(df[["x [nm]", "y [nm]"]].iloc[0], [3.66, -1.86], atol=1e-6)
     # never overwrite without --force
     before = out.read_text()
-    assert main(["route", "zermelo-paper", "-o", str(out)]) == 2
+    assert main(["route", "paper-zermelo", "-o", str(out)]) == 2
     assert "output exists" in capsys.readouterr().err
     assert out.read_text() == before
-    assert main(["route", "zermelo-paper", "-o", str(out), "--force", "--solver", "pmp"]) == 0
+    assert main(["route", "paper-zermelo", "-o", str(out), "--force", "--method", "pmp"]) == 0
 
 
 def test_zermelo_json_problem_with_grid_csv(tmp_path):
@@ -82,7 +82,7 @@ def test_pso_vessel_from_a_fit_result_json(tmp_path):
 @pytest.mark.slow
 def test_pso_paper(tmp_path):
     out = tmp_path / "p.json"
-    assert main(["route", "pso-paper", "-o", str(out)]) == 0
+    assert main(["route", "paper-pso", "-o", str(out)]) == 0
     doc = json.loads(out.read_text())
     for key in ("energy_J", "distance_m", "saving_vs_distance_optimal"):
         assert np.isfinite(doc[key])
@@ -114,17 +114,17 @@ def test_missing_and_malformed_files(tmp_path, capsys):
     (tmp_path / "m.json").write_text("{not json")
     assert main(["route", str(tmp_path / "m.json"), "-o", str(tmp_path / "o.json")]) == 2
     assert "not valid JSON" in capsys.readouterr().err
-    assert main(["route", "zermelo-paper", "-o", str(tmp_path / "o.txt")]) == 2
+    assert main(["route", "paper-zermelo", "-o", str(tmp_path / "o.txt")]) == 2
     assert "must be a .json" in capsys.readouterr().err
 
 
 def test_route_progress_on_request_same_result_and_quiet_off_a_terminal(tmp_path, capsys):
-    args = ["route", "pso-paper", "--seed", "1"]
+    args = ["route", "paper-pso", "--seed", "1"]
     assert main([*args, "-o", str(tmp_path / "a.json")]) in (0, 1)
     assert capsys.readouterr().err == ""  # stderr is not a terminal here: no progress by default
     assert main([*args, "--progress", "-o", str(tmp_path / "b.json")]) in (0, 1)
     assert "route (PSO iterations)" in capsys.readouterr().err
     a, b = (json.loads((tmp_path / f"{k}.json").read_text()) for k in "ab")
     assert a["energy_J"] == b["energy_J"]  # the progress callback draws no random numbers
-    assert main(["route", "zermelo-paper", "--progress", "-o", str(tmp_path / "z.json")]) == 0
+    assert main(["route", "paper-zermelo", "--progress", "-o", str(tmp_path / "z.json")]) == 0
     assert "route (Zermelo solvers)" in capsys.readouterr().err

@@ -91,6 +91,7 @@ def filter_functions(model, notice: bool = True, refcount: bool = False):
     without reference counting (:func:`_refcount_free`); with ``refcount`` (or once that build failed to
     compile, :func:`call`) all of them are reference counted (a separate build and disk cache)."""
     if not _jit.enabled():
+        _jit.fallback_notice()
         return None
     eq = getattr(model, "_equations", None)
     if eq is None:
@@ -120,6 +121,7 @@ def call(model, fns, name, *args):
     """``fns[name](*args)`` for ``fns = filter_functions(model)``.  Should that build not compile (an
     equation compiled without reference counting allocates after all: numba refuses it), the model's
     reference-counted build runs instead, now and from then on (same results, slower)."""
+    _jit.compile_notice(fns[name], f"the {model.name} filter")
     try:
         return fns[name](*args)
     except _jit.compile_errors():

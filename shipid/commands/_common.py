@@ -1,7 +1,64 @@
 """Options and helpers shared by the sub-commands (one copy of each)."""
 from __future__ import annotations
 
+import argparse
+import sys
 import warnings
+
+#: How long an old spelling keeps working (said in the notice it prints).
+RENAMED_UNTIL = "the next release"
+
+
+class _RenamedOption(argparse.Action):
+    """A hidden old spelling of an option: stores into the new option's destination and says once, on stderr,
+    what to use instead."""
+
+    def __init__(self, option_strings, dest, *, new: str, note: str = "", **kwargs):
+        self.new, self.note = new, note
+        super().__init__(option_strings, dest, help=argparse.SUPPRESS, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        renamed_notice(parser.prog, option_string, self.new, self.note)
+        setattr(namespace, self.dest, self.const if self.nargs == 0 else values)
+
+
+def renamed_option(p, old: str, new: str, *, dest: str, note: str = "", flag: bool = False, **kwargs) -> None:
+    """Add ``old`` to parser ``p`` as a hidden alias of the option ``new`` (same ``dest``): it works, is not
+    listed in ``--help``, and prints one line on stderr naming ``new``.  ``flag``: an option without a value
+    (stores True); ``kwargs`` (type, nargs, metavar) as the new option's."""
+    if flag:
+        kwargs = {"nargs": 0, "const": True}
+    p.add_argument(old, dest=dest, action=_RenamedOption, new=new, note=note, default=argparse.SUPPRESS, **kwargs)
+
+
+def renamed_notice(prog: str, old: str, new: str, note: str = "") -> None:
+    """The one line an old spelling prints on stderr: what to use instead, and until when the old one works."""
+    extra = f" ({note})" if note else ""
+    print(f"{prog}: note: '{old}' is now '{new}'{extra}; '{old}' works until {RENAMED_UNTIL}", file=sys.stderr)
+
+
+def split_model_option(args) -> None:
+    """``--model MODEL[:SET]`` or ``--model RESULT.json`` of ``fit``/``crossval`` into the model name
+    (``args.model``) and its start values (``args.params``: the set or the result file); ``auto[:...]`` is
+    left as it is.  ValueError when the start values are named twice (with the old ``--params``)."""
+    from pathlib import Path
+
+    spec = str(args.model)
+    if spec == "auto" or spec.startswith("auto:"):
+        return
+    if spec.lower().endswith(".json") or Path(spec).is_file():
+        name, start = None, spec
+    else:
+        name, colon, start = spec.partition(":")
+        if not colon:
+            return
+    if getattr(args, "params", None) is not None:
+        raise ValueError(f"--model {spec} already names the start values; drop --params {args.params}")
+    if name is None:
+        from ..identify.result import load_result
+
+        name = load_result(start).model
+    args.model, args.params = name, start or None
 
 
 def parse_pairs(items, option: str, convert=str) -> dict:
@@ -98,11 +155,17 @@ def read_logs(paths, args) -> list:
               schema=args.schema, skip_rows=args.skip_rows, header=args.header,
               velocity_frame=args.velocity_frame, rudder_sign=args.rudder_sign,
               consistency_checks=not args.no_consistency_checks)
+    from ..logs.sensors import SensorWarning
+
     logs = []
     for path in paths:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("ignore", UserWarning)
+            warnings.simplefilter("always", SensorWarning)
             logs.append(read_log(path, **kw))
+        for w in caught:  # what the reader found without the channel checks (a cut last row, look-alikes)
+            if issubclass(w.category, SensorWarning):
+                warnings.warn(str(w.message), UserWarning, stacklevel=2)
         # consistency warnings (GNSS freezes, a loose yaw rate, rpm?) matter to every command: one line each
         for f in (logs[-1].consistency.warnings if logs[-1].consistency is not None else []):
             warnings.warn(f.message, UserWarning, stacklevel=2)
@@ -151,15 +214,27 @@ def check_output_path(path, *, force: bool, inputs=(), what: str = "output"):
 
 
 def add_progress_option(p) -> None:
-    """``--progress`` / ``--no-progress``; default: on when stderr is a terminal."""
+    """``--progress`` / ``--no-progress`` (bars on stderr; default: on when stderr is a terminal) and ``--quiet``
+    (no bars, no stage lines, no notices: only the results)."""
     p.add_argument("--progress", dest="progress", action="store_true", default=None,
-                   help="show progress (default: on when stderr is a terminal)")
-    p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress output")
+                   help="show progress bars (default: on when stderr is a terminal; otherwise one line per stage)")
+    p.add_argument("--no-progress", dest="progress", action="store_false",
+                   help="no progress bars (the stage lines stay)")
+    p.add_argument("--quiet", action="store_true", help="print the results only: no progress bars, stage lines or notices")
+
+
+def say(args, line: str) -> None:
+    """Print a stage line (what starts now and how big it is) unless ``--quiet``."""
+    if not getattr(args, "quiet", False):
+        print(line, flush=True)
 
 
 def progress_iter(items, args, desc: str):
-    """``items`` wrapped in a tqdm bar when :func:`progress_on` (else unchanged)."""
+    """``items`` wrapped in a tqdm bar when :func:`progress_on`; otherwise unchanged, after one stage line
+    ("DESC (N) ...") unless ``--quiet``."""
     if not progress_on(args):
+        items = list(items)
+        say(args, f"{desc} ({len(items)}) ...")
         return items
     from tqdm.auto import tqdm
 
@@ -170,6 +245,8 @@ def progress_on(args) -> bool:
     """Whether to show progress for ``args`` (see :func:`add_progress_option`)."""
     import sys
 
+    if getattr(args, "quiet", False):
+        return False
     value = getattr(args, "progress", None)
     if value is None:
         return bool(getattr(sys.stderr, "isatty", lambda: False)())

@@ -3,11 +3,11 @@ from __future__ import annotations
 
 import sys
 
-from ._common import add_progress_option, check_output_path, progress_on, read_logs
+from ._common import add_progress_option, check_output_path, progress_on, read_logs, split_model_option
 
 
 def register(sub) -> None:
-    from .identify import add_engine_options, add_fit_options
+    from .fit import add_engine_options, add_fit_options
 
     p = sub.add_parser("crossval", help="cross-validate a model over runs: fit on all runs but one, predict the one left out",
                        description="Leave-one-run-out (or K-fold over runs) cross-validation through the path of "
@@ -17,9 +17,10 @@ def register(sub) -> None:
                        epilog="exit status: 0 every fold fitted and predicted; 1 some fold failed (reported, the others "
                               "completed); 2 bad input or option.")
     p.add_argument("logs", nargs="+", metavar="LOG", help="trial log files (.csv, MARIN .dat); at least two runs")
-    p.add_argument("--model", default="kcs-response",
-                   help="registered model (see `shipid models`), or 'auto' / 'auto:MODEL[:SET],...' to cross-validate "
-                        "every candidate and rank them by the rule of docs/choosing_a_model.md")
+    p.add_argument("--model", default="kcs-response", metavar="MODEL",
+                   help="the model and its start values: MODEL[:SET] (see `shipid models`) or a fit RESULT.json; or "
+                        "'auto' / 'auto:MODEL[:SET],...' to cross-validate every candidate and rank them by the rule of "
+                        "docs/choosing_a_model.md")
     p.add_argument("-o", "--output", required=True, help="JSON file to write (every fold and left-out run)")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     add_fit_options(p)
@@ -36,9 +37,10 @@ def _crossval(args) -> int:
 
     from .._io import atomic_write_text, dumps_json
     from ..crossval import choose_model, cross_validate, parse_candidates
-    from .identify import _folds, _lib_errors, _logs_lpp, _start_model, check_fit_args, fit_options, print_choice
+    from .fit import _folds, _lib_errors, _logs_lpp, _start_model, check_fit_args, fit_options, print_choice
     from .validate import _horizons
 
+    split_model_option(args)
     out = check_output_path(args.output, force=args.force, inputs=[*args.logs, args.params, args.ship])
     check_fit_args(args)
     horizons = _horizons(args.horizon)
@@ -51,7 +53,7 @@ def _crossval(args) -> int:
     if args.model == "auto" or args.model.startswith("auto:"):
         given = parse_candidates(args.model)
         if args.params is not None or args.fixed:
-            raise ValueError("--params and --fixed cannot be combined with --model auto; name start sets per "
+            raise ValueError("start values and --fixed cannot be combined with --model auto; name start sets per "
                              "candidate, e.g. --model auto:mmg:kvlcc2,response-nl")
         choice = _lib_errors(lambda: choose_model(logs, given, fit_options=fit_options(args, None), **common))
         for line in choice.why:

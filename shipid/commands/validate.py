@@ -1,6 +1,6 @@
-"""``shipid validate`` and ``shipid report``: check a fitted model against measured logs.
+"""``shipid validate``: check a fitted model against measured logs (and the options ``shipid report`` shares).
 
-Both replay the model with each log's recorded rudder and propeller inputs
+``validate`` and ``report`` both replay the model with each log's recorded rudder and propeller inputs
 (:mod:`shipid.validation`); ``validate`` writes the comparison as a JSON list,
 ``report`` as one self-contained HTML page.
 """
@@ -13,8 +13,12 @@ from pathlib import Path
 from ._common import add_log_options, add_progress_option, progress_iter, read_logs_for_result
 
 
-def _common(p) -> None:
-    p.add_argument("result", metavar="RESULT.json", help="fit result written by `shipid fit -o`")
+def _common(p, model: bool = False) -> None:
+    if model:
+        p.add_argument("result", metavar="MODEL", help="the model to validate: a fit RESULT.json (written by `shipid "
+                                                       "fit -o`) or a registered model MODEL[:SET], e.g. mmg:kvlcc2")
+    else:
+        p.add_argument("result", metavar="RESULT.json", help="fit result written by `shipid fit -o`")
     p.add_argument("logs", nargs="+", metavar="LOG", help="trial logs to replay (.csv, MARIN .dat)")
     # --lpp (default: from the log, then the model), --rudder-sign (-1: the file's rudder is positive to port;
     # the MARIN reader flips by itself), --schema, --units, ...: read exactly as `shipid fit` reads
@@ -37,24 +41,12 @@ def register(sub) -> None:
                        description="Replay a fitted model with each log's recorded inputs from its initial state and "
                                    "compare with the measurement: per-channel RMSE/NRMSE, track error, and the "
                                    "ITTC/IMO manoeuvre metrics of the log and of the replay.")
-    _common(p)
+    _common(p, model=True)
     p.add_argument("-o", "--output", required=True, help="JSON file to write (a list, one object per log)")
-    from .uncertainty import add_draws_option
+    from ._draws import add_draws_option
 
     add_draws_option(p)
     p.set_defaults(handler=_validate)
-
-    r = sub.add_parser("report", help="write a self-contained HTML validation report of a fitted model",
-                       description="One HTML file (figures embedded, no network): coefficients with sigma and 95 % "
-                                   "intervals, correlation heat-map, identifiability warnings, measured vs replayed "
-                                   "time series and tracks, residuals, the IMO table, versions and input hashes.")
-    _common(r)
-    r.add_argument("-o", "--output", required=True, help="HTML file to write")
-    r.add_argument("--title", default=None, help="report title")
-    from .uncertainty import add_draws_option
-
-    add_draws_option(r)
-    r.set_defaults(handler=_report)
 
 
 def _check(args) -> Path:
@@ -101,11 +93,13 @@ def _line(d: dict) -> str:
 def _validate(args) -> int:
     from .._io import atomic_write_text, dumps_json
     from ..validation import resolve_model, validate_one
-    from .uncertainty import validate_draws
+    from ._draws import check_draws, validate_draws
 
     out = _check(args)
     horizons = _horizons(args.horizon)
     model, result = resolve_model(args.result)  # read once
+    if result is None and check_draws(args):
+        raise ValueError(f"--draws needs a fit RESULT.json (the draws come from its covariance); {args.result} is a model")
     logs = read_logs_for_result(args, model)
     initial = _current_start(model, result)  # the replay and the horizon predictions start with it
     vals = [validate_one(model, lg, lpp=args.lpp, closed_loop=not args.no_closed_loop, zigzag_angles=_zigzag(args),
@@ -160,7 +154,8 @@ def _horizon_results(args, horizons, logs, model, initial) -> list:
     from ..validation.horizon import horizon_prediction
 
     out = []
-    for lg in logs:
+    for lg in progress_iter(logs, args, f"open-loop predictions over {', '.join(f'{h:g}' for h in horizons)} s, "
+                                        "logs"):
         if not {"x", "y", "psi"} <= set(getattr(lg, "data", lg).columns):
             print(f"note: {getattr(lg, 'name', 'log')}: no x, y, psi channels; horizon prediction skipped",
                   file=sys.stderr)
@@ -186,26 +181,3 @@ def _current_start(model, result):
     return {"cx": float(start["cx"]), "cy": float(start["cy"])}
 
 
-def _report(args) -> int:
-    from .._io import atomic_write_text
-    from ..report import render_report
-    from ..validation import resolve_model, validate_one
-
-    out = _check(args)
-    model, res = resolve_model(args.result)
-    logs = read_logs_for_result(args, model)
-    initial = _current_start(model, res)
-    vals = [validate_one(model, lg, lpp=args.lpp, closed_loop=not args.no_closed_loop,
-                         zigzag_angles=_zigzag(args), initial=initial)
-            for lg in progress_iter(logs, args, "replaying logs")]
-    from .uncertainty import check_draws
-
-    unc = {"draws": check_draws(args), "seed": args.draws_seed, "samples": args.samples} if check_draws(args) else None
-    horizons = _horizons(args.horizon)
-    hz = [h for h in _horizon_results(args, horizons, logs, model, initial) if h[0] is not None] if horizons else None
-    text = render_report(res, args.logs, title=args.title, validations=vals, uncertainty=unc, horizons=hz)
-    atomic_write_text(out, text, force=args.force)
-    for v in vals:
-        print(_line(v.to_dict()))
-    print(f"wrote {out}")
-    return 0 if all(v.simulation.success for v in vals) else 1

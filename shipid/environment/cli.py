@@ -1,7 +1,6 @@
 """What ``shipid fit --wind --current`` builds (kept here so the command stays a thin layer)."""
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
@@ -23,13 +22,13 @@ def wind_geometry(spec: str, logs=()) -> WindForce:
                          "--wind FILE.json with lpp, breadth, A_T, A_L, A_OD, C, C_BR, H_BR, H_C (m, m^2)")
     if spec == "esso-osaka-3m":
         return WindForce.esso_osaka_3m()
+    from .._io import read_json
+
     p = Path(spec)
-    if not p.is_file():
+    if not p.exists():
         raise ValueError(f"--wind {spec}: not 'esso-osaka-3m' and no such file")
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"--wind {spec}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+    doc = read_json(p, "wind geometry file", advice="give a JSON mapping with lpp, breadth, A_T, A_L, A_OD, C, "
+                    "C_BR, H_BR, H_C")
     return WindForce.from_mapping(doc)
 
 

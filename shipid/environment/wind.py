@@ -84,7 +84,7 @@ def _regressors(g: "WindForce") -> dict:
 
 
 def fujiwara_components(geometry: "WindForce") -> dict:
-    """The ten Fourier components ``wX0 ... wN3`` of Fujiwara et al. (1998) for a ship's geometry."""
+    """The ten Fourier components ``wX0`` to ``wN3`` of Fujiwara et al. (1998) for a ship's geometry."""
     reg = _regressors(geometry)
     return {k: c0 + sum(a * reg[name] for a, name in terms) for k, (c0, terms) in _REGRESSION.items()}
 

@@ -225,8 +225,9 @@ class OutputErrorRefiner:
                  substeps: int = 1, jacobian: str = "fd", log_weights=None,
                  extra_residuals=None, input_hold: str = "foh", estimate_x0=False,
                  hold_unresolved: bool = False, sign_bounds: bool = False, loss: str = "linear",
-                 f_scale: float = 1.0):
+                 f_scale: float = 1.0, progress: bool = False):
         self.model = model
+        self.progress = progress
         self.estimate = estimate
         self.channels = channels
         self.meas_std = meas_std
@@ -427,6 +428,16 @@ class OutputErrorRefiner:
             # a diverging simulation: finite residuals capped at 1e6 (squares must not overflow), others 1e6
             return np.where(np.isfinite(r), np.clip(r, -1e6, 1e6), 1e6)
 
+        if self.progress:  # a bar counting the replays (one per parameter set), on stderr; closed below
+            from tqdm.auto import tqdm
+
+            bar = tqdm(desc="output-error refinement", unit="replay", leave=False)
+            _residual_batch = residual_batch
+
+            def residual_batch(theta_batch):
+                bar.update(theta_batch.shape[0])
+                return _residual_batch(theta_batch)
+
         def extra_batch(theta_batch):
             P = params_of(theta_batch)
             out = np.asarray(self.extra_residuals(P), dtype=float).reshape(P.shape[0], -1)
@@ -583,7 +594,7 @@ class OutputErrorRefiner:
             self.message_ = (f"refinement failed: the refined model's replay of some logs still diverges ({sol.message}); "
                              "the model cannot follow these logs")
         else:
-            self.message_ = str(sol.message)
+            self.message_ = _least_squares_words(sol)
         if start is not None and getattr(start, "success_", True) is False:
             # a start from a diverged filter is not a result, whatever the optimiser says
             self.success_ = False
@@ -598,6 +609,8 @@ class OutputErrorRefiner:
         self.diagnostics_["note"] = ("output-error covariance from J^T J with white-residual weights: "
                                      "optimistic when simulation errors are correlated in time")
         self.logs_ = [a.meta for a in arrays]
+        if self.progress:
+            bar.close()
         return self
 
     def to_model(self) -> Model:
@@ -631,3 +644,13 @@ class OutputErrorRefiner:
                    "rms_normalised_residual": self.rms_normalised_residual_},
             model_options=opts, ship=ship,
         )
+
+
+def _least_squares_words(sol) -> str:
+    """scipy's least_squares status in words (its own message names its options in backquotes)."""
+    return {1: "converged: gradient below the tolerance (gtol)",
+            2: "converged: the cost no longer decreases by more than the tolerance (ftol)",
+            3: "converged: the step is below the tolerance (xtol)",
+            4: "converged: cost change and step below their tolerances (ftol, xtol)",
+            0: f"stopped at the evaluation limit ({sol.nfev} evaluations; raise max_nfev / --max-nfev)"}.get(
+        int(sol.status), f"stopped: {str(sol.message).replace('`', '')}")

@@ -899,5 +899,6 @@ def _smooth_compiled(out):
     c = lambda a: np.ascontiguousarray(a, dtype=float)  # noqa: E731
     cs = lambda a: np.ascontiguousarray(a, dtype=np.float32 if a.dtype == np.float32 else float)  # noqa: E731
     zs, Ps = np.empty(out.z_post.shape), np.empty(out.P_post.shape)
+    _jit.compile_notice(fns["rts_batch"], "the smoother", seconds=10)
     fns["rts_batch"](c(out.z_post), cs(out.P_post), c(out.z_prior), cs(out.P_prior), cs(out.F), zs, Ps)
     return zs, Ps

@@ -151,6 +151,10 @@ class EKFIdentifier(ResultMixin):
         drop_frozen: bool = True,
         progress: bool = False,
     ):
+        if not isinstance(model, Model):
+            hint = f"; build it with shipid.models.get_model({model!r})" if isinstance(model, str) else ""
+            raise TypeError(f"model must be a model object (shipid.models), got {type(model).__name__} "
+                            f"{str(model)[:40]!r}{hint}")
         self.model = model
         self.estimate = estimate
         self.fixed = fixed

@@ -576,6 +576,8 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         seed_drift = LINEAR_DRIFT_DEG if max_drift_deg == "auto" else drift
         seed_logs = [linear_window(lg, seed_drift) for lg in used] if seed_drift is not None else used
         seed_logs = [lg for lg in seed_logs if len(lg) >= MIN_WINDOW_SAMPLES] or used  # none in range: all
+        if log is not None:
+            log(f"recipe: start values: fitting kcs-response to {len(seed_logs)} log(s) first ...")
         seed = EKFIdentifier(seed_model, fixed=seed_fix or None, n_passes=n_passes, progress=progress,
                              meas_std=meas_std, **(ekf_options or {})).fit(seed_logs)
         vals = {k2: float(seed.coef_.get(k2, 0.0)) for k2 in m0.param_names}
@@ -602,6 +604,10 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         step("process noise", {k2: float(f"{v:.4g}") for k2, v in ekf_opts["process_std"].items()},
              f"{name}'s recipe default at Lpp {defaults.process_std[0]:g} m, "
              f"Froude-scaled to {L:g} m" + ("; current states from the environment model" if env else ""))
+    if log is not None:
+        log(f"recipe: running the EKF: {n_passes} pass(es) over {len(used)} log(s), "
+            f"{sum(len(lg) for lg in used)} samples, "
+            f"{len(est) if est is not None else len([q for q in m0.param_names if q not in fix])} coefficients ...")
     ekf = EKFIdentifier(m0, estimate=est, fixed=fix or None, n_passes=n_passes, tune_noise=tune_noise,
                         progress=progress, meas_std=meas_std, **ekf_opts).fit(used)
     step("EKF", ekf.message_, f"{len(ekf.estimated_)} parameters estimated, {n_passes} passes")
@@ -609,6 +615,8 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         # the start transient of a model far from the data gives large innovations; rejecting them (gating)
         # leaves the filter open-loop (the MARIN KVLCC2 mmg fit diverges at t = 38 s with the default gate)
         first = ekf.message_
+        if log is not None:
+            log(f"recipe: the EKF failed with the innovation gate ({first}): running it again without ...")
         ekf = EKFIdentifier(m0, estimate=est, fixed=fix or None, n_passes=n_passes, tune_noise=tune_noise,
                             progress=progress, meas_std=meas_std, **{**ekf_opts, "gate": None}).fit(used)
         step("EKF", ekf.message_, f"refitted without innovation gating: with the default gate the filter failed ({first})")
@@ -635,7 +643,7 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         return fit
     return refine_fit(fit, logs, mode, max_nfev=max_nfev, metric_weight=metric_weight,
                       hold_unresolved=hold_unresolved, sign_bounds=sign_bounds,
-                      physical_damping=physical_damping, log=log)
+                      physical_damping=physical_damping, log=log, progress=progress)
 
 
 def recipe_table(fit: RecipeFit) -> pd.DataFrame:

@@ -103,7 +103,8 @@ def _kinds(logs, L) -> set:
 
 def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: int = 60,
                metric_weight: float | None = None, channels=None, hold_unresolved: bool = True,
-               grid_dt=None, sign_bounds: bool = False, physical_damping: bool = True, log=None) -> RecipeFit:
+               grid_dt=None, sign_bounds: bool = False, physical_damping: bool = True, log=None,
+               progress: bool = False) -> RecipeFit:
     """Step 6 of the recipe on a fitted EKF stage: a new :class:`RecipeFit` with the refinement.
 
     Parameters
@@ -130,7 +131,8 @@ def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: in
         penalty (:func:`~shipid.identify.diagnostics.damping_penalty`; default True).  A fit that keeps its own
         damping negative is not touched.  Unlike ``sign_bounds`` it constrains the damping itself, whatever
         terms make it up (docs/validation.md, session 8)
-    log : callable, optional  called with one line per step
+    log : callable, optional  called with one line per step, and one as each solve starts (they take a while)
+    progress : bool  a bar over the refinement's replays (tqdm, on stderr)
     """
     from .batch import OutputErrorRefiner
     from .diagnostics import DAMPING_MARGIN, damping_check, damping_penalty
@@ -188,8 +190,11 @@ def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: in
         return OutputErrorRefiner(start_model, estimate=est_ref, channels=chans, meas_std=sstd,
                                   log_weights=list(1.0 / np.maximum(nsamp, 1.0)), extra_residuals=extra_res,
                                   max_nfev=max_nfev, hold_unresolved=hold_unresolved,
-                                  sign_bounds=sign_bounds).fit(grid, start=ekf)
+                                  sign_bounds=sign_bounds, progress=progress).fit(grid, start=ekf)
 
+    if log is not None:
+        log(f"recipe: refining {len(est_ref)} coefficients by replaying {len(grid)} log(s) "
+            f"(at most {max_nfev} evaluations; each Jacobian takes {len(est_ref) + 1} replays in one batch) ...")
     ref = refine(extra)
     damp = None
     if physical_damping and {"v", "r"} <= set(start_model.state_names):
@@ -210,6 +215,8 @@ def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: in
             return f"own damping positive at {frac} of the logged states, at rest {rest}"
 
         first = f"unconstrained: {where(damp)}, cost {ref.cost_:.4g}"
+        if log is not None:
+            log(f"recipe: own damping positive ({where(damp)}): refining again with it constrained ...")
         ref = refine(both)
         damp2 = damping_check(start_model.with_params(ref.coef_.to_numpy()), used)
         pen_cost = 0.5 * float(np.sum(pen(ref.coef_.to_numpy()) ** 2))

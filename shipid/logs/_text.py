@@ -19,6 +19,15 @@ _DELIMS = {",": "comma", ";": "semicolon", "\t": "tab", "whitespace": "whitespac
 
 
 def _check_path(p: Path, what: str = "log file") -> None:
+    if not p.exists() and p.is_symlink():
+        import os
+
+        try:
+            target = os.readlink(p)
+        except OSError:
+            target = "?"
+        raise LogError(f"`{p}`: a symbolic link to {target!r}, which is missing or links back in a loop; give the "
+                       f"{what} itself or fix the link", path=p)
     if not p.exists():
         hint = ""
         parent = p.parent if str(p.parent) else Path(".")

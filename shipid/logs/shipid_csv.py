@@ -90,6 +90,15 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
     hdr = [c.strip() for c in split(header_line)]
     if not header:  # no header line: the first data row gives the number of columns
         hdr = [f"col{j + 1}" for j in range(len(hdr))]
+    else:  # look-alike letters (Cyrillic 'р' for 'p', full-width 'ｕ') and invisible characters: read as plain,
+        # and said (shipid.logs.sensors): else they make an extra channel and leave the real one unlogged
+        from .sensors import plain_header
+
+        for j, cell in enumerate(hdr):
+            fixed, chars = plain_header(cell)
+            if chars:
+                meta.setdefault("_lookalike", []).append((j, cell, fixed.strip(), chars))
+                hdr[j] = fixed.strip()
     if not hdr or all(not c for c in hdr):
         raise LogError(f"`{p.name}` row {h + 1}: empty header", path=p, row=h + 1)
     parsed = [_split_header(c) for c in hdr]
@@ -193,6 +202,10 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
     rows_txt: list = []
     keep_rows: list[int] = []
     blank_rows: list[int] = []   # rows of empty cells (bare delimiters), dropped with a note
+    cut = _cut_last_row(text, lines, data_idx, split, ncol) if header and data_idx else None
+    if cut is not None:  # a last row cut short (no line end): dropped, and said (shipid.logs.sensors)
+        meta["_truncated"] = cut
+        data_idx = data_idx[:-1]
     fast = _fast_table(lines, data_idx, delim, ncol)
     if fast is not None:  # all cells numeric or blank, every row complete: pandas' C parser did the work
         table, keep = fast
@@ -292,6 +305,35 @@ def _read_csv(text: str, p: Path, columns: Mapping[str, str], units: Mapping[str
     where.sources = {c: f"column {j + 1} '{hdr[j]}'" for c, j in {**colmap, **extra_at}.items()}
     t, ch, units_in = _convert_units(arrays, units, header_units, where, file_col)
     return t, ch, where, units_in, notes, meta
+
+
+def _cut_last_row(text: str, lines: list, data_idx: list, split, ncol: int) -> dict | None:
+    """``{"row", "why"}`` when the file's last row lacks its line end and is cut short: fewer cells than the
+    header, or a last cell shorter than that column's cell in every one of the 20 rows before it (a number
+    cut mid-way; the columns of one log are printed at a steady width)."""
+    if text.endswith(("\n", "\r")) or len(data_idx) < 2:
+        return None
+    k = data_idx[-1]
+    try:
+        cells = split(lines[k])
+    except Exception:  # noqa: BLE001 - an unparsable last row is reported by the row checks
+        return None
+    if len(cells) < ncol:
+        return {"row": k + 1, "why": f"{len(cells)} of {ncol} cells"}
+    if len(cells) != ncol:
+        return None
+    prev = []
+    for kk in data_idx[-21:-1]:
+        try:
+            c = split(lines[kk])
+        except Exception:  # noqa: BLE001
+            return None
+        if len(c) == ncol:
+            prev.append(len(c[-1].strip()))
+    last = cells[-1].strip()
+    if len(prev) >= 5 and len(last) < min(prev):
+        return {"row": k + 1, "why": f"its last value {last!r} is shorter than that column's others"}
+    return None
 
 
 def _cell_error(p: Path, k: int, line: str, exc: Exception) -> LogError:

@@ -21,6 +21,7 @@ import pandas as pd
 from .._io import atomic_write_text
 from ..results import ResultMixin, axes_column, in_degrees
 from .consistency import check_consistency
+from .sensors import check_sensors
 from .errors import LogError, _fmt_value, _Where
 from .ship import ShipParticulars, _as_ship
 from .units import _UNKNOWN_DIMS, SCHEMA, SHIP_CHANNELS, SI_UNIT, UNITS, _units_for, unit_key
@@ -523,7 +524,7 @@ def _finish(t: np.ndarray, ch: dict[str, np.ndarray], *, where: _Where, name: st
     for c, a in ch.items():
         _check_channel(c, a, where, unit_checks, units_in.get(c))
     if unit_checks and "psi" in ch:
-        _check_heading(t, ch, where)
+        _check_heading(t, ch, where, psi_unit=units_in.get("psi"))
     if unit_checks and ship is not None and "n" in ch and np.isfinite(ch["n"]).any():
         # Froude scaling keeps n sqrt(Lpp) of ships and their models within ~10..100 rps m^0.5
         # (KVLCC2 1.5 rps x sqrt(320 m) = 27; KCS model 10 rps x sqrt(4.36 m) = 21); rpm gives 60x that
@@ -692,8 +693,9 @@ def _psi_r_slope(t: np.ndarray, ch: dict[str, np.ndarray], ok: np.ndarray):
     return slope, se
 
 
-def _check_heading(t: np.ndarray, ch: dict[str, np.ndarray], where: _Where) -> None:
-    """Heuristics for a heading in degrees declared as radians (see docs/logs.md)."""
+def _check_heading(t: np.ndarray, ch: dict[str, np.ndarray], where: _Where, psi_unit: str | None = None) -> None:
+    """Heuristics for a heading in degrees declared as radians (see docs/logs.md), and for one in radians
+    declared as degrees (``psi_unit``: the unit the file declared)."""
     psi = ch["psi"]
     ok = np.flatnonzero(np.isfinite(psi))
     if ok.size < 2:
@@ -731,6 +733,16 @@ def _check_heading(t: np.ndarray, ch: dict[str, np.ndarray], where: _Where) -> N
             raise where.error(f"value {_fmt_value(psi[i])} looks like degrees (heading changes "
                               f"{abs(slope):.1f} x faster than the integral of r; 57.3 = deg/rad); "
                               + hint, "psi", i, value=psi[i])
+        if clear and 1 / 200.0 < abs(slope) < 1 / 20.0 and psi_unit is not None and \
+                unit_key(psi_unit) in ("deg", "degree", "degrees") and \
+                float(np.nanmax(np.abs(np.degrees(psi[ok])))) <= 2 * math.pi + 0.1:
+            # declared degrees, yet the file's numbers never leave +-2 pi: the heading is in radians (r is not
+            # to blame: it agrees with the heading read as radians)
+            i = int(ok[np.nanargmax(np.abs(psi[ok]))])
+            raise where.error(f"value {_fmt_value(math.degrees(psi[i]))} declared in deg looks like radians (the "
+                              f"file's headings stay within +-2 pi and the integral of r changes {1 / abs(slope):.1f} "
+                              "x faster than them read as degrees); declare units={'psi': 'rad'} (CLI: --units "
+                              "psi=rad) or fix the header's unit", "psi", i, value=math.degrees(psi[i]))
         if clear and 1 / 200.0 < abs(slope) < 1 / 20.0:
             i = int(np.nanargmax(np.abs(r)))
             raise where.error(f"value {_fmt_value(r[i])} looks like deg/s (the integral of r changes "
@@ -741,10 +753,15 @@ def _check_heading(t: np.ndarray, ch: dict[str, np.ndarray], where: _Where) -> N
                           f"(d psi/dt = {slope:.2f} r); check the sign conventions", stacklevel=4)
 
 
-def _run_consistency(log: TrialLog, opt_out: str = "or --no-consistency-checks") -> None:
-    """Check the channels; errors raise LogError (all named, first in full, then ``opt_out``: how to
-    skip the checks), warnings warn."""
+def _run_consistency(log: TrialLog, opt_out: str = "or --no-consistency-checks", *,
+                     reader_notes: dict | None = None) -> None:
+    """Check the channels and the sensors (:mod:`shipid.logs.sensors`, with what the reader found in
+    ``reader_notes``); errors raise LogError (all named, first in full, then ``opt_out``: how to skip the
+    checks), warnings warn."""
     res = check_consistency(log)
+    res.findings.extend(check_sensors(log, reader_notes=reader_notes))  # sensor faults, in the same structure
+    order = {"error": 0, "warning": 1, "info": 2}
+    res.findings.sort(key=lambda f: order.get(f.level, 3))
     log.consistency = res
     for f in res.warnings:
         warnings.warn(f.message, stacklevel=3)

@@ -35,7 +35,7 @@ def _figure(width: float, height: float) -> Figure:
 def _margins(fig: Figure) -> None:
     """Fixed margins in inches (one draw per figure; ``bbox_inches='tight'`` would draw twice)."""
     w, h = fig.get_size_inches()
-    fig.subplots_adjust(left=1.0 / w, right=1 - 0.2 / w, bottom=0.6 / h, top=1 - 0.4 / h, hspace=0.15)
+    fig.subplots_adjust(left=1.0 / w, right=1 - 0.2 / w, bottom=0.6 / h, top=1 - 0.5 / h, hspace=0.15)
 
 
 def to_data_uri(fig: Figure) -> str:
@@ -50,7 +50,7 @@ def correlation_figure(names: list[str], matrix) -> Figure:
     C = np.asarray(matrix, dtype=float)
     n = len(names)
     size = max(4.0, 0.5 * n + 1.8)
-    fig = _figure(size + 1.6, size)  # room on the right for the colour bar, its tick labels and its label
+    fig = _figure(size + 1.9, size)  # room on the right for the colour bar, its tick labels and its label
     ax = fig.add_subplot()
     im = ax.imshow(C, cmap="RdBu_r", vmin=-1, vmax=1)
     ax.set_xticks(range(n), names, rotation=90, fontsize=11)
@@ -65,37 +65,61 @@ def correlation_figure(names: list[str], matrix) -> Figure:
     cb.ax.tick_params(labelsize=10)
     ax.set_title("posterior correlation of the estimated coefficients", fontsize=12)
     w, h = fig.get_size_inches()
-    fig.subplots_adjust(left=1.0 / w, right=1 - 1.3 / w, bottom=1.0 / h, top=1 - 0.5 / h)
+    fig.subplots_adjust(left=1.0 / w, right=1 - 1.6 / w, bottom=1.0 / h, top=1 - 0.5 / h)
     return fig
 
 
+#: Inputs plotted under the time series when they vary during the log: (name, label, factor to the plotted unit).
+VARYING_INPUTS = (("n", "n [rpm]", 60.0), ("wind_speed_true", "true wind [m/s]", 1.0),
+                  ("wind_speed_rel", "apparent wind [m/s]", 1.0), ("wind_dir_true", "true wind from [deg]", 180 / math.pi))
+
+
+def _varies(values: np.ndarray) -> bool:
+    """A channel worth a plot: it changes by more than 2 % of its largest magnitude (or changes sign)."""
+    v = values[np.isfinite(values)]
+    if v.size < 2:
+        return False
+    big = float(np.max(np.abs(v)))
+    return big > 0 and (float(np.ptp(v)) > 0.02 * big or (v.min() < 0 < v.max()))
+
+
+def _legend_above(ax, **kw) -> None:
+    """The legend in a row above the axes, right-aligned, where it cannot cover data."""
+    ax.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0), ncol=4, frameon=False, borderaxespad=0.2, **kw)
+
+
 def time_series_figure(log_frame: pd.DataFrame, sim_frame: pd.DataFrame, title: str) -> Figure:
-    """Measured (dots) vs replayed (line) u, v, r, psi and delta against time."""
+    """Measured (dots) vs replayed (line) u, v, r, psi and delta against time, and below them the propeller
+    rate and the wind where they vary during the log (e.g. berthing runs that go astern)."""
     chans = [c for c in TIME_SERIES_CHANNELS if c[0] in log_frame.columns or c[0] in sim_frame.columns]
-    fig = _figure(8.5, 1.45 * len(chans) + 0.6)
+    chans += [c for c in VARYING_INPUTS if c[0] in log_frame.columns and _varies(log_frame[c[0]].to_numpy(float))]
+    wrap = {"wind_dir_true"}  # directions in (-180, 180] deg: a wind from about north does not jump 0 <-> 360
+    fig = _figure(8.5, 1.45 * len(chans) + 0.8)
     axs = fig.subplots(len(chans), 1, sharex=True, squeeze=False)[:, 0]
     t_log = log_frame["time"].to_numpy(float)
     t_sim = sim_frame["time"].to_numpy(float)
     for ax, (ch, label, f) in zip(axs, chans):
         if ch in log_frame.columns:
-            ax.plot(t_log, f * log_frame[ch].to_numpy(float), ".", ms=1.5, color="0.35", label="measured")
-        if ch in sim_frame.columns and ch != "delta":
+            y = f * log_frame[ch].to_numpy(float)
+            if ch in wrap:
+                y = 180.0 - np.mod(180.0 - y, 360.0)
+            ax.plot(t_log, y, ".", ms=1.5, color="0.35", label="measured")
+        if ch in sim_frame.columns and ch not in ("delta", "n") and not ch.startswith("wind"):
             ax.plot(t_sim, f * sim_frame[ch].to_numpy(float), "-", lw=1.2, color="C3", label="replay (model)")
         ax.set_ylabel(label, fontsize=11)
         ax.tick_params(labelsize=10)
         ax.grid(alpha=0.3)
-    axs[0].legend(fontsize=10, loc="best", markerscale=4)
-    axs[0].set_title(title, fontsize=12)
+    _legend_above(axs[0], fontsize=10, markerscale=4)
+    axs[0].set_title(title, fontsize=12, loc="left")
     axs[-1].set_xlabel("time [s]", fontsize=11)
     _margins(fig)
     return fig
 
 
-def track_figure(log_frame: pd.DataFrame, sim_frame: pd.DataFrame, title: str, lpp: float | None = None) -> Figure:
-    """Measured vs replayed track (north x up, east y right), in ship lengths when ``lpp`` is known."""
-    s = 1.0 / lpp if lpp else 1.0
-    unit = "L" if lpp else "m"
-    fig = _figure(5.0, 5.0)
+def track_figure(log_frame: pd.DataFrame, sim_frame: pd.DataFrame, title: str) -> Figure:
+    """Measured vs replayed track (north x up, east y right) in metres, as every track of the report."""
+    s, unit = 1.0, "m"
+    fig = _figure(5.0, 5.6)
     ax = fig.add_subplot()
     if {"x", "y"} <= set(log_frame.columns):
         ax.plot(s * log_frame["y"].to_numpy(float), s * log_frame["x"].to_numpy(float), ".", ms=1.5, color="0.35",
@@ -109,9 +133,9 @@ def track_figure(log_frame: pd.DataFrame, sim_frame: pd.DataFrame, title: str, l
     ax.set_ylabel(f"x (north) [{unit}]", fontsize=11)
     ax.tick_params(labelsize=10)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=10, markerscale=3)
+    ax.legend(fontsize=10, markerscale=3, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=3, frameon=False)
     ax.set_title(title, fontsize=12)
-    fig.subplots_adjust(left=0.18, right=0.97, bottom=0.13, top=0.92)
+    fig.subplots_adjust(left=0.18, right=0.97, bottom=0.2, top=0.93)
     return fig
 
 
@@ -158,8 +182,8 @@ def innovation_figure(innov: pd.DataFrame, title: str) -> Figure:
         ax.set_ylabel(f"{ch} [{unit}]", fontsize=11)
         ax.tick_params(labelsize=10)
         ax.grid(alpha=0.3)
-    axs[0].legend(fontsize=10, loc="upper right")
-    axs[0].set_title(title, fontsize=12)
+    _legend_above(axs[0], fontsize=10)
+    axs[0].set_title(title, fontsize=12, loc="left")
     axs[-1].set_xlabel("time [s]", fontsize=11)
     _margins(fig)
     return fig

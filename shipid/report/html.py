@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import sys
 from datetime import datetime, timezone
 from pathlib import Path
@@ -65,9 +66,41 @@ def _versions_now() -> dict:
 
 
 # ----------------------------------------------------------------------------- sections
+_ROLE = re.compile(r":[a-z]+:`~?([^`]+)`")
+
+
+def plain(text: str) -> str:
+    """``text`` without reStructuredText markup: roles (``:func:`x```) and literals (````x````) as plain words."""
+    text = _ROLE.sub(lambda m: m.group(1).rsplit(".", 1)[-1], str(text))
+    return text.replace("``", "").replace("**", "")
+
+
+def _options_text(opts) -> str:
+    """Model options as ``key: value; ...`` (nested mappings in brackets), not a Python repr."""
+    def one(v):
+        if isinstance(v, dict):
+            return "(" + ", ".join(f"{k} {one(x)}" for k, x in v.items()) + ")"
+        if isinstance(v, (list, tuple)):
+            return ", ".join(one(x) for x in v)
+        if isinstance(v, float):
+            return f"{v:.6g}"
+        return "none" if v is None else str(v)
+    return "; ".join(f"{k}: {one(v)}" for k, v in dict(opts).items())
+
+
+def model_label(result, model) -> str:
+    """The model in words: its registered name, or a ship model with wind and/or current named after its base."""
+    base = getattr(model, "base", None)
+    if base is None:
+        return str(result.model)
+    parts = [w for w, on in (("wind", getattr(model, "wind", None) is not None),
+                             ("current", bool(getattr(model, "current", None)))) if on]
+    return f"{base.name} with {' and '.join(parts)}" if parts else str(base.name)
+
+
 def _section_model(result, model) -> str:
-    mod = sys.modules.get(type(model).__module__)
-    doc = (mod.__doc__ or "").strip().splitlines()[0] if mod is not None and mod.__doc__ else ""
+    mod = sys.modules.get(type(getattr(model, "base", None) or model).__module__)
+    doc = plain((mod.__doc__ or "").strip().splitlines()[0]) if mod is not None and mod.__doc__ else ""
     s = result.settings or {}
     rows = [("registered model", _e(result.model)), ("description", _e(doc)),
             ("states", _e(", ".join(model.state_names))), ("inputs", _e(", ".join(model.input_names))),
@@ -80,8 +113,9 @@ def _section_model(result, model) -> str:
             rows.append((label, _e(s[key])))
     opts = result.model_options
     if opts:
-        rows.append(("model options", _e(opts)))
-    out = "<h2 id=\"model\">Model and method</h2>" + _table(["item", "value"], rows, left=2)
+        rows.append(("model options", _e(_options_text(opts))))
+    out = ("<h2 id=\"model\">Model and method</h2><p>Which equations were fitted, how, and the settings that "
+           "reproduce the fit.</p>" + _table(["item", "value"], rows, left=2))
     for key, label in (("meas_std", "measurement noise std (SI units)"), ("process_std", "process noise std (SI units)")):
         d = s.get(key)
         if d:
@@ -89,31 +123,44 @@ def _section_model(result, model) -> str:
     return out
 
 
-def _section_coefficients(result) -> str:
+def _unit(model, name: str) -> str:
+    """The unit of coefficient ``name`` of ``model`` (``model.units``): "&ndash;" for non-dimensional ones."""
+    u = (getattr(model, "units", None) or {}).get(name)
+    if u is None:
+        return "?"
+    return "&ndash;" if u in ("-", "1", "") else _e(u.replace("^2", "²").replace("^3", "³"))
+
+
+def _section_coefficients(result, model=None) -> str:
     tab = result.summary()
     est = list(tab.index)
     rows = []
     for name, r in tab.iterrows():
-        rows.append((_e(name), _f(r["value"], "{:.5g}"), _f(r["std"], "{:.3g}"), _f(r["ci95_low"], "{:.5g}"),
-                     _f(r["ci95_high"], "{:.5g}"), _f(r["rel_std_%"], "{:.1f}")))
-    out = "<h2 id=\"coefficients\">Identified coefficients</h2>"
+        rows.append((_e(name), _unit(model, name), _f(r["value"], "{:.5g}"), _f(r["std"], "{:.3g}"),
+                     _f(r["ci95_low"], "{:.5g}"), _f(r["ci95_high"], "{:.5g}"), _f(r["rel_std_%"], "{:.1f}")))
+    out = ("<h2 id=\"coefficients\">Identified coefficients</h2><p>The estimated coefficients with their "
+           "uncertainty; the unit column gives each one's SI unit (&ndash;: non-dimensional).</p>")
     fixed = {k: v for k, v in result.coef.items() if k not in est}
     if not est:
         return out + ("<p>No coefficient was estimated (the result carries no covariance, e.g. a published "
                       "parameter set): values used:</p>" +
-                      _table(["coefficient", "value"], [(_e(k), _f(v, "{:.5g}")) for k, v in fixed.items()]))
+                      _table(["coefficient", "unit", "value"],
+                             [(_e(k), _unit(model, k), _f(v, "{:.5g}")) for k, v in fixed.items()], left=2))
     out += ("<p class=\"note\">95 % confidence interval = value &plusmn; 1.96 &sigma; (Gaussian approximation of the "
             "posterior); relative &sigma; = &sigma; / |value|.</p>")
-    out += _table(["coefficient", "value", "&sigma;", "95 % CI low", "95 % CI high", "relative &sigma; [%]"], rows)
+    out += _table(["coefficient", "unit", "value", "&sigma;", "95 % CI low", "95 % CI high", "relative &sigma; [%]"],
+                  rows, left=2)
     if fixed:
-        out += ("<p class=\"note\">Held fixed (not estimated): " +
-                ", ".join(f"{_e(k)} = {_f(v, '{:.5g}')}" for k, v in fixed.items()) + "</p>")
+        out += ("<p class=\"note\">Held fixed (not estimated; units as above, &ndash; non-dimensional): " +
+                ", ".join(f"{_e(k)} = {_f(v, '{:.5g}')}" + ("" if _unit(model, k) in ("&ndash;", "?") else
+                                                             f" {_unit(model, k)}") for k, v in fixed.items()) + "</p>")
     return out
 
 
 def _section_identifiability(result) -> str:
     d = result.diagnostics or {}
-    out = "<h2 id=\"identifiability\">Identifiability</h2>"
+    out = ("<h2 id=\"identifiability\">Identifiability</h2><p>Whether the logs determine each coefficient on its "
+           "own, or only in combination with others.</p>")
     if not d:
         return out + "<p class=\"note\">The result carries no identifiability diagnostics.</p>"
     out += f"<p>Condition number of the scaled posterior covariance: <b>{_f(d.get('condition_number'), '{:.3g}')}</b>"
@@ -163,6 +210,14 @@ def _section_summary(vals: list[LogValidation]) -> str:
            "speed; propeller rps held at the value that gives that speed; zigzag rudder reversed by the "
            "model's heading): the free-running prediction. For a log whose propeller rate changes during "
            "the run only the replay is comparable.</p>")
+    psi = [v.to_dict()["rmse"].get("psi") for v in vals]
+    psi = [x * 180 / math.pi for x in psi if x is not None and math.isfinite(x)]
+    if psi and max(psi) > 20.0:
+        out += ("<p class=\"note\">The heading RMSE is over the whole replay, which runs open loop for the whole log: "
+                "a small yaw-rate error integrates into a heading error that grows with time and never returns "
+                f"(here up to {max(psi):.0f}&deg;), so on long runs it measures that drift more than the model's "
+                "turning.  The yaw rate r and, where shown, the open-loop predictions over fixed horizons "
+                "judge the turning better.</p>")
     rows = [_summary_row(v, i) for i, v in enumerate(vals)]
     out += _table(["log", "manoeuvre", "RMSE u [m/s]", "RMSE v [m/s]", "RMSE r [deg/s]", "RMSE &psi; [deg]",
                    "track RMSE [m]", "track RMSE [L]"], rows, left=2)
@@ -224,7 +279,8 @@ def _section_imo(vals: list[LogValidation]) -> str:
     for v in vals:
         na = ("n/a", "na")
         if v.measured is None:
-            rows.append([_e(v.log.name), "&ndash;", "&ndash;", "&ndash;", na, "&ndash;", na, "&ndash;", na])
+            rows.append([_e(v.log.name), "not a standard manoeuvre: no criterion applies", "", "", na, "", na, "",
+                         na])
             continue
         mi = v.measured.imo()
         pd_ = v.predicted.to_dict() if v.predicted is not None else {}
@@ -275,7 +331,7 @@ def _section_log(v: LogValidation, i: int, identifier) -> str:
         sf["delta"] = -sf["delta"]
     out += _fig(figures.time_series_figure(lf, sf, f"{log.name}: measured vs replay"), f"time series {log.name}")
     out += "<div class=\"figs\">"
-    out += _fig(figures.track_figure(lf, sf, f"{log.name}: track", v.lpp), f"track {log.name}")
+    out += _fig(figures.track_figure(lf, sf, f"{log.name}: track"), f"track {log.name}")
     out += "</div>"
     out += _fig(figures.residual_figure(lf, sf, f"{log.name}: replay residual (measured - replay)"),
                 f"residuals {log.name}")
@@ -292,7 +348,8 @@ def _section_log(v: LogValidation, i: int, identifier) -> str:
 
 
 def _section_inputs(result, vals: list[LogValidation]) -> str:
-    out = "<h2 id=\"inputs\">Input files</h2><h3>Logs the model was fitted to</h3>"
+    out = ("<h2 id=\"inputs\">Input files</h2><p>The files behind this report, with checksums to show they are the "
+           "ones named.</p><h3>Logs the model was fitted to</h3>")
     rows = [(_e(m.get("name")), f"<span class=\"mono\">{_e(m.get('path'))}</span>",
              f"<span class=\"mono\">{_e(m.get('sha256'))}</span>") for m in (result.inputs or [])]
     out += _table(["log", "path", "sha256"], rows, left=3) if rows else "<p class=\"note\">not recorded</p>"
@@ -312,7 +369,7 @@ def _section_versions(result) -> str:
     now = _versions_now()
     keys = list(dict.fromkeys(list(fit) + list(now)))
     rows = [(_e(k), _e(fit.get(k, "–")), _e(now.get(k, "–"))) for k in keys]
-    return ("<h2 id=\"versions\">Software</h2>" +
+    return ("<h2 id=\"versions\">Software</h2><p>The versions that made the fit and this report.</p>" +
             _table(["package", "at the fit", "at this report"], rows, left=3))
 
 
@@ -360,23 +417,129 @@ def _section_horizon(horizons) -> str:
     predicted-vs-measured track overlays; ``horizons`` is a list of ``(HorizonResult, log)``."""
     if not horizons:
         return ""
-    import matplotlib.pyplot as plt
-
     rows, figs = [], []
     for h, log in horizons:
         for e in h.to_records():
             rows.append([_e(h.name), _f(e["seconds"], "{:g}"), _f(e["position_error_median_m"], "{:.3f}"),
                          _f(e["position_error_p90_m"], "{:.3f}"), _f(e["heading_error_median_deg"], "{:.2f}"),
                          _f(e["n_starts"], "{:.0f}"), (_f(e["n_blowups"], "{:.0f}"), "bad" if e["n_blowups"] else "")])
-        ax = h.plot(log=log, every=max(1, len(h.start_times) // 12))
-        ax.set_title(f"{h.name}: predictions over {h.horizons.max():g} s")
-        figs.append(_fig(ax.figure, f"predicted vs measured tracks, {h.name}"))
-        plt.close(ax.figure)
-    return ('<h2 id="horizon">Open-loop prediction from the measured state</h2><p>From starts every few seconds '
-            "the model runs open loop with the measured inputs; errors at each horizon (blow-ups count with "
-            "infinite error).</p>" + _table(["log", "horizon [s]", "median position error [m]", "p90 [m]",
-                                               "median heading error [deg]", "starts", "blow-ups"], rows)
-            + "".join(figs))
+        fig = figures._figure(4.6, 5.0)
+        ax = h.plot(ax=fig.add_subplot(), log=log, every=max(1, len(h.start_times) // 12))
+        ax.set_title(f"{h.name}\npredictions over {h.horizons.max():g} s", fontsize=10)
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=2, frameon=False)  # off the tracks
+        fig.subplots_adjust(left=0.17, right=0.97, bottom=0.2, top=0.9)
+        figs.append(_fig(fig, f"predicted vs measured tracks, {h.name}"))
+    return ('<h2 id="horizon">Open-loop prediction from the measured state</h2><p>How far ahead the model can be '
+            "trusted: from starts every few seconds it runs open loop with the measured inputs, and the table gives "
+            "its position and heading errors at each horizon (blow-ups count with infinite error).</p>"
+            + _table(["log", "horizon [s]", "median position error [m]", "p90 [m]", "median heading error [deg]",
+                      "starts", "blow-ups"], rows)
+            + '<div class="figs">' + "".join(figs) + "</div>")
+
+
+def _ship_name(validations) -> str | None:
+    for v in validations:
+        name = getattr(getattr(v.log, "ship", None), "name", None)
+        if name:
+            return str(name)
+    return None
+
+
+def _data_set(validations) -> str:
+    """The logs' folder (their common parent's name), or their names when they have no files."""
+    paths = [getattr(v.log, "path", None) for v in validations]
+    if paths and all(paths):
+        parents = {Path(p).resolve().parent for p in paths}
+        common = Path(os.path.commonpath([str(q) for q in parents]))
+        return f"{len(paths)} log(s) from {common.name or common}"
+    return f"{len(validations)} log(s)"
+
+
+def default_title(result, model, validations) -> str:
+    """"SHIP — MODEL model on N log(s) from FOLDER" (the ship from the logs' particulars, else its length)."""
+    ship = _ship_name(validations)
+    if ship is None:
+        L = next((v.lpp for v in validations if v.lpp), None) or getattr(model, "lpp", None)
+        ship = f"ship of Lpp {L:.4g} m" if L else "ship"
+    return f"{ship} — {model_label(result, model)} model on {_data_set(validations)}"
+
+
+def _section_verdict(result) -> str:
+    """The fit's graded verdict (``result.verdict``: grade, reasons) right under the title, when it has one."""
+    verdict = getattr(result, "verdict", None)
+    if verdict is None or not getattr(verdict, "grade", None):
+        return ""
+    reasons = "".join(f"<li>{_e(r)}</li>" for r in (getattr(verdict, "reasons", None) or []))
+    return (f"<div class=\"warn\"><b>Verdict: {_e(verdict.grade.replace('_', ' '))}</b>"
+            + (f"<ul>{reasons}</ul>" if reasons else "") + "</div>")
+
+
+def _median(xs):
+    xs = sorted(x for x in xs if x is not None and math.isfinite(x))
+    if not xs:
+        return None
+    n = len(xs)
+    return xs[n // 2] if n % 2 else 0.5 * (xs[n // 2 - 1] + xs[n // 2])
+
+
+def plain_summary(result, model, validations, horizons=None) -> str:
+    """One paragraph in plain words: what was fitted, on what, the verdict, how well it predicts."""
+    n_fit = len(result.inputs or [])
+    names = [m.get("name") for m in (result.inputs or []) if m.get("name")]
+    k = len(list(result.cov.index)) if getattr(result, "cov", None) is not None else 0
+    n_par = len(result.coef or {})
+    m = str(result.method)
+    method = ("an extended Kalman filter" if m == "ekf" else
+              f"an extended Kalman filter, then refined by {m} fitting of the replays" if m == "output-error" else
+              f"the {m} method")
+    fitted = (f"fitted by {method} to {n_fit} log(s) ({', '.join(names[:6])}{', ...' if len(names) > 6 else ''})"
+              if n_fit else "with no fitted logs recorded")
+    out = [f"This report checks a {model_label(result, model)} model {fitted}, estimating {k} of its {n_par} "
+           "coefficients."]
+    verdict = getattr(result, "verdict", None)
+    cons = (result.diagnostics or {}).get("consistency") or {}
+    if verdict is not None and getattr(verdict, "grade", None):
+        out.append(f"Its verdict is {verdict.grade.replace('_', ' ')} (box above).")
+    elif cons:
+        out.append("The filter's innovations are consistent with its noise model." if cons.get("consistent", True)
+                   else "The filter's innovations are not consistent with its noise model, so the stated "
+                        "uncertainties are likely too small (Identifiability section).")
+    if not result.success:
+        out.append(f"The fit did not succeed: {result.message}.")
+    fitted_sha = {m.get("sha256") for m in (result.inputs or []) if m.get("sha256")}
+    held = [v for v in validations if getattr(v.log, "sha256", None) and fitted_sha
+            and v.log.sha256 not in fitted_sha]
+    track = _median([v.to_dict()["track_rmse_m"] for v in validations])
+    Ls = [v.lpp for v in validations if v.lpp]
+    if track is not None:
+        rel = f" ({track / Ls[0]:.2f} ship lengths)" if Ls else ""
+        out.append(f"Replayed open loop with each log's own rudder and propeller inputs, it follows the "
+                   f"{len(validations)} log(s) ({len(held)} not used in the fit) with a median track error of "
+                   f"{track:.3g} m{rel}.")
+    td = [abs(v.difference("standard").get("tactical_diameter_L") or math.nan) / v.measured.to_dict()
+          ["tactical_diameter_L"] * 100 for v in validations if v.manoeuvre == "turning" and v.standard is not None
+          and v.measured.to_dict().get("tactical_diameter_L")]
+    os1 = [abs(v.difference("standard").get("overshoot1_deg") or math.nan) for v in validations
+           if v.manoeuvre == "zigzag" and v.standard is not None]
+    parts = []
+    if _median(td) is not None:
+        parts.append(f"tactical diameter within {max(x for x in td if math.isfinite(x)):.1f} %")
+    if _median(os1) is not None:
+        parts.append(f"first overshoot within {max(x for x in os1 if math.isfinite(x)):.1f}&deg;".replace("&deg;", "°"))
+    if parts:
+        out.append("Sailing its own standard manoeuvres (closed loop), it predicts the measured " + " and ".join(parts)
+                   + ".")
+    by_h: dict = {}
+    for h, _log in horizons or []:
+        for e in h.to_records():
+            by_h.setdefault(float(e["seconds"]), []).append(e.get("position_error_median_m"))
+    if by_h:
+        sec = 30.0 if 30.0 in by_h else sorted(by_h)[len(by_h) // 2]
+        med = _median(by_h[sec])
+        if med is not None:
+            out.append(f"Predicting {sec:g} s ahead from measured states, its position error is {med:.2f} m "
+                       f"(median over {len(by_h[sec])} log(s)).")
+    return " ".join(out)
 
 
 def render_report(result, logs, *, identifier=None, title: str | None = None, lpp: float | None = None,
@@ -409,7 +572,7 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
         from .uncertainty import uncertainty_section
 
         extra.append(uncertainty_section(res, validations, **uncertainty))
-    title = title or f"Validation report: {res.model} model"
+    title = title or default_title(res, model, validations)
     stamp = datetime.now(timezone.utc).isoformat(timespec="seconds")
     n_ok = sum(v.success for v in validations)
     nav = " ".join(f'<a href="#{a}">{t}</a>' for a, t in (
@@ -417,7 +580,9 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
         ("identifiability", "Identifiability"), ("model", "Model"), ("logs", "Logs"), ("inputs", "Inputs"),
         ("versions", "Software")))
     body = [f"<h1>{_e(title)}</h1>",
-            f"<p>Model <b>{_e(res.model)}</b> ({_e(res.method)}; "
+            _section_verdict(res),
+            f"<p class=\"intro\">{_e(plain_summary(res, model, validations, horizons))}</p>",
+            f"<p class=\"note\">Model <b>{_e(model_label(res, model))}</b> ({_e(res.method)}; "
             f"{'fitted to ' + str(len(res.inputs)) + ' log(s)' if res.inputs else 'no fitted logs recorded'}), "
             f"validated on {len(validations)} log(s) "
             f"({n_ok} replayed with both metric sets). Report written {_e(stamp)} by shipid "
@@ -426,9 +591,10 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
             f"<nav>{nav}</nav>",
             _section_summary(validations), _section_horizon(horizons), _section_imo(validations),
             _section_crossval(res), *extra,
-            _section_coefficients(res),
+            _section_coefficients(res, model),
             _section_identifiability(res), _section_model(res, model),
-            "<h2 id=\"logs\">Measured vs simulated, per log</h2>",
+            "<h2 id=\"logs\">Measured vs simulated, per log</h2><p>For each log: the measured channels against the "
+            "replay, the track, the replay's residuals and, for the fitted logs, the filter's innovations.</p>",
             *[_section_log(v, i, identifier) for i, v in enumerate(validations)],
             _section_inputs(res, validations), _section_versions(res)]
     return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"

@@ -33,8 +33,9 @@ def band_figure(log_frame, sim, title: str, lpp=None, n_tracks: int = 60):
         ax.tick_params(labelsize=6)
         ax.grid(alpha=0.3)
         if k == 0:
-            ax.legend(fontsize=6, loc="best", markerscale=4)
-            ax.set_title(title, fontsize=8)
+            ax.legend(fontsize=6, loc="lower right", bbox_to_anchor=(1.0, 1.0), ncol=3, frameon=False,
+                      markerscale=4, borderaxespad=0.2)
+            ax.set_title(title, fontsize=8, loc="left")
     ax.set_xlabel("time [s]", fontsize=7)
     ax = fig.add_subplot(gs[:, 1])
     s = 1.0 / lpp if lpp else 1.0
@@ -50,7 +51,7 @@ def band_figure(log_frame, sim, title: str, lpp=None, n_tracks: int = 60):
     ax.tick_params(labelsize=6)
     ax.grid(alpha=0.3)
     ax.set_title(f"tracks of {min(sim.x.shape[0] - 1, n_tracks)} draws", fontsize=8)
-    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.11, top=0.93, hspace=0.15, wspace=0.2)
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.11, top=0.9, hspace=0.15, wspace=0.2)
     return fig
 
 
@@ -117,7 +118,7 @@ def uncertainty_section(res, validations, *, draws: int, seed: int = 0, samples=
         if blk["draws"]["n_failed"]:
             parts.append(f"<p class=\"warn\">{_e(name)}: {blk['draws']['n_failed']} draws did not finish: "
                          f"{_e(blk['draws']['messages'])}</p>")
-        figs.append(_fig(band_figure(v.log.data, blk["simulation"], f"{name}: replays of {draws} draws", v.lpp),
+        figs.append(_fig(band_figure(v.log.data, blk["simulation"], f"{name}: replays of {draws} draws"),
                          f"uncertainty bands {name}"))
     if rows:
         parts.append(_table(["log", "metric", "measured", "predicted", "95 % interval", "measured inside"], rows, left=2))

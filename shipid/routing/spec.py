@@ -161,7 +161,7 @@ def load_problem_spec(path) -> tuple[dict, Path]:
     """Read and minimally validate a problem JSON; returns ``(spec, folder)``."""
     path = Path(path)
     if not path.exists():
-        raise ValueError(f"{path}: no such problem file; use zermelo-paper, pso-paper or a JSON problem")
+        raise ValueError(f"{path}: no such problem file; use paper-zermelo, paper-pso or a JSON problem")
     spec = read_json(path, "routing problem file", advice="see shipid/routing/spec.py for the format")
     if not isinstance(spec, dict) or spec.get("type") not in ("zermelo", "pso"):
         raise ValueError(f"{path}: top-level 'type' must be 'zermelo' or 'pso'")

@@ -95,6 +95,24 @@ def parse_manoeuvre(spec) -> ManoeuvreSpec:
 
 
 # ----------------------------------------------------------------------------- draws
+#: Bytes one parameter draw costs per simulated sample and state: the batched RK4 keeps about four state
+#: arrays alive (stages) and the trajectory; one more for the metrics' frames.
+_DRAW_BYTES_PER_SAMPLE_STATE = 8 * 6
+#: A standard manoeuvre's length in samples for the estimate before it is simulated (a 35 deg turning circle
+#: or a 20/20 zigzag of the KCS model at dt = 0.1 s: 1000-3000).
+MANOEUVRE_SAMPLES = 3000
+
+
+def check_draws_memory(draws: int, samples: int = MANOEUVRE_SAMPLES, states: int = 8, what: str = "draws") -> None:
+    """Refuse ``draws`` whose batched simulations of ``samples`` samples need more memory than
+    :func:`shipid._io.memory_limit_bytes` (one line with the estimate, the limit and the option)."""
+    from .._io import check_memory
+
+    shown = f"{draws}" if draws < 10**12 else f"{draws:.3g}"
+    check_memory(float(draws) * max(samples, 1) * max(states, 1) * _DRAW_BYTES_PER_SAMPLE_STATE,
+                 f"{what}={shown} ({max(samples, 1)} samples each)", "use fewer draws (--draws, or 'draws' in a campaign)")
+
+
 def parameter_draws(result, draws: int, *, seed=None, samples=None, inflation: float = 1.0) -> np.ndarray:
     """``draws`` full parameter vectors (N, np) of the result's model.
 
@@ -118,6 +136,7 @@ def parameter_draws(result, draws: int, *, seed=None, samples=None, inflation: f
     n = int(draws)
     if n < 1:
         raise ValueError(f"draws must be a positive integer, got {draws!r}")
+    check_draws_memory(n, 1, 1)
     if not (inflation > 0 and math.isfinite(inflation)):
         raise ValueError(f"inflation must be a positive factor, got {inflation!r}")
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
@@ -466,6 +485,7 @@ def replay_draws(model, log, params: np.ndarray, *, lpp: float, kind: str, switc
     if rudder_sign == -1 and "delta" in data.columns:
         data = data.assign(delta=-data["delta"])
     P = np.asarray(params, dtype=float)
+    check_draws_memory(P.shape[0], len(data), model.nx + model.nu)
     if with_nominal:
         P = np.vstack([model.params[None], P])
     with warnings.catch_warnings():

@@ -376,27 +376,49 @@ def load_samples(obj) -> PosteriorSamples:
     if isinstance(obj, dict):
         return PosteriorSamples.from_dict(obj)
     if isinstance(obj, (str, os.PathLike)):
+        from .._io import read_json
+
         p = Path(obj)
-        if not p.is_file():
+        if not p.exists():
             raise FileNotFoundError(f"{p}: no such samples file; write it with `shipid sample`")
-        try:
-            doc = json.loads(p.read_text(encoding="utf-8"))
-        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise ValueError(f"{p}: not a JSON samples file ({exc})") from None
+        doc = read_json(p, "JSON samples file", advice="pass the file written by `shipid sample -o`")
         if not isinstance(doc, dict):
             raise ValueError(f"{p}: not a shipid samples file (top level is not an object)")
         return PosteriorSamples.from_dict(doc, source=str(p))
     raise ValueError(f"samples: expected PosteriorSamples, a dict or a JSON path, got {type(obj).__name__}")
 
 
-def chain_diagnostics(chain: np.ndarray, acceptance: np.ndarray, names, n_total_steps: int) -> dict:
-    """Diagnostics of an ensemble chain ``(n_steps, n_walkers, n_params)`` and the convergence verdict."""
+def _tau(chain: np.ndarray) -> np.ndarray:
+    """emcee's integrated autocorrelation time per parameter of ``chain (n_steps, n_walkers, n_params)``, without
+    its multi-line "chain is shorter than 50 tau" log record (the length check of :func:`chain_diagnostics`
+    says that in one line)."""
+    import logging
+
     from emcee.autocorr import integrated_time
 
+    log = logging.getLogger("emcee.autocorr")
+    level = log.level
+    log.setLevel(logging.ERROR)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return np.asarray(integrated_time(chain, quiet=True), dtype=float)
+    finally:
+        log.setLevel(level)
+
+
+#: Early stop of :func:`sample_posterior`: the kept chain is checked every ``check_every`` steps (default
+#: ``max(50, steps // 10)``); once the estimated autocorrelation time says the chain would need more than
+#: ``EARLY_STOP_FACTOR`` times the steps asked for to reach 50 tau (after at least a third of them), sampling
+#: stops and the message says how many steps it would take.  The tau estimated from a short chain is biased
+#: low (Sokal 1997; emcee's documentation), so that number is a lower bound.
+EARLY_STOP_FACTOR = 2.0
+
+
+def chain_diagnostics(chain: np.ndarray, acceptance: np.ndarray, names, n_total_steps: int) -> dict:
+    """Diagnostics of an ensemble chain ``(n_steps, n_walkers, n_params)`` and the convergence verdict."""
     n, w, k = chain.shape
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        tau = np.asarray(integrated_time(chain, quiet=True), dtype=float)
+    tau = _tau(chain)
     ess = n * w / tau
     rhat = split_rhat(np.moveaxis(chain, 1, 0)) if n >= 4 else np.full(k, np.inf)
     acc = float(np.mean(acceptance))
@@ -424,6 +446,23 @@ def chain_diagnostics(chain: np.ndarray, acceptance: np.ndarray, names, n_total_
             "ess_min": float(np.min(ess)), "rhat_max": float(np.max(rhat)), "n_kept_steps": int(n),
             "n_walkers": int(w), "n_steps": int(n_total_steps), "checks": checks, "thresholds": CONVERGENCE,
             "not_converged_because": why}
+
+
+def _early_stop(sampler, done: int, steps: int, burn: int, every: int, thin: int):
+    """None to go on, or a dict (``at``, ``tau_max``, ``needed``, ``suggest``) when the chain sampled so far says
+    ``steps`` are far too few (:data:`EARLY_STOP_FACTOR`)."""
+    if done < max(steps // 3, burn + every):
+        return None
+    kept = sampler.get_chain(discard=burn, thin=thin)
+    if kept.shape[0] < 20:
+        return None
+    tau_max = float(np.max(_tau(kept))) * thin
+    needed = int(np.ceil(burn + CONVERGENCE["tau_factor"] * tau_max))
+    if not np.isfinite(tau_max) or needed <= EARLY_STOP_FACTOR * steps:
+        return None
+    # with the default burn (a third of the steps) the kept two thirds must hold 50 tau: steps >= 75 tau
+    suggest = int(np.ceil(max(needed, 1.5 * CONVERGENCE["tau_factor"] * tau_max) / 1000.0) * 1000)
+    return {"at": int(done), "tau_max": tau_max, "needed": needed, "suggest": suggest}
 
 
 def _proposal_in_sampler_coordinates(proposal, all_names, like):
@@ -470,11 +509,59 @@ def _recorded_prior(res, names):
     return None, None
 
 
+#: Fewest kept steps per walker (after burn-in and thinning) the chain diagnostics need (split-R-hat halves
+#: the chain, the autocorrelation estimate needs a few lags).
+MIN_KEPT_STEPS = 4
+
+
+def _run_mcmc(sampler, state, steps: int, progress):
+    """``sampler.run_mcmc(state, steps)`` with Ctrl-C taken between steps: emcee prints a traceback for any
+    exception raised inside the likelihood (KeyboardInterrupt included) before passing it on, so the
+    interrupt is noted by a handler and raised here, outside the likelihood.  Returns the last state."""
+    import signal
+    import threading
+
+    hit: list = []
+    previous = None
+    if threading.current_thread() is threading.main_thread() and \
+            signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        previous = signal.signal(signal.SIGINT, lambda signum, frame: hit.append(signum))
+    try:
+        last = state
+        for last in sampler.sample(state, iterations=steps, progress=progress):
+            if hit:
+                raise KeyboardInterrupt
+        return last
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+
+
+def _check_sample_size(nw: int, steps: int, burn: int, thin: int, k: int, logs, like) -> None:
+    """Refuse before anything is allocated: a thinning that keeps fewer than :data:`MIN_KEPT_STEPS` steps, and
+    a run whose chain and batched simulations need more memory than :func:`shipid._io.memory_limit_bytes`."""
+    from .._io import check_memory
+
+    kept = -(-(steps - burn) // thin)
+    if kept < MIN_KEPT_STEPS:
+        raise ValueError(f"thin={thin}: keeps {kept} of the {steps - burn} steps after burn-in (steps={steps}, "
+                         f"burn={burn}); the diagnostics need at least {MIN_KEPT_STEPS}: use a smaller thin "
+                         "(--thin) or more steps (--steps)")
+    n_samples = sum(int(np.size(getattr(lg, "t", ()))) for lg in logs) or 1
+    nx = len(getattr(like.model, "state_names", ())) or 6
+    # emcee's chain and log-probabilities (steps x walkers x (dims + 1)), the proposal and its batched
+    # simulation (walkers x samples x states, ~4 arrays of it alive in one RK4 step)
+    need = 8.0 * (steps * nw * (k + 1) + 4 * nw * k + 4 * nw * n_samples * nx)
+    check_memory(need, f"sampling with walkers={nw} x steps={steps}",
+                 "use fewer walkers or steps (--walkers, --steps; the default walkers is max(4 x coefficients, 32))")
+
+
 def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2000, burn: int | None = None,
                      thin: int = 1, seed=0, vectorize: bool = True, channels=None, substeps: int = 1,
                      start_scale: float = 1.0, use_prior: bool = True, moves: str = "de",
                      input_hold: str | None = None, sample_x0: bool = False, proposal=None,
-                     progress: bool = False) -> PosteriorSamples:
+                     progress: bool = False, early_stop: bool = True, check_every: int | None = None,
+                     log=None) -> PosteriorSamples:
     """Sample the posterior of a fit's estimated coefficients with emcee (optional extra ``mcmc``).
 
     Parameters
@@ -526,6 +613,13 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
         sampled names (initial states as absolute values ``u0[i]`` ...).  Every sampled dimension must be in
         it.  The walkers still start from the EKF posterior ``N(coef, cov)`` of ``result``.
     progress : bool  -- emcee's tqdm progress bar
+    early_stop : bool
+        With "de" or "stretch": check the chain every ``check_every`` steps (default ``max(50, steps // 10)``)
+        and stop when, after at least a third of ``steps``, the estimated autocorrelation time says 50 tau
+        would need more than :data:`EARLY_STOP_FACTOR` times ``steps``; the result is then not converged and
+        its message says how many steps to ask for (a lower bound: tau from a short chain is biased low).
+    check_every : int, optional  -- steps between those checks
+    log : callable, optional  -- called with one line as sampling starts and one per check (e.g. ``print``)
 
     Returns
     -------
@@ -561,6 +655,7 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
     nw += nw % 2
     if nw < 2 * k:
         raise ValueError(f"walkers={nw}: emcee needs at least 2 x {k} sampled dimensions = {2 * k} walkers")
+    _check_sample_size(nw, steps, burn, thin, k, logs, like)
     rng = np.random.default_rng(seed)
     w, V = np.linalg.eigh(0.5 * (cov + cov.T))
     A = V * np.sqrt(np.clip(w, 0, None))
@@ -589,29 +684,53 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
     mv = emcee.moves.StretchMove() if moves == "stretch" else [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
     sampler = emcee.EnsembleSampler(nw, k, fn, vectorize=vectorize, moves=mv)
     sampler._random = np.random.mtrand.RandomState(int(rng.integers(2**31 - 1)))  # emcee's own stream, seeded
+    stop, steps_run = None, steps  # early stop (de, stretch): the reason, and the steps sampled
     if moves == "independence" and proposal is not None:
         pm, pc = _proposal_in_sampler_coordinates(proposal, all_names, like)
         kept = emcee.EnsembleSampler(nw, k, fn, vectorize=vectorize, moves=_independence_move(emcee, pm, pc))
         kept._random = sampler._random
-        kept.run_mcmc(emcee.State(p0, log_prob=lp0), steps, progress=progress)
+        _run_mcmc(kept, emcee.State(p0, log_prob=lp0), steps, progress)
         chain, acceptance = kept.get_chain(discard=burn, thin=thin), kept.acceptance_fraction
     elif moves == "independence":
-        state = sampler.run_mcmc(emcee.State(p0, log_prob=lp0), burn, progress=progress)
+        state = _run_mcmc(sampler, emcee.State(p0, log_prob=lp0), burn, progress)
         pts = sampler.get_chain(discard=burn // 2).reshape(-1, k)
         kept = emcee.EnsembleSampler(nw, k, fn, vectorize=vectorize,
                                      moves=_independence_move(emcee, pts.mean(axis=0), np.cov(pts, rowvar=False)))
         kept._random = sampler._random
-        kept.run_mcmc(state, steps - burn, progress=progress)
+        _run_mcmc(kept, state, steps - burn, progress)
         chain, acceptance = kept.get_chain(thin=thin), kept.acceptance_fraction
     else:
-        sampler.run_mcmc(emcee.State(p0, log_prob=lp0), steps, progress=progress)  # start values evaluated once
+        done, state = 0, emcee.State(p0, log_prob=lp0)  # start values evaluated once
+        every = max(50, steps // 10) if check_every is None else max(1, int(check_every))
+        if log is not None:
+            log(f"sampling: {nw} walkers x {steps} steps ({k} dimensions, {burn} "
+                f"steps of burn-in), checked every {every} steps ...")
+        while done < steps:
+            n = min(every, steps - done)
+            state = _run_mcmc(sampler, state, n, progress)  # Ctrl-C between steps
+            done += n
+            if log is not None:
+                log(f"sampling: {done} of {steps} steps, mean acceptance {np.mean(sampler.acceptance_fraction):.2f}")
+            stop = _early_stop(sampler, done, steps, burn, every, thin) if early_stop and done < steps else None
+            if stop is not None:
+                break
+        steps_run = done
         chain, acceptance = sampler.get_chain(discard=burn, thin=thin), sampler.acceptance_fraction
     diag = chain_diagnostics(chain, acceptance, all_names, steps)
     diag["n_simulations"] = int(like.n_sims)
     diag["n_likelihood_calls"] = int(like.n_calls)
     ok = all(diag["checks"].values())
-    msg = "converged: " + ", ".join(f"{c} ok" for c in diag["checks"]) if ok else \
-        "NOT converged: " + "; ".join(diag["not_converged_because"]) + " -- run longer (more steps) or check the fit"
+    diag["n_steps_run"] = int(steps_run)
+    if stop is not None:
+        ok = False
+        diag["stopped_early"] = stop
+        diag["checks"]["length"] = False
+        msg = (f"NOT converged: stopped after {stop['at']} of {steps} steps: tau_max ~{stop['tau_max']:.0f} steps, so "
+               f"50 tau needs at least {stop['needed']} steps; run again with --steps {stop['suggest']} (steps="
+               f"{stop['suggest']}), or check the fit if that is out of reach")
+    else:
+        msg = "converged: " + ", ".join(f"{c} ok" for c in diag["checks"]) if ok else \
+            "NOT converged: " + "; ".join(diag["not_converged_because"]) + " -- run longer (more steps) or check the fit"
     if not ok:
         warnings.warn(f"sample_posterior: {msg}", RuntimeWarning, stacklevel=2)
     settings = {"walkers": nw, "steps": steps, "moves": moves, "burn": burn,

@@ -215,13 +215,19 @@ def _num(v) -> float | None:
 
 
 # ----------------------------------------------------------------------------- inputs
+def _check_substeps(substeps) -> None:
+    if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
+        raise ValueError(f"substeps must be a whole number >= 1 (RK4 steps per log sample), got {substeps!r}")
+
+
 def resolve_model(result_or_model) -> tuple[Model, Any]:
     """A model (and the fit result, if any) from a fit result, its JSON, a path to it, or a model.
 
     Parameters
     ----------
     result_or_model : FitResult, dict, str, os.PathLike or Model
-        A result JSON may carry ``"model_options"`` (keyword arguments of the model class, e.g.
+        A result (or the path of its JSON), a model, or a registered model's name with an optional
+        parameter set (``"mmg:kvlcc2"``).  A result JSON may carry ``"model_options"`` (keyword arguments of the model class, e.g.
         MMG particulars ``{"lpp": 320}``), at top level or under ``"extra"``.
 
     Returns
@@ -230,7 +236,9 @@ def resolve_model(result_or_model) -> tuple[Model, Any]:
     """
     from ..identify.result import model_from
 
-    if isinstance(result_or_model, (str, os.PathLike)) and not Path(result_or_model).is_file():
+    looks_like_file = isinstance(result_or_model, (str, os.PathLike)) and (
+        Path(result_or_model).suffix.lower() == ".json" or os.sep in str(result_or_model))
+    if looks_like_file and not Path(result_or_model).is_file():  # else a registered model name[:set]
         raise FileNotFoundError(f"{result_or_model}: no such result file; run `shipid fit` first or check the path")
     return model_from(result_or_model)
 
@@ -473,6 +481,7 @@ def validate(result_or_model, logs, lpp: float | None = None, *, rudder_sign: fl
     and radians, NRMSE relative to the measured range), ``track_rmse_m``, ``replay`` (success,
     message), ``success`` and ``notes``.
     """
+    _check_substeps(substeps)
     return [v.to_dict() for v in validate_logs(result_or_model, logs, lpp, rudder_sign=rudder_sign,
                                                substeps=substeps, closed_loop=closed_loop,
                                                zigzag_angles=zigzag_angles, initial=initial)]

@@ -157,7 +157,7 @@ def test_cli_fit_carries_the_logs_particulars_through_refinement(tmp_path, capsy
     out = tmp_path / "r.json"
     # sway/yaw re-identified, surge kept from the (scaled) start: a 260 s zigzag does not determine the surge terms
     code = main(["fit", str(short), "--model", "kcs-response", "--estimate", "b1,b2,b3,b4,c1,c2,c3", "--passes", "1",
-                 "--refine", "--dt", "1", "--no-progress", "-o", str(out)])
+                 "--refine", "--every", "1", "--no-progress", "-o", str(out)])
     assert code in (0, 1)  # 1: the refinement hit its iteration limit (said so); the result is written either way
     res = load_result(out)
     assert res.method == "output-error"
@@ -190,9 +190,8 @@ def _cli_fit_validate(tmp_path, model, params=None, extra=()):
 
     files = dict(zip(ks.RUNS, marin_files(tmp_path, ks.RUNS)))
     out, val = tmp_path / "r.json", tmp_path / "v.json"
-    args = ["fit", *[files[k] for k in ks.TRAIN], "--model", model, "-o", str(out), "--no-progress"]
-    if params:
-        args += ["--params", params]
+    args = ["fit", *[files[k] for k in ks.TRAIN], "--model", f"{model}:{params}" if params else model, "-o", str(out),
+            "--no-progress"]
     args += list(extra)
     # 3: done, but the EKF stage is not consistent with its noise model -- on these measured runs it is
     # flagged (x innovations ~2x the model's, not white, ~12 % gated: model error), said on stderr and in

@@ -1,13 +1,12 @@
-"""``shipid fit`` and ``shipid demo``: identification from the shell."""
+"""``shipid fit``: identification from the shell."""
 from __future__ import annotations
 
 import sys
-from datetime import datetime
-from pathlib import Path
 
 import numpy as np
 
-from ._common import add_log_options, add_progress_option, check_output_path, parse_pairs, progress_on, read_logs
+from ._common import (add_log_options, add_progress_option, check_output_path, parse_pairs, progress_on, read_logs,
+                      renamed_option, split_model_option)
 
 
 def _names(items) -> list[str]:
@@ -23,9 +22,8 @@ def register(sub) -> None:
                               "channels and likely causes; the result JSON has diagnostics.consistency); "
                               "4 the filter diverged (result = start values, success false).")
     p.add_argument("logs", nargs="+", metavar="LOG", help="trial log files (.csv, MARIN .dat)")
-    p.add_argument("--model", default="kcs-response",
-                   help="registered model (see `shipid models`), or 'auto' to choose among the models that apply by "
-                        "cross-validation ('auto:mmg:kvlcc2,response-nl' to choose among those; docs/choosing_a_model.md)")
+    p.add_argument("--model", default="kcs-response", metavar="MODEL",
+                   help=FIT_MODEL_HELP)
     p.add_argument("-o", "--output", required=True, help="result JSON to write")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     add_fit_options(p)
@@ -35,12 +33,6 @@ def register(sub) -> None:
     add_engine_options(p)
     add_progress_option(p)
     p.set_defaults(handler=_fit)
-
-    d = sub.add_parser("demo", help="fit the bundled synthetic KCS logs and print the results")
-    d.add_argument("-o", "--output-dir", default=None, help="new folder for the outputs (default: shipid-demo-<time>)")
-    d.add_argument("--passes", type=int, default=2, help="EKF passes (default 2)")
-    add_progress_option(d)
-    d.set_defaults(handler=_demo)
 
 
 def add_engine_options(p) -> None:
@@ -53,10 +45,17 @@ def add_engine_options(p) -> None:
                    help="run the folds on an existing Dask scheduler, e.g. tcp://host:8786")
 
 
+#: ``--model`` of ``shipid fit`` and ``shipid crossval``: the model and its start values, or the choice.
+FIT_MODEL_HELP = ("the model and its start values: MODEL[:SET] (a registered model, see `shipid models`, with a "
+                  "parameter set), an earlier fit RESULT.json, or 'auto' to choose among the models that apply by "
+                  "cross-validation ('auto:mmg:kvlcc2,response-nl' to choose among those; docs/choosing_a_model.md)")
+
+
 def add_fit_options(p) -> None:
     """The options of ``shipid fit`` that say how to fit (one copy: ``shipid crossval`` takes them too)."""
-    p.add_argument("--params", default=None, metavar="SET|RESULT.json",
-                   help="start values: a parameter set of the model or an earlier result JSON")
+    p.set_defaults(params=None)
+    renamed_option(p, "--params", "--model", dest="params", metavar="SET|RESULT.json",
+                   note="MODEL:SET or --model RESULT.json")
     add_log_options(p)
     p.add_argument("--estimate", action="append", metavar="NAMES", help="comma-separated parameters to estimate")
     p.add_argument("--fixed", action="append", metavar="NAME[=VALUE]", help="parameters to hold fixed")
@@ -82,9 +81,10 @@ def add_fit_options(p) -> None:
     p.add_argument("--no-physical-damping", action="store_true",
                    help="do not constrain the refinement when the refined model's own sway or yaw damping is positive "
                         "along the logged states (default: solve again with d(dv/dt)/dv, d(dr/dt)/dr <= -0.02 U/L there)")
-    p.add_argument("--dt", default="auto", metavar="auto|K",
+    p.add_argument("--every", default="auto", metavar="auto|K",
                    help="use every K-th sample; default auto: >= 25 steps per fastest time constant of the model (mmg: 50; "
                         "lowspeed: 2 s at 3 m, Froude-scaled)")
+    renamed_option(p, "--dt", "--every", dest="every", metavar="auto|K", note="the sample stride K")
     p.add_argument("--max-drift", default="auto", metavar="auto|DEG|none",
                    help="models linear in v and r (kcs-response): use each log until its drift angle first exceeds "
                         "DEG (default auto: 10 deg for such models, every sample for the others; none: every sample)")
@@ -151,14 +151,14 @@ def _fixed(args, model):
 
 
 def _dt(args):
-    if args.dt == "auto":
+    if args.every == "auto":
         return "auto"
     try:
-        k = int(args.dt)
+        k = int(args.every)
     except ValueError:
         k = 0
     if k < 1:
-        raise ValueError(f"--dt {args.dt}: give 'auto' or a positive whole number of samples, e.g. --dt 4")
+        raise ValueError(f"--every {args.every}: give 'auto' or a positive whole number of samples, e.g. --every 4")
     return k
 
 
@@ -264,6 +264,7 @@ def print_choice(choice) -> None:
 def _fit(args) -> int:
     from ..identify.recipe import fit_logs
 
+    split_model_option(args)
     out = check_output_path(args.output, force=args.force, inputs=[*args.logs, args.params, args.ship],
                             what="result")
     check_fit_args(args)
@@ -287,7 +288,7 @@ def _fit(args) -> int:
     opts = fit_options(args, model)
     recipe = _lib_errors(lambda: fit_logs(
         logs, model, lpp=args.lpp, progress=progress_on(args), ekf_options=extra, start_defaults=args.params is None,
-        log=print, **opts))
+        log=None if getattr(args, "quiet", False) else print, **opts))
     fit, ident = recipe, recipe.ekf
     result = fit.result()
     if choice is not None:
@@ -352,136 +353,3 @@ def _print_result(result) -> None:
             print(f"warning: {w}")
 
 
-def _new_dir(base: str | None) -> Path:
-    if base is not None:
-        p = Path(base)
-        if p.exists():
-            raise ValueError(f"{p}: output folder exists; choose a new name (the demo never overwrites)")
-        p.mkdir(parents=True)
-        return p
-    stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
-    p = Path(f"shipid-demo-{stamp}")
-    i = 1
-    while p.exists():
-        i += 1
-        p = Path(f"shipid-demo-{stamp}-{i}")
-    p.mkdir()
-    return p
-
-
-def _demo(args) -> int:
-    import pandas as pd
-
-    from ..datasets import bundled_data_dir, bundled_kcs_logs
-    from ..identify import EKFIdentifier
-    from ..logs import read_log
-    from ..models import get_model
-    from ..simulate import replay, replay_errors
-
-    paths = bundled_kcs_logs()
-    if not paths:
-        raise ValueError(f"no bundled logs found in {bundled_data_dir()}; reinstall shipid")
-    outdir = _new_dir(args.output_dir)
-    print(f"shipid demo: fitting kcs-response to {len(paths)} bundled synthetic logs ({bundled_data_dir()})")
-    logs = [read_log(p) for p in paths]
-    truth = get_model("kcs-response", "synthetic-truth")
-    # start far from the truth: every coefficient off by a seeded random 30 %
-    rng = np.random.default_rng(0)
-    start = truth.with_params(truth.params * (1 + 0.3 * rng.standard_normal(truth.np)))
-    ident = EKFIdentifier(start, n_passes=args.passes, init="equation-error", progress=progress_on(args)).fit(logs)
-    result = ident.result()
-    result.to_json(outdir / "result.json")
-    _print_result(result)
-    tab = result.summary()
-    tab["truth"] = truth.params_series()[tab.index]
-    tab["error_sigma"] = (tab["value"] - tab["truth"]) / tab["std"]
-    from .._io import atomic_write_text
-
-    atomic_write_text(outdir / "coefficients.csv", tab.to_csv(float_format="%.10g"))
-    inside = int((tab["error_sigma"].abs() < 3).sum())
-    print(f"\nagainst the known truth: {inside}/{len(tab)} coefficients within 3 sigma")
-    rows = []
-    fitted = ident.to_model()
-    for lg in logs:
-        err = replay_errors(replay(fitted, lg), lg)
-        rows.append(pd.Series({f"{ch}_rmse": err.loc[ch, "rmse"] for ch in ("u", "v", "r") if ch in err.index}, name=lg.name))
-    rep = pd.DataFrame(rows)
-    print("\nreplay of each log with its recorded inputs (RMSE against the noisy log):")
-    print(rep.to_string(float_format=lambda v: f"{v:.4g}"))
-    rep.columns = [c.replace("u_rmse", "u_rmse [m/s]").replace("v_rmse", "v_rmse [m/s]")
-                   .replace("r_rmse", "r_rmse [rad/s]") for c in rep.columns]
-    atomic_write_text(outdir / "replay_rmse.csv", rep.to_csv(float_format="%.10g"))
-    _demo_figure(ident, logs, fitted, outdir)
-    from ..report import write_report
-
-    write_report(result, logs, outdir / "report_known_truth.html", identifier=ident,
-                 title="shipid demo, part 1: kcs-response identified from logs with a known truth",
-                 intro=DEMO_INTRO_1.format(inside=inside, n=len(tab)))
-    _demo_mmg(args, outdir)
-    print(f"\noutputs in {outdir}/: result.json, coefficients.csv, replay_rmse.csv, replay.png, "
-          "report_known_truth.html (part 1), mmg_result.json, report.html (part 2)")
-    return 0
-
-
-#: What the demo's two reports demonstrate (shown at the top of each).
-DEMO_INTRO_1 = (
-    "Part 1 of the demo: the bundled synthetic KCS logs were generated by the kcs-response model itself with "
-    "known coefficients (data/README.md) plus sensor noise, and the fit started 30 % away from them. This "
-    "checks the identification: {inside}/{n} coefficients are within 3 standard deviations of the truth, "
-    "and the replays should match the logs to the sensor noise.\n\n"
-    "Part 2 (report.html) shows the harder, realistic case: logs from a different (MMG) model.")
-DEMO_INTRO_2 = (
-    "Part 2 of the demo: the logs were generated by the MMG model, which the kcs-response model cannot "
-    "represent exactly, as with real ship data. Four logs were fitted; {held} was held out. A poor replay "
-    "here is an honest result: it shows how far this simple model is from the one that made the data, and "
-    "the identifiability section shows which coefficients these manoeuvres do not determine.\n\n"
-    "Part 1 (report_known_truth.html) shows the same method on logs with a known truth.")
-
-
-def _demo_mmg(args, outdir: Path) -> None:
-    """Part 2: logs from the MMG model (structurally different, as real data are):
-    fit on four, validate on all five (one held out), write the HTML report."""
-    from ..datasets import bundled_kcs_logs
-    from ..identify import EKFIdentifier
-    from ..logs import read_log
-    from ..models import get_model
-    from ..report import write_report
-
-    paths = bundled_kcs_logs("mmg")
-    if not paths:
-        return
-    logs = [read_log(p) for p in paths]
-    held_out = [lg for lg in logs if lg.name.endswith("zz_p10")]
-    train = [lg for lg in logs if lg not in held_out]
-    print(f"\npart 2: kcs-response fitted to {len(train)} logs generated by the MMG model "
-          f"(held out: {', '.join(lg.name for lg in held_out)})")
-    ident = EKFIdentifier(get_model("kcs-response"), n_passes=args.passes, progress=progress_on(args)).fit(train)
-    res = ident.result()
-    res.to_json(outdir / "mmg_result.json")
-    _print_result(res)
-    write_report(res, logs, outdir / "report.html", identifier=ident,
-                 title="shipid demo, part 2: kcs-response identified from MMG-generated KCS logs",
-                 intro=DEMO_INTRO_2.format(held=", ".join(lg.name for lg in held_out) or "none"))
-
-
-def _demo_figure(ident, logs, fitted, outdir: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from ..simulate import replay
-
-    fig, axs = plt.subplots(1, len(logs), figsize=(4 * len(logs), 4))
-    for ax, lg in zip(np.atleast_1d(axs), logs):
-        sim = replay(fitted, lg)
-        ax.plot(lg["y"], lg["x"], ".", ms=1, label="log")
-        ax.plot(sim.state("y"), sim.state("x"), "-", label="fitted model")
-        ax.set_aspect("equal", adjustable="datalim")
-        ax.set_title(lg.name, fontsize=9)
-        ax.set_xlabel("y [m]")
-    np.atleast_1d(axs)[0].set_ylabel("x [m]")
-    np.atleast_1d(axs)[0].legend()
-    fig.tight_layout()
-    fig.savefig(outdir / "replay.png", dpi=90)
-    plt.close(fig)

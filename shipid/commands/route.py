@@ -1,7 +1,7 @@
 """``shipid route``: Zermelo time-optimal routes and PSO energy-optimal USV plans.
 
-    shipid route zermelo-paper -o route.json        # seed 001 example (nm, kn, h)
-    shipid route pso-paper -o plan.json             # seed 003 scenario (our obstacles, see docs)
+    shipid route paper-zermelo -o route.json        # the Zermelo paper's example (nm, kn, h)
+    shipid route paper-pso -o plan.json             # the USV paper's scenario (our obstacles, see docs)
     shipid route PROBLEM.json -o route.json         # your problem (shipid/routing/spec.py)
 
 Writes the JSON summary and the route as CSV beside it (same name, ``.csv``).
@@ -12,7 +12,13 @@ import numpy as np
 
 from .._io import atomic_write_set, dumps_json
 
-from ._common import add_progress_option, json_and_csv_outputs, progress_iter, progress_on, units_header
+from ._common import (add_progress_option, json_and_csv_outputs, progress_iter, progress_on, renamed_notice,
+                      renamed_option, units_header)
+
+#: Built-in problems (the papers' examples), named as ``shipid plan``'s: ``paper-<which>``.
+BUILTIN = ("paper-zermelo", "paper-pso")
+#: Old names of the built-in problems (they work, with a note naming the new one).
+OLD_BUILTIN = {"zermelo-paper": "paper-zermelo", "pso-paper": "paper-pso"}
 
 #: Units of the route CSV columns, by the problem's unit system (``units`` of a Zermelo problem; PSO is SI).
 ROUTE_UNITS = {
@@ -22,7 +28,7 @@ ROUTE_UNITS = {
 }
 
 
-#: What ``route pso-paper`` prints under its numbers (docs/routing.md has the 64-case table).
+#: What ``route paper-pso`` prints under its numbers (docs/routing.md has the 64-case table).
 PSO_FRAMING = ("the paper gives obstacles and current directions only in figures, so these are ours; this default "
                "(current towards E, then N, then W) turned out to be the worst of the 64 direction combinations "
                "in docs/routing.md (savings -50.4 % .. +9.2 %, median 0.0 %); the paper reports +10.37 %")
@@ -35,20 +41,27 @@ PSO_PAPER_NOTE = ("seed 003 scenario: start/goal, wind (from east, 7 m/s) and cu
 def register(sub) -> None:
     p = sub.add_parser("route", help="time-optimal (Zermelo) or energy-optimal (PSO) routes in currents",
                        description="Solve a routing problem and write a JSON summary plus the route as CSV beside it.")
-    p.add_argument("problem", help="'zermelo-paper', 'pso-paper' or a problem JSON file")
+    p.add_argument("problem", metavar="PROBLEM",
+                   help="a built-in problem, paper-zermelo (time-optimal route in a shear current) or paper-pso "
+                        "(energy-optimal USV path), or a PROBLEM.json file")
     p.add_argument("-o", "--output", required=True, help="output JSON; the route CSV gets the same name with .csv")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
     p.add_argument("--seed", type=int, default=None, help="PSO random seed (default: the problem's 'seed' or 0)")
-    p.add_argument("--solver", choices=["pmp", "transcription", "both"], default=None,
-                   help="Zermelo solver (default: the problem's 'solver' or 'both')")
+    p.add_argument("--method", choices=["pmp", "transcription", "both"], default=None,
+                   help="Zermelo solution method: Pontryagin shooting, direct transcription, or both (default: the "
+                        "problem's 'solver' or both)")
+    renamed_option(p, "--solver", "--method", dest="method", choices=["pmp", "transcription", "both"])
     p.add_argument("--kinematics", choices=["paper", "crab"], default=None,
-                   help="PSO leg kinematics for pso-paper (default 'paper')")
+                   help="PSO leg kinematics for paper-pso (default 'paper')")
     add_progress_option(p)
     p.set_defaults(handler=_route)
 
 
 def _outputs(args):
-    inputs = [] if args.problem in ("zermelo-paper", "pso-paper") else [args.problem]
+    if args.problem in OLD_BUILTIN:
+        renamed_notice("shipid route", args.problem, OLD_BUILTIN[args.problem])
+        args.problem = OLD_BUILTIN[args.problem]
+    inputs = [] if args.problem in BUILTIN else [args.problem]
     return json_and_csv_outputs(args.output, args.force, inputs=inputs)
 
 
@@ -56,9 +69,9 @@ def _route(args) -> int:
     from ..routing.spec import load_problem_spec
 
     out, csv = _outputs(args)
-    if args.problem == "zermelo-paper":
+    if args.problem == "paper-zermelo":
         return _zermelo(args, {"type": "zermelo", "paper": True, "units": "nautical"}, None, out, csv)
-    if args.problem == "pso-paper":
+    if args.problem == "paper-pso":
         return _pso(args, {"type": "pso", "paper": True}, None, out, csv)
     spec, base = load_problem_spec(args.problem)
     if spec["type"] == "zermelo":
@@ -80,12 +93,12 @@ def _zermelo(args, spec, base, out, csv) -> int:
     problem = paper_problem() if spec.get("paper") else zermelo_from_spec(spec, str(args.problem), base)
     units = spec.get("units", "si")
     to_h = 1.0 if units == "nautical" else 1.0 / 3600.0
-    solver = args.solver or spec.get("solver", "both")
+    solver = args.method or spec.get("solver", "both")
     if solver not in ("pmp", "transcription", "both"):
         raise ValueError(f"{args.problem}: 'solver' must be pmp, transcription or both, got {solver!r}")
     if solver in ("pmp", "both") and problem.field.time_dependent:
         if solver == "pmp":
-            raise ValueError(f"{args.problem}: the current is time dependent; the PMP solver needs a steady one -- use --solver transcription")
+            raise ValueError(f"{args.problem}: the current is time dependent; the PMP solver needs a steady one -- use --method transcription")
         solver = "transcription"
     results = {}
     stages = ["pmp", "transcription"] if solver == "both" else [solver]

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._common import add_progress_option, json_and_csv_outputs, progress_on, units_header
+from ._common import add_progress_option, json_and_csv_outputs, progress_on, renamed_option, units_header
 
 
 def register(sub) -> None:
@@ -12,13 +12,16 @@ def register(sub) -> None:
         description="Solve a minimum-time optimal-control problem and write plan.json plus the trajectory "
                     "as CSV beside it (same name, .csv).",
     )
-    p.add_argument("problem", help="paper-1, paper-2, paper-3 (seed 000's scenarios) or a PROBLEM.json file")
+    p.add_argument("problem", metavar="PROBLEM",
+                   help="a built-in problem, paper-1, paper-2 or paper-3 (the planing boat paper's scenarios), or a "
+                        "PROBLEM.json file")
     p.add_argument("--method", choices=("indirect", "direct"), default="direct",
                    help="indirect: costates + LEPF (the paper's method); direct: multiple shooting (default)")
-    p.add_argument("--optimizer", "--solver", dest="optimizer", choices=("bfgs", "steepest", "slsqp", "trust-constr", "ipopt"),
-                   default=None,
+    optimizers = ("bfgs", "steepest", "slsqp", "trust-constr", "ipopt")
+    p.add_argument("--optimizer", dest="optimizer", choices=optimizers, default=None,
                    help="inner optimiser (indirect: bfgs|steepest, default bfgs; direct: slsqp|trust-constr|ipopt, "
                         "default slsqp; ipopt needs `pip install shipid[casadi]`)")
+    renamed_option(p, "--solver", "--optimizer", dest="optimizer", choices=optimizers)
     p.add_argument("--intervals", type=int, default=None, help="number of control intervals (overrides the problem)")
     p.add_argument("--substeps", type=int, default=None, help="RK4 steps per control interval (overrides the problem)")
     p.add_argument("--tol", type=float, default=1e-2, help="admissible scaled constraint violation (default 0.01)")
