@@ -30,6 +30,7 @@ import contextlib
 import importlib.util
 import os
 import types
+from importlib.metadata import PackageNotFoundError, version
 
 __all__ = ["available", "enabled", "disabled", "rebind", "compiled", "path", "compile_notice", "fallback_notice",
            "set_notices"]
@@ -62,8 +63,6 @@ def path() -> str:
         return "numpy path: SHIPID_JIT=0"
     if _off[0]:
         return "numpy path: compilation disabled"
-    from importlib.metadata import PackageNotFoundError, version
-
     try:
         return f"compiled path: numba {version('numba')}"
     except PackageNotFoundError:  # importable but without metadata (a source checkout)
@@ -180,7 +179,7 @@ def _has_nrt_option() -> bool:
     reject the option at the first call (a KeyError, not a compile error :func:`compile_errors` names), so
     ``no_refcount`` then compiles with reference counting: slower, same results."""
     try:
-        from numba.core.cpu import CPUTargetOptions
+        from numba.core.cpu import CPUTargetOptions  # optional (the fast extra), ~0.6 s to import
     except ImportError:
         return False
     return hasattr(CPUTargetOptions, "_nrt")
@@ -197,7 +196,7 @@ def _import_numba():
     if _numba is None:
         if not _HAVE_NUMBA:
             raise RuntimeError("numba is not installed: pip install numba")
-        import numba
+        import numba  # ~0.6 s to import: only when compiling
 
         _numba = numba
     return _numba

@@ -17,6 +17,7 @@ PACKAGES = [
     ("shipid.logs", "Trial logs: reading, checking, ship particulars"),
     ("shipid.models", "Models: the protocol and the registry"),
     ("shipid.identify", "Identification: the fit recipe, the EKF, results"),
+    ("shipid.results", "The result contract every result follows"),
     ("shipid.simulate", "Simulation"),
     ("shipid.manoeuvres", "Standard manoeuvres and their metrics"),
     ("shipid.validation", "Validation: replay, metrics, horizon predictions"),
