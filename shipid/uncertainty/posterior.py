@@ -408,8 +408,10 @@ def _tau(chain: np.ndarray) -> np.ndarray:
 #: ``max(50, steps // 10)``); once the estimated autocorrelation time says the chain would need more than
 #: ``EARLY_STOP_FACTOR`` times the steps asked for to reach 50 tau (after at least a third of them), sampling
 #: stops and the message says how many steps it would take.  The tau estimated from a short chain is biased
-#: low (Sokal 1997; emcee's documentation), so that number is a lower bound.
-EARLY_STOP_FACTOR = 2.0
+#: low (Sokal 1997; emcee's documentation), so that number is a lower bound: once it exceeds the steps asked
+#: for (factor 1), the rest of the run cannot converge.  On the bundled KCS logs (16 coefficients, the defaults)
+#: the full 2000 steps ended with tau_max 47, 50 tau = 2350 kept steps: not converged after 100 s of CPU.
+EARLY_STOP_FACTOR = 1.0
 
 
 def chain_diagnostics(chain: np.ndarray, acceptance: np.ndarray, names, n_total_steps: int) -> dict:
@@ -445,6 +447,13 @@ def chain_diagnostics(chain: np.ndarray, acceptance: np.ndarray, names, n_total_
             "not_converged_because": why}
 
 
+def _steps_for(tau_max: float, burn: int, steps: int) -> int:
+    """Steps to ask for so that the kept chain holds 50 tau: 75 tau with the default burn-in (a third of the
+    steps), else burn + 50 tau; rounded up to a thousand."""
+    need = max(burn + CONVERGENCE["tau_factor"] * tau_max, 1.5 * CONVERGENCE["tau_factor"] * tau_max)
+    return int(np.ceil(need / 1000.0) * 1000) if np.isfinite(need) else 2 * steps
+
+
 def _early_stop(sampler, done: int, steps: int, burn: int, every: int, thin: int):
     """None to go on, or a dict (``at``, ``tau_max``, ``needed``, ``suggest``) when the chain sampled so far says
     ``steps`` are far too few (:data:`EARLY_STOP_FACTOR`)."""
@@ -457,8 +466,7 @@ def _early_stop(sampler, done: int, steps: int, burn: int, every: int, thin: int
     needed = int(np.ceil(burn + CONVERGENCE["tau_factor"] * tau_max))
     if not np.isfinite(tau_max) or needed <= EARLY_STOP_FACTOR * steps:
         return None
-    # with the default burn (a third of the steps) the kept two thirds must hold 50 tau: steps >= 75 tau
-    suggest = int(np.ceil(max(needed, 1.5 * CONVERGENCE["tau_factor"] * tau_max) / 1000.0) * 1000)
+    suggest = _steps_for(tau_max, burn, steps)
     return {"at": int(done), "tau_max": tau_max, "needed": needed, "suggest": suggest}
 
 
@@ -718,11 +726,13 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
         diag["stopped_early"] = stop
         diag["checks"]["length"] = False
         msg = (f"NOT converged: stopped after {stop['at']} of {steps} steps: tau_max ~{stop['tau_max']:.0f} steps, so "
-               f"50 tau needs at least {stop['needed']} steps; run again with --steps {stop['suggest']} (steps="
-               f"{stop['suggest']}), or check the fit if that is out of reach")
+               f"50 tau needs at least {stop['needed']} steps; run again with --steps {stop['suggest']}, "
+               "or check the fit if that is out of reach")
     else:
         msg = "converged: " + ", ".join(f"{c} ok" for c in diag["checks"]) if ok else \
-            "NOT converged: " + "; ".join(diag["not_converged_because"]) + " -- run longer (more steps) or check the fit"
+            "NOT converged: " + "; ".join(diag["not_converged_because"]) + (
+                f" -- run again with --steps {_steps_for(diag['tau_max'], burn, steps)}, or check the fit"
+                if not diag["checks"]["length"] else " -- run longer (more steps) or check the fit")
     if not ok:
         warnings.warn(f"sample_posterior: {msg}", RuntimeWarning, stacklevel=2)
     settings = {"walkers": nw, "steps": steps, "moves": moves, "burn": burn,
