@@ -40,7 +40,8 @@ def _files(roots):
             yield p
         elif p.is_dir():
             for f in sorted(p.rglob("*")):
-                if f.is_file() and f.suffix in SUFFIXES and "__pycache__" not in f.parts and f.name != Path(__file__).name:
+                if (f.is_file() and f.suffix in SUFFIXES and "__pycache__" not in f.parts and "_build" not in f.parts
+                        and f.name != Path(__file__).name):  # _build: the generated documentation site
                     if f.suffix == ".csv" and f.stat().st_size > 200_000:
                         continue  # large data tables: numbers, not prose
                     yield f
