@@ -1,3 +1,4 @@
+# Why one file: the graded verdict, the checks behind each grade and the exit status derived from it share one set of thresholds and reasons.
 """The graded verdict of a fit: is the data sound, and how wrong is the model on these runs?
 
 Every fit result carries a :class:`Verdict` with one of four grades:
