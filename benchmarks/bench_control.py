@@ -1,5 +1,5 @@
 """Paper's steepest descent + LEPF vs BFGS + LEPF vs the direct method (SLSQP, and IPOPT when
-CasADi is installed), side by side on seed 000's scenarios.
+CasADi is installed), side by side on Ghorbani et al.'s scenarios.
 
 For each scenario: iterations, wall time, its ratio to the reference method measured in the same
 run (the paper's steepest descent), final time reached (and its difference to the analytic answer

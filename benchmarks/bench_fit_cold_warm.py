@@ -76,21 +76,24 @@ def main(argv=None) -> int:
         print(f"MARIN KVLCC2 runs not found in {MARIN.resolve()}: nothing to measure")
         return 0
     res = {}
+    print(f"shipid fit (README KVLCC2 command: {len(RUNS)} MARIN runs, --model mmg), one child process each")
+    print(f"{'run':<20}{'wall s':>9}{'CPU s':>9}{'silent s':>10}{'exit':>6}  compile notice", flush=True)
+
+    def one(label, out, env):
+        r = res[label] = run_fit(out, env)
+        notice = next((ln for ln in r["lines"] if "compiling" in ln), "none")
+        print(f"{label:<20}{r['wall']:9.1f}{r['cpu']:9.1f}{r['silent']:10.1f}{r['rc']:6d}  {notice[:70]}", flush=True)
+
     with tempfile.TemporaryDirectory() as tmp:
         cache = Path(tmp) / "numba_cache"
         cache.mkdir()
         env = {"SHIPID_JIT": "1", "NUMBA_CACHE_DIR": str(cache)}
-        res["compiled, cold"] = run_fit(Path(tmp) / "cold.json", env)
-        res["compiled, warm"] = run_fit(Path(tmp) / "warm.json", env)
+        one("compiled, cold", Path(tmp) / "cold.json", env)
+        one("compiled, warm", Path(tmp) / "warm.json", env)
         if not args.skip_numpy:
-            res["numpy path"] = run_fit(Path(tmp) / "numpy.json", {"SHIPID_JIT": "0"})
+            one("numpy path", Path(tmp) / "numpy.json", {"SHIPID_JIT": "0"})
             if args.numpy_twice:
-                res["numpy path, again"] = run_fit(Path(tmp) / "numpy2.json", {"SHIPID_JIT": "0"})
-    print(f"shipid fit (README KVLCC2 command: {len(RUNS)} MARIN runs, --model mmg), one child process each")
-    print(f"{'run':<20}{'wall s':>9}{'CPU s':>9}{'silent s':>10}{'exit':>6}  first line")
-    for k, r in res.items():
-        first = next((ln for ln in r["lines"] if ln.strip()), "")
-        print(f"{k:<20}{r['wall']:9.1f}{r['cpu']:9.1f}{r['silent']:10.1f}{r['rc']:6d}  {first[:70]}")
+                one("numpy path, again", Path(tmp) / "numpy2.json", {"SHIPID_JIT": "0"})
     cold, warm = res["compiled, cold"], res["compiled, warm"]
     print(f"cold / warm (compiled): wall {cold['wall'] / warm['wall']:.2f}x, CPU {cold['cpu'] / warm['cpu']:.2f}x; "
           f"compilation ~{cold['wall'] - warm['wall']:.0f} s wall")

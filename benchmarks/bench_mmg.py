@@ -1,6 +1,6 @@
 """Benchmark: shipid's MMG model vs the shipmmg package (same KVLCC2 L7 coefficients, same run).
 
-Goals (issue 3): one 35 deg turning circle >= 5x faster than shipmmg at equal accuracy; a sweep of
+Goals: one 35 deg turning circle >= 5x faster than shipmmg at equal accuracy; a sweep of
 100 manoeuvres as one shipid batch >= 50x faster than looping shipmmg at equal accuracy.
 
 1. One 35 deg turning circle (rudder step at t = 0, 250 s at L7 scale, > 700 deg of heading change):

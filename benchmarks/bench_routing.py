@@ -6,7 +6,7 @@
 Every number is measured in this run; ratios are against references measured
 alongside:
 
-* Zermelo: the paper's own procedure (seed 001: extremals from the target
+* Zermelo: the paper's own procedure (Zwierzewicz: extremals from the target
   integrated with an adaptive Runge-Kutta until x1 reaches the start's x1, the
   final-heading parameter alpha adjusted until x2 matches -- here by brentq
   instead of "trial and error") is the reference for the PMP solver.
@@ -59,7 +59,7 @@ def best_of(fn, repeat=5):
 
 
 def paper_procedure(start, V=0.5, k=-0.5, t_max=30.0):
-    """Seed 001's procedure: for a final-heading parameter alpha, integrate the
+    """Zwierzewicz's procedure: for a final-heading parameter alpha, integrate the
     closed-form heading law backwards from the target (ode45 in the paper) until
     x1 (north) reaches the start's x1; adjust alpha until x2 (east) matches."""
     x1s, x2s = start[1], start[0]  # paper frame: x1 north, x2 east
@@ -81,7 +81,7 @@ def paper_procedure(start, V=0.5, k=-0.5, t_max=30.0):
 
 
 def zermelo_bench():
-    print("== Zermelo (seed 001 example, nm/kn/h) ==")
+    print("== Zermelo (Zwierzewicz example, nm/kn/h) ==")
     P = paper_problem()
     thf = float(math_from_course(np.radians(210.0)))
     start_cf = extremal(P, thf, PAPER_TF_CLOSED_FORM_H).xy[0]
@@ -107,7 +107,7 @@ def zermelo_bench():
 
 
 def pso_bench():
-    print("\n== PSO (seed 003 scenario, our obstacles) ==")
+    print("\n== PSO (Li et al. scenario, our obstacles) ==")
     pr = paper_scenario()
     for objective in ("distance", "energy"):
         cost = PathCost(pr, objective)

@@ -11,7 +11,7 @@
    (warm-up, and for Dask the cluster start, included).  Also printed: the ceiling (the same members on
    a pre-warmed ``ProcessPoolExecutor``), the per-worker warm-up, member durations, the idle tail, the
    CPU of the members, of the workers' other threads and of the main process, and the same Dask half
-   with Dask's default configuration (``Engine(quiet=False)``, the engine before session 8).
+   with Dask's default configuration (``Engine(quiet=False)``).
 3. MCMC effective samples per second: emcee with vectorised walkers (one batched simulation per half
    ensemble) against emcee calling the likelihood once per walker, same chain settings.
 4. The MCMC column's problem (docs/uncertainty.md sect. 3: c1-c3 and six initial states, two 40 s logs):
@@ -117,7 +117,7 @@ def bench_campaign(n_fits: int, workers: int, members: str = "light", ceiling: b
     Both halves are timed warm (after the same warm-up, :func:`shipid.campaign.warm_fits`, that the
     engine runs on each worker at start-up) and cold (warm-up included; for Dask also the cluster start).
     ``ceiling``: also the same members on a pre-warmed ProcessPoolExecutor; ``compare``: also a Dask half
-    with Dask's default configuration (``Engine(quiet=False)``, the engine before session 8).
+    with Dask's default configuration (``Engine(quiet=False)``).
     """
     import json
     import pickle
@@ -183,7 +183,7 @@ def bench_campaign(n_fits: int, workers: int, members: str = "light", ceiling: b
           f"    CPU-time projection for free cores (serial CPU / (busiest worker's CPU + main process CPU / "
           f"{workers})): {_cpu_projection(ser, st, workers):.2f}x -- a model that ignores waiting; the wall ratios "
           "on an idle machine are the measurement")
-    if False in runs:  # the same Dask half with Dask's default configuration (the engine before session 8)
+    if False in runs:  # the same Dask half with Dask's default configuration (``Engine(quiet=False)``)
         t_warm, t_dask, st = runs[False]
         member_cpu = sum(st["member_cpu"])
         print(f"    Dask's default configuration (Engine(quiet=False)): warm {t_dask:.1f} s -> {ser['run'] / t_dask:.2f}x, "

@@ -19,11 +19,11 @@ from shipid.synthetic import KCS_MMG_RECIPES, KCS_RECIPES, make_kcs_logs
 HERE = Path(__file__).resolve().parent
 SEED = 20261123
 
-#: KCS model particulars (SPEC.md section 1: scale 52.67, Lpp 4.36 m ...).
+#: KCS model particulars (scale 52.67, Lpp 4.36 m, the SIMMAN 2008 KCS model).
 KCS_MODEL = ShipParticulars(
     lpp=4.36, beam=0.61, draught=0.20, displacement=0.356, design_speed=1.7,
     rudder_rate=0.29321531433504733, rudder_max=0.6108652381980153, name="KCS model 1:52.67", scale=52.67,
-    extra={"source": "SIMMAN/seed 002 KCS model particulars (SPEC.md section 1)"},
+    extra={"source": "KCS model particulars, scale 1:52.67 (SIMMAN 2008 KCS model)"},
 )
 
 

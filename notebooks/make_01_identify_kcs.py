@@ -4,7 +4,7 @@ md, code = nbf.v4.new_markdown_cell, nbf.v4.new_code_cell
 nb.cells = [
 md("""# 01 — Identify the KCS response model from trial logs
 
-Fits the 16 coefficients of the seed-002 KCS response model (SPEC §1) to the bundled
+Fits the 16 coefficients of the KCS response model of Hajizadeh et al. to the bundled
 synthetic model-scale logs with the augmented-state EKF, looks at the identifiability
 diagnostics, and replays each log with the fitted model. The logs were generated from a
 documented truth (`data/README.md`), so every number below can be checked against it.
@@ -77,8 +77,8 @@ display(logs[0], fit, fit.result(), sim)
 sim.plot();"""),
 md("""## Caveat: the paper's Table 3
 
-The coefficients printed in seed 002 (shipped as the parameter set `table3`) have no stated
-units and do not close a turning circle (SPEC §1). They are available for reference only:"""),
+The coefficients printed in Hajizadeh et al. (shipped as the parameter set `table3`) have no stated
+units and do not close a turning circle. They are available for reference only:"""),
 code("""t3 = shipid.get_model("kcs-response", "table3")
 print(t3.parameter_set("table3").caveat)"""),
 ]

@@ -6,7 +6,7 @@ import nbformat as nbf
 cells = [
     nbf.v4.new_markdown_cell("""# 03 Time-optimal manoeuvres
 
-Seed 000 (Ghorbani, Salarieh, Assadian): minimum-time manoeuvres of a 7.95 m planing boat with two
+Ghorbani et al. (Ghorbani, Salarieh, Assadian): minimum-time manoeuvres of a 7.95 m planing boat with two
 vectored outboards, solved here with shipid's indirect method (costates + linear extended penalty,
 steepest descent or BFGS) and a direct multiple-shooting method, plus a time-optimal turn of a
 KCS response model as it comes out of `shipid fit`.
@@ -60,7 +60,7 @@ axs[1].plot(df.index, df["u"]); axs[1].set_ylabel("u [m/s]")
 axs[2].step(df.index, df["T"] / 1e3, where="post"); axs[2].set_ylabel("T [kN]")
 for a in axs: a.set_xlabel("t [s]")"""),
     nbf.v4.new_markdown_cell("""## Scenarios 2 and 3: initial heading 90 and 180 deg
-With the limits of SPEC section 2 (u <= 20 m/s, |p| <= 10 deg/s, |r| <= 15 deg/s, |phi| <= 20 deg,
+With the paper's limits (u <= 20 m/s, |p| <= 10 deg/s, |r| <= 15 deg/s, |phi| <= 20 deg,
 |phi_p| <= 45 deg). These solves take minutes; skipped in fast mode."""),
     nbf.v4.new_code_cell("""def show(res):
     df = res.to_pandas()

@@ -9,11 +9,11 @@ code = lambda s: cells.append(nbf.v4.new_code_cell(s))  # noqa: E731
 
 md("""# 04 Routing in currents
 
-Two planners from the seed papers (SPEC.md sections 3-4):
+Two planners from the papers (Zwierzewicz; Li et al.):
 
 * **Zermelo**: the time-optimal route of a constant-speed boat through a current, by Pontryagin's
-  principle (seed 001) and by direct transcription (any field, including currents faster than the boat);
-* **PSO**: energy-optimal USV paths around circular obstacles (seed 003): DOPSO (shortest),
+  principle (Zwierzewicz) and by direct transcription (any field, including currents faster than the boat);
+* **PSO**: energy-optimal USV paths around circular obstacles (Li et al.): DOPSO (shortest),
   EOPSO (least energy), OCPSO (replanning when the measured current changes).
 
 `SHIPID_FAST=1` (used by the test) shrinks the swarms.""")
@@ -74,7 +74,7 @@ qv = solve_transcription(Pv, n=30, guess=rv)
 print(f"PMP {rv.time:.3f} s, transcription {qv.time:.3f} s, straight line in still water {Pv.distance:.1f} s")
 ax = f.plot((-900, 900, -700, 700), n=15, color="0.7")
 rv.plot(ax=ax); ax.plot(qv.xy[:, 0], qv.xy[:, 1], "C1."); ax.set_title("route through a strong vortex")""")
-md("""## PSO: energy-optimal USV planning (seed 003)
+md("""## PSO: energy-optimal USV planning (Li et al.)
 Start/goal, wind (from the east, 7 m/s) and current speed (1.2 m/s) are the paper's; the obstacle positions and
 the current directions exist only in the paper's figures, so they are ours (`paper_scenario` docstring). The
 paper's event times (minutes 8 and 32) are scaled by 0.1: with the paper's own thrust and drag curves the USV

@@ -18,9 +18,9 @@ def code(s):
 
 
 md("""
-# 05 — Underwater glider: launch study and launch optimisation (seed 004)
+# 05 — Underwater glider: launch study and launch optimisation (Divsalar et al.)
 
-The spherical-nose glider of seed 004 as a `shipid` protocol model (`glider`): Fossen's
+The spherical-nose glider of Divsalar et al. as a `shipid` protocol model (`glider`): Fossen's
 equations in surge/heave/pitch, hull drag `C_D = a α² + b|α| + c`, lift `C_Lα`, moment
 `C_Mα`, NACA0009 fins by the paper's aspect-ratio formulas (with the `V²` the paper's
 fin-force formulas omit).  Depth `z` is positive down; the launch angle is measured from

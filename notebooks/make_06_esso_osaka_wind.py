@@ -70,7 +70,7 @@ Each training run gets its own constant current in the fit. Projected on the run
 (where the true wind blows to), the estimated current pointed downwind in 27 of the 32 runs in the full
 study (about 0.65 % of the wind speed): partly a wind-driven drift, partly a per-run absorber of
 unmodelled force. A held-out run starts with the training runs' mean current; starting it with a
-wind-driven current instead helped the turning runs and hurt the zigzags (round 7,
+wind-driven current instead helped the turning runs and hurt the zigzags (
 docs/environment.md), so the mean stays."""),
     code("""if HAVE_DATA:
     display(es.current_vs_wind(res, folder).round(4))"""),

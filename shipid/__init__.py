@@ -2,12 +2,13 @@
 validate the identified models and use them for control, routing and studies."""
 from __future__ import annotations
 
-from ._version import __version__  # noqa: E402
+import importlib
 
-from .models import Model, available_models, get_model, register_model  # noqa: E402
 from . import simulate  # noqa: E402  (the module; calling it calls simulate.simulate)
-from .simulate import SimulationResult  # noqa: E402
+from ._version import __version__  # noqa: E402
 from .logs import LogError, ShipParticulars, TrialLog, read_log, read_ship  # noqa: E402
+from .models import Model, available_models, get_model, register_model  # noqa: E402
+from .simulate import SimulationResult  # noqa: E402
 
 __all__ = ["__version__", "Model", "available_models", "get_model", "register_model", "simulate", "SimulationResult",
            "read_log", "TrialLog", "LogError", "ShipParticulars", "read_ship"]
@@ -19,7 +20,5 @@ __all__ += list(_LAZY)
 
 def __getattr__(name):
     if name in _LAZY:
-        import importlib
-
         return getattr(importlib.import_module(_LAZY[name]), name)
     raise AttributeError(f"module 'shipid' has no attribute {name!r}")

@@ -1,6 +1,8 @@
 """One BLAS thread for iterative solvers whose iterates must not depend on the machine's thread count."""
 from __future__ import annotations
 
+from threadpoolctl import threadpool_limits
+
 __all__ = ["one_blas_thread"]
 
 
@@ -14,6 +16,4 @@ def one_blas_thread():
     two different minima (cost 0.0470 and 0.0452).  Inside this context the solvers give the same answer
     whatever the thread setting (their matrices are small, so one thread costs little).
     """
-    from threadpoolctl import threadpool_limits
-
     return threadpool_limits(limits=1, user_api="blas")

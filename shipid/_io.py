@@ -23,7 +23,9 @@ Reading
 """
 from __future__ import annotations
 
+import atexit
 import hashlib
+import importlib.util
 import json
 import math
 import os
@@ -226,8 +228,6 @@ def install_signal_cleanup() -> dict:
     (SIGINT already raises KeyboardInterrupt, which the writers clean up after.)
     Returns the previous handlers for :func:`restore_signal_handlers`.
     """
-    import atexit
-
     def handler(signum, frame):
         _cleanup_tmp()
         raise SystemExit(128 + signum)
@@ -350,7 +350,7 @@ MAX_EXPANDED_NODES = 1_000_000
 
 
 def _yaml_loader():
-    import yaml  # type: ignore
+    import yaml  # type: ignore  # optional (the yaml extra): only for YAML files
 
     return getattr(yaml, "CSafeLoader", None) or yaml.SafeLoader
 
@@ -363,7 +363,7 @@ def _yaml_bounds(text: str, where: str, what: str) -> None:
     anchored node's nesting height and expanded size are recorded when it closes, so an alias costs one
     look-up: the check is linear in the text and never builds the expanded document.
     """
-    import yaml  # type: ignore
+    import yaml  # type: ignore  # optional (the yaml extra): only for YAML files
 
     stack: list[list] = []  # open collections: [anchor, size, height of the children]
     size: dict = {}
@@ -412,7 +412,7 @@ def loads_yaml(text: str, where: str, what: str = "YAML"):
     """``yaml.safe_load`` after bounds read from the parse events (:func:`_yaml_bounds`): at most
     :data:`MAX_ALIASES` aliases, nesting at most :data:`MAX_DEPTH` and at most :data:`MAX_EXPANDED_NODES`
     nodes with the aliases expanded, each counted without expanding anything; every refusal is one line."""
-    import yaml  # type: ignore
+    import yaml  # type: ignore  # optional (the yaml extra): only for YAML files
 
     if len(text) > MAX_YAML_BYTES:
         raise ValueError(f"{where}: {len(text) / 2**20:.1f} MiB is too large for a YAML {what} file "
@@ -441,8 +441,6 @@ def read_structured(path, what: str, *, advice: str | None = None, yaml_ok: bool
     if is_yaml and yaml_ok is False:
         raise ValueError(f"{path}: a {what} is read as JSON; convert the YAML to JSON")
     if is_yaml:
-        import importlib.util
-
         if importlib.util.find_spec("yaml") is None:
             raise ValueError(f"{path}: reading YAML needs PyYAML (pip install pyyaml); or write the {what} as JSON")
         _check_size(path, what, MAX_YAML_BYTES)

@@ -17,7 +17,7 @@ which give the same values (``tests/test_mmg.py`` compares both).
 
 Compiled code is cached on disk by numba (``__pycache__`` beside the source,
 numba's user cache directory, or ``NUMBA_CACHE_DIR``), so only the first run
-compiles (about 20-35 s for a ship model's filter, said once on stderr by
+compiles (up to about a minute for a ship model's filter, said once on stderr by
 :func:`compile_notice`; later runs load it in well under a second).  numba invalidates a cached function when *its*
 source file changes, not when a helper in another file does: the tests
 compare the compiled and pure paths, so a stale cache shows there; delete
@@ -30,6 +30,7 @@ import contextlib
 import importlib.util
 import os
 import types
+from importlib.metadata import PackageNotFoundError, version
 
 __all__ = ["available", "enabled", "disabled", "rebind", "compiled", "path", "compile_notice", "fallback_notice",
            "set_notices"]
@@ -62,8 +63,6 @@ def path() -> str:
         return "numpy path: SHIPID_JIT=0"
     if _off[0]:
         return "numpy path: compilation disabled"
-    from importlib.metadata import PackageNotFoundError, version
-
     try:
         return f"compiled path: numba {version('numba')}"
     except PackageNotFoundError:  # importable but without metadata (a source checkout)
@@ -95,9 +94,9 @@ def fallback_notice() -> None:
                          "about 3-8x slower); pip install numba to compile")
 
 
-#: Measured compile time of a ship model's filter with an empty cache (2-core machine, numba 0.68):
-#: kcs-response ~20 s, mmg ~30 s (``benchmarks/bench_fit_cold_warm.py`` prints it); the notice rounds up.
-COMPILE_SECONDS = 30
+#: Compile time of a ship model's filter with an empty cache, said by the notice: the README's KVLCC2 ``mmg`` fit
+#: took 84.5 s of CPU cold and 20.7 s warm (``benchmarks/bench_fit_cold_warm.py``, numba 0.68), so ~64 s compiling.
+COMPILE_SECONDS = 60
 
 
 def compile_notice(dispatcher, what: str, seconds: float = COMPILE_SECONDS) -> bool:
@@ -180,7 +179,7 @@ def _has_nrt_option() -> bool:
     reject the option at the first call (a KeyError, not a compile error :func:`compile_errors` names), so
     ``no_refcount`` then compiles with reference counting: slower, same results."""
     try:
-        from numba.core.cpu import CPUTargetOptions
+        from numba.core.cpu import CPUTargetOptions  # optional (the fast extra), ~0.6 s to import
     except ImportError:
         return False
     return hasattr(CPUTargetOptions, "_nrt")
@@ -197,7 +196,7 @@ def _import_numba():
     if _numba is None:
         if not _HAVE_NUMBA:
             raise RuntimeError("numba is not installed: pip install numba")
-        import numba
+        import numba  # ~0.6 s to import: only when compiling
 
         _numba = numba
     return _numba

@@ -1,3 +1,4 @@
+# Why one file: the engine, the campaign file, its members and the resumable run share one journal and one schema.
 """Distributed work on Dask: an engine that maps independent members over workers, and campaigns.
 
 :class:`Engine` runs a list of independent tasks (fits of a campaign, replicates of
@@ -53,10 +54,14 @@ command exits 0, 3 (some flagged, none failed) or 1 (some failed).
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
+import math
 import os
+import pickle
 import re
+import threading
 import time
 import traceback
 import warnings
@@ -67,9 +72,18 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 import pandas as pd
+from tqdm.auto import tqdm
 
-from ._io import short
+from ._io import atomic_write_text, check_output_target, dumps_json, read_structured, sha256_file, short
+from .glider import PAPER_SWEEP, sweep
+from .identify import EKFIdentifier, model_from
+from .identify.batch import OutputErrorRefiner
+from .logs import read_log
+from .manoeuvres import ship_info, turning_sweep
+from .models import get_model, model_class
 from .results import ResultMixin
+from .uncertainty import parse_manoeuvre, predict_manoeuvres
+from .uncertainty.draws import check_draws_memory
 
 __all__ = ["Engine", "Outcome", "CampaignResult", "member_seeds", "load_campaign", "run_campaign", "run_fit_member", "run_sweep_member",
            "run_member", "member_cost", "warm_fits", "warm_specs", "FIT_KEYS", "SWEEP_KEYS", "dask_available"]
@@ -81,7 +95,7 @@ WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THRE
 
 def dask_available() -> bool:
     try:
-        import distributed  # noqa: F401
+        import distributed  # noqa: F401  # optional (the distributed extra)
     except ImportError:
         return False
     return True
@@ -199,7 +213,7 @@ class Engine:
     def _start(self):
         if self._client is not None or self.mode != "dask":
             return
-        from distributed import Client, LocalCluster
+        from distributed import Client, LocalCluster  # optional (the distributed extra)
 
         if self.scheduler is not None:
             self._client = _connect(self.scheduler)
@@ -207,7 +221,7 @@ class Engine:
             # one thread per worker process and one BLAS/OpenMP/numba thread inside it: W workers use W
             # cores, never W x (threads of each library) (Dask's pre-spawn environment sets the BLAS ones
             # already; numba's is added here)
-            import dask
+            import dask  # optional (the distributed extra)
 
             t0 = time.perf_counter()
             with dask.config.set({**(QUIET_CONFIG if self.quiet else {}),
@@ -225,8 +239,6 @@ class Engine:
         ``{worker: seconds}``; a warm-up already run on this engine is not repeated."""
         if warm is None or self.mode != "dask":
             return {}
-        import pickle
-
         key = pickle.dumps(warm)
         if key in self._warmed:
             return {}
@@ -273,8 +285,6 @@ class Engine:
         if self.mode == "dask":
             self.warm(warm)
         if self.progress:
-            from tqdm.auto import tqdm
-
             bar = tqdm(total=len(items), desc=desc, unit="member")
         t0, c0 = time.perf_counter(), time.process_time()
         out: list = []
@@ -287,7 +297,7 @@ class Engine:
                     if bar is not None:
                         bar.update(1)
                 return out
-            from distributed import as_completed
+            from distributed import as_completed  # optional (the distributed extra)
 
             self._start()
             cpu0 = self._client.run(_process_cpu)
@@ -339,9 +349,7 @@ def _lost_member_message(exc) -> str:
 def _connect(address: str):
     """A Client of the scheduler at ``address``, or a one-line error within :data:`SCHEDULER_TIMEOUT` s
     (also for a port that accepts the connection but never answers: the attempt runs in a daemon thread)."""
-    import threading
-
-    from distributed import Client
+    from distributed import Client  # optional (the distributed extra)
 
     box: dict = {}
 
@@ -417,8 +425,6 @@ def load_campaign(path) -> dict:
     log or result files and bad sweep levels are one-line ValueErrors naming the file, the member
     and the key.
     """
-    from ._io import read_structured
-
     p = Path(path)
     doc = read_structured(p, "campaign", advice="see the campaign format in the shipid.campaign module docstring")
     if not isinstance(doc, dict):
@@ -469,15 +475,11 @@ def load_campaign(path) -> dict:
             if k in spec and spec[k] < (1 if k == "passes" else 0):
                 raise ValueError(f"{p}: {label}: '{k}' must be >= {1 if k == 'passes' else 0}, got {spec[k]}")
         if spec.get("draws"):
-            from .uncertainty.draws import check_draws_memory
-
             try:
                 check_draws_memory(int(spec["draws"]))
             except ValueError as exc:
                 raise ValueError(f"{p}: {label}: {exc}") from None
         if "manoeuvres" in spec:
-            from .uncertainty import parse_manoeuvre
-
             for m in spec["manoeuvres"]:
                 try:
                     parse_manoeuvre(m)
@@ -531,11 +533,6 @@ def _sweep_spec(p: Path, i: int, w, names: set) -> dict:
 def run_fit_member(spec: dict) -> dict:
     """One campaign member: read its logs, fit (EKF, optional output-error refinement) and, with
     ``draws`` > 0, predict its manoeuvres with intervals.  Returns JSON-able dicts (runs on a worker)."""
-    from .logs import read_log
-
-    from .identify import EKFIdentifier, model_from
-    from .models import get_model, model_class
-
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", UserWarning)
         logs = [read_log(f, lpp=spec.get("lpp")) for f in spec["logs"]]
@@ -559,16 +556,12 @@ def run_fit_member(spec: dict) -> dict:
                           tune_noise=bool(spec.get("tune_noise", False))).fit(logs)
     result = ident.result()
     if spec.get("refine"):
-        from .identify.batch import OutputErrorRefiner
-
         result = OutputErrorRefiner(ident.to_model(), estimate=ident.estimated_).fit(logs, start=ident).result()
     result.created = ""  # the member's output must not depend on when or where it ran
     if kept:
         result.extra = {**(result.extra or {}), "reader_warnings": kept}
     out = {"result": result.to_dict(), "prediction": None, "warnings": kept}
     if int(spec.get("draws", 0)) > 0:
-        from .uncertainty import predict_manoeuvres
-
         pred = predict_manoeuvres(result, spec.get("manoeuvres", ["turning:35", "zigzag:10/10"]),
                                   draws=int(spec["draws"]), seed=int(spec["seed"]),
                                   inflation=float(spec.get("inflation", 1.0)), speed=spec.get("speed"))
@@ -584,17 +577,10 @@ def run_sweep_member(spec: dict):
     (default: the design speed); "glider": :func:`shipid.glider.sweep` over the given factor levels
     (the paper's where omitted).  Returns the sweep's table (DataFrame).
     """
-    import math
-
     if spec["kind"] == "glider":
-        from .glider import PAPER_SWEEP, sweep
-
         levels = {k: spec.get(k, PAPER_SWEEP[k]) for k in PAPER_SWEEP}
         res = sweep(**levels, dt=spec.get("dt"), t_max=float(spec.get("t_max", 60.0)), keep_trajectories=False)
         return res.launches.reset_index(drop=True)
-    from .identify.result import model_from
-    from .manoeuvres import ship_info, turning_sweep
-
     model = model_from(spec["model"])[0]
     lpp = spec.get("lpp")
     if lpp is not None and getattr(model, "lpp", None) not in (None, lpp) and hasattr(model, "scaled"):
@@ -626,8 +612,6 @@ def member_cost(spec: dict) -> float:
     """Estimated run time of a campaign member (:data:`_COST_PER_BYTE_PASS` ...), for scheduling."""
     if spec.get("_member") == "sweep":
         if spec["kind"] == "glider":
-            from .glider import PAPER_SWEEP
-
             return _COST_PER_CASE * float(np.prod([len(spec.get(k, PAPER_SWEEP[k])) for k in PAPER_SWEEP]))
         n = len(spec.get("rudder", [10.0, 15.0, 25.0])) * len(spec.get("speeds", [0]))
         return _COST_PER_CASE * n * (2 if spec.get("side") == "both" else 1)
@@ -685,7 +669,18 @@ def member_status(value: dict | None, ok: bool) -> tuple[str, list[str]]:
 
 def fit_exit_status(result: dict) -> tuple[int, list[str]]:
     """``shipid fit``'s exit status for a result dict (0 consistent, 1 not converged, 3 not consistent with its
-    noise model, 4 filter diverged) and the reasons, from the result's own diagnostics."""
+    noise model or a data defect, 4 filter diverged) and the reasons.  A result that carries a graded verdict
+    is judged by the verdict's own mapping (``shipid.identify.verdict.exit_status``), so that a campaign
+    grades a fit exactly as ``shipid fit`` does; otherwise from the result's consistency diagnostics."""
+    if isinstance(result.get("verdict"), dict):
+        try:
+            from .identify.verdict import exit_status, verdict_of  # optional: the graded verdict, where it exists
+        except ImportError:
+            pass
+        else:
+            v = verdict_of(result)
+            code = int(exit_status(v))
+            return code, ([str(r) for r in v.reasons] if code else [])
     diag = result.get("diagnostics") or {}
     if result.get("method") == "ekf" and not result.get("success", True):  # the filter did not finish
         return 4, [f"the filter diverged: {result.get('message', '')}"]
@@ -738,16 +733,12 @@ def _clear_member(out: Path, name: str) -> None:
 
 
 def _fingerprint(specs) -> str:
-    import hashlib
-
     text = json.dumps([{k: v for k, v in sp.items()} for sp in specs], sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 def _read_journal(path: Path, fingerprint: str) -> dict:
     """``{name: record}`` of the members a journal says finished (lines cut by a kill are skipped)."""
-    from ._io import sha256_file
-
     done: dict = {}
     try:
         lines = path.read_text(encoding="utf-8").splitlines()
@@ -787,11 +778,10 @@ def run_campaign(campaign, outdir, *, engine: Engine | None = None, force: bool 
     ``reasons``, ``warnings`` (of reading its logs), ``success``, ``seed``, ``files``; and ``n_ok``,
     ``n_flagged``, ``n_failed``.  ``on_member(record)`` is called as each member's files are written.
     """
-    from ._io import atomic_write_text, check_output_target, sha256_file
-
     camp = load_campaign(campaign) if not isinstance(campaign, dict) else campaign
     out = Path(outdir)
     check_output_target(out / SUMMARY, "campaign summary")
+    check_output_target(out / JOURNAL, "campaign journal")  # (a FIFO there would block --resume's read)
     if out.exists() and not out.is_dir():
         raise ValueError(f"{out}: exists and is not a folder; give a new or empty output folder")
     fits, sweeps = camp["fits"], camp.get("sweeps", [])
@@ -853,8 +843,6 @@ def run_campaign(campaign, outdir, *, engine: Engine | None = None, force: bool 
 
 def _write_member(out: Path, spec: dict, o: Outcome) -> dict:
     """Write one finished member's files (exclusively: its old ones were removed before it ran); its record."""
-    from ._io import atomic_write_text, dumps_json
-
     kind = spec.get("_member", "fit")
     value = o.value if o.ok else None
     status, reasons = member_status(value if kind == "fit" else None, o.ok)
@@ -918,7 +906,7 @@ class CampaignResult(dict, ResultMixin):
     def plot(self, ax=None):
         """Seconds each member took, coloured by outcome (green ok, orange flagged or no success, red failed);
         returns the axes."""
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         df = self.summary()
         if ax is None:

@@ -1,3 +1,4 @@
+# Why one file: cross-validation and model choice share one fold loop, its scoring rule and its table.
 """How well will a model predict a run it has not seen?  Cross-validation over runs, and model choice.
 
 :func:`cross_validate` fits a model on all runs but one (or one fold of runs) and predicts the runs left out,
@@ -22,6 +23,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,7 +32,14 @@ from typing import Any, Sequence
 import numpy as np
 import pandas as pd
 
+from .campaign import Engine
+from .environment.cli import APPARENT_WIND, environment_model, true_wind_at_edge, wind_geometry
+from .environment.model import WIND_INPUTS
+from .identify import fit_logs, model_from
+from .logs.overlap import drop_contained, repeated_samples
+from .models import available_models, get_model, model_class
 from .results import ResultMixin, verdict_grade
+from .validation import horizon_prediction, load_logs, validate_one
 
 __all__ = ["cross_validate", "CrossValidation", "choose_model", "ModelChoice", "Candidate", "candidates_for",
            "parse_candidates", "fold_groups", "assign_folds", "score_runs", "run_fold", "start_model",
@@ -64,9 +73,6 @@ _G = 9.80665
 def start_model(name: str, params=None, lpp: float | None = None, *, say=None):
     """The start model of ``shipid fit --model NAME [--params SET|RESULT.json]`` at the logs' ship length ``lpp``:
     a named parameter set is Froude-scaled to it, an earlier result of another length too (said with ``say``)."""
-    from .identify import model_from
-    from .models import get_model, model_class
-
     cls = model_class(name)
     opts = {"lpp": lpp} if (lpp is not None and "lpp" in cls.__init__.__code__.co_varnames) else {}
     if params is None:
@@ -105,8 +111,6 @@ class Candidate:
 def parse_candidates(text: str) -> list[Candidate] | None:
     """``"auto"`` -> None (the rule of :func:`candidates_for`); ``"auto:mmg:kvlcc2,response-nl"`` -> those
     candidates in that order.  ValueError for an unknown model name."""
-    from .models import available_models
-
     text = str(text).strip()
     if text == "auto":
         return None
@@ -128,9 +132,6 @@ def parse_candidates(text: str) -> list[Candidate] | None:
 
 
 def _has_wind(log) -> bool:
-    from .environment.cli import APPARENT_WIND
-    from .environment.model import WIND_INPUTS
-
     cols = set(getattr(log, "data", log).columns)
     return set(WIND_INPUTS) <= cols or set(APPARENT_WIND) <= cols
 
@@ -160,8 +161,6 @@ def candidates_for(logs, *, lpp: float | None = None, wind: str | None = None, c
     ``given``: the user's candidates (``--model auto:...``), kept in their order; ``wind``, ``current``: the
     environment options given explicitly (applied to every candidate).  Without them, every candidate gets a wind
     part and a constant current when every log carries wind and a geometry is known (the logs' ship)."""
-    from .environment.cli import wind_geometry
-
     why = []
     L = lpp or _lpp(logs)
     if given is None:
@@ -203,8 +202,6 @@ def fold_groups(logs) -> tuple[list[list[int]], list[dict]]:
     is left out of the cross-validation (the fit would drop it as a repeat; predicting it would count its run
     twice); logs that share samples (overlapping segments, :func:`~shipid.logs.overlap.repeated_samples`) form one
     group.  Returns ``(groups as lists of indices into logs, in the order of their first log; copies)``."""
-    from .logs.overlap import drop_contained, repeated_samples
-
     rows = repeated_samples(logs) if len(logs) > 1 else []
     kept, gone = drop_contained(logs, rows)
     keep = [i for i, lg in enumerate(logs) if any(lg is k for k in kept)]
@@ -333,13 +330,6 @@ def run_fold(spec: dict) -> dict:
     """One fold (runs on a worker): fit ``spec["candidate"]`` on ``spec["train"]`` with ``spec["fit_options"]``
     (keyword arguments of :func:`shipid.identify.fit_logs`), then predict each log of ``spec["test"]`` as
     ``shipid validate`` does.  Returns the fold record and one entry per left-out run (JSON-able)."""
-    import time
-
-    from .environment.cli import environment_model
-    from .identify import fit_logs, model_from
-    from .validation import validate_one
-    from .validation import horizon_prediction
-
     t0 = time.perf_counter()
     cand: Candidate = spec["candidate"]
     train, test = spec["train"], spec["test"]
@@ -517,7 +507,7 @@ class CrossValidation(ResultMixin):
 
     def plot(self, ax=None):
         """Bar chart of the run scores (1 = at the goals), worst first; returns the axes."""
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         if ax is None:
             _, ax = plt.subplots(figsize=(6, 3))
@@ -593,8 +583,6 @@ def _collect(cand: Candidate, outcomes, specs, copies, settings) -> CrossValidat
 
 
 def _prepare(logs, lpp, folds):
-    from .validation import load_logs
-
     logs = load_logs(logs, lpp=lpp)
     groups, gone = fold_groups(logs)
     if len(groups) < 2:
@@ -619,8 +607,6 @@ def _specs(cand, plan, lpp, fit_options, horizons, start_every):
 
 
 def _engine(engine, workers, scheduler, progress):
-    from .campaign import Engine
-
     if engine is not None:
         return engine, False
     return Engine(workers if workers is not None else 1, scheduler=scheduler, progress=progress), True
@@ -665,8 +651,6 @@ def cross_validate(logs, model: str = "mmg", params=None, *, folds="loro", lpp: 
     logs, plan, copies, names = _prepare(logs, lpp, folds)
     cand = Candidate(model, params, wind, current)
     if wind:
-        from .environment.cli import true_wind_at_edge
-
         true_wind_at_edge(logs, what="--wind")
     specs = _specs(cand, plan, lpp, fit_options, horizons, start_every)
     eng, own = _engine(engine, workers, scheduler, progress)
@@ -748,7 +732,7 @@ class ModelChoice(ResultMixin):
         return self.summary()
 
     def plot(self, ax=None):
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         if ax is None:
             _, ax = plt.subplots(figsize=(5, 3))
@@ -781,8 +765,6 @@ def choose_model(logs, candidates: Sequence[Candidate] | None = None, *, folds="
                  scheduler: str | None = None, engine=None, progress: bool = False) -> ModelChoice:
     """Cross-validate every candidate (default :func:`candidates_for` the logs) and rank them by the rule of
     docs/choosing_a_model.md.  All folds of all candidates are members of one map over the engine."""
-    from .environment.cli import true_wind_at_edge
-
     logs, plan, copies, names = _prepare(logs, lpp, folds)
     cands, why = candidates_for(logs, lpp=lpp, wind=wind, current=current, given=candidates)
     if any(c.wind for c in cands):

@@ -54,7 +54,7 @@ def axes_column(ax, n: int, *, height: float = 1.6, width: float = 7.0) -> np.nd
     """``n`` axes stacked in one column sharing the time axis (new figure when ``ax`` is None); a single
     given axes is reused for every panel."""
     if ax is None:
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         _, axs = plt.subplots(max(n, 1), 1, sharex=True, figsize=(width, height * max(n, 1)), squeeze=False)
         return axs[:, 0]
@@ -86,7 +86,7 @@ def plot_coefficients(table: pd.DataFrame, ax=None, title: str | None = None):
     """Each estimated coefficient's 95 % interval relative to its value (1 = the estimate), so coefficients of
     every size share one axis; a wide bar is a poorly determined coefficient.  Returns the axes."""
     if ax is None:
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         _, ax = plt.subplots(figsize=(6, 0.3 * len(table) + 1.2))
     v = table["value"].to_numpy(dtype=float)

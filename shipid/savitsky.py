@@ -50,9 +50,11 @@ or Maxsurf curve exists, pass it instead (``PlaningHull.resistance_table``).
 """
 from __future__ import annotations
 
+import bisect
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.interpolate import PchipInterpolator
 from scipy.optimize import brentq
 
 __all__ = [
@@ -287,8 +289,6 @@ class ResistanceCurve:
     source: str = ""
 
     def __post_init__(self):
-        from scipy.interpolate import PchipInterpolator
-
         s, r = np.asarray(self.speed, float), np.asarray(self.resistance, float)
         if s.ndim != 1 or s.shape != r.shape or len(s) < 3:
             raise ValueError("ResistanceCurve: speed and resistance must be 1-D arrays of equal length >= 3")
@@ -326,8 +326,6 @@ class ResistanceCurve:
 
     def _scalar(self, V: float):
         """Value and derivative at one speed with Python floats (fast path of the same Hermite cubic)."""
-        import bisect
-
         a = abs(V)
         sgn = 1.0 if V > 0 else (-1.0 if V < 0 else 0.0)
         s = self.speed

@@ -30,6 +30,7 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
+from ._kernel import replay_compiled
 from .integrate import dopri5, hold_steps, interval_steps, rk4_map
 from .models.base import Model
 from .results import ResultMixin, axes_column, in_degrees, plot_series
@@ -303,10 +304,8 @@ def simulate(
     n_int = interval_steps(t, substeps, h_max).tolist()
     if (U is not None and controller is None and model.nu > 0 and p.dtype.kind == "f"
             and (p.ndim == 1 or p.shape[:-1] == batch)):
-        # sampled inputs: the same RK4 map on the model's kernel equations (issue 15): compiled, or run by the
+        # sampled inputs: the same RK4 map on the model's kernel equations: compiled, or run by the
         # interpreter on floats for one trajectory of a model that sets _python_replay
-        from ._kernel import replay_compiled
-
         Xc = replay_compiled(model, x0.reshape(-1, model.nx), t, U.reshape(-1, n_t, model.nu), p, n_int, foh)
         if Xc is not None:
             Xc = Xc.reshape(batch + (n_t, model.nx))

@@ -9,7 +9,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+from scipy.optimize import brentq
 
+from .manoeuvres import RampSchedule, SampledHold, TurningRudder, ZigzagRudder
+from .models import get_model
 from .models.base import Model
 from .simulate import simulate
 
@@ -44,7 +47,7 @@ class TrialRecipe:
     rpm_steps: tuple = ((0.0, 10.0),)
     psi_deg: float = 0.0
     dt_s: float = 0.1
-    rudder_rate_deg_s: float = 16.8  # KCS model, SPEC section 1
+    rudder_rate_deg_s: float = 16.8  # KCS model
     n_rate: float = 1.0  # rps per second
     execute_s: float = 5.0
 
@@ -76,8 +79,6 @@ def steady_surge_speed(model: Model, n: float, delta: float = 0.0) -> float:
     surge equation), so it works for any model with states u, v, r and inputs
     delta, n.
     """
-    from scipy.optimize import brentq
-
     iu = model.state_index("u")
     x = np.zeros(model.nx)
     uin = np.zeros(model.nu)
@@ -118,8 +119,6 @@ def make_trial(model: Model, recipe: TrialRecipe, rng: np.random.Generator | Non
         its sample interval (exactly the zero-order-hold assumption), fixed-step RK4 with 4 steps per
         sample.
     """
-    from .manoeuvres import RampSchedule, SampledHold, TurningRudder, ZigzagRudder
-
     if rudder not in ("continuous", "sampled"):
         raise ValueError(f"rudder must be 'continuous' or 'sampled', got {rudder!r}")
     if recipe.kind not in ("turning", "zigzag"):
@@ -160,8 +159,6 @@ def make_kcs_logs(model: Model | None = None, seed: int = 20261123, recipes=KCS_
     :func:`make_trial`.
     """
     if model is None:
-        from .models import get_model
-
         model = get_model("kcs-response", "synthetic-truth")
     rng = np.random.default_rng(seed)
     return {r.name: make_trial(model, r, rng, noise_std, rudder) for r in recipes}

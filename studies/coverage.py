@@ -146,7 +146,7 @@ def _replicate(task: dict) -> dict:
 
 def _task_keys(task: dict, truth) -> tuple[str, str]:
     """Checkpoint key of a replicate task: the replicate's seed and every setting it depends on, as canonical JSON;
-    and the key of files written before session 7 (a pickle, which depends on whether equal strings of the settings
+    and the key of older checkpoint files (a pickle, which depends on whether equal strings of the settings
     are one object, so a call from another script could find nothing; such files are still read)."""
     import hashlib
     import json
@@ -289,7 +289,7 @@ def coverage_study(truth=None, recipes=None, *, n_replicates: int = 100, seed: i
     estimate_x0 : bool
         The output-error fit also estimates each log's initial u, v, r (nuisance parameters; the
         coefficients' covariance is marginal over them).  False holds them at the EKF smoother's
-        values, as before session 6: the joint covariance is then too tight (the predicted tactical
+        values: the joint covariance is then too tight (the predicted tactical
         diameter covered 0.85 of 100 replicates, docs/uncertainty.md sect. 3).
 
     Returns

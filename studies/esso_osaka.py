@@ -16,34 +16,32 @@ Choices (made once, before looking at any held-out error, and the same for every
   scatter seen in the second differences of the logs; process std 0.005 m/sqrt(s) (x, y),
   0.002 rad/sqrt(s) (psi), 0.003 m/s/sqrt(s) (u, v), 0.002 rad/s/sqrt(s) (r): the model error of a
   manoeuvring model in gusting wind, about a third of the measured accelerations' scatter.  The identifier's
-  automatic defaults were not used (on these runs they diverge, as the issue reports);
-* estimated coefficients :data:`ESTIMATE` (hull, thrust ahead and astern, astern side force, rudder
-  lift and its hull interaction aH, tR -- the last two chosen by cross-validation in session 6 -- and the
-  cross-flow factor CrY, chosen by cross-validation in session 9) and,
+  automatic defaults were not used (on these runs they diverge);
+* estimated coefficients :data:`ESTIMATE` (hull, thrust ahead and astern, astern side force, rudder lift and
+  its hull interaction aH, tR, and the cross-flow factor CrY -- the last three kept by cross-validation) and,
   with wind, :data:`ESTIMATE_WIND`; prior = ``esso-osaka-prior`` with :data:`PRIOR_PARAMS` (the
-  side-dependent flow straightening, chosen by cross-validation in session 7) and 100 % prior std;
+  side-dependent flow straightening, kept by cross-validation) and 100 % prior std;
 * current: constant per run (reset at each run), estimated with prior std 0.05 m/s; in prediction the
   held-out run starts with the training runs' mean current (a wind-driven start current,
-  ``current_start="wind"``, was round 7's candidate D1: not kept);
+  ``current_start="wind"``, was scored and not kept);
 * EKF inputs: the identifier's defaults, first-order hold and a 5-sigma innovation gate -- chosen by 8-fold
-  cross-validation against the held inputs without gating the study used before (docs/environment.md);
-  a constant current per run was preferred to a random walk by the same cross-validation;
+  cross-validation against held inputs without gating (docs/environment.md); a constant current per run was
+  preferred to a random walk by the same cross-validation;
 * fits on all run types and by run type (``by_type``); which to use for a run type is a cross-validated
-  choice reported in docs/environment.md, not made here;
-* options scored as pre-registered candidates and not kept (docs/environment.md, "Session 6"): a rudder
-  rate limit (``rudder_rate``), other extra estimated coefficients, 1 Hz fits, the aft wind geometry
-  (``wind``), per-type fits on the other types' posterior (``by_type_prior="others"``); in sessions 7 and 8
-  the cross-flow factor ``CrN`` (with ``CrY``), a wake falling with drift, the side force and yaw moment of the
-  propeller turning ahead (``YPf``, ``NPf``) and a rudder neutral angle (``delta0``) (rounds 4-6), in
-  session 9 the wind-driven start current (round 7; docs/environment.md), in session 9 rudder stall at
-  24.1 deg (``lowspeed``'s ``kstall``), a side-dependent rudder normal force (``dfalpha``) and the wake's
-  side-dependent fall with drift estimated (``C2p``, ``C2m``) (round 8: 8-fold means 0.3017, 0.2873, 0.2964
-  against 0.2823; docs/environment.md), in session 10 a windowed output-error refinement of the EKF fits on
-  30 s open-loop prediction windows of the training runs (``refine``, round 9: 8-fold means 0.3398, 0.3271,
-  0.3181 against 0.2823: it traded position error for heading error; docs/environment.md), and the same on
-  position only with ``aH``, ``tR`` held, with a linear and a robust loss (round 10: 8-fold means 0.2837,
-  0.2831 against 0.2823: better on the training zigzags, not on the held-out ones).  The defaults are
-  the chosen settings.
+  choice (:data:`CHOSEN_SCOPE`, docs/environment.md);
+* the rule: each candidate was written down before it ran and kept only when it lowered the cross-validated
+  mean of the per-type 30 s median position errors (8-fold, then leave-one-run-out); the numbers are in
+  docs/environment.md.  Scored and not kept: a rudder rate limit (``rudder_rate``), 1 Hz fits, the aft wind
+  geometry (``wind``), per-type fits on the other types' posterior (``by_type_prior="others"``), the
+  cross-flow factor ``CrN`` (with ``CrY``), a wake falling with drift, the side force and yaw moment of the
+  propeller turning ahead (``YPf``, ``NPf``), a rudder neutral angle (``delta0``), the wind-driven start
+  current, rudder stall at 24.1 deg (``kstall``), a side-dependent rudder normal force (``dfalpha``) and the
+  wake's side-dependent fall with drift (``C2p``, ``C2m``) (8-fold means 0.3017, 0.2873, 0.2964 against
+  0.2823), a windowed output-error refinement of the EKF fits on 30 s open-loop prediction windows of the
+  training runs (:func:`refine_on_windows`; 8-fold means 0.3398, 0.3271, 0.3181 against 0.2823: it traded
+  position error for heading error), and the same on position only with ``aH``, ``tR`` held, with a linear and
+  a robust loss (0.2837, 0.2831 against 0.2823: better on the training zigzags, not on the held-out ones).
+  The defaults are the chosen settings.
 """
 from __future__ import annotations
 
@@ -61,31 +59,27 @@ from shipid.environment import WindForce
 from shipid.models import model_class
 from shipid.logs.schema import PRESETS
 
-__all__ = ["run_study", "refine_on_windows", "in_sample_errors", "REFINE_DEFAULTS", "REFINE_CANDIDATES", "anemometer_check", "path_relative_error", "current_vs_wind", "start_current_floor", "drift_factor", "with_drift_current", "air_velocity", "EssoStudy", "load_runs", "recipe_loro", "RECIPE_CANDIDATES_11", "error_diagnosis", "residual_accelerations", "split_position_error", "PRIOR_PARAMS", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
+__all__ = ["run_study", "refine_on_windows", "in_sample_errors", "REFINE_DEFAULTS", "REFINE_CANDIDATES", "anemometer_check", "path_relative_error", "current_vs_wind", "start_current_floor", "drift_factor", "with_drift_current", "air_velocity", "EssoStudy", "load_runs", "recipe_loro", "error_diagnosis", "residual_accelerations", "split_position_error", "PRIOR_PARAMS", "DATA_DIR", "ESTIMATE", "ESTIMATE_WIND", "RUN_TYPES"]
 
 #: Where the shared data set lives relative to the repository root.
 DATA_DIR = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "esso_osaka_frt"
 RUN_TYPES = ("turning", "zigzag", "random", "berthing")
 #: A trimmed copy of another run (same samples): left out.
 DUPLICATES = ("turn_cut_14-Sep-2020_15_58_08",)
-#: Estimated hull, propeller and rudder coefficients.  ``aH``, ``tR`` were added in session 6 by the
-#: pre-registered rule (round 3, candidate Q3: leave-one-run-out chosen-scope mean of the 30 s medians
-#: 0.2780 against 0.2793 m); with them ``f_alpha``, ``aH`` and ``tR`` are not separately identifiable
-#: (they scatter over the folds; docs/environment.md) -- read them as a group, not one by one.
-#: ``CrY`` (the yaw-rate weighting of the cross-flow sway force) was added in session 9 by the pre-registered
-#: round 7 (candidate T1: 8-fold mean 0.28228 against G1's 0.28981, leave-one-run-out chosen-scope mean
-#: 0.26546 against 0.27080; docs/environment.md).
-#: (One copy: the fit recipe's lowspeed default, ``shipid.identify.recipe.DEFAULT_ESTIMATE``, which ``shipid fit``
-#: uses.)
+#: Estimated hull, propeller and rudder coefficients (one copy: the ``lowspeed`` model's recipe default, which
+#: ``shipid fit`` uses).  ``aH``, ``tR`` kept by the rule (leave-one-run-out chosen-scope mean of the 30 s medians
+#: 0.2780 against 0.2793 m); with them ``f_alpha``, ``aH`` and ``tR`` are not separately identifiable (they
+#: scatter over the folds; docs/environment.md) -- read them as a group, not one by one.  ``CrY`` (the yaw-rate
+#: weighting of the cross-flow sway force) kept by the rule (8-fold mean 0.28228 against 0.28981,
+#: leave-one-run-out chosen-scope mean 0.26546 against 0.27080; docs/environment.md).
 _LOWSPEED = model_class("lowspeed").recipe_defaults  # what `shipid fit` uses for lowspeed (one copy, in the model)
 ESTIMATE = tuple(_LOWSPEED.estimate)
 ESTIMATE_WIND = tuple(WindForce.recipe_estimate)
 #: Values replacing the ``esso-osaka-prior`` set's in every ``lowspeed`` fit of the study: the MMG standard
 #: method's side-dependent flow straightening at the KVLCC2's published split (gamma_R 0.640 / 0.395 for
-#: beta_R > 0 / < 0, Yasukawa & Yoshimura 2015: +-0.1225 about the prior's 0.5), chosen in session 7 by the
-#: pre-registered round 4 (candidate G1: 8-fold mean of the 30 s medians 0.2898 vs 0.2922, leave-one-run-out
-#: chosen-scope mean 0.2708 vs 0.2780; docs/environment.md).  ``run_study(prior_params={})`` is the setting
-#: before.
+#: beta_R > 0 / < 0, Yasukawa & Yoshimura 2015: +-0.1225 about the prior's 0.5), kept by the rule (8-fold mean
+#: of the 30 s medians 0.2898 vs 0.2922, leave-one-run-out chosen-scope mean 0.2708 vs 0.2780;
+#: docs/environment.md).  ``run_study(prior_params={})`` fits without it.
 PRIOR_PARAMS = dict(_LOWSPEED.start)  # (one copy: the recipe's lowspeed start default)
 #: Measurement noise of the fits: the ``esso-frt`` format's sensor noise (one copy, in the log adapter).
 MEAS_STD = dict(PRESETS["esso-frt"].meas_std)
@@ -94,7 +88,7 @@ PROCESS_STD = dict(_LOWSPEED.process_std[1])
 
 
 #: Froude-scaled IMO minimum steering-gear rate (2.32 deg/s at full scale, A.751(18)) for the 3 m model
-#: of the 325 m Esso Osaka: 2.32 * sqrt(325 / 3) = 24.1 deg/s (a candidate of the pre-registered list in
+#: of the 325 m Esso Osaka: 2.32 * sqrt(325 / 3) = 24.1 deg/s (a candidate scored and not kept,
 #: docs/environment.md: the logged rudder angle of the zigzags jumps by 40 deg within one 0.1 s sample).
 FROUDE_RUDDER_RATE_DEG_S = 2.32 * float(np.sqrt(325.0 / 3.0))
 
@@ -212,8 +206,7 @@ class EssoStudy:
         return "\n".join(out)
 
 
-#: Round 9 (session 10, pre-registered; docs/environment.md): a windowed output-error refinement of every
-#: environment-aware EKF fit, i.e. fit for what is judged.  After the EKF, the estimated coefficients
+#: A windowed output-error refinement of every environment-aware EKF fit (scored and not kept; docs/environment.md), i.e. fit for what is judged.  After the EKF, the estimated coefficients
 #: (``ESTIMATE`` + ``ESTIMATE_WIND``) are adjusted by :class:`shipid.identify.batch.OutputErrorRefiner` to
 #: minimise the open-loop prediction error of windows of the *training* runs
 #: (:func:`shipid.identify.batch.prediction_windows`): a window starts at the measured state every ``every`` s,
@@ -227,29 +220,27 @@ class EssoStudy:
 REFINE_DEFAULTS = {"horizon": 30.0, "every": 10.0, "sample_every": 5, "channels": ("x", "y", "psi"),
                    "meas_std": {"x": 0.3, "y": 0.3, "psi": 0.05}, "max_nfev": 20, "input_hold": "zoh",
                    "current": "own", "balance": False, "hold": (), "loss": "linear", "f_scale": 1.0}
-#: The round's three candidates (fixed before any of them was run): R1 the refinement above, R2 with the
-#: training mean current as every window's start current, R3 with each run type weighing the same.
-#: Result: none kept (8-fold means 0.3398 / 0.3271 / 0.3181 against the bar 0.2823; the heading weight let the
-#: fit trade position error for heading error, on the training runs too): ``refine`` stays off by default.
+#: Candidates: R1 the refinement above, R2 with the training mean current as every window's start current, R3
+#: with each run type weighing the same.  None kept (8-fold means 0.3398 / 0.3271 / 0.3181 against 0.2823; the
+#: heading weight let the fit trade position error for heading error, on the training runs too).
 REFINE_CANDIDATES = {"R1": {}, "R2": {"current": "mean"}, "R3": {"balance": True}}
-#: Round 10 (session 10, pre-registered before any of them was run; docs/environment.md): R3's settings with the
-#: cost on position only (x, y at 0.3 m) and the ridge coefficients ``aH``, ``tR`` held at the EKF fit's values
+#: Further candidates: R3's settings with the cost on position only (x, y at 0.3 m) and the ridge coefficients ``aH``, ``tR`` held at the EKF fit's values
 #: (P1), and the same with the robust loss ``soft_l1``, ``f_scale`` 1, i.e. quadratic up to one 0.3 m
 #: normalised residual and linear beyond (P2: the judged number is a median).
 REFINE_CANDIDATES["P1"] = {"balance": True, "channels": ("x", "y"), "meas_std": {"x": 0.3, "y": 0.3},
                            "hold": ("aH", "tR")}
 REFINE_CANDIDATES["P2"] = {**REFINE_CANDIDATES["P1"], "loss": "soft_l1", "f_scale": 1.0}
-#: Result: none kept (8-fold means 0.2837 / 0.2831 against 0.2823; the refinements converged and lowered the
-#: in-sample zigzag error by 8-11 %, the held-out one rose by 2 %): ``refine`` stays off by default.
+#: None kept (8-fold means 0.2837 / 0.2831 against 0.2823; the refinements converged and lowered the in-sample
+#: zigzag error by 8-11 %, the held-out one rose by 2 %): ``refine`` stays off by default.
 
 
 def refine_on_windows(model, runs, currents, *, estimate, horizon=30.0, every=10.0, sample_every=5,
                       channels=("x", "y", "psi"), meas_std=None, max_nfev=20, input_hold="zoh", current="own",
                       balance=False, hold=(), loss="linear", f_scale=1.0):
-    """Refine a fitted environment-aware model on open-loop prediction windows of ``runs`` (round 9;
+    """Refine a fitted environment-aware model on open-loop prediction windows of ``runs`` (
     :data:`REFINE_DEFAULTS` explains the settings).  ``currents``: per run ``{"cx": .., "cy": ..}`` estimated by
-    the fit.  ``hold``: coefficients of ``estimate`` held at the fitted model's values (round 10); ``loss``,
-    ``f_scale``: the refiner's loss (round 10).  Returns the fitted :class:`shipid.identify.batch.OutputErrorRefiner`."""
+    the fit.  ``hold``: coefficients of ``estimate`` held at the fitted model's values; ``loss``,
+    ``f_scale``: the refiner's loss.  Returns the fitted :class:`shipid.identify.batch.OutputErrorRefiner`."""
     from shipid.identify.batch import OutputErrorRefiner, prediction_windows
 
     if current == "mean":
@@ -279,7 +270,7 @@ def in_sample_errors(models: dict, runs, currents, horizon: float = 30.0, start_
     """Open-loop prediction errors of fitted ``models`` (name -> model) on runs they were fitted on (in-sample),
     judged like the held-out runs (:func:`shipid.validation.horizon.horizon_prediction` on the
     ``eval_every``-th 10 Hz sample) but each run started with its own ``currents`` entry (``{"cx", "cy"}``, as
-    estimated by the fit; None for models without a current).  Round 9's diagnosis: does a refinement lower
+    estimated by the fit; None for models without a current).  The diagnosis of the refinement: does it lower
     the judged error on its own training runs?  Columns ``model``, ``run``, ``run_type``, ``position_error``
     [m], ``heading_error`` [deg] at ``horizon``, one row per start."""
     from shipid.validation.horizon import horizon_prediction
@@ -447,10 +438,10 @@ def run_study(data_dir=DATA_DIR, *, folds="loro", fit_every: int = 20, eval_ever
         Start current of a held-out run's predictions: the training runs' mean current (default), or
         wind-driven, ``k`` x the mean air velocity of the trailing :data:`DRIFT_WINDOW_S` before each start,
         ``k`` fitted to the training runs' estimated currents on their mean air velocities
-        (:func:`drift_factor`, :func:`with_drift_current`; round 7, docs/environment.md).
+        (:func:`drift_factor`, :func:`with_drift_current`; docs/environment.md).
     refine : dict, optional
         Refine every environment-aware fit on open-loop prediction windows of its training runs
-        (:func:`refine_on_windows` with :data:`REFINE_DEFAULTS` updated by this dict; round 9); None: the EKF fit.
+        (:func:`refine_on_windows` with :data:`REFINE_DEFAULTS` updated by this dict); None: the EKF fit.
     """
     from shipid.environment import with_environment
     from shipid.models import get_model
@@ -700,7 +691,7 @@ def current_vs_wind(study: "EssoStudy", data_dir=DATA_DIR, runs=None) -> pd.Data
     """Per run: the current estimated for it by the all-types fits that trained on it (mean over those folds)
     and its components along (``c_down`` = c.w/|w|) and across (``c_cross`` = (wx cy - wy cx)/|w|) the run's mean
     air velocity ``wx, wy`` (where the true wind blows to; :func:`air_velocity`), with ``ratio`` = ``c_down`` /
-    |w| (round 7's diagnosis: a current driven down the wind)."""
+    |w| (the diagnosis of a current driven down the wind)."""
     c = _run_currents(study)
     rows = []
     for lg in load_runs(data_dir) if runs is None else runs:
@@ -752,7 +743,7 @@ def start_current_floor(study: "EssoStudy", model: str = "lowspeed + wind + curr
 
 
 def anemometer_check(data_dir=DATA_DIR, runs=None) -> pd.DataFrame:
-    """A physics check of the logged wind against the ship's own motion (round 8, docs/environment.md).
+    """A physics check of the logged wind against the ship's own motion (docs/environment.md).
 
     The logged true wind is the apparent wind converted with the logged ``psi, u, v``.  If the anemometer
     had a constant direction offset ``phi0`` or gain ``s`` (``s e^{i phi0}`` times the apparent air velocity,
@@ -780,7 +771,7 @@ def path_relative_error(study: "EssoStudy", model: str = "lowspeed + wind + curr
     the run (all-types fit, started with that fit's mean current, as :func:`run_study`) beside the path the
     ship measured in that time (sum of the distances between the samples) and the median propeller rate.
     Columns ``run``, ``run_type``, ``error``, ``path`` [m], ``n`` [rps]; ``error / path`` is the error per
-    metre sailed, which compares run types of different speeds (round 8, docs/environment.md)."""
+    metre sailed, which compares run types of different speeds (docs/environment.md)."""
     rows = []
     for lg in load_runs(data_dir) if runs is None else runs:
         d, r, _ = _held_out_prediction(study, lg, model, horizon, start_every)
@@ -846,25 +837,6 @@ def residual_accelerations(study: "EssoStudy", candidates=("YPf", "NPf", "delta0
 #: The study's chosen scope of the fit for a left-out run of each type (docs/environment.md): the training runs of
 #: its own type, except zigzags, fitted on all types (only six zigzag training runs).
 CHOSEN_SCOPE = {"turning": "type", "zigzag": "all", "random": "type", "berthing": "type"}
-
-
-#: Session 11, round 11 (pre-registered in docs/environment.md before any ran): options of :func:`recipe_loro`.
-#: N1: the identifier's likelihood-based noise tuning (the fits' consistency verdict says the innovations are
-#: 0.2-0.45 of what the a-priori noise levels predict); S1: the recipe's time-constant sampling rule (25 steps per
-#: fastest time constant at the training runs' median speed) instead of the fixed 2 s.
-RECIPE_CANDIDATES_11 = {"N1": {"fit_options": {"tune_noise": True}}, "S1": {"sampling": "rule"}}
-
-
-def _estimate_plus(*names) -> dict:
-    """:func:`recipe_loro` options estimating the recipe's default list for ``lowspeed`` with a wind part, plus
-    ``names``."""
-    return {"fit_options": {"estimate": list(ESTIMATE) + list(ESTIMATE_WIND) + list(names)}}
-
-
-#: Session 12, round 12 (pre-registered in docs/environment.md before any ran): one more coefficient estimated
-#: each. K1: the slope k1 of the propeller's K_T(J); L1: the rudder's yaw-rate flow-straightening lever lR;
-#: X1: the lever xH of the hull's share of the rudder force.
-RECIPE_CANDIDATES_12 = {"K1": _estimate_plus("k1"), "L1": _estimate_plus("lR"), "X1": _estimate_plus("xH")}
 
 
 def recipe_loro(data_dir=DATA_DIR, *, types=RUN_TYPES, horizons=(10.0, 30.0, 60.0), start_every: float = 5.0,
@@ -945,9 +917,9 @@ def _main(argv=None):  # pragma: no cover - the full study (slow): python -m stu
     ap.add_argument("--set", default="", help="comma-separated name=value replacing values of the lowspeed prior "
                     f"(start and prior of every fit), on top of {PRIOR_PARAMS} (dgammaR=0: the setting before)")
     ap.add_argument("--current-start", default="mean", choices=("mean", "wind"),
-                    help="start current of held-out predictions: training mean, or wind-driven (round 7)")
+                    help="start current of held-out predictions: training mean, or wind-driven")
     ap.add_argument("--refine", default=None, choices=tuple(REFINE_CANDIDATES),
-                    help="refine the environment-aware fits on open-loop prediction windows (round 9 and 10 candidates)")
+                    help="refine the environment-aware fits on open-loop prediction windows (candidates scored and not kept)")
     ap.add_argument("--save", help="pickle the EssoStudy here")
     a = ap.parse_args(argv)
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")

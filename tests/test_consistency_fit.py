@@ -95,15 +95,23 @@ def _swapped(logs):  # v and r columns swapped
     return logs
 
 
-@pytest.mark.parametrize("case, needle", [
-    (_units, "times the model's value"), (_sign, "opposite sign"), (_decimated, "smaller than the noise model"),
-    pytest.param(_noise, "larger than the noise model", marks=pytest.mark.slow),
-    pytest.param(_swapped, "not white", marks=pytest.mark.slow)], ids=lambda v: getattr(v, "__name__", "")[1:])
-def test_each_wrong_physics_case_is_flagged(kcs_truth, kcs_logs, case, needle):
+@pytest.mark.parametrize("case, kind, grade, needle", [
+    (_units, "physics_range", "defect", "--units delta=deg"), (_sign, "physics_sign", "defect", "--rudder-sign -1"),
+    (_decimated, "sampling", "defect", "full-rate"),
+    pytest.param(_noise, "innovations_large", "model_error", "", marks=pytest.mark.slow),
+    pytest.param(_swapped, "innovations_coloured", "model_error", "", marks=pytest.mark.slow)],
+    ids=lambda v: getattr(v, "__name__", "")[1:] if callable(v) else None)
+def test_each_wrong_physics_case_is_flagged(kcs_truth, kcs_logs, case, kind, grade, needle):
+    """The verdict grades the cases a model-form error cannot produce as defects naming the option that
+    fixes them (a scaled or flipped rudder leaves the innovations white: only the coefficients' physics shows
+    it); the channel checks of the reader catch the noise and swapped cases before any fit
+    (tests/test_logs_consistency.py), the filter's statistics flag them here."""
     fit = EKFIdentifier(kcs_truth, n_passes=1).fit(case(_two_logs(kcs_logs)))
-    c = fit.diagnostics_["consistency"]
-    assert fit.success_ and not c["consistent"]
-    assert any(needle in r for r in c["reasons"]), c["reasons"]
+    assert fit.success_
+    v = fit.result().verdict
+    assert v.grade == grade and any(f["kind"] == kind for f in v.findings), v.to_dict()
+    assert needle in " ".join(v.reasons)
+    assert all(len(r) <= 300 for r in v.reasons)
 
 
 def _drop(logs, t0, T):
@@ -228,39 +236,24 @@ def _write_csv(path, frame):
     return path
 
 
-def test_cli_inconsistent_fit_exits_3_with_one_warning_and_strict_json(tmp_path, capsys, kcs_logs):
+def test_cli_defect_fit_exits_3_with_one_warning_and_strict_json(tmp_path, capsys, kcs_logs):
     f = kcs_logs["kcs_zz_m10"][0].copy()
     f["delta"] = -f["delta"]
     p = _write_csv(tmp_path / "flipped.csv", f)
     out = tmp_path / "r.json"
-    # the reader's own rudder-sign check would refuse this file first (exit 2): switch it off to reach the fit's
-    # verdict; the logs are the 4.36 m KCS model's (the recipe needs the ship length)
+    # the reader's own rudder-sign check refuses this file first (exit 2): switched off, the fit's verdict still
+    # finds the flipped rudder (from the log's channels and from the coefficients' physical signs)
     rc = main(["fit", str(p), "--model", "kcs-response:synthetic-truth", "--passes", "1", "-o", str(out), "--no-progress",
                "--lpp", "4.36", "--no-consistency-checks"])
-    err = capsys.readouterr().err
+    cap = capsys.readouterr()
     assert rc == 3
-    lines = [ln for ln in err.splitlines() if ln.startswith("warning: the fit is not consistent")]
-    assert len(lines) == 1 and "opposite sign" in lines[0] and "sign convention" in lines[0]
+    lines = [ln for ln in cap.err.splitlines() if ln.startswith("warning: defect")]
+    assert len(lines) == 1 and "--rudder-sign -1" in lines[0] and len(lines[0]) <= 300, cap.err
+    assert "verdict: defect" in cap.out
     text = out.read_text()
     assert "NaN" not in text and "Infinity" not in text
     doc = json.loads(text)
-    assert doc["diagnostics"]["consistency"]["consistent"] is False
-    # the verdict is the EKF stage's: after a refinement the warning says so (the coefficient values it quotes
-    # are that stage's, not the refined ones in the printed table)
-    assert ("its EKF stage, before the refinement" in lines[0]) == (doc["method"] != "ekf")
-
-
-def test_inconsistency_warning_names_the_ekf_stage_after_a_refinement():
-    from shipid.commands.fit import _inconsistency_warning
-
-    verdict = {"consistent": False, "channels": {"r": {}}, "reasons": ["coefficient c3 = 4 +- 0.1 is 11 times the "
-                                                                      "model's value 0.3: channel 'r' in the wrong units?"]}
-    plain, staged = _inconsistency_warning(verdict), _inconsistency_warning(verdict, refined=True)
-    assert plain.startswith("warning: the fit is not consistent with its noise model in channel(s) r: ")
-    assert "EKF stage" not in plain
-    assert staged.startswith("warning: the fit is not consistent with its noise model in channel(s) r (its EKF stage, "
-                             "before the refinement: coefficient values quoted here are that stage's")
-    assert "c3 = 4" in staged and staged.endswith("(exit status 3).")
+    assert doc["verdict"]["grade"] == "defect" and doc["verdict"]["reasons"]
 
 
 def test_cli_diverged_fit_exits_4_and_refinement_from_it_fails(tmp_path, capsys, kcs_truth, kcs_logs):

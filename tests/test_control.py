@@ -1,5 +1,5 @@
 """Optimal control: LEPF, exact gradients (RK4 sensitivities, costates, shooting Jacobians),
-the analytic bang-bang answer of seed 000's scenario 1 against both numeric solvers and the
+the analytic bang-bang answer of Ghorbani et al.'s scenario 1 against both numeric solvers and the
 paper, scenarios 2-3 constraints, identified-model plans and the `shipid plan` CLI."""
 import builtins
 import json
@@ -142,7 +142,7 @@ def test_scenario1_indirect_agrees_with_analytic(bang):
     # 11 LEPF stages: with 10, the exterior-penalty residual on u(tf) sits at the 0.01 tolerance and
     # depends on round-off (0.0085 before, 0.0137 after a 1e-11 change of the R_T evaluation); 11 give
     # 0.0082. The later stages stall after one L-BFGS-B iteration (docs/control.md), so it shrinks little.
-    # A stage stopped at its iteration limit is not success (issue 16); with the default max_iter=300
+    # A stage stopped at its iteration limit is not success; with the default max_iter=300
     # every stage converges.  Stages run to gtol (ftol=0, the default): with L-BFGS-B's relative-
     # reduction stop at 1e-13 an AMD EPYC stopped the late stages with the thrust sagging to 0.965 of
     # full and no switch; to gtol both CPUs give the bang-bang (switch 28.66 s, violation 0.0079).
@@ -161,7 +161,7 @@ def test_scenarios_2_3_satisfy_constraints(k):
     # (violation 0.0026); 300, the old default limit, stopped it at 0.0148 there.
     assert res.max_constraint_violation <= 1e-2, res.message
     df = res.to_pandas()
-    # SPEC section 2 limits on the fine grid (1 % of each bound's range as tolerance)
+    # the paper's limits on the fine grid (1 % of each bound's range as tolerance)
     assert df["u"].max() <= 20.0 + 0.1
     assert np.degrees(df["p"].abs().max()) <= 10.0 * 1.01
     assert np.degrees(df["r"].abs().max()) <= 15.0 * 1.01

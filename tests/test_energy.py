@@ -1,4 +1,4 @@
-"""Leg speed/power models: the seed-003 USV curves and the shipid-model plug-in."""
+"""Leg speed/power models: the USV curves of Li et al. and the shipid-model plug-in."""
 import numpy as np
 import pytest
 

@@ -1,6 +1,6 @@
 """Identification of the glider's hydrodynamic coefficients (a, b, c of C_D, C_L_alpha,
 C_M_alpha) with the project's augmented-state EKF from synthetic dive logs with sensor
-noise (issue 6, item 4)."""
+noise."""
 import warnings
 
 import numpy as np

@@ -32,7 +32,7 @@ def test_ballistic_launch_event_matches_the_parabola(speed, angle):
 
 
 def test_paper_reference_launch_depth_within_15_percent_horizontal_not():
-    """Seed 004, section 6-3-1: 5 m/s, 45 deg, fin 0, CG 0.01 m -> max depth 1.68 m, horizontal 4.73 m.
+    """Divsalar et al., section 6-3-1: 5 m/s, 45 deg, fin 0, CG 0.01 m -> max depth 1.68 m, horizontal 4.73 m.
 
     With the paper's printed data and the choices stated in the 'paper' parameter set, the
     maximum depth is reproduced (+2.5 %), the horizontal travel is 21 % short (3.74 m).  The

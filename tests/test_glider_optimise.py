@@ -40,7 +40,7 @@ def test_bad_bounds_are_rejected():
 
 @pytest.mark.slow
 def test_full_optimisation_against_the_papers_choice():
-    """Seed 004 chooses 5 m/s, 30 deg, fin 5 deg, CG 0 or -1 cm.  Under the stated max-min
+    """Divsalar et al. chooses 5 m/s, 30 deg, fin 5 deg, CG 0 or -1 cm.  Under the stated max-min
     trade-off this model chooses 5 m/s and CG ~0 (agrees), but a launch of about 40 deg with
     a fin of 0-2 deg: at 30 deg / fin 5 the horizontal travel is only 56 % of the best
     reachable, against 78 % for both depth and travel at the optimum."""

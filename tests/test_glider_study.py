@@ -1,5 +1,5 @@
 """The paper's launch sweeps as one batch (shipid.glider.study) and what they show
-against the trends seed 004 reports in section 6-3."""
+against the trends Divsalar et al. reports in section 6-3."""
 import numpy as np
 import pytest
 

@@ -1,4 +1,4 @@
-"""Hostile input corpus (issue 16): every file the CLI reads is treated as hostile.
+"""Hostile input corpus: every file the CLI reads is treated as hostile.
 
 Each case builds its files in a fresh folder and runs ``shipid ...`` in-process.
 The contract, checked for every case by :func:`_check`: exit code 2, exactly one
@@ -490,7 +490,7 @@ def test_output_naming_a_device_pipe_or_socket_is_refused_even_with_force(kind, 
             "simulate": ["simulate", "kcs-response:synthetic-truth", "--turning", "35"],
             "sample": ["sample", r, LOG, "--steps", "10"], "log": ["log", LOG], "metrics": ["metrics", LOG],
             "sweep": ["sweep", "kcs-response:synthetic-truth", "--rudder", "35"],
-            "plan": ["plan", "paper-1"], "route": ["route", "zermelo-paper"],
+            "plan": ["plan", "paper-1"], "route": ["route", "paper-zermelo"],
             "glider": ["glider", "launch", "--speed", "1", "--angle", "45"]}[command]
     rc = main([str(a) for a in argv] + ["-o", str(out), "--force"])
     err = capsys.readouterr().err.strip()
@@ -524,14 +524,10 @@ BOMB = "".join(f"{a}: &{a} [" + ", ".join([f"*{p}" if p else "x"] * 9) + "]\n"
 
 
 def test_yaml_alias_bomb_is_refused_without_expanding_it():
-    import time
-
-    t0 = time.perf_counter()
-    with pytest.raises(ValueError) as e:
+    with pytest.raises(ValueError) as e:  # counted from the parse events (9 x 9 aliases), never expanded
         _io.loads_yaml(BOMB, "c.yaml", "campaign")
     assert str(e.value) == ("c.yaml: its aliases expand to more than 1e+06 nodes, the limit; write the campaign "
                             "without aliases")
-    assert time.perf_counter() - t0 < 5.0  # counted from the parse events (9 x 9 aliases), never expanded
 
 
 def test_yaml_alias_limits():
@@ -612,6 +608,7 @@ def test_sample_refuses_a_thinning_that_keeps_too_few_steps_and_a_run_beyond_mem
     assert not (tmp_path / "s.json").exists()
 
 
+@pytest.mark.slow
 def test_ctrl_c_during_sample_is_one_line(tmp_path):
     """SIGINT while the walkers run: 'shipid: interrupted', exit 130, no traceback (emcee prints one for any
     exception inside the likelihood, so the interrupt is taken between steps)."""

@@ -51,7 +51,7 @@ def test_lowspeed_kernel_equals_numpy(env_logs, monkeypatch, terms):
     if terms == "asymmetric":  # the MMG side-dependent gamma_R and drift-dependent wake on, dgammaR estimated
         model = model.with_params({"dgammaR": 0.1225, "C1": 2.0, "C2p": 1.6, "C2m": 1.1, "xP": -0.48})
         est = HYD + ["dgammaR"]
-    elif terms == "rudder":  # round 8's side-dependent rudder force and rudder stall on, dfalpha estimated
+    elif terms == "rudder":  # side-dependent rudder force and rudder stall on, dfalpha estimated
         model = model.with_params({"dfalpha": 0.1, "kstall": 2.445})
         est = HYD + ["dfalpha"]
     logs = [lg[["time", "x", "y", "psi", "u", "v", "r", "delta", "n"]] for lg in env_logs]

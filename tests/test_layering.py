@@ -25,9 +25,9 @@ FLOORS = [
     ("environment", ("environment",)),
     ("manoeuvres", ("manoeuvres",)),
     ("synthetic logs", ("synthetic",)),
-    ("results", ("identify.result",)),
+    ("results", ("identify.result", "identify.verdict")),
     ("identification", ("identify",)),
-    ("validation", ("validation", "validation_horizon")),
+    ("validation", ("validation",)),
     ("uncertainty", ("uncertainty",)),
     ("report", ("report",)),
     ("applications", ("control", "routing", "glider")),
@@ -169,6 +169,43 @@ def test_no_import_cycles():
         " <-> ".join(c) for c in loops)
 
 
+#: Where function-local imports are the rule, not the exception (the package docstring says why): the CLI's
+#: commands load the library only for the command that runs.
+LOCAL_IMPORTS_ALLOWED = ("commands", "cli", "__main__")
+
+
+def unexplained_local_imports(root: Path = PKG) -> list[str]:
+    """Function-local imports without a comment giving the reason (on the import's line, or on the comment line
+    directly above the run of imports it belongs to)."""
+    files, _ = import_graph(root)
+    bad = []
+    for mod, f in files.items():
+        rel = mod.split(".", 1)[1] if "." in mod else ""
+        if any(rel == p or rel.startswith(p + ".") for p in LOCAL_IMPORTS_ALLOWED):
+            continue
+        lines = f.read_text().split("\n")
+        for line, name, local in _imports(f, mod, f.name == "__init__.py"):
+            if not local:
+                continue
+            i = line - 1
+            explained = "#" in lines[i]
+            while not explained and i > 0 and lines[i - 1].strip().startswith(("import ", "from ")):
+                i -= 1
+                explained = "#" in lines[i]
+            explained = explained or (i > 0 and lines[i - 1].strip().startswith("#"))
+            if not explained:
+                bad.append(f"{f.relative_to(root.parent)}:{line} imports {name.rsplit('.', 1)[0]} inside a function")
+    return sorted(set(bad))
+
+
+def test_function_local_imports_say_why():
+    """An import inside a function hides a dependency from the reader (and, before this test, hid import
+    loops): outside the CLI's commands it is kept only to defer an optional or heavy dependency, and says so."""
+    bad = unexplained_local_imports()
+    assert not bad, ("move these imports to the top of their module, or give the reason in a comment on the "
+                     "line:\n" + "\n".join(bad))
+
+
 def _write(root: Path, files: dict[str, str]) -> None:
     for rel, text in files.items():
         p = root / rel
@@ -210,3 +247,26 @@ def test_the_parser_sees_every_import_form(tmp_path, source, expected):
     found = {".".join(name.split(".")[:2]) for _, name, _ in _imports(f, "shipid.models.m", False)
              if name.split(".")[0] == "shipid" and len(name.split(".")) > 1}
     assert found == expected
+
+
+def test_the_local_import_check_wants_a_reason(tmp_path):
+    root = tmp_path / "pkg"
+    _write(root, {"__init__.py": "", "a.py": "def f():\n    import json\n",
+                  "b.py": "def f():\n    import numba  # optional extra\n",
+                  "c.py": "def f():\n    # optional extras, only when plotting\n    import matplotlib\n    import numba\n",
+                  "commands/__init__.py": "", "commands/x.py": "def f():\n    import json\n"})
+    assert unexplained_local_imports(root) == ["pkg/a.py:2 imports json inside a function"]
+
+
+#: Longest module (lines) that needs no stated reason.
+MAX_LINES = 700
+
+
+def test_long_modules_say_why_they_are_one_file():
+    """A newcomer finds a room by its name; a module past ~700 lines holds several rooms unless it says why it
+    does not: its first line is ``# Why one file: <reason>``."""
+    bad = [f"{f.relative_to(PKG.parent)} ({n} lines)" for f in sorted(PKG.rglob("*.py"))
+           if (n := len(f.read_text().splitlines())) > MAX_LINES
+           and not f.read_text().startswith("# Why one file: ")]
+    assert not bad, ("split these modules by job, or give the reason on their first line "
+                     "('# Why one file: ...'):\n" + "\n".join(bad))

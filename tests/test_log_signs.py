@@ -1,5 +1,5 @@
 """Per-channel signs (``read_log(signs=)``, ``--sign r=-1,v=-1``) and the consistency checks of
-``TrialLog.from_arrays`` (issue 11, items left open in session 4)."""
+``TrialLog.from_arrays``."""
 from __future__ import annotations
 
 import warnings

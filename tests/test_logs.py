@@ -538,7 +538,7 @@ def test_ship_particulars_validation_and_round_trip():
     for bad, msg in [({"lpp": 0}, "lpp = 0 must be finite and > 0"), ({"lpp": float("nan")}, "finite"),
                      ({"lpp": "long"}, "is not a number"), ({"beam": 3}, "'lpp' .* is required"),
                      ({"lpp": 4, "rudder_max": 35}, "rudder_max = 35.0 rad is beyond 90 deg"),
-                     # the usual symbols are accepted (issue 11), but one field given twice is an error
+                     # the usual symbols are accepted, but one field given twice is an error
                      ({"lpp": 4, "Lpp": 4}, r"'lpp' and 'Lpp' both give lpp; keep one"),
                      ({"lpp": 4, "bream": 0.6}, r"unknown field\(s\) \['bream'\]; known fields are "),
                      ({"lpp": True}, r"lpp = True is not a number"),

@@ -1,4 +1,4 @@
-"""Hostile and broken log files (issue 16): each gives one clear line (exit 2 from the CLI, no traceback),
+"""Hostile and broken log files: each gives one clear line (exit 2 from the CLI, no traceback),
 or is repaired with a note; the input is never modified."""
 from __future__ import annotations
 

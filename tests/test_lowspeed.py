@@ -1,5 +1,5 @@
 """Low-speed four-quadrant model (shipid.models.lowspeed) and the defect fixes of mmg, the response
-models and simulate() found on the Esso Osaka runs (issue 13)."""
+models and simulate() found on the Esso Osaka runs."""
 from __future__ import annotations
 
 import warnings

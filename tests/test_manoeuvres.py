@@ -404,7 +404,7 @@ def test_zigzag_heading_reference_is_the_heading_at_the_execute():
         assert math.degrees(psi_rev - psi[i_e]) == pytest.approx(20.0, abs=0.3), kw
 
 
-# ----------------------------------------------------------------------------- check angle (issue 11, item 3)
+# ----------------------------------------------------------------------------- check angle
 @pytest.mark.parametrize("rudder, check", [(10.0, 5.0), (20.0, 10.0)])
 def test_zigzag_check_angle_is_read_from_the_log(rudder, check):
     """A 10/5 and a 20/10 zigzag (simulated with the known check angle) read as a log: the check angle is

@@ -1,4 +1,4 @@
-"""Issue 11 acceptance: ``shipid fit`` on the raw MARIN KVLCC2 runs with nothing but ``--lpp 320``.
+"""Acceptance on measured data: ``shipid fit`` on the raw MARIN KVLCC2 runs with nothing but ``--lpp 320``.
 
 The four training runs (tc+-35, zz+-10; the zz+-20 hold-outs are never read here) as the files are, through
 the CLI exactly as a user types it: the fit never diverges, exits 0 (consistent) or 3 (the consistency
@@ -8,7 +8,7 @@ the response models: b1, c2 < 0 and c3 > 0 (the rudder's yaw moment with shipid'
 rudder) -- and the fitted model's own sway and yaw damping (``diagnostics.damping``) is negative along the
 logged states.
 
-``response-nl`` meets it through the recipe's own-damping constraint (session 8): unconstrained, its
+``response-nl`` meets it through the recipe's own-damping constraint: unconstrained, its
 refinement gives b1 +0.0177 and the cross-flow term b6 +0.0124, and its own sway damping is positive on
 ~17 % of the logged states and at rest (self-excited sway in the slow part of the turns); the recipe then
 solves again with d(dv/dt)/dv, d(dr/dt)/dr <= -0.02 U/L at the logged states and at rest
@@ -66,7 +66,7 @@ def test_raw_marin_fit_with_only_lpp_has_physical_damping_signs(tmp_path, capsys
     for k in positive:
         assert coef[k] > 0, (k, coef[k], std[k])
     if res["model"] == "response-nl":
-        from shipid.identify.recipe import _approach_speed
+        from shipid.identify.sampling import _approach_speed
         from shipid.logs import read_log
 
         with warnings.catch_warnings():
@@ -196,7 +196,7 @@ def test_output_error_refinement_of_padded_short_logs_does_not_warn(tmp_path):
 def test_linear_window_ignores_the_drift_angle_near_rest():
     """A log that starts from rest (the Esso Osaka runs do) has |v| ~ u ~ noise there, so atan2(|v|, u) is
     meaningless: those samples neither cut the window nor count; the drift at speed still does."""
-    from shipid.identify.recipe import DRIFT_SPEED_FRACTION, linear_window
+    from shipid.identify.sampling import DRIFT_SPEED_FRACTION, linear_window
     from shipid.logs import TrialLog
 
     rng = np.random.default_rng(3)

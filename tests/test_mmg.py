@@ -11,7 +11,7 @@ integration accuracy, and separately measures what each difference does:
 2. shipmmg evaluates U and beta with the sway velocity v - x_G r instead of
    the midship v_m its equations of motion use (paper: U = sqrt(u^2 + v_m^2),
    beta = atan(-v_m/u)).
-3. shipmmg issue #31: the rudder yaw moment N_R = -(x_R + a_H x_H) F_N cos(delta)
+3. shipmmg's rudder lever (github.com/ShipMMG/shipmmg/issues/31): the rudder yaw moment N_R = -(x_R + a_H x_H) F_N cos(delta)
    needs the dimensional x_R = -0.5 L; older shipmmg code used -0.5 (no L).  In
    0.0.11 x_R is an argument; passing the non-dimensional -0.5 reproduces the bug.
 """
@@ -162,7 +162,7 @@ def test_stock_shipmmg_differences_are_documented(kvlcc2, turn35):
     d_ref = _track_stats(turn35["shipid"], L)
     _, X_stock = _run_shipmmg(shipmmg.mmg_3dof.simulate_mmg_3dof, kvlcc2, math.radians(35), turn35["n"], 250.0)
     _, X_bug31 = _run_shipmmg(shipmmg.mmg_3dof.simulate_mmg_3dof, kvlcc2, math.radians(35), turn35["n"], 250.0,
-                              x_R=kvlcc2.particulars.x_R)  # -0.5, not -0.5 L: issue #31
+                              x_R=kvlcc2.particulars.x_R)  # -0.5, not -0.5 L: shipmmg/issues/31
     d_stock, d_bug = _track_stats(X_stock, L), _track_stats(X_bug31, L)
     print(f"steady diameter/L: paper formulas {d_ref:.3f}, stock shipmmg {d_stock:.3f}, "
           f"stock shipmmg with issue-#31 x_R {d_bug:.3f}")
@@ -173,7 +173,7 @@ def test_stock_shipmmg_differences_are_documented(kvlcc2, turn35):
 
 
 def test_rudder_moment_lever_is_dimensional(kvlcc2):
-    """N_R = -(x_R + a_H x_H) F_N cos(delta) with x_R = -0.5 L (issue #31), checked on the force breakdown."""
+    """N_R = -(x_R + a_H x_H) F_N cos(delta) with x_R = -0.5 L (shipmmg/issues/31), checked on the force breakdown."""
     x = np.array([0, 0, 0, U0, -0.02, 0.01])
     F = kvlcc2.forces(x, [math.radians(20), 11.0])
     c = kvlcc2.params_series()

@@ -1,4 +1,4 @@
-"""The numpy path's shortcuts (issue 15) give what the general numpy code gives, with or without numba.
+"""The numpy path's shortcuts give what the general numpy code gives, with or without numba.
 
 - ``simulate`` of one trajectory with sampled inputs runs the model's kernel equations in the
   interpreter on floats when the model sets ``_python_replay`` (kcs-response, response-nl, the

@@ -1,4 +1,4 @@
-"""PSO planner of seed 003: geometry, optimiser, DOPSO/EOPSO against differential evolution, voyages, OCPSO."""
+"""PSO planner of Li et al.: geometry, optimiser, DOPSO/EOPSO against differential evolution, voyages, OCPSO."""
 import numpy as np
 import pytest
 

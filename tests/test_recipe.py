@@ -80,8 +80,8 @@ def test_refinement_from_a_diverging_model_reports_failure():
 
 def test_recipe_steps_are_reported_and_switchable():
     """fit_logs on two bundled KCS turning logs (4.36 m): every sample (tau 0.83 s at 0.1 s logging), a8
-    free (one log changes rpm), no refinement for turning circles alone ('auto'), and the steps land in
-    the result's settings."""
+    fixed (the linear range ends both turns within 13 s of the start, before the rpm change of one of them),
+    no refinement for turning circles alone ('auto'), and the steps land in the result's settings."""
     from shipid.datasets import bundled_kcs_logs
     from shipid.identify.recipe import fit_logs
     from shipid.logs import read_log
@@ -94,7 +94,8 @@ def test_recipe_steps_are_reported_and_switchable():
     assert steps["ship"]["value"] == {"lpp": pytest.approx(4.36)}
     assert steps["sampling"]["value"] == 1 and "0.827 s" in steps["sampling"]["reason"]
     assert len(lines) == len(res.settings["recipe"]) and lines[0].startswith("recipe: ship:")
-    assert "a8" not in steps and steps["refinement"]["value"] == "none"
+    assert steps["a8"]["value"] == 0.0 and "constant" in steps["a8"]["reason"]
+    assert steps["refinement"]["value"] == "none"
     assert res.model_options["lpp"] == pytest.approx(4.36) and res.method == "ekf"
     with pytest.raises(ValueError, match="refine='both'"):
         fit_logs(logs, "kcs-response", refine="both")
@@ -214,7 +215,7 @@ def test_refinement_covariance_is_positive_semidefinite_and_its_condition_finite
 def test_cli_refine_all_switches_the_identifiable_subset_off(tmp_path):
     """shipid fit --refine-all: the refinement fits every estimated coefficient and says so in the recipe steps.
     By default the step holds what the solver cannot resolve -- on one constant-rpm turning circle the surge
-    term a3 (a unit change moves the cost by less than ftol * cost) -- at its EKF-stage value, reports it with
+    term a5 (a unit change moves the cost by less than ftol * cost) -- at its EKF-stage value, reports it with
     the threshold and the condition numbers before/after, and the rest is refined."""
     from shipid.cli import main
     from shipid.datasets import bundled_kcs_logs
@@ -228,13 +229,13 @@ def test_cli_refine_all_switches_the_identifiable_subset_off(tmp_path):
     step_a = next(s for s in a.settings["recipe"] if s["step"] == "identifiable subset")
     step_b = next(s for s in b.settings["recipe"] if s["step"] == "identifiable subset")
     held = a.settings["held"]
-    assert held == step_a["value"] == ["a3"] and "sqrt(2 ftol cost)" in step_a["reason"]
+    assert held == step_a["value"] == ["a5"] and "sqrt(2 ftol cost)" in step_a["reason"]
     rule = a.settings["hold_rule"]
     assert rule["ftol"] == 1e-8 and rule["threshold"] > 0 and rule["condition_after"] < rule["condition_before"]
-    assert a.coef["a3"] == a.settings["ekf_stage"]["coef"]["a3"] and a.coef_std["a3"] == 0.0
-    assert "a3" not in a.settings["estimated"] and "a3" in b.settings["estimated"]
+    assert a.coef["a5"] == a.settings["ekf_stage"]["coef"]["a5"] and a.coef_std["a5"] == 0.0
+    assert "a5" not in a.settings["estimated"] and "a5" in b.settings["estimated"]
     assert step_b["value"] is None and "off (asked)" in step_b["reason"] and "held" not in b.settings
-    assert b.coef["a3"] != a.coef["a3"]
+    assert b.coef_std["a5"] > 0  # refined with the rest: it has an uncertainty of its own
 
 
 def test_refinement_keeps_the_own_damping_negative():
@@ -283,7 +284,7 @@ def test_refinement_keeps_the_own_damping_negative():
 def test_speed_scale_of_the_damping_margin():
     """The own-damping margin's speed: the approach speed; the median speed when the logs start from rest (the
     approach speed below a tenth of it, e.g. the Esso Osaka runs); none when nothing moves."""
-    from shipid.identify.recipe import _speed_scale
+    from shipid.identify.sampling import _speed_scale
 
     t = np.arange(200.0)
     moving = TrialLog.from_arrays(t, name="m", u=np.full(200, 2.0), v=np.zeros(200), r=np.zeros(200))

@@ -150,8 +150,8 @@ def test_report_reads_as_a_hand_over_document(fitted, tmp_path):
     doc = _parse(text)
     title = re.search(r"<h1>([^<]*)</h1>", text).group(1)
     assert html.unescape(title) == "KCS model 1:52.67 — kcs-response model on 2 log(s) from data"
-    intro = re.search(r'</h1>\s*<p class="intro">([^<]*)</p>', text)
-    assert intro, "the summary paragraph follows the title"
+    intro = re.search(r'</h1>\s*<div class="verdict"[^>]*>.*?</div>\s*<p class="intro">([^<]*)</p>', text, re.S)
+    assert intro, "the verdict banner follows the title, then the summary paragraph"
     summary = html.unescape(intro.group(1))
     assert summary.startswith("This report checks a kcs-response model fitted by an extended Kalman filter to 1 "
                               "log(s) (kcs_zz_p20_rpm), estimating 7 of its 16 coefficients.")

@@ -111,14 +111,19 @@ def build(name, log, ekf):
         from shipid.uncertainty import predict_manoeuvres
 
         return predict_manoeuvres(_fit_result(), ["turning:35"], draws=3, seed=1)
-    if name == "ControlResult":
-        from shipid.control import paper_problem, solve_direct
+    if name == "ControlResult":  # full throttle on a coarse grid: evaluated, not optimised (cheap)
+        from shipid.control import ControlResult, paper_problem
 
-        return solve_direct(paper_problem(1, n_intervals=6, substeps=2))
+        pr = paper_problem(1, n_intervals=6, substeps=2)
+        u = np.tile(pr.u_hi, (pr.n_intervals, 1))
+        return ControlResult(pr, "direct-slsqp", u, 30.0, nit=0, nfev=1, optimizer_success=True,
+                             optimizer_message="evaluated", wall_time=0.0)
     if name == "ZermeloResult":
-        from shipid.routing import paper_problem, solve_transcription
+        from shipid.routing import ZermeloResult
 
-        return solve_transcription(paper_problem(), n=12)
+        t = np.linspace(0.0, 2.0, 9)
+        xy = np.column_stack([t, 0.5 * t])
+        return ZermeloResult(t, xy, np.full(9, 0.4), 2.0, True, 0.0, True, 0, "reached", "pmp")
     if name in ("PSOResult", "PlanResult", "Voyage"):
         from shipid.routing import paper_scenario, plan_eopso, sail
 
@@ -238,3 +243,18 @@ def test_simulate_is_the_module_and_callable():
     a = shipid.simulate(m, np.array([0, 0, 0, 1.0, 0, 0]), t, np.tile([0.1, 10.0], (5, 1)))
     b = shipid.simulate.simulate(m, np.array([0, 0, 0, 1.0, 0, 0]), t, np.tile([0.1, 10.0], (5, 1)))
     np.testing.assert_array_equal(a.x, b.x)
+
+
+def test_fit_cards_carry_the_grade_and_an_unfitted_identifier_says_so(ekf):
+    from shipid.identify import EKFIdentifier
+    from shipid.identify.recipe import RecipeFit
+
+    from shipid.results import verdict_grade
+
+    for r in (ekf, ekf.result(), RecipeFit(ekf=ekf)):  # each its own grade (a recipe judges its logs too)
+        grade = verdict_grade(r)
+        assert grade in ("consistent", "model_error", "defect", "diverged")
+        assert f"verdict <b>{grade}</b>" in r._repr_html_() and r.summary().attrs["verdict"] == grade
+    bare = EKFIdentifier(get_model("kcs-response"))
+    h = bare._repr_html_()
+    assert bare.success is False and "not fitted" in h and len(h) < HTML_LIMIT

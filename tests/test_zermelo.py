@@ -1,4 +1,4 @@
-"""Zermelo solvers against the seed-001 example, closed forms and each other."""
+"""Zermelo solvers against the example of Zwierzewicz, closed forms and each other."""
 import numpy as np
 import pytest
 from scipy.optimize import brentq

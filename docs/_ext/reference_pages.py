@@ -17,10 +17,10 @@ PACKAGES = [
     ("shipid.logs", "Trial logs: reading, checking, ship particulars"),
     ("shipid.models", "Models: the protocol and the registry"),
     ("shipid.identify", "Identification: the fit recipe, the EKF, results"),
+    ("shipid.results", "The result contract every result follows"),
     ("shipid.simulate", "Simulation"),
     ("shipid.manoeuvres", "Standard manoeuvres and their metrics"),
     ("shipid.validation", "Validation: replay, metrics, horizon predictions"),
-    ("shipid.validation_horizon", "Open-loop horizon predictions"),
     ("shipid.report", "HTML report"),
     ("shipid.uncertainty", "Uncertainty propagation"),
     ("shipid.campaign", "Campaigns on Dask"),
@@ -56,7 +56,7 @@ def write(folder: Path) -> None:
     for pkg, title in PACKAGES:
         try:
             mod = importlib.import_module(pkg)
-        except ImportError:
+        except (ImportError, AttributeError):
             continue  # a module that does not exist in this checkout
         own, linked = [], []
         for n in public_names(mod):
@@ -83,6 +83,9 @@ def write(folder: Path) -> None:
         if not page.exists() or page.read_text() != text:
             page.write_text(text)
         pages.append(pkg)
+    for stale in folder.glob("shipid*.rst"):  # a package that no longer exists
+        if stale.stem not in pages:
+            stale.unlink()
     index = ["API reference", "=============", "",
              "Every public name of the package, generated from its docstrings and grouped by package "
              "in the order data flow through shipid: logs, models, identification, simulation and "

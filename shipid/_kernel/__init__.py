@@ -121,7 +121,9 @@ def call(model, fns, name, *args):
     """``fns[name](*args)`` for ``fns = filter_functions(model)``.  Should that build not compile (an
     equation compiled without reference counting allocates after all: numba refuses it), the model's
     reference-counted build runs instead, now and from then on (same results, slower)."""
-    _jit.compile_notice(fns[name], f"the {model.name} filter")
+    base = getattr(model, "base", None)  # a ship model with wind/current parts: named after its ship model
+    what = {"ekf_batch": "filter", "rk4_replay": "replay"}.get(name, name)
+    _jit.compile_notice(fns[name], f"the {base.name + ' (wind/current)' if base is not None else model.name} {what}")
     try:
         return fns[name](*args)
     except _jit.compile_errors():

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ._common import add_progress_option, progress_on, renamed_option
-from .fit import _print_result
+from .fit import _print_result, _print_verdict
 
 
 def register(sub) -> None:
@@ -63,6 +63,7 @@ def _demo(args) -> int:
     result = ident.result()
     result.to_json(outdir / "result.json")
     _print_result(result)
+    _print_verdict(result)
     tab = result.summary()
     tab["truth"] = truth.params_series()[tab.index]
     tab["error_sigma"] = (tab["value"] - tab["truth"]) / tab["std"]
@@ -132,6 +133,7 @@ def _demo_mmg(args, outdir: Path) -> None:
     res = ident.result()
     res.to_json(outdir / "mmg_result.json")
     _print_result(res)
+    _print_verdict(res)
     write_report(res, logs, outdir / "report.html", identifier=ident,
                  title="shipid demo, part 2: kcs-response identified from MMG-generated KCS logs",
                  intro=DEMO_INTRO_2.format(held=", ".join(lg.name for lg in held_out) or "none"))

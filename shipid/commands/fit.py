@@ -17,10 +17,11 @@ def register(sub) -> None:
     p = sub.add_parser("fit", help="identify model coefficients from trial logs (augmented-state EKF)",
                        description="Identify a model's coefficients from one or more trial logs (CSV in the "
                                    "shipid schema, or MARIN .dat) with the augmented-state EKF.",
-                       epilog="exit status: 0 fit consistent with its noise model; 1 the output-error refinement "
-                              "failed; 2 bad input or option; 3 fit done but NOT consistent (a warning names the "
-                              "channels and likely causes; the result JSON has diagnostics.consistency); "
-                              "4 the filter diverged (result = start values, success false).")
+                       epilog="exit status: 0 the fit's verdict is 'consistent' (the model explains the logs to "
+                              "their noise) or 'model_error' (no data defect; the model misses the logs by more than "
+                              "their noise: one warning line says how much); 2 bad input or option; 3 'defect' (a data or set-up defect is likely: the warning "
+                              "names it, the channel and the option that fixes it); 4 'diverged' (no estimate). The "
+                              "result JSON's 'verdict' holds the grade, the reasons and the numbers.")
     p.add_argument("logs", nargs="+", metavar="LOG", help="trial log files (.csv, MARIN .dat)")
     p.add_argument("--model", default="kcs-response", metavar="MODEL",
                    help=FIT_MODEL_HELP)
@@ -288,7 +289,7 @@ def _fit(args) -> int:
     opts = fit_options(args, model)
     recipe = _lib_errors(lambda: fit_logs(
         logs, model, lpp=args.lpp, progress=progress_on(args), ekf_options=extra, start_defaults=args.params is None,
-        log=None if getattr(args, "quiet", False) else print, **opts))
+        log=None if getattr(args, "quiet", False) else _print_step, **opts))
     fit, ident = recipe, recipe.ekf
     result = fit.result()
     if choice is not None:
@@ -305,51 +306,78 @@ def _fit(args) -> int:
     result.to_json(out, force=args.force)
     _print_result(result)
     print(f"wrote {out}")
-    if not ident.success_:
-        return EXIT_DIVERGED
-    verdict = ident.diagnostics_.get("consistency", {})
-    if not verdict.get("consistent", True):
-        print(_inconsistency_warning(verdict, refined=result.method != "ekf"), file=sys.stderr)
-    damping = result.diagnostics.get("damping") or {}
-    for reason in damping.get("reasons", []):
-        print(f"warning: {reason} (result JSON: diagnostics.damping)", file=sys.stderr)
-    if not result.success:
-        return 1
-    return 0 if verdict.get("consistent", True) else EXIT_INCONSISTENT
+    return _report_verdict(result)
 
 
-#: ``shipid fit`` exit status of a fit that is not consistent with its noise model, and of a diverged filter.
-EXIT_INCONSISTENT, EXIT_DIVERGED = 3, 4
+def _print_step(line: str) -> None:
+    """A recipe step, one line of at most ~300 characters (the full reason is in the result's settings)."""
+    from ..identify.verdict import clip, plain_message
+
+    print(clip(plain_message(line)))
 
 
-def _inconsistency_warning(verdict: dict, refined: bool = False) -> str:
-    """One plain warning for an inconsistent fit: the channels, the findings, the likely causes.  ``refined``:
-    the verdict is the EKF stage's and a refinement followed, so the coefficient values the findings quote are
-    the EKF stage's, not the refined ones printed above (said, so that the two are not confused)."""
-    from ..identify.diagnostics import likely_causes
+def _print_verdict(result) -> None:
+    """The verdict's grade and, unless consistent, its one line (the demo's parts)."""
+    from ..identify.verdict import verdict_of, warning_line
 
-    reasons = verdict.get("reasons", [])
-    chans = [c for c in verdict.get("channels", {}) if any(f"'{c}'" in r for r in reasons)]
-    where = f" in channel(s) {', '.join(chans)}" if chans else ""
-    causes = likely_causes(reasons)
-    stage = (" (its EKF stage, before the refinement: coefficient values quoted here are that stage's, the "
-             "refined ones are in the table above)") if refined else ""
-    return (f"warning: the fit is not consistent with its noise model{where}{stage}: " + "; ".join(reasons)
-            + (f". Likely causes: {causes}." if causes else ".") + " Do not use these coefficients before the cause "
-            "is found (exit status 3).")
+    v = verdict_of(result)
+    print(f"verdict: {v.grade}")
+    line = warning_line(v)
+    if line:
+        print(line)
+
+
+def _report_verdict(result) -> int:
+    """Print the verdict's one line (stderr; nothing for a consistent fit) and return the exit status."""
+    from ..identify.verdict import exit_status, verdict_of, warning_line
+
+    v = verdict_of(result)
+    print(f"verdict: {v.grade}", file=sys.stdout)
+    line = warning_line(v)
+    if line:
+        print(line, file=sys.stderr)
+    return exit_status(v)
 
 
 def _print_result(result) -> None:
     import pandas as pd
 
+    from ..identify.verdict import plain_message
+
     tab = result.summary()
     with pd.option_context("display.float_format", "{:.5g}".format, "display.width", 120):
-        print(f"model {result.model} ({result.method}): {result.message}")
+        print(f"model {result.model} ({result.method}): {plain_message(result.message)}")
         print(tab.to_string())
     d = result.diagnostics
     if d:
         print(f"condition number of the scaled covariance: {d.get('condition_number', float('nan')):.3g}")
-        for w in d.get("warnings", []):
-            print(f"warning: {w}")
+        for w in identifiability_lines(d):
+            print(w)
+
+
+def identifiability_lines(d: dict) -> list[str]:
+    """The identifiability findings of a fit's diagnostics, one line per kind (at most ~300 characters; every
+    pair and combination is in the result JSON under diagnostics)."""
+    from ..identify.verdict import clip
+
+    out = []
+    pairs = d.get("correlated_pairs") or []
+    if pairs:
+        shown = ", ".join(f"{a}-{b} ({r:+.2f})" for a, b, r in pairs)
+        out.append(clip(f"note: {len(pairs)} strongly correlated pair(s) (the logs determine a combination better "
+                        f"than each; manoeuvres that excite them differently separate them): {shown}"))
+    combos = d.get("unidentified_combinations") or []
+    if combos:
+        shown = "; ".join(c["combination"] for c in combos)
+        out.append(clip(f"note: {len(combos)} combination(s) of scaled coefficients the data do not determine (the "
+                        f"result along them is the prior): {shown}"))
+    if d.get("poorly_determined"):
+        out.append(clip("note: poorly determined (posterior std above half the prior std): "
+                        + ", ".join(d["poorly_determined"])))
+    generic = ("are strongly correlated (rho", "the data do not determine the combination", "poorly determined (")
+    for w in d.get("warnings", []):
+        if not any(g in w for g in generic):
+            out.append(clip(f"warning: {w}"))
+    return out
 
 

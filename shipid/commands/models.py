@@ -11,7 +11,7 @@ MEANINGS = {
 #: What the parameters of a model are (the term each multiplies), for ``shipid models``.
 PARAMETER_NOTES = {
     "kcs-response": ("du/dt = (a1 + a8 n) u + a2 v^2 + a3 r^2 + a4 delta^2 + (a5 r + a6 delta) v + a7 r delta + a9 n^2; "
-                     "dv/dt = b1 v + (b2 + b4 u) r + b3 delta; dr/dt = c1 v + c2 r + c3 delta (seed 002, SPEC section 1)"),
+                     "dv/dt = b1 v + (b2 + b4 u) r + b3 delta; dr/dt = c1 v + c2 r + c3 delta (Hajizadeh et al.)"),
     "mmg": ("non-dimensional (prime) hull derivatives X.., Y.., N.., added masses mx, my, Jz, propeller (tP, wP0, "
             "k0-k2, xP) and rudder (tR, aH, xH, gammaR, lR, eps, kappa, f_alpha) coefficients in the notation of "
             "Yasukawa & Yoshimura (2015)"),

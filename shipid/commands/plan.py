@@ -1,4 +1,4 @@
-"""``shipid plan``: time-optimal manoeuvres (seed 000's scenarios or a PROBLEM.json)."""
+"""``shipid plan``: time-optimal manoeuvres (Ghorbani et al.'s scenarios or a PROBLEM.json)."""
 from __future__ import annotations
 
 import numpy as np

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from ._common import progress_iter, read_logs_for_result
 from ._draws import add_draws_option, check_draws
-from .validate import _check, _common, _current_start, _horizon_results, _horizons, _line, _zigzag
+from .validate import _check, _common, _current_start, _horizon_results, _horizons, _line, _print_grade, _zigzag
 
 
 def register(sub) -> None:
@@ -25,6 +25,7 @@ def _report(args) -> int:
 
     out = _check(args)
     model, res = resolve_model(args.result)
+    _print_grade(res)
     logs = read_logs_for_result(args, model)
     initial = _current_start(model, res)
     vals = [validate_one(model, lg, lpp=args.lpp, closed_loop=not args.no_closed_loop,

@@ -32,7 +32,7 @@ ROUTE_UNITS = {
 PSO_FRAMING = ("the paper gives obstacles and current directions only in figures, so these are ours; this default "
                "(current towards E, then N, then W) turned out to be the worst of the 64 direction combinations "
                "in docs/routing.md (savings -50.4 % .. +9.2 %, median 0.0 %); the paper reports +10.37 %")
-PSO_PAPER_NOTE = ("seed 003 scenario: start/goal, wind (from east, 7 m/s) and current speed (1.2 m/s) from the paper; "
+PSO_PAPER_NOTE = ("Li et al. scenario: start/goal, wind (from east, 7 m/s) and current speed (1.2 m/s) from the paper; "
                   "obstacles and current directions (towards 90, 0, 270 deg) are ours; events at 48 s and 192 s "
                   "(the paper's minutes 8 and 32 scaled by 0.1, since its own speed model finishes the 305 m in ~4 min). "
                   + PSO_FRAMING[0].upper() + PSO_FRAMING[1:] + ".")
@@ -123,7 +123,7 @@ def _zermelo(args, spec, base, out, csv) -> int:
                     + ("h, nm, nm, deg, deg" if units == "nautical" else "s, m, m, deg, deg")),
     }
     if spec.get("paper"):
-        doc["note"] = ("seed 001 example in nm, kn, h; the paper's 10.93 h is 4(1+sqrt 3) = 10.928 h of the extremal "
+        doc["note"] = ("Zwierzewicz example in nm, kn, h; the paper's 10.93 h is 4(1+sqrt 3) = 10.928 h of the extremal "
                        "with the rounded angles u(0) = 345, u(tf) = 210 deg, which starts 0.004 nm from the printed A")
     _write(out, csv, doc, best.to_pandas(), args.force, "nautical" if units == "nautical" else "si")
     print(f"time {best.time * to_h:.6f} h ({best.method}); reached: {best.reached}")

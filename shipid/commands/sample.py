@@ -56,7 +56,7 @@ def _sample(args) -> int:
 
     from ._common import check_output_path
 
-    out = check_output_path(args.output, force=args.force, inputs=[args.result, *args.logs], what="samples")
+    out = check_output_path(args.output, force=args.force, inputs=[args.result, *args.logs], what="samples file")
     for opt, v, low in (("--walkers", args.walkers, 2), ("--steps", args.steps, 10), ("--thin", args.thin, 1)):
         if v is not None and v < low:
             raise ValueError(f"{opt} {v}: give a whole number >= {low}")

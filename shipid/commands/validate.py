@@ -100,6 +100,7 @@ def _validate(args) -> int:
     model, result = resolve_model(args.result)  # read once
     if result is None and check_draws(args):
         raise ValueError(f"--draws needs a fit RESULT.json (the draws come from its covariance); {args.result} is a model")
+    _print_grade(result)
     logs = read_logs_for_result(args, model)
     initial = _current_start(model, result)  # the replay and the horizon predictions start with it
     vals = [validate_one(model, lg, lpp=args.lpp, closed_loop=not args.no_closed_loop, zigzag_angles=_zigzag(args),
@@ -134,6 +135,22 @@ def _validate(args) -> int:
         print(f"shipid validate: warning: replay diverged for {', '.join(bad)}", file=sys.stderr)
         return 1
     return 0
+
+
+def _print_grade(result) -> None:
+    """First line of ``validate`` and ``report``: the fit's verdict (for a defect, what it is; the coefficients
+    are not to be trusted before it is fixed)."""
+    if result is None:
+        return
+    from ..identify.verdict import verdict_of
+
+    v = verdict_of(result)
+    if v.grade in ("defect", "diverged"):
+        first = v.reasons[0] if v.reasons else ""
+        line = f"warning: this fit's verdict is {v.grade}: {first}" if first else f"warning: this fit's verdict is {v.grade}"
+        print(line if len(line) <= 300 else line[:296].rsplit(" ", 1)[0] + " ...")
+    else:
+        print(f"fit verdict: {v.grade.replace('_', ' ')}")
 
 
 def _horizons(text: str) -> list[float]:

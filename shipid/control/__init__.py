@@ -1,7 +1,7 @@
 """Optimal control of protocol models: problems, an indirect (costate,
 steepest descent / BFGS, LEPF) and a direct (multiple shooting, SLSQP /
 trust-constr, or IPOPT through the optional CasADi extra) solver with a common
-result, seed 000's scenarios and time-optimal manoeuvres for identified ship
+result, Ghorbani et al.'s scenarios and time-optimal manoeuvres for identified ship
 models."""
 from .analytic import BangBang, bang_bang_straight
 from .direct import solve_direct

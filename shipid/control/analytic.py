@@ -1,6 +1,6 @@
-"""Analytic bang-bang answer of seed 000's scenario 1 (straight-line minimum time).
+"""Analytic bang-bang answer of Ghorbani et al.'s scenario 1 (straight-line minimum time).
 
-With the craft on its line of sight the 4-DOF model reduces to (seed 000, eq. (23))::
+With the craft on its line of sight the 4-DOF model reduces to (Ghorbani et al., eq. (23))::
 
     (m - X_udot) u' = T - R_T(u),   x' = u,   0 <= T <= T_max
 

@@ -26,8 +26,10 @@ import warnings
 
 import numpy as np
 from scipy.optimize import BFGS, Bounds, NonlinearConstraint, minimize
+from tqdm.auto import tqdm
 
-from .problem import Problem, one_blas_thread
+from .ipopt import solve_ipopt
+from .problem import Problem, check_problem_size, one_blas_thread
 from .result import ControlResult
 from .shooting import _MS
 
@@ -66,11 +68,7 @@ def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int | N
     if method not in ("slsqp", "trust-constr", "ipopt"):
         raise ValueError(f"solve_direct: method must be 'slsqp', 'trust-constr' or 'ipopt', got {method!r}")
     if method == "ipopt":
-        from .ipopt import solve_ipopt
-
         return solve_ipopt(problem, n_segments=n_segments, max_iter=max_iter, tol=tol, U0=U0, tf0=tf0)
-    from .problem import check_problem_size
-
     nseg = problem.shooting_segments if n_segments is None else n_segments
     check_problem_size(problem.model, problem.n_intervals, problem.substeps, problem.name, n_segments=nseg)
     t0 = time.perf_counter()
@@ -84,8 +82,6 @@ def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int | N
     has_ineq = ms.n_ineq() > 0
     bar = None
     if progress:
-        from tqdm.auto import tqdm
-
         bar = tqdm(total=max_iter * (10 if method == "trust-constr" else 1), desc=f"{problem.name} ({method})",
                    unit="it", leave=False)
     step = (lambda *a: bar.update(1)) if bar is not None else None

@@ -1,8 +1,8 @@
-"""Indirect (Hamiltonian) solver of seed 000: discretised controls, costates
+"""Indirect (Hamiltonian) solver of Ghorbani et al.: discretised controls, costates
 integrated backwards for the gradient, steepest descent or BFGS, constraints
 by the linear extended penalty function (LEPF).
 
-Augmented cost (seed 000, eqs. (11)-(15), after Rao 2009 sec. 7.13)::
+Augmented cost (Ghorbani et al., eqs. (11)-(15), after Rao 2009 sec. 7.13)::
 
     J_a = J + w(r) sum_j h_j^2 + r int_0^tf sum_i C(c_i(x)) dt + r sum_rate C(c_rate)
 
@@ -26,7 +26,7 @@ The gradient is exact for the discretised problem: the costate recursion
 the model's ``jac_x``) is the discrete form of ``lambda' = -dH/dx``, and
 ``dJ_a/du_j = sum_k B_k^T lambda_{k+1}`` over the steps of interval ``j``, the
 discrete ``dH/du``.  A free final time enters through the step size
-(time normalised by ``t_f``, seed 000 eqs. (19)-(21)).  The paper updates with
+(time normalised by ``t_f``, Ghorbani et al. eqs. (19)-(21)).  The paper updates with
 a constant step ``eta``; we backtrack (Armijo) from the previous step, since a
 constant step either diverges or crawls on this problem.
 """
@@ -36,9 +36,10 @@ import time
 
 import numpy as np
 from scipy.optimize import minimize
+from tqdm.auto import tqdm
 
 from ..integrate import rk4_step
-from .problem import Problem, one_blas_thread, rk4_sensitivities
+from .problem import Problem, check_problem_size, one_blas_thread, rk4_sensitivities
 from .result import ControlResult
 
 __all__ = ["solve_indirect", "lepf"]
@@ -267,8 +268,6 @@ def solve_indirect(problem: Problem, *, method: str = "bfgs", r0: float = 1.0, c
         raise ValueError(f"solve_indirect: method must be 'bfgs' or 'steepest', got {method!r}")
     if not 0.0 < c_factor < 1.0:
         raise ValueError(f"solve_indirect: c_factor must be in (0, 1), got {c_factor!r}")
-    from .problem import check_problem_size
-
     check_problem_size(problem.model, problem.n_intervals, problem.substeps, problem.name, n_segments=1)
     t0 = time.perf_counter()
     aug = _Augmented(problem)
@@ -289,8 +288,6 @@ def solve_indirect(problem: Problem, *, method: str = "bfgs", r0: float = 1.0, c
     r = r0
     bar = None
     if progress:
-        from tqdm.auto import tqdm
-
         bar = tqdm(total=n_penalty, desc=f"{problem.name} (LEPF stages)", unit="stage", leave=False)
     for stage in range(n_penalty):
         fun = lambda zz, rr=r: aug(zz, rr)  # noqa: E731

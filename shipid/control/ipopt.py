@@ -34,7 +34,8 @@ import time
 
 import numpy as np
 
-from .problem import Problem
+from ..integrate import rk4_step
+from .problem import Problem, rk4_sensitivities
 from .result import ControlResult
 from .shooting import _MS
 
@@ -47,7 +48,7 @@ class MissingExtraError(ImportError, ValueError):
 
 def _casadi():
     try:
-        import casadi
+        import casadi  # optional (the casadi extra)
     except ImportError:
         raise MissingExtraError(
             "solve_direct(method='ipopt') needs CasADi (IPOPT ships in its wheel), which is not installed; "
@@ -146,8 +147,6 @@ def _interval_callback(ca, pr: Problem, batch: int, keep: list):
     ``jac_x``, ``jac_u``), the code the SLSQP path uses; the Jacobian callback returns them as
     block-diagonal sparse matrices (column ``k`` depends only on column ``k``).
     """
-    from .problem import rk4_sensitivities
-
     m, p = pr.model, pr.model.params
     nx, nu, s, K = m.nx, m.nu, pr.substeps, batch
     no = nx * s
@@ -161,8 +160,6 @@ def _interval_callback(ca, pr: Problem, batch: int, keep: list):
     sp_in = (dense(nx, K), dense(nu, K), dense(1, 1))
 
     def evaluate(arg):
-        from ..integrate import rk4_step
-
         x, u, h = _unpack(arg)
         out = np.empty((K, s, nx))
         with np.errstate(all="ignore"):

@@ -21,6 +21,7 @@ import numpy as np
 
 from .._blas import one_blas_thread  # noqa: F401  (re-exported: the control solvers' context)
 from .._io import check_memory
+from ..integrate import rk4_step
 from ..models.base import Model
 
 __all__ = ["Problem", "rk4_sensitivities", "Trajectory", "evaluate", "Bounds", "one_blas_thread", "check_problem_size"]
@@ -270,8 +271,6 @@ class Problem:
         X = [x]
         Us = np.repeat(U, s, axis=0)
         p = self.model.params
-        from ..integrate import rk4_step
-
         for k in range(N * s):
             x = rk4_step(self.model, 0.0, x, Us[k], p, h)
             X.append(x)

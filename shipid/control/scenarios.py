@@ -1,4 +1,4 @@
-"""The three scenarios of seed 000 (SPEC.md section 2) as :class:`Problem` objects.
+"""The three scenarios of Ghorbani et al. as :class:`Problem` objects.
 
 Common: the planing boat of Table 1 starts at rest at the origin; target
 ``x = 300 m, y = 0`` reached "stopped"; cost = final time (free).  Controls
@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..models import get_model
-from .problem import Problem
+from .problem import Problem, check_problem_size
 
 __all__ = ["paper_problem", "STOP_SPEED", "SCENARIOS"]
 
@@ -29,7 +29,7 @@ _PATH = {"u": (None, 20.0), "p": (-np.radians(10), np.radians(10)), "r": (-np.ra
 
 
 def paper_problem(which: str | int, *, model=None, n_intervals: int | None = None, substeps: int | None = None) -> Problem:
-    """Problem of seed 000's scenario ``which`` (1, 2, 3 or "paper-1".."paper-3").
+    """Problem of Ghorbani et al.'s scenario ``which`` (1, 2, 3 or "paper-1".."paper-3").
 
     Scenario 1 holds ``phi_p = 0`` (thrust is its only control, paper eqs. 23-24) and has no
     ``y`` condition (``y`` stays 0 by symmetry).
@@ -50,8 +50,6 @@ def paper_problem(which: str | int, *, model=None, n_intervals: int | None = Non
     m = get_model("planing-boat") if model is None else model
     bounds = {"T": (0.0, 7500.0), "phi_p": (-np.radians(45), np.radians(45))}
     N = n_intervals or (40 if k == 1 else 20)
-    from .problem import check_problem_size
-
     check_problem_size(m, N, substeps or (4 if k == 1 else 8), key)
     # initial guess: full thrust for the first half, then none (no knowledge of the switch)
     guess = np.zeros((N, 2))

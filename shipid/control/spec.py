@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from .._io import (as_int, as_mapping, as_number, as_string, check_keys, read_json, short)
-
+from ..identify.result import model_from
 from ..models import get_model
 from .problem import Problem, check_problem_size
 
@@ -84,8 +84,6 @@ def problem_from_dict(doc: dict, *, where: str = "problem", base_dir: Path | Non
         raise ValueError(f"{where}: expected a JSON object at the top level")
     check_keys(doc, _KEYS, where)
     if "fit_result" in doc:
-        from ..identify.result import model_from
-
         p = Path(as_string(doc["fit_result"], f"{where}: fit_result"))
         if base_dir is not None and not p.is_absolute():
             p = base_dir / p
@@ -171,7 +169,7 @@ def kcs_turn_problem(model=None, *, heading_change_deg: float = 90.0, u0: float 
 
     Starts on a straight course at ``u0`` with ``n0`` and the rudder amidships;
     ends on the new heading with zero yaw rate.  Limits: rudder angle, rudder
-    rate (SPEC: 16.8 deg/s for the 4.36 m model) on consecutive control values,
+    rate (16.8 deg/s for the 4.36 m model) on consecutive control values,
     propeller revolutions ``n_bounds`` [rps].
     """
     m = get_model("kcs-response") if model is None else model

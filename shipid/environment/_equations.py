@@ -23,6 +23,8 @@ from math import cos, sin
 
 import numpy as np
 
+from .._jit import rebind
+
 
 #: Number of environment constants before the base model's in :func:`env_derived`.
 HEADER = 16
@@ -197,8 +199,6 @@ def equation_sets(base_eqm) -> dict:
     ``"numpy"``, ``"complex"`` (numpy arrays, real / complex step), ``"kernel"`` (the kernel protocol,
     for :mod:`shipid._kernel`), ``"real"``, ``"cs"`` (function dicts for :func:`shipid._jit.compiled`,
     with their namespaces ``"cmath"``) and ``"tag"`` (numba cache tag)."""
-    from .._jit import rebind
-
     out = _SETS.get(base_eqm.__name__)
     if out is None:
         base = {k: f for k, f in base_eqm.FUNCTIONS.items()}
@@ -219,8 +219,6 @@ def equation_sets(base_eqm) -> dict:
 
 def wind_force_numpy():
     """:func:`wind_force` on numpy arrays (real or complex), for :meth:`WindForce.force_cs`."""
-    from .._jit import rebind
-
     if "wind" not in _SETS:
         _SETS["wind"] = rebind({"coefficients_cs": coefficients_cs, "inv_sqrt_pos": inv_sqrt_pos,
                                 "wind_force": wind_force}, NUMPY)["wind_force"]

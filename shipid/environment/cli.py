@@ -4,6 +4,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from .._io import read_json
 from .model import WIND_INPUTS, with_environment
 from .wind import WindForce, true_wind_from_apparent
 
@@ -22,12 +23,10 @@ def wind_geometry(spec: str, logs=()) -> WindForce:
                          "--wind FILE.json with lpp, breadth, A_T, A_L, A_OD, C, C_BR, H_BR, H_C (m, m^2)")
     if spec == "esso-osaka-3m":
         return WindForce.esso_osaka_3m()
-    from .._io import read_json
-
     p = Path(spec)
     if not p.exists():
         raise ValueError(f"--wind {spec}: not 'esso-osaka-3m' and no such file")
-    doc = read_json(p, "wind geometry file", advice="give a JSON mapping with lpp, breadth, A_T, A_L, A_OD, C, "
+    doc = read_json(p, "wind geometry", advice="give a JSON mapping with lpp, breadth, A_T, A_L, A_OD, C, "
                     "C_BR, H_BR, H_C")
     return WindForce.from_mapping(doc)
 

@@ -35,6 +35,7 @@ from typing import Mapping
 import numpy as np
 
 from .._jit import compiled
+from ..models import get_model
 from ..models.base import ComplexStepJacobians, Model, batch_shape
 from ..models.mmg import DerivedConstants, ShipEquationsModel, components
 from . import _equations as _eqe
@@ -89,8 +90,6 @@ class EnvironmentModel(DerivedConstants, ComplexStepJacobians, Model):
                  current: str | None = None, velocities: str = "ground", current_walk: float = 2e-4,
                  base_params=None):
         if isinstance(base, str):
-            from ..models import get_model
-
             base = get_model(base, base_params, **dict(base_options or {}))
         if not isinstance(base, ShipEquationsModel):
             raise ValueError(f"with_environment: base must be a 3-DOF ship model with a mass matrix (mmg, lowspeed), got "

@@ -4,6 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from ..simulate import simulate
+
 __all__ = ["environment_log", "NOISE_STD"]
 
 #: Measurement noise std per channel of :func:`environment_log` (GNSS-like, model scale).
@@ -22,8 +24,6 @@ def environment_log(model, *, seed: int, duration: float = 400.0, dt: float = 0.
     Returns a frame with ``time``, ``x, y, psi, u, v, r``, ``delta, n``, ``wind_speed_true, wind_dir_true``
     (``attrs["name"]`` set; ``attrs["truth"]`` holds the noise-free states).
     """
-    from ..simulate import simulate
-
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, duration, dt)
     k = (t // hold).astype(int)

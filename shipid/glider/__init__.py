@@ -1,4 +1,4 @@
-"""Glider launch study (seed 004): launch simulation with surface-return
+"""Glider launch study (Divsalar et al.): launch simulation with surface-return
 event detection, vectorised parameter sweeps and a metaheuristic optimiser.
 
 The glider's equations live in :mod:`shipid.models.glider`; this package only

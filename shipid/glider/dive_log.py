@@ -12,6 +12,7 @@ from typing import Mapping
 
 import numpy as np
 
+from ..logs import TrialLog
 from ..models.base import Model
 from .launch import launch
 
@@ -55,8 +56,6 @@ def dive_log(
     shipid.logs.TrialLog
         Columns ``time, z, theta, u, w, q, delta`` (SI units, radians).
     """
-    from ..logs import TrialLog
-
     std = dict(DEFAULT_SENSOR_STD)
     for k, v in (sensor_std or {}).items():
         if k not in DEFAULT_SENSOR_STD:

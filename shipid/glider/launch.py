@@ -2,10 +2,10 @@
 
 The glider starts on the free surface (``x = z = 0``) moving along its hull
 axis at the launch speed, nose down at the launch angle **measured from the
-vertical** (seed 004, figure 10: 15 deg is a steep dive, 60 deg a shallow
+vertical** (Divsalar et al., figure 10: 15 deg is a steep dive, 60 deg a shallow
 one), so the initial pitch is ``theta0 = -(90 deg - angle)``.  The fin
 incidence is held constant; the CG offset ``x_g`` (positive towards the nose,
-seed 004 figure 12) is set per launch as a model parameter, so any number of
+Divsalar et al. figure 12) is set per launch as a model parameter, so any number of
 launches run as one batch through :func:`shipid.simulate.simulate`.
 
 Surface return is an event detected on the RK4 grid: the first step where the
@@ -21,7 +21,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
+from tqdm.auto import tqdm
 
+from .._io import check_memory
 from ..models import get_model
 from ..models.base import Model
 from ..results import ResultMixin
@@ -175,7 +177,7 @@ class LaunchResult(ResultMixin):
         members : sequence of int, optional
             Launches to draw (default: all, at most 40).
         """
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         if ax is None:
             _, ax = plt.subplots(figsize=(7, 3.5))
@@ -295,8 +297,6 @@ def launch(
         dt = _stable_dt(model, x0, fin, params, 0.01)
     dt = float(dt)
     n_total = int(np.ceil(t_max / dt))
-    from .._io import check_memory
-
     # the trajectory of every launch is kept (6 doubles per step), plus one chunk of the simulation
     check_memory(8.0 * B * (n_total + 1) * 6 * 2, f"glider launch: dt {dt:g} s over t_max {t_max:g} s "
                  f"({n_total} steps x {B} launch(es))", "use a larger --dt (default: automatic, <= 0.01 s)")
@@ -314,8 +314,6 @@ def launch(
     step0 = 0
     bar = None
     if progress:
-        from tqdm.auto import tqdm
-
         bar = tqdm(total=n_total, desc="glider launches", unit="step")
     while active.size and step0 < n_total:
         n = min(chunk, n_total - step0)

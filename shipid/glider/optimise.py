@@ -2,7 +2,7 @@
 
 Objective (stated, not fitted to the paper's answer)
 ----------------------------------------------------
-Seed 004 picks its launch by a trade-off it describes in words: a higher
+Divsalar et al. picks its launch by a trade-off it describes in words: a higher
 launch speed is better for both depth and horizontal travel (section 6-3-1);
 the fin angle is chosen because it gives "values close to the maximum of
 each" of depth and horizontal travel (section 6-3-3); the angle because it
@@ -24,11 +24,13 @@ vectorised batch of launches (``vectorized=True``).
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
 from scipy.optimize import differential_evolution
+from tqdm.auto import tqdm
 
 from ..models import get_model
 from ..models.base import Model
@@ -101,7 +103,7 @@ class GliderOptimum(ResultMixin):
 
     def plot(self, ax=None):
         """The optimum and the grid's best launch in the (horizontal travel, maximum depth) plane; returns the axes."""
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         if ax is None:
             _, ax = plt.subplots(figsize=(5, 3.5))
@@ -232,16 +234,12 @@ def optimise_launch(
 
     bar = cb = None
     if progress:
-        from tqdm.auto import tqdm
-
         bar = tqdm(total=maxiter, desc="glider DE", unit="gen")
 
         def _tick(intermediate_result):
             bar.update(1)
 
         cb = _tick
-
-    import warnings
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)

@@ -1,6 +1,6 @@
 """The paper's launch sweeps as one vectorised batch.
 
-Seed 004 section 6-2 varies launch speed (0.5, 0.8, 1, 2, 3, 4, 5 m/s),
+Divsalar et al. section 6-2 varies launch speed (0.5, 0.8, 1, 2, 3, 4, 5 m/s),
 launch angle from the vertical (15, 30, 45, 60 deg), fin incidence (0, 5, 10,
 15, 20 deg) and CG offset (0, -1, -3, -5 cm): the full factorial is 560
 launches, run here as a single batch of :func:`shipid.glider.launch`.

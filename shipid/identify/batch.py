@@ -21,8 +21,12 @@ from datetime import datetime, timezone
 
 import numpy as np
 import pandas as pd
+from scipy.linalg import qr
 from scipy.optimize import least_squares
+from tqdm.auto import tqdm
 
+from .._blas import one_blas_thread
+from ..integrate import hold_steps, rk4_step_tangent
 from ..models.base import Model
 from ..simulate import simulate
 from .data import measured_states, noise_std_from_data, prepare_logs
@@ -55,8 +59,6 @@ def identifiable_subset(J, cost: float, ftol: float = FTOL):
     Returns ``(keep, held, info)``: sorted column indices kept and held, and a dict with ``threshold``,
     ``singular_values`` (of the whole ``J``), ``condition`` of ``J^T J`` before and ``condition_kept`` after.
     """
-    from scipy.linalg import qr
-
     J = np.asarray(J, dtype=float)
     ne = J.shape[1]
     thr = math.sqrt(2.0 * ftol * max(float(cost), 0.0))
@@ -251,8 +253,6 @@ class OutputErrorRefiner:
 
         Runs with one BLAS thread (:func:`shipid._blas.one_blas_thread`): on an ill-conditioned
         problem the solver's path, and so its answer, would otherwise follow the thread count."""
-        from .._blas import one_blas_thread
-
         with one_blas_thread():
             return self._fit(logs, start, x0)
 
@@ -381,8 +381,6 @@ class OutputErrorRefiner:
 
         def tangent_jac(th):
             """Exact sensitivities of the RK4 map along the nominal trajectory, (n_res, ne)."""
-            from ..integrate import hold_steps, rk4_step_tangent
-
             p = p0.copy()
             p[est_idx] = th[:ne] * scale
             blocks: list = [None] * len(arrays)
@@ -429,8 +427,6 @@ class OutputErrorRefiner:
             return np.where(np.isfinite(r), np.clip(r, -1e6, 1e6), 1e6)
 
         if self.progress:  # a bar counting the replays (one per parameter set), on stderr; closed below
-            from tqdm.auto import tqdm
-
             bar = tqdm(desc="output-error refinement", unit="replay", leave=False)
             _residual_batch = residual_batch
 

@@ -16,9 +16,11 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+from scipy.special import chdtrc, gammaincinv
 
-__all__ = ["identifiability", "consistency", "coefficient_plausibility", "ljung_box", "likely_causes",
-           "CONSISTENCY_RULES"]
+from .data import prepare_logs
+
+__all__ = ["identifiability", "consistency", "ljung_box", "CONSISTENCY_RULES"]
 
 
 def _combo(vec: np.ndarray, names: list[str], tol: float = 0.25) -> str:
@@ -113,17 +115,7 @@ def identifiability(
 
 
 # --------------------------------------------------------------------------- consistency of a fit
-#: Rules of the consistency verdict (fixed from clean synthetic logs before any wrong-physics case was
-#: run; see docs/identification.md "Does the fit say when it is wrong?").
-CONSISTENCY_RULES = {
-    "alpha": 1e-3,          # two-sided level of the statistical tests (per channel and test)
-    "nis_factor": 2.0,      # ... and the mean normalised innovation must be outside [1/f, f] to count
-    "lb_lags": 20,          # Ljung-Box lags (at most a tenth of the samples)
-    "rho_limit": 0.3,       # ... and some |autocorrelation| of the normalised innovations above this
-    "replay_factor": 3.0,   # replay RMS of a dynamic channel above this many noise std
-    "gated_fraction": 0.05, # more than this fraction of a channel's measurements rejected by the gate
-    "coef_factor": 10.0,    # a well-determined coefficient this many times larger or smaller than the model's
-}
+from .verdict import CONSISTENCY_RULES  # noqa: E402 (the rules live with the verdict, on the results floor)
 
 
 def ljung_box(x_segments, lags: int):
@@ -138,8 +130,6 @@ def ljung_box(x_segments, lags: int):
     Returns ``(Q, p_value, rho (L,), n)``; ``p`` from the chi-square distribution with ``L`` degrees of
     freedom (no fitted ARMA terms are subtracted: the innovations are tested as they are).
     """
-    from scipy.special import chdtrc
-
     num = np.zeros(lags)
     den = 0.0
     n = 0
@@ -163,32 +153,6 @@ def _finite_or_none(v):
     return v if np.isfinite(v) else None
 
 
-def coefficient_plausibility(names, theta, theta_std, theta_model, prior_std, rules=None) -> list[str]:
-    """Coefficients the data determine that contradict the model's values (the prior) grossly.
-
-    A linear-in-the-input model absorbs a scale or sign error of that input into its coefficient with
-    perfectly consistent innovations (a rudder logged in rad/57.3 gives ``c3 x 57``), so this is the
-    only place such an error can show.  A coefficient counts when it is determined (posterior std below
-    half its prior std, more than 3 std from zero) and the model's value is not zero; it is reported when
-    its sign is opposite to the model's, or its magnitude is more than ``coef_factor`` times larger or
-    smaller.  Returns one sentence per finding.
-    """
-    r = dict(CONSISTENCY_RULES)
-    r.update(rules or {})
-    f = r["coef_factor"]
-    out = []
-    for n, th, sd, tm, ps in zip(names, theta, theta_std, theta_model, prior_std):
-        if not (np.isfinite(th) and np.isfinite(sd) and tm != 0 and sd < 0.5 * ps and abs(th) > 3 * sd):
-            continue
-        if th * tm < 0:
-            out.append(f"coefficient {n} = {th:.4g} +- {sd:.2g} has the opposite sign of the model's value {tm:.4g}: "
-                       "a sign convention (rudder, axes) of a channel?")
-        elif abs(th) > f * abs(tm) or abs(th) < abs(tm) / f:
-            out.append(f"coefficient {n} = {th:.4g} +- {sd:.2g} is {abs(th / tm):.3g} times the model's value {tm:.4g}: "
-                       "a channel in the wrong units (degrees/radians, rpm/rps)?")
-    return out
-
-
 #: Largest fraction of the logged states at which a fitted model's own sway or yaw damping may be positive
 #: before :func:`damping_check` calls the model unphysical (a few samples at a transient are tolerated).
 DAMPING_FRACTION = 0.01
@@ -201,8 +165,6 @@ def damping_states(model, logs, max_points: int = 2000):
     (:func:`shipid.identify.data.prepare_logs`: inputs required, states by name; a state a log lacks counts
     as 0); rows with a non-finite value are left out.  Returns ``(X (N, nx), U (N, nu))``.
     """
-    from .data import prepare_logs
-
     arrays, meas = prepare_logs(model, logs)
     cols = [model.state_index(s) for s in meas]
     X, U = [], []
@@ -374,7 +336,7 @@ def consistency(names, innov, S_diag, gated, segments, replay_ratio=None, dynami
     dynamic : channels whose replay ratio enters the verdict (those with estimated parameters in their
         equations; positions and heading integrate and drift in an open-loop replay)
     rules : dict, optional  overrides of :data:`CONSISTENCY_RULES`
-    extra_reasons : further findings that make the fit inconsistent (e.g. :func:`coefficient_plausibility`)
+    extra_reasons : further findings that make the fit inconsistent
 
     Returns
     -------
@@ -386,8 +348,6 @@ def consistency(names, innov, S_diag, gated, segments, replay_ratio=None, dynami
     (largest |autocorrelation| over the lags), ``replay_ratio``, ``n_gated``, ``gated_fraction``.
     Non-finite values are None (the JSON stays strict).
     """
-    from scipy.special import gammaincinv
-
     # chi2.ppf(q, df) is 2 gammaincinv(df / 2, q) (scipy.stats' own formula; called directly, ~30x cheaper)
     chi2_ppf = lambda q, df: 2.0 * gammaincinv(df / 2.0, q)  # noqa: E731
     r = dict(CONSISTENCY_RULES)
@@ -435,23 +395,3 @@ def consistency(names, innov, S_diag, gated, segments, replay_ratio=None, dynami
         out_ch[name] = {k: (_finite_or_none(v) if isinstance(v, (float, np.floating)) else v) for k, v in row.items()}
     reasons += list(extra_reasons)
     return {"consistent": not reasons, "reasons": reasons, "channels": out_ch, "rules": r}
-
-
-def likely_causes(reasons: list[str]) -> str:
-    """One plain sentence of likely causes for the reasons of an inconsistent fit."""
-    causes = []
-    text = " ".join(reasons)
-    if "larger than" in text or "misses" in text or "not white" in text:
-        causes += ["a channel in the wrong units or sign (e.g. degrees declared as radians)",
-                   "missing physics in the model (wind, current, shallow water)"]
-    if "smaller than" in text:
-        causes.append("a pre-filtered or decimated channel (the noise level estimated from the data is wrong)")
-    if "not white" in text:
-        causes.append("logs sampled too coarsely for the dynamics (decimated)")
-    if "rejected" in text:
-        causes.append("a sensor fault (glitches, frozen positions)")
-    if "opposite sign" in text:
-        causes.append("a sign convention of a channel (rudder positive to port, axes)")
-    if "times the model's value" in text:
-        causes.append("a channel in the wrong units (degrees declared as radians, rpm as rps)")
-    return "; ".join(dict.fromkeys(causes))

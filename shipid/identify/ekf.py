@@ -1,3 +1,4 @@
+# Why one file: the numpy EKF (problem, filter pass, RTS and Bryson-Frazier smoothers) is one algorithm whose steps share its arrays; the compiled copy is split by job in shipid/_kernel/.
 """Augmented-state extended Kalman filter kernel and its RTS smoother.
 
 The augmented state is ``z = [x, theta_s]``: the model's states followed by the

@@ -1,3 +1,4 @@
+# Why one file: EKFIdentifier is one estimator (settings, fit, learned attributes, result); its parts live in data.py, initial.py and ekf.py.
 """The augmented-state EKF identifier (an estimator: settings in ``__init__``,
 learning in :meth:`EKFIdentifier.fit`, learned attributes end in ``_``)."""
 from __future__ import annotations
@@ -8,13 +9,18 @@ from typing import Mapping, Sequence
 
 import numpy as np
 import pandas as pd
+from tqdm.auto import tqdm
 
+from ..integrate import STEP_TANGENTS
 from ..models.base import Model
 from ..results import ResultMixin, coefficient_table, plot_coefficients, verdict_grade
+from ..simulate import simulate
 from .data import LogArrays, frozen_mask, noise_std_from_data, prepare_logs, resolution_std
-from .diagnostics import coefficient_plausibility, consistency, identifiability
-from .ekf import EKFOutput, EKFProblem, bf_smooth, rts_smooth, run_ekf
+from .diagnostics import consistency, identifiability
+from .ekf import INPUT_HOLDS, EKFOutput, EKFProblem, bf_smooth, gain_covariance, rts_smooth, run_ekf
+from .verdict import verdict_from_identifier
 from .initial import equation_error_fit
+from .result import FitResult
 
 __all__ = ["EKFIdentifier", "NotFittedError"]
 
@@ -183,16 +189,12 @@ class EKFIdentifier(ResultMixin):
     def _check_settings(self):
         if self.init not in ("equation-error", "model"):
             raise ValueError(f"init must be 'equation-error' or 'model', got {self.init!r}")
-        from ..integrate import STEP_TANGENTS
-
         if self.method not in STEP_TANGENTS:
             raise ValueError(f"method must be one of {sorted(STEP_TANGENTS)}, got {self.method!r}")
         if int(self.n_passes) < 1:
             raise ValueError(f"n_passes must be >= 1, got {self.n_passes}")
         if int(self.substeps) < 1:
             raise ValueError(f"substeps must be >= 1, got {self.substeps}")
-        from .ekf import INPUT_HOLDS
-
         if self.input_hold not in INPUT_HOLDS:
             raise ValueError(f"input_hold must be one of {INPUT_HOLDS}, got {self.input_hold!r}")
         if self.gate is not None and not self.gate > 0:
@@ -270,6 +272,9 @@ class EKFIdentifier(ResultMixin):
         """
         self._check_settings()
         model = self.model
+        # the trial logs themselves (not frames): the verdict reads their channel-consistency findings
+        self._trial_logs = [lg for lg in (logs if isinstance(logs, (list, tuple)) else [logs])
+                            if hasattr(lg, "channels") and hasattr(lg, "data")]
         arrays, meas = prepare_logs(model, logs)
         p_base, est_idx, est_names = self._parameters()
         nx = model.nx
@@ -372,8 +377,6 @@ class EKFIdentifier(ResultMixin):
         theta_s = theta0 / scale
         passes = range(int(self.n_passes))
         if self.progress:
-            from tqdm.auto import tqdm
-
             passes = tqdm(passes, desc="EKF passes", unit="pass")
         history = []
         good = None  # (prob, out, zs, var_x, Ps0) of the last pass that did not diverge
@@ -655,6 +658,7 @@ class EKFIdentifier(ResultMixin):
         # per-log smoothed states and innovations: tables built when first read (states_, innovations_)
         self._tables = (zs[0, :, :nx], var_x[0], out.innov[0], out.S_diag[0])
         self.__dict__.pop("_tables_built", None)
+        self.__dict__.pop("_verdict_cache", None)
         notes = []
         hook = getattr(model, "identifiability_notes", None)
         if hook is not None:
@@ -684,8 +688,6 @@ class EKFIdentifier(ResultMixin):
         dynamic = [m for m in meas if Jp[model.state_index(m), s["est_idx"]].max() > 0]
         ratio = None
         if self.success_:
-            from ..simulate import simulate
-
             fitted = self.to_model()
             t = np.concatenate([a.t for a in arrays])
             U = np.concatenate([a.U for a in arrays])
@@ -704,12 +706,9 @@ class EKFIdentifier(ResultMixin):
                     sq += np.where(ok, np.where(np.isfinite(e), e, np.inf) ** 2, 0.0).sum(axis=0)
                     cnt += ok.sum(axis=0)
             ratio = {m: float(np.sqrt(sq[j] / cnt[j]) / sig[j]) if cnt[j] else float("nan") for j, m in enumerate(meas)}
-        est = s["est_idx"]
-        coef_reasons = coefficient_plausibility(s["est_names"], self.coef_.to_numpy()[est],
-                                                self.coef_std_.to_numpy()[est], s["p_base"][est],
-                                                self.prior_std_.to_numpy())
+        # (the coefficients' physics is judged by the verdict, from the model's declared signs and ranges)
         res = consistency(meas, out.innov[0], out.S_diag[0], out.gated[0], pieces, replay_ratio=ratio,
-                          dynamic=dynamic, extra_reasons=coef_reasons)
+                          dynamic=dynamic)
         res["dynamic_channels"] = dynamic
         res["gaps"] = list(self.gap_notes_)
         if not self.success_:
@@ -777,6 +776,15 @@ class EKFIdentifier(ResultMixin):
         """``message_`` of a fitted identifier."""
         return getattr(self, "message_", "not fitted yet: call fit(logs) first")
 
+    @property
+    def verdict_(self):
+        """The fit's graded verdict (:func:`shipid.identify.verdict.verdict_from_identifier`; computed once)."""
+        self._check_fitted()
+        v = self.__dict__.get("_verdict_cache")
+        if v is None:
+            v = self._verdict_cache = verdict_from_identifier(self)
+        return v
+
     def summary(self) -> pd.DataFrame:
         """Coefficient table: value, std, relative std, 95 % interval, prior std (``attrs["verdict"]``: the
         verdict grade when the fit has one)."""
@@ -820,8 +828,6 @@ class EKFIdentifier(ResultMixin):
         (:func:`~shipid.identify.ekf.gain_covariance`): the assumption of the output-error likelihood.  It is not
         the right covariance when the logs carry real process noise (waves, wind, model error).  Needs
         ``param_walk = 0`` (constant coefficients)."""
-        from .ekf import gain_covariance
-
         if not hasattr(self, "problem_"):
             raise NotFittedError("this EKFIdentifier is not fitted yet: call fit(logs) first")
         if self.param_walk > 0:
@@ -834,7 +840,5 @@ class EKFIdentifier(ResultMixin):
 
     def result(self):
         """A :class:`~shipid.identify.result.FitResult` (serialisable) of this fit."""
-        from .result import FitResult
-
         self._check_fitted()
         return FitResult.from_identifier(self)

@@ -68,10 +68,17 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from .._blas import one_blas_thread
+from ..logs.overlap import drop_contained, repeated_samples
+from ..models import get_model, Model, model_class
 from ..results import ResultMixin, coefficient_table, plot_coefficients, verdict_grade
+from .diagnostics import damping_check
+from .identifier import EKFIdentifier
 from .refine import AUTO_REFINE, METRIC_TOL, METRIC_WEIGHT, REFINE_MODES, _kinds, metric_residuals, refine_fit
-from .sampling import (LINEAR_DRIFT_DEG, MIN_WINDOW_SAMPLES, SAMPLES_PER_TAU, _every, _log_step,
+from .sampling import (LINEAR_DRIFT_DEG, MIN_WINDOW_SAMPLES, SAMPLES_PER_TAU, _every, _log_step, every_kth,
+                       fastest_time_constant,
                        _lpp_of, choose_sampling, common_grid, linear_sway_yaw, linear_window)
+from .verdict import verdict_from_recipe
 
 __all__ = ["fit_logs", "RecipeFit", "neutral_rudder_angle", "approach_segment", "choose_sampling", "common_grid",
            "linear_sway_yaw", "linear_window", "LINEAR_DRIFT_DEG",
@@ -104,6 +111,10 @@ class RecipeFit(ResultMixin):
     free_in_refine: list = field(default_factory=list)
     lpp: float | None = None
     metric_weight: float | None = None
+    #: the logs as given (before the recipe's stride and linear range): the verdict checks their channels
+    source_logs: list = field(default_factory=list)
+    #: ``{"log_step": s, "time_constant": s}`` of the logs and the start model (the verdict's sampling rule)
+    sampling: dict = field(default_factory=dict)
 
     @property
     def final(self):
@@ -139,8 +150,9 @@ class RecipeFit(ResultMixin):
 
     @property
     def verdict(self):
-        """The fit's verdict from its EKF stage (None when the identifier has none)."""
-        return getattr(self.ekf, "verdict", None) or getattr(self.ekf, "verdict_", None)
+        """The fit's graded verdict (:func:`shipid.identify.verdict.verdict_from_recipe`), as its result carries it."""
+        v = self.__dict__.get("_verdict")
+        return v if v is not None else self.result().verdict
 
     def summary(self) -> pd.DataFrame:
         """The last stage's coefficient table (value, std, relative std, 95 % interval; ``attrs["verdict"]``
@@ -196,14 +208,23 @@ class RecipeFit(ResultMixin):
                 res.success = False
                 res.message = f"EKF stage failed ({self.ekf.message_}); refinement: {res.message}"
         if self.logs:
-            from .diagnostics import damping_check
-
             res.diagnostics["damping"] = damping_check(self.final.to_model(), self.logs)
+        res.verdict = self.__dict__["_verdict"] = verdict_from_recipe(self, res)
         return res
 
     def __str__(self) -> str:
         """The recipe's steps as text, one ``recipe: step: value -- reason`` line each."""
         return "\n".join(f"recipe: {s['step']}: {s['value']} -- {s['reason']}" for s in self.steps)
+
+
+def _sampling_check(model, logs) -> dict:
+    """The logs' sample interval and the start model's fastest time constant at their speed (empty when
+    unknown): the verdict calls a log that samples the ship's fastest motion fewer than twice decimated."""
+    try:
+        tau = fastest_time_constant(model, logs)[0]
+        return {"log_step": float(_log_step(logs)), "time_constant": float(tau)}
+    except (ValueError, np.linalg.LinAlgError, ZeroDivisionError):
+        return {}
 
 
 def current_start(ekf):
@@ -290,8 +311,6 @@ def _check_under_way(logs, L: float) -> None:
 
 # ----------------------------------------------------------------------------- the recipe
 def _start_model(model, params, L):
-    from ..models import Model, get_model, model_class
-
     if isinstance(model, Model):
         m = model
         ml = getattr(m, "lpp", None)
@@ -358,8 +377,6 @@ def fit_logs(logs, model="mmg", params=None, *, lpp: float | None = None, estima
     refinement then give the same answer whatever the machine's thread setting (on the MARIN ``response-nl``
     fit, 1 and 2 OpenBLAS threads had ended the refinement in different minima).
     """
-    from .._blas import one_blas_thread
-
     with one_blas_thread():
         return _fit_logs(logs, model, params, lpp=lpp, estimate=estimate, fixed=fixed, start=start, neutral=neutral,
                          free_neutral=free_neutral, estimate_neutral=estimate_neutral, dt=dt,
@@ -392,8 +409,6 @@ def _repeated_runs(logs, drop: bool, step) -> list:
     """Step 0: a log whose every sample is a sample of another (a trimmed copy of the same run) is dropped when
     ``drop`` (it would count that run twice), else kept with a warning; logs that share part of their samples
     (overlapping segments) are kept with a warning.  A step is recorded only when something was found."""
-    from ..logs.overlap import drop_contained, repeated_samples
-
     if len(logs) < 2:
         return logs
     rows = repeated_samples(logs)  # (one comparison of the samples for both kinds of finding)
@@ -422,8 +437,6 @@ def _repeated_runs(logs, drop: bool, step) -> list:
 def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free_neutral, estimate_neutral, dt,
               max_drift_deg, refine, metric_weight, n_passes, max_nfev, tune_noise, progress, meas_std, ekf_options,
               hold_unresolved, sign_bounds, physical_damping, start_defaults, drop_repeated, log) -> RecipeFit:
-    from .identifier import EKFIdentifier
-
     logs = list(logs)
     if not logs:
         raise ValueError("fit_logs: no logs given")
@@ -442,6 +455,7 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
     L = _lpp_of(logs, lpp)
     _check_under_way(logs, L)
     m0, why = _start_model(model, params, L)
+    sampling_check = _sampling_check(m0, logs)  # the start model as built, before any start values from the logs
     # a model with wind/current parts takes its base ship model's defaults
     env = getattr(m0, "base", None) is not None and hasattr(m0, "identifier_settings")
     name = m0.base.name if env else m0.name
@@ -464,7 +478,7 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         L0, h0 = defaults.sampling
         h = h0 * math.sqrt(L / L0)
         k = max(1, int(round(h / dt_log)))
-        reason = (f"every {k}. sample ({k * dt_log:.3g} s): {name}'s recipe step {h0:g} s at Lpp {L0:g} m"
+        reason = (f"{every_kth(k)} ({k * dt_log:.3g} s): {name}'s recipe step {h0:g} s at Lpp {L0:g} m"
                   f", Froude-scaled to {h:.3g} s at {L:g} m, log step {dt_log:.3g} s")
         if defaults.substeps is not None and "substeps" not in ekf_opts:
             ekf_opts["substeps"] = defaults.substeps
@@ -477,7 +491,7 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         k = int(dt)
         if k < 1:
             raise ValueError(f"dt={dt!r}: give 'auto', None or a positive integer sample stride")
-        reason = f"every {k}. sample (asked)"
+        reason = f"{every_kth(k)} (asked)"
     step("sampling", k, reason)
     used = [_every(lg, k) for lg in logs]
     if max_drift_deg == "auto":
@@ -568,8 +582,6 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         est = [p for p in est if p not in fix]
     # staged start
     if start == "staged" and defaults.seed_model is not None:
-        from ..models import get_model
-
         seed_model = get_model(defaults.seed_model, lpp=L)
         seed_fix = {k2: v for k2, v in fix.items() if k2 in seed_model.param_names}
         # the seed is linear in v and r: fitted on the linear range (step 2b) unless that is switched off
@@ -620,7 +632,8 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
         ekf = EKFIdentifier(m0, estimate=est, fixed=fix or None, n_passes=n_passes, tune_noise=tune_noise,
                             progress=progress, meas_std=meas_std, **{**ekf_opts, "gate": None}).fit(used)
         step("EKF", ekf.message_, f"refitted without innovation gating: with the default gate the filter failed ({first})")
-    fit = RecipeFit(ekf=ekf, steps=steps, logs=used, free_in_refine=free_in_refine, lpp=L)
+    fit = RecipeFit(ekf=ekf, steps=steps, logs=used, free_in_refine=free_in_refine, lpp=L, source_logs=logs,
+                    sampling=sampling_check)
     mode = refine
     if mode == "auto" and (env or not defaults.auto_refine):
         mode = None

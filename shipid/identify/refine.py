@@ -7,6 +7,9 @@ import warnings
 
 import numpy as np
 
+from ..manoeuvres import metrics as manoeuvre_metrics, ship_info, standard_manoeuvre
+from .batch import OutputErrorRefiner
+from .diagnostics import damping_check, DAMPING_MARGIN, damping_penalty
 from .sampling import _head, _lpp_of, _speed_scale, common_grid
 
 __all__ = ["refine_fit", "metric_residuals", "METRIC_TOL", "METRIC_WEIGHT", "REFINE_MODES", "AUTO_REFINE"]
@@ -24,9 +27,8 @@ METRIC_WEIGHT = 0.1
 #: What ``refine="auto"`` does when the logs hold turning circles and zigzags: the metric-augmented refinement
 #: at weight :data:`METRIC_WEIGHT`.  Chosen by leave-one-run-out within the four KVLCC2 training runs (fit on
 #: three, predict the fourth's tactical diameter or overshoots; score = the worst goal-normalised error over
-#: the folds; rule fixed before any variant ran; the held-out zz+-20 never read; docs/validation.md, session 5):
+#: the folds; rule written before any variant ran; the held-out zz+-20 never read; docs/validation.md):
 #: metrics at weight 0.1 1.96, 0.3 2.19, 0.5 2.25, 1 5.34; output-error 2.47, output-error with heading 2.48.
-#: Session 4 (same rule, older identifier) had output-error 2.29 against metrics at weight 1 3.19.
 AUTO_REFINE = "metrics"
 
 
@@ -41,10 +43,6 @@ def metric_residuals(model, logs, *, lpp: float | None = None, tolerances=None, 
     and the names of the logs used (logs without standard-manoeuvre metrics are left out).  The B
     parameter sets of one manoeuvre run as one batch; a manoeuvre a set cannot complete gives 1e3.
     """
-    from ..manoeuvres import metrics as manoeuvre_metrics
-    from ..manoeuvres import ship_info
-    from ..manoeuvres import standard_manoeuvre
-
     L = _lpp_of(logs, lpp)
     tol = {**METRIC_TOL, **(tolerances or {})}
     jobs, used = [], []
@@ -90,8 +88,6 @@ def metric_residuals(model, logs, *, lpp: float | None = None, tolerances=None, 
 
 
 def _kinds(logs, L) -> set:
-    from ..manoeuvres import metrics as manoeuvre_metrics
-
     kinds = set()
     for lg in logs:
         try:
@@ -124,19 +120,16 @@ def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: in
     sign_bounds : bool  keep the model's dissipative coefficients (``model.dissipative``, the pure sway and yaw
         damping terms) <= 0 (default False; :class:`shipid.identify.batch.OutputErrorRefiner`).  Not the
         default: on the MARIN ``response-nl`` fit the held set follows the BLAS thread count and the cross
-        terms can still make the own damping positive (docs/validation.md, session 7)
+        terms can still make the own damping positive (docs/validation.md)
     physical_damping : bool  when the refined model's own sway or yaw damping is positive along the logged
         states (:func:`~shipid.identify.diagnostics.damping_check` fails), solve again from the same start with
         the constraint ``d(dv/dt)/dv, d(dr/dt)/dr <= -DAMPING_MARGIN * U/L`` at those states as an exterior
         penalty (:func:`~shipid.identify.diagnostics.damping_penalty`; default True).  A fit that keeps its own
         damping negative is not touched.  Unlike ``sign_bounds`` it constrains the damping itself, whatever
-        terms make it up (docs/validation.md, session 8)
+        terms make it up (docs/validation.md)
     log : callable, optional  called with one line per step, and one as each solve starts (they take a while)
     progress : bool  a bar over the refinement's replays (tqdm, on stderr)
     """
-    from .batch import OutputErrorRefiner
-    from .diagnostics import DAMPING_MARGIN, damping_check, damping_penalty
-
     if mode not in REFINE_MODES:
         raise ValueError(f"mode={mode!r}: use one of {REFINE_MODES}")
     w = METRIC_WEIGHT if metric_weight is None else float(metric_weight)
@@ -149,7 +142,8 @@ def refine_fit(fit: RecipeFit, logs, mode: str = "output-error", *, max_nfev: in
         if log is not None:
             log(f"recipe: {name}: {value} -- {reason}")
 
-    out = type(fit)(ekf=fit.ekf, steps=steps, logs=fit.logs, free_in_refine=list(fit.free_in_refine), lpp=fit.lpp)
+    out = type(fit)(ekf=fit.ekf, steps=steps, logs=fit.logs, free_in_refine=list(fit.free_in_refine), lpp=fit.lpp,
+                    source_logs=list(fit.source_logs), sampling=dict(fit.sampling))
     ekf, used, L = fit.ekf, fit.logs, fit.lpp
     if not ekf.success_:
         step("refinement", "skipped", f"the EKF stage failed ({ekf.message_}): no refinement from a diverged filter")

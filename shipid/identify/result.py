@@ -13,7 +13,10 @@ import numpy as np
 import pandas as pd
 
 from .._io import (as_bool, as_mapping, as_number, as_string, atomic_write_text, dumps_json, read_json, short)
+from .._version import __version__
+from ..models import available_models, get_model, Model
 from ..results import ResultMixin, coefficient_table, plot_coefficients, verdict_grade
+from .verdict import Verdict
 
 __all__ = ["FitResult", "load_result", "as_result", "model_from", "software_versions", "diagnostics_to_json", "fitted_ship"]
 
@@ -66,11 +69,10 @@ def diagnostics_to_json(d: dict) -> dict:
 
 def software_versions() -> dict:
     """Versions of Python and the packages a result depends on."""
+    # imported here only to read their versions: filterpy and matplotlib are not loaded otherwise
     import filterpy
     import matplotlib
     import scipy
-
-    from .._version import __version__
 
     return {"shipid": __version__, "python": platform.python_version(), "numpy": np.__version__,
             "scipy": scipy.__version__, "pandas": pd.__version__, "filterpy": filterpy.__version__,
@@ -93,6 +95,9 @@ class FitResult(ResultMixin):
     ship : dict -- particulars of the logs the fit was made on (``lpp`` [m], ...; see :func:`fitted_ship`)
     method : str, settings : dict, loglik : float, success : bool, message : str
     versions : dict, created : str (UTC ISO time)
+    verdict : :class:`~shipid.identify.verdict.Verdict` -- the graded verdict (``grade`` consistent,
+        model_error, defect or diverged; ``reasons``); ``shipid fit`` exits on it
+        (:func:`~shipid.identify.verdict.exit_status`)
     """
 
     model: str
@@ -111,6 +116,7 @@ class FitResult(ResultMixin):
     extra: dict = field(default_factory=dict)
     model_options: dict = field(default_factory=dict)
     ship: dict = field(default_factory=dict)
+    verdict: object = None
 
     @classmethod
     def from_identifier(cls, ident) -> "FitResult":
@@ -128,7 +134,7 @@ class FitResult(ResultMixin):
             "discretisation": ident.method,
         }
         opts, ship = fitted_ship(ident.model, ident.logs_)
-        return cls(
+        return cls(verdict=ident.verdict_,
             model=ident.model.name, coef={k: float(v) for k, v in ident.coef_.items()},
             coef_std={k: float(v) for k, v in ident.coef_std_.items()}, cov=ident.cov_.copy(),
             diagnostics=diag, inputs=_inputs(ident.logs_), method="ekf", settings=settings,
@@ -145,6 +151,7 @@ class FitResult(ResultMixin):
             "diagnostics": self.diagnostics, "loglik": self.loglik, "settings": self.settings,
             "inputs": self.inputs, "versions": self.versions, "created": self.created, "extra": self.extra,
             "model_options": self.model_options, "ship": self.ship,
+            **({"verdict": self.verdict.to_dict()} if self.verdict is not None else {}),
         }
 
     def to_json(self, path, *, force: bool = False) -> Path:
@@ -166,12 +173,11 @@ class FitResult(ResultMixin):
             versions=d["versions"], created=d["created"], extra=d["extra"],
             model_options=dict(d["model_options"] or d["extra"].get("model_options") or {}),
             ship=dict(as_mapping(doc.get("ship") or {}, f"{source}: ship", '{"lpp": 320}')),
+            verdict=_verdict(doc, source),
         )
 
     def to_model(self):
         """The registered model with these coefficients (and its options, e.g. MMG particulars)."""
-        from ..models import get_model
-
         if not isinstance(self.coef, dict):
             raise ValueError("fit result: 'coef' must be a mapping name -> value")
         try:
@@ -187,8 +193,9 @@ class FitResult(ResultMixin):
         tab = coefficient_table(pd.Series({k: self.coef[k] for k in est}, dtype=float),
                                 pd.Series({k: self.coef_std.get(k, np.nan) for k in est}, dtype=float))
         grade = verdict_grade(self)
-        if grade is not None:
+        if grade is not None:  # the grade travels with the table (DataFrame.attrs survive copies)
             tab.attrs["verdict"] = grade
+            tab.attrs["verdict_reasons"] = list(getattr(self.verdict, "reasons", []) or [])
         return tab
 
     def to_pandas(self) -> pd.DataFrame:
@@ -219,6 +226,14 @@ class FitResult(ResultMixin):
         return k
 
 
+def _verdict(doc: dict, source: str):
+    """The result document's verdict (None when it has none: written before verdicts existed)."""
+    v = doc.get("verdict")
+    if v is None:
+        return None
+    return Verdict.from_dict(as_mapping(v, f"{source}: verdict", '{"grade": "consistent", "reasons": []}'), source)
+
+
 def model_from(spec, *, model: str | None = None):
     """A model (and the fit result, if any) from any of the ways a user names one.
 
@@ -232,10 +247,6 @@ def model_from(spec, *, model: str | None = None):
     -------
     (Model, FitResult or None)
     """
-    import os
-
-    from ..models import Model, available_models, get_model
-
     res = None
     if isinstance(spec, Model):
         m = spec

@@ -8,7 +8,10 @@ import warnings
 
 import numpy as np
 
-__all__ = ["choose_sampling", "common_grid", "linear_sway_yaw", "linear_window", "LINEAR_DRIFT_DEG", "SAMPLES_PER_TAU"]
+from ..logs import TrialLog
+from .verdict import time_constant_at
+
+__all__ = ["choose_sampling", "fastest_time_constant", "common_grid", "linear_sway_yaw", "linear_window", "LINEAR_DRIFT_DEG", "SAMPLES_PER_TAU"]
 
 #: Samples per fastest time constant of the model at the EKF step (RK4 with h = tau/25 is accurate to ~1e-7
 #: per step); a model may set its own (``recipe_defaults.samples_per_tau``).  Finer is not better for every
@@ -27,6 +30,14 @@ LINEAR_DRIFT_DEG = 10.0
 DRIFT_SPEED_FRACTION = 0.25
 #: Fewest samples a log keeps in the linear range to be fitted at all (fewer: the log is left out, and said).
 MIN_WINDOW_SAMPLES = 20
+
+
+def every_kth(k: int) -> str:
+    """``"every sample"``, ``"every 2nd sample"``, ``"every 3rd sample"``, ``"every 4th sample"``, ..."""
+    if k == 1:
+        return "every sample"
+    suffix = "th" if 10 <= k % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(k % 10, "th")
+    return f"every {k}{suffix} sample"
 
 
 def _approach_speed(logs) -> float:
@@ -66,6 +77,16 @@ def _log_step(logs) -> float:
     return max(float(np.median(np.diff(lg.time))) for lg in logs if lg.time.size > 1)
 
 
+def fastest_time_constant(model, logs) -> tuple[float, float, str]:
+    """``(tau [s], U [m/s], where U comes from)``: the fastest time constant of ``model``'s surge, sway and yaw
+    (its Jacobian's largest decay rate) in straight running at the logs' approach speed U (or the median speed
+    of logs that start from rest), with the propeller rate that holds that speed.  ValueError when unknown."""
+    U, speed_why = _speed_scale(logs)  # the approach speed, or the median speed of logs that start from rest
+    if not U > 0:
+        raise ValueError(speed_why)
+    return time_constant_at(model, U), U, speed_why
+
+
 def choose_sampling(model, logs, samples_per_tau: int | None = None) -> tuple[int, str]:
     """Every how many samples of the logs the EKF uses, and why (see the module docstring, step 2);
     ``samples_per_tau`` default: the model's ``recipe_defaults.samples_per_tau``, else :data:`SAMPLES_PER_TAU`."""
@@ -73,28 +94,11 @@ def choose_sampling(model, logs, samples_per_tau: int | None = None) -> tuple[in
         samples_per_tau = model.recipe_defaults.samples_per_tau or SAMPLES_PER_TAU
     dt_log = _log_step(logs)
     try:
-        from ..manoeuvres import steady_rps
-
-        U, speed_why = _speed_scale(logs)  # the approach speed, or the median speed of logs that start from rest
-        if not U > 0:
-            raise ValueError(speed_why)
-        n = float(steady_rps(model, U)[0]) if "n" in model.input_names else 0.0
-        x = np.zeros(model.nx)
-        x[model.state_index("u")] = U
-        u = np.zeros(model.nu)
-        if "n" in model.input_names:
-            u[model.input_index("n")] = n
-        J = np.asarray(model.jac_x(0.0, x, u), dtype=float)
-        dyn = [model.state_index(s) for s in ("u", "v", "r") if s in model.state_names]
-        rates = np.abs(np.linalg.eigvals(J[np.ix_(dyn, dyn)]).real)
-        rates = rates[rates > 0]
-        if not rates.size:
-            raise ValueError("no decaying mode")
-        tau = 1.0 / float(rates.max())
+        tau, U, speed_why = fastest_time_constant(model, logs)
     except (ValueError, np.linalg.LinAlgError) as exc:
         return 1, f"every sample (log step {dt_log:.3g} s): the model's time constants are unknown ({exc})"
     k = max(1, int(math.floor(tau / samples_per_tau / dt_log + 1e-9)))
-    return k, (f"every {k}. sample ({k * dt_log:.3g} s): fastest time constant of the start model at "
+    return k, (f"{every_kth(k)} ({k * dt_log:.3g} s): fastest time constant of the start model at "
                f"{speed_why} of the logs, {U:.3g} m/s, is {tau:.3g} s, >= {samples_per_tau} steps per time "
                f"constant, log step {dt_log:.3g} s")
 
@@ -127,8 +131,6 @@ def linear_window(log, max_drift_deg: float = LINEAR_DRIFT_DEG):
     Near rest the drift angle is undefined (a log that starts from rest, as the Esso Osaka runs do, has
     |v| ~ u ~ noise there), so samples slower than :data:`DRIFT_SPEED_FRACTION` of the log's 90th-percentile
     speed are not tested: they neither cut the log nor count as drift."""
-    from ..logs import TrialLog
-
     if "v" not in log.channels:
         return log
     u, v = np.asarray(log["u"], dtype=float), np.asarray(log["v"], dtype=float)
@@ -150,18 +152,14 @@ def _every(log, k: int):
     """The log with every ``k``-th sample, keeping its name, ship and provenance (path, sha256)."""
     if k == 1:
         return log
-    from ..logs import TrialLog
-
     return TrialLog(log.data.iloc[::k].reset_index(drop=True), name=log.name, ship=log.ship, path=log.path,
                     sha256=log.sha256, rows=log.rows[::k], units_in=log.units_in,
-                    notes=list(log.notes) + [f"every {k}. sample (fit recipe)"], fmt=log.fmt,
+                    notes=list(log.notes) + [f"{every_kth(k)} (fit recipe)"], fmt=log.fmt,
                     meas_std=getattr(log, "meas_std", None))
 
 
 def _head(log, n: int):
     """The first ``n`` samples of a log, keeping its name, ship and provenance."""
-    from ..logs import TrialLog
-
     return TrialLog(log.data.iloc[:n].reset_index(drop=True), name=log.name, ship=log.ship, path=log.path,
                     sha256=log.sha256, rows=log.rows[:n], units_in=log.units_in, notes=list(log.notes), fmt=log.fmt,
                     meas_std=getattr(log, "meas_std", None))
@@ -172,8 +170,6 @@ def common_grid(logs, dt: float) -> list:
     all as long as the longest: past the end of a shorter log its measured channels are NaN (missing, not
     fitted) and its inputs ``delta, n`` hold their last value.  Logs on one grid are simulated as one batch
     by the output-error refinement."""
-    from ..logs import TrialLog
-
     if not dt > 0:
         raise ValueError(f"dt must be a positive time step [s], got {dt}")
     span = max(lg.time[-1] - lg.time[0] for lg in logs)

@@ -1,3 +1,4 @@
+# Why one file: the channel-consistency checks run as one set on one log, each a short function with its message.
 """Channel-consistency checks of a trial log, before any fit.
 
 Aircraft system identification calls this *data compatibility analysis*: the
@@ -32,6 +33,7 @@ import numpy as np
 import pandas as pd
 
 from ..results import ResultMixin
+from .units import SHIP_CHANNELS, unit_key, UNITS
 
 __all__ = ["Finding", "ConsistencyResult", "check_consistency", "CHECKS"]
 
@@ -44,8 +46,10 @@ _FIT_GOOD = 0.3          # yaw rate vs dpsi/dt: rms of the unexplained heading i
 _FIT_BAD = 0.7           # above: does not agree (error); between: loosely (warning)
 _FRAME_GOOD = 0.3        # relative error of the velocity integral against the track, "agrees"
 _EXECUTE = math.radians(5.0)     # rudder execute: |delta - delta0| above this
-_TURN_ERR = math.radians(10.0)   # heading change against the rudder that is an error (below: warning)
-_TURN_WARN = math.radians(3.0)
+_TURN_ERR = math.radians(10.0)   # heading change against the rudder over the first hold that is an error
+_TURN_WARN = math.radians(3.0)   # ... and a warning
+_SIGN_T_ERR = 5.0         # t statistic of the rudder's yaw response against shipid's sign that is an error
+_SIGN_T_WARN = 3.0        # ... and a warning (a 1e-3 two-sided level for a normal statistic is 3.3)
 _NU_WARN, _NU_ERR = 300.0, 3000.0  # median n*u [rps m/s] while moving ahead: looks like rpm
 _FREEZE_WARN = 0.01      # fraction of frozen position samples that is warned about
 _GLITCH_SIGMA = 12.0     # single-sample spike threshold in robust sigmas of the second difference
@@ -128,7 +132,7 @@ class ConsistencyResult(ResultMixin):
 
     def plot(self, ax=None):
         """Findings per check, stacked by level (error, warning, info); returns the axes."""
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         if ax is None:
             _, ax = plt.subplots(figsize=(6, 2.5))
@@ -192,8 +196,6 @@ class _Ctx:
         """(significant digits the file's values of ``c`` are printed with, factor file unit -> SI); judged on
         up to 256 values spread over the log.  16 = full precision."""
         if c not in self._sig:
-            from .units import UNITS, unit_key
-
             unit = unit_key(str(self.log.units_in.get(c, "")).split(" (")[0])
             factor = UNITS.get(unit, ("", 1.0))[1]
             a = self.get(c)
@@ -330,6 +332,24 @@ def _deg(x: float) -> str:
 # --------------------------------------------------------------------------------------
 
 
+def _other_yaw_column(c: _Ctx, ok, st, t_full, t, psi, seg, lags):
+    """The column other than r whose integral explains the heading's increments as logged (no scale fitted),
+    ``(name, unexplained fraction, correlation)``, when one does (unexplained fraction <= the "agrees" level);
+    else None."""
+    best, best_e, best_rho = None, float("inf"), float("nan")
+    for other in c.log.channels:
+        if other in ("psi", "r"):
+            continue
+        a = c.get(other)
+        if a is None or not np.isfinite(a[ok]).all():
+            continue
+        io = _cumint(t_full, a[ok])[::st]
+        eo, rho_o = min((_yaw_fit(t, psi, io, g, seg)[0], _yaw_fit(t, psi, io, g, seg)[4]) for g in lags)
+        if eo < best_e:
+            best, best_e, best_rho = other, eo, rho_o
+    return (best, best_e, best_rho) if best is not None and best_e <= _FIT_GOOD else None
+
+
 def _check_yaw_rate(c: _Ctx) -> None:
     psi, r = c.get("psi"), c.get("r")
     if psi is None or r is None:
@@ -362,6 +382,10 @@ def _check_yaw_rate(c: _Ctx) -> None:
     vals = dict(rho=rho, scale=k, bias_rad_s=bias, error_direct=e_direct, error_fitted=e_fit, lag_samples=lag)
     who = f"yaw rate {c.col('r')}"
     shown = f"{rho:.3f}" if math.isfinite(rho) else "undefined"
+    if e_fit <= _FIT_GOOD and k < -0.5 and abs(k + 1.0) >= 0.25:
+        # r follows the heading with the other sign but not at its rate: another column (v, in a ship whose
+        # drift opposes its turn) may sit in r's place; the search below decides
+        e_fit = max(e_fit, _FIT_GOOD + 1e-9) if _other_yaw_column(c, ok, st, t_full, t, psi, seg, fits) else e_fit
     if e_fit <= _FIT_GOOD and k < -0.5:
         c.add("error", "yaw_rate", ("r", "psi"),
               f"{who} has the opposite sign to dpsi/dt of {c.col('psi')} (rho = {shown}, dpsi/dt = {k:.3g} r): "
@@ -369,17 +393,8 @@ def _check_yaw_rate(c: _Ctx) -> None:
         return
     if e_fit > _FIT_GOOD:
         # r does not explain the heading: which other column does?
-        best, best_e, best_rho = None, float("inf"), float("nan")
-        for other in c.log.channels:
-            if other in ("psi", "r"):
-                continue
-            a = c.get(other)
-            if a is None or not np.isfinite(a[ok]).all():
-                continue
-            io = _cumint(t_full, a[ok])[::st]
-            eo, rho_o = min((_yaw_fit(t, psi, io, g, seg)[0], _yaw_fit(t, psi, io, g, seg)[4]) for g in fits)
-            if eo < best_e:
-                best, best_e, best_rho = other, eo, rho_o
+        best, best_e, best_rho = _other_yaw_column(c, ok, st, t_full, t, psi, seg, fits) or (None, float("inf"),
+                                                                                              float("nan"))
         if best is not None and best_e <= _FIT_GOOD:
             src = c.log.sources.get(best)
             target = src.split(" '")[0] if src else f"'{best}'"
@@ -460,14 +475,32 @@ def _check_velocity_frame(c: _Ctx) -> None:
     body = {lag: err("ub", "vb", lag) for lag in lags}
     lag = min(body, key=body.get)
     uv = f"{c.col('u')}, {c.col('v')}"
+    uf, vf = (a[ok] for a in (c.get("u"), c.get("v")))
+    integrate(u=uf, v=vf, ubs=vf * cs - uf * sn, vbs=vf * sn + uf * cs, unx=u * cs + v * sn, uny=u * sn - v * cs)
+    # v with the other sign (positive to port): the body-axis track with -v, against the one with v
+    e_vneg = min(err("unx", "uny", g) for g in lags)
+    if e_vneg <= _FRAME_GOOD and e_vneg < 0.5 * body[lag]:
+        c.add("error", "velocity_frame", ("v",),
+              f"{c.col('v')} has the other sign: with -v the body-axis velocities integrate to the track of x, y "
+              f"(median error {100 * e_vneg:.0f} %), with v as logged worse ({100 * body[lag]:.0f} %): pass signs "
+              "{'v': -1} (CLI: --sign v=-1)", error_body=body[lag], error_v_negated=e_vneg, lag_samples=lag)
+        return
     if body[lag] <= _FRAME_GOOD:
+        # both hypotheses: earth-fixed u, v that integrate to the track clearly better (half the error) are
+        # earth-fixed, however small the body-axis error (on a course that turns little the two readings differ
+        # little, and a body-axis error of 20 % passes)
+        e_earth = min(err("u", "v", g) for g in lags)
+        if e_earth < 0.5 * body[lag] and "(earth-fixed)" not in str(c.log.units_in.get("u", "")):
+            c.add("error", "velocity_frame", ("u", "v"),
+                  f"{uv} integrate to the track of x, y better as earth-fixed (median error {100 * e_earth:.0f} %) "
+                  f"than as body-axis velocities ({100 * body[lag]:.0f} %): pass velocity_frame='earth' (CLI: "
+                  "--velocity-frame earth)", error_body=body[lag], error_earth=e_earth, lag_samples=lag)
+            return
         c.add("info", "velocity_frame", ("u", "v"),
               f"body-axis {uv} integrate to the track of x, y (median error {100 * body[lag]:.0f} %)",
-              error_body=body[lag], lag_samples=lag)
+              error_body=body[lag], error_earth=e_earth, lag_samples=lag)
         return
     # body axes do not fit: earth-fixed? swapped?
-    uf, vf = (a[ok] for a in (c.get("u"), c.get("v")))
-    integrate(u=uf, v=vf, ubs=vf * cs - uf * sn, vbs=vf * sn + uf * cs)
     errs = {g: (body[g], err("u", "v", g)) for g in lags}
     lag = min(errs, key=lambda g: min(errs[g]))
     e_body, e_earth = errs[lag]
@@ -527,24 +560,82 @@ _SPEED_UNITS = (
 )
 
 
-def _check_rudder_sign(c: _Ctx) -> None:
+def _yaw_rate_series(c: _Ctx):
+    """The yaw rate [rad/s] at every sample: the logged r when the yaw-rate check found nothing wrong with it,
+    else the heading's central difference."""
+    r = c.get("r")
+    doubted = any(f.check == "yaw_rate" and f.level in ("error", "warning") for f in c.findings)
+    if r is not None and np.isfinite(r).sum() > 20 and not doubted:
+        return r
+    psi = c.get("psi")
+    if psi is None:
+        return None
+    with np.errstate(all="ignore"):
+        return np.gradient(psi, c.t)
+
+
+def _rudder_response(t, r, d, v, ahead, lag):
+    """The yaw response to the rudder's *changes*, from pairs of adjacent windows of ``lag`` samples.
+
+    The linear yaw equation ``dr/dt = c2 r + c1 v + c3 delta + c0`` in increments over a window,
+    ``r(k + L) - r(k) = c2 int r + c1 int v + c3 int delta + c0 T``, differenced between a window and the
+    one before it: the constant ``c0`` (a neutral rudder angle, a propeller's side force) cancels, and the
+    rudder's movements, which are fast, dominate while ``r`` and ``v`` change smoothly.  Least squares of the
+    differenced yaw-rate increments on the differenced integrals of ``r``, ``delta`` (and ``v`` when logged)
+    over window pairs that do not overlap, where the ship moves ahead (``ahead``).  (``v`` is left out by the
+    check: in a steady turn it is nearly collinear with ``r``.)  Returns ``(c3, its t
+    statistic, pairs)``."""
+    n = t.size
+    mid = np.arange(lag, n - lag, 2 * lag)
+    if mid.size < 8:
+        return float("nan"), float("nan"), int(mid.size)
+    cols = [d, r] + ([v] if v is not None else [])
+    ints = [_cumint(t, np.nan_to_num(a)) for a in cols]
+    lo, hi = mid - lag, mid + lag
+    bad = np.concatenate([[0], np.cumsum(~ahead | ~np.isfinite(d) | ~np.isfinite(r))])
+    ok = (bad[hi + 1] - bad[lo]) == 0
+    if ok.sum() < 8:
+        return float("nan"), float("nan"), int(ok.sum())
+
+    def d2(a):
+        return ((a[hi] - a[mid]) - (a[mid] - a[lo]))[ok]
+
+    y = d2(r)
+    X = np.column_stack([d2(I) for I in ints])
+    if not np.any(X[:, 0]):
+        return float("nan"), float("nan"), int(ok.sum())
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    res = y - X @ coef
+    dof = max(1, y.size - X.shape[1])
+    s2 = float(res @ res) / dof
+    try:
+        cov = s2 * np.linalg.inv(X.T @ X)
+    except np.linalg.LinAlgError:
+        return float("nan"), float("nan"), int(ok.sum())
+    se = math.sqrt(max(float(cov[0, 0]), 0.0))
+    return float(coef[0]), (float(coef[0]) / se if se > 0 else float("nan")), int(ok.sum())
+
+
+def _first_hold(c: _Ctx):
+    """The heading change over the first rudder hold against its side: ``(level, text, values)`` when it
+    turned the ship against shipid's convention by more than 10 deg (error) or 3 deg (warning), else None."""
     d, psi, u = c.get("delta"), c.get("psi"), c.get("u")
     if d is None or psi is None or u is None:
-        return
+        return None
     n = c.get("n")
     t = c.t
     d0 = float(np.nanmedian(d[:max(5, d.size // 50)]))
     off = d - d0
     hit = np.flatnonzero(np.abs(off) > _EXECUTE)
     if hit.size == 0:
-        return
+        return None
     i = int(hit[0])
     side = math.copysign(1.0, off[i])
     # the rudder hold: until it comes back within half the execute angle or changes side
     rest = np.flatnonzero((side * off[i:] < 0.5 * _EXECUTE))
     j = i + int(rest[0]) if rest.size else d.size - 1
     if j - i < 3:
-        return
+        return None
     seg = slice(i, j + 1)
     umax = float(np.nanmax(u))
     ahead = umax > 0 and float(np.nanmin(u[seg])) > 0.3 * umax
@@ -552,15 +643,76 @@ def _check_rudder_sign(c: _Ctx) -> None:
         ahead = ahead and float(np.nanmin(n[seg])) >= 0
     turn = float(psi[j] - psi[i])
     if not ahead or not math.isfinite(turn):
-        return
+        return None
     held = float(d[seg][int(np.nanargmax(np.abs(off[seg])))])
     vals = dict(execute_time=float(t[i]), delta_held=held, heading_change=turn)
     what = (f"the first rudder execute ({c.col('delta')} {math.degrees(held):+.1f} deg, t = {t[i]:.4g} s) turned the "
             f"ship to {'port' if turn < 0 else 'starboard'} (heading {math.degrees(turn):+.0f} deg)")
     if side * turn <= -_TURN_ERR:
+        return "error", what, vals
+    if side * turn <= -_TURN_WARN:
+        return "warning", what, vals
+    return None
+
+
+def _check_rudder_sign(c: _Ctx) -> None:
+    """The rudder's sign from the yaw response to every rudder movement of the log.
+
+    Under shipid's convention a positive rudder turns the ship to starboard when it moves ahead: the yaw
+    acceleration follows the rudder, ``dr/dt = c2 r + c3 delta + ...`` with ``c3 > 0`` for every ship with a
+    stern rudder.  The fit of :func:`_rudder_response` gives the sign of ``c3`` with its t statistic from all
+    rudder movements at once, so a zigzag with small check angles (heading changes of a few degrees between
+    reversals) is judged as surely as a turning circle.  A clear heading change against the rudder over the
+    first hold (:func:`_first_hold`) is an error too, and a weaker one an error when the whole log agrees."""
+    d, u = c.get("delta"), c.get("u")
+    r = _yaw_rate_series(c)
+    if d is None or r is None:
+        return
+    t = c.t
+    n_ = c.get("n")
+    d0 = float(np.nanmedian(d[:max(5, d.size // 50)]))
+    off = d - d0
+    if not np.nanmax(np.abs(off)) > math.radians(1.0):
+        return   # the rudder never moves: nothing to judge
+    if u is not None and np.isfinite(u).any() and np.nanmax(u) > 0:
+        ahead = np.nan_to_num(u, nan=-1.0) > 0.3 * float(np.nanmax(u))
+    else:
+        ahead = np.ones(t.size, dtype=bool)
+    if n_ is not None:
+        ahead &= ~(np.nan_to_num(n_) < 0)
+    # windows of 4, 8, 16, ... samples (while 32 pairs fit): the rudder's movements take from a second (a model)
+    # to tens of seconds (a full-scale ship); the sign is judged at the window where the response is clearest,
+    # and not at all when windows disagree clearly (|t| >= the error level with both signs)
+    fits = []
+    lag = 4
+    while lag * 64 <= t.size:
+        k_, t_, m_ = _rudder_response(t, r, off, None, ahead, lag)
+        if math.isfinite(t_):
+            fits.append((k_, t_, m_, lag))
+        lag *= 2
+    if not fits:
+        return
+    k, tstat, m, lag = min(fits, key=lambda f: f[1])
+    if max(f[1] for f in fits) >= _SIGN_T_ERR and tstat <= -_SIGN_T_ERR:
+        tstat = float("nan")   # contradictory evidence: no judgement from the whole log
+    first = _first_hold(c)
+    vals = dict(yaw_per_rudder=k, t_statistic=tstat, windows=m, lag_samples=lag, neutral_rad=d0)
+    if first is not None and (first[0] == "error" or not tstat > -_SIGN_T_ERR):
+        # the first hold's turn (a turning circle's or a large zigzag's first heading change) is the plainer
+        # evidence when it is clear; the whole log's response decides otherwise
+        level, what, v1 = first
+        if level == "error" or tstat <= -_SIGN_T_WARN:
+            c.add("error", "rudder_sign", ("delta",),
+                  f"{what}: rudder sign opposite to shipid's; pass rudder_sign=-1 (CLI: --rudder-sign -1)", **vals, **v1)
+            return
+    if not math.isfinite(tstat):
+        return
+    what = (f"over the whole log ({m} pairs of windows of {lag} samples) positive rudder {c.col('delta')} turns the ship "
+            f"to port (yaw acceleration per rudder angle {k:.3g} 1/s^2, t = {tstat:.1f})")
+    if tstat <= -_SIGN_T_ERR:
         c.add("error", "rudder_sign", ("delta",),
               f"{what}: rudder sign opposite to shipid's; pass rudder_sign=-1 (CLI: --rudder-sign -1)", **vals)
-    elif side * turn <= -_TURN_WARN:
+    elif tstat <= -_SIGN_T_WARN:
         c.add("warning", "rudder_sign", ("delta",),
               f"{what}, against shipid's convention (positive rudder to starboard); check the rudder sign "
               "(rudder_sign=-1 flips it)", **vals)
@@ -641,8 +793,6 @@ def _check_position_freeze(c: _Ctx) -> None:
 
 
 def _check_glitches(c: _Ctx) -> None:
-    from .units import SHIP_CHANNELS
-
     counts, first = {}, {}
     units = c.log.units()
     names = [ch for ch in c.log.channels if c.get(ch) is not None]
@@ -708,7 +858,7 @@ def check_consistency(log, *, checks=CHECKS) -> ConsistencyResult:
         Which of :data:`CHECKS` to run (default all): ``yaw_rate`` (r against
         dpsi/dt: correlation, scale, bias; names another column that agrees
         when r does not), ``velocity_frame`` (u, v against the track: body or
-        earth axes, or swapped), ``rudder_sign`` (direction of the first turn),
+        earth axes, or swapped), ``rudder_sign`` (the sign of the yaw response to every rudder movement),
         ``propeller`` (n x u separates rps from rpm without a length; n < 0
         while moving ahead), ``position_freeze`` (GNSS positions that freeze
         and jump, counted), ``glitches`` (single-sample spikes per channel).

@@ -1,14 +1,19 @@
 """``read_log``: open a log file, pick its format reader, validate into a :class:`TrialLog`."""
 from __future__ import annotations
 
+import hashlib
 import os
+import warnings
+from importlib import resources
 from pathlib import Path
 from typing import Mapping, Sequence
 
+from .._io import check_memory
 from ._text import _check_path, _decode
 from .marin import _looks_marin, _read_marin
 from .schema import (OPTIONAL_CHANNELS, PRESETS, Schema, apply_conventions, check_frame, check_rudder_sign, check_signs,
                      load_schema, merged)
+from .sensors import check_sensors, SensorWarning
 from .ship import ShipParticulars, _as_ship, _bundled_ship, read_ship
 from .shipid_csv import _read_csv
 from .trial_log import LogError, TrialLog, _finish, _run_consistency
@@ -130,12 +135,11 @@ def read_log(
         raw = p.read_bytes()
     except PermissionError:
         raise LogError(f"`{p}`: cannot read the file (permission denied); check its permissions", path=p) from None
-    import hashlib
-
     sha = hashlib.sha256(raw).hexdigest()
-    if not raw.strip():
+    if not raw or raw.isspace():  # (raw.strip() would copy the whole file)
         raise LogError(f"`{p.name}`: file is empty; give a log with a header line and data rows", path=p)
     text = _decode(raw, p)
+    del raw  # the text is what is parsed; the bytes of a long log are not kept beside it
     if fmt not in ("auto", "csv", "marin"):
         raise ValueError(f"fmt={fmt!r}: use 'auto', 'csv' or 'marin'")
     if velocity_frame is not None:
@@ -195,26 +199,22 @@ def read_log(
     if consistency_checks:
         _run_consistency(log, reader_notes=reader_notes)
     else:  # the reader's own findings are said even without the channel checks
-        import warnings
-
-        from .sensors import SensorWarning, check_sensors
-
         for f in check_sensors(log, reader_notes=reader_notes):
             if f.check in ("truncated_row", "header_lookalike"):
                 warnings.warn(f.message, SensorWarning, stacklevel=2)
     return log
 
 
-#: Peak memory of reading a text log per row [bytes]: measured 0.79 kB a row on a 500 000-row, 9-column log of
-#: 70-byte rows (468 MB peak resident, 73 MB of it the imports), against 72 bytes a row in the finished log.
-LOG_BYTES_PER_ROW = 800
+#: Peak memory of reading a text log per row [bytes], with a margin: ``benchmarks/bench_log_memory.py``
+#: measures 454 bytes a row above the imports on a 500 000-row, 9-column log of 71-byte rows (6.3 x the 72 bytes
+#: a row of the finished log; 671 bytes, 9.3 x, before the table was parsed from bytes rather than a
+#: 4-byte-a-character StringIO and the file's bytes were dropped once decoded).
+LOG_BYTES_PER_ROW = 700
 
 
 def check_log_memory(p: Path) -> None:
     """Refuse, before reading it, a log whose rows (estimated from the file's size and its first 64 kB) would
     need more memory than :func:`shipid._io.memory_limit_bytes`; one line with the estimate and the limit."""
-    from .._io import check_memory
-
     size = p.stat().st_size
     if size < 2**26:  # below 64 MiB no log can come near the limit
         return
@@ -228,8 +228,6 @@ def check_log_memory(p: Path) -> None:
 
 def _schema_ship(spec: str) -> ShipParticulars:
     """A schema's ship: a bundled ship name (``shipid/data_ships/NAME.json``) or a ship file path."""
-    from importlib import resources
-
     if resources.files("shipid").joinpath("data_ships", f"{spec}.json").is_file():
         return _bundled_ship(spec)
     return read_ship(spec)

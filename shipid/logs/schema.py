@@ -29,6 +29,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from ._text import load_mapping_file
+
 __all__ = ["Schema", "PRESETS", "load_schema", "OPTIONAL_CHANNELS"]
 
 #: Channels a schema may map that a file of that kind need not have (the log then lacks them):
@@ -265,8 +267,6 @@ def load_schema(spec: "str | os.PathLike | Schema | Mapping") -> Schema:
     if p.suffix.lower() not in (".json", ".yaml", ".yml") and not p.exists():
         raise ValueError(f"schema {s!r}: not a preset ({', '.join(PRESETS)}) and no such schema file; give a "
                          "preset name or a .json/.yaml schema file")
-    from ._text import load_mapping_file
-
     return _from_mapping(load_mapping_file(p, "schema file"), f"`{p.name}`", default_name=p.stem)
 
 

@@ -6,10 +6,13 @@ import json
 import math
 import os
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
+
+from ._text import load_mapping_file
 
 # --------------------------------------------------------------------------------------
 # ship particulars
@@ -169,16 +172,12 @@ def read_ship(path: str | os.PathLike) -> ShipParticulars:
     The file holds one mapping with the fields of :class:`ShipParticulars`
     (SI units; ``lpp`` required), e.g. ``{"name": "KVLCC2", "lpp": 320}``.
     """
-    from ._text import load_mapping_file
-
     p = Path(path)
     d = load_mapping_file(p, "ship file")
     return ShipParticulars.from_dict(d, source=f"`{p.name}`")
 
 
 def _bundled_ship(name: str) -> ShipParticulars:
-    from importlib import resources
-
     text = resources.files("shipid").joinpath("data_ships", f"{name}.json").read_text("utf-8")
     return ShipParticulars.from_dict(json.loads(text), source=f"bundled ship {name}")
 

@@ -1,3 +1,4 @@
+# Why one file: TrialLog and the checks every reader applies to a log (units, channels, heading) are one contract.
 """The :class:`TrialLog` object, :class:`LogError`, and the validation every reader shares.
 
 Every reader (and :meth:`TrialLog.from_arrays`) converts its channels to SI with
@@ -354,7 +355,7 @@ class TrialLog(ResultMixin):
 
         Angles and rates are shown in degrees for readability.
         """
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         names = list(channels) if channels is not None else self.channels
         if ax is None:

@@ -14,7 +14,7 @@ from ..simulate import METHODS, SimulationResult, simulate
 
 _REQUIRED_STATES = ("x", "y", "psi", "u", "v", "r")
 _REQUIRED_INPUTS = ("delta", "n")
-#: Ship facts of models that do not carry them (SPEC.md section 1: the KCS model of seed 002).
+#: Ship facts of models that do not carry them (the KCS model of Hajizadeh et al.).
 _KNOWN_SHIPS = {"kcs-response": {"lpp": 4.36, "rudder_rate": math.radians(16.8), "design_speed": 1.7}}
 
 
@@ -23,7 +23,7 @@ def ship_info(model: Model) -> dict:
 
     Taken from model attributes of those names, then from the default parameter set's
     ``operating_point`` (``lpp_m``, ``u0_m_s``, ``rudder_rate_deg_s``), then from the known
-    ships of SPEC.md (only for a model of that ship's length); missing ones are absent from the dict.
+    ships of the bundled papers (only for a model of that ship's length); missing ones are absent from the dict.
     """
     info: dict[str, float] = {}
     for k in ("lpp", "rudder_rate", "design_speed"):
@@ -161,7 +161,7 @@ class ManoeuvreResult(ResultMixin):
     def plot(self, ax=None):
         """Turning: the tracks in ship lengths (x/L up, y/L right, as a trial chart); zigzag: heading and rudder
         angle [deg] against time.  One line per member; returns the axes."""
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         sim, model = self.simulation, self.simulation.model
         if ax is None:

@@ -313,7 +313,7 @@ def turning_sweep(model: Model, rudder_deg: Sequence[float] = (10.0, 15.0, 25.0)
                   *, side: str = "starboard", rudder_rate: float | None = None, heading_change_deg: float = 540.0,
                   dt: float | None = None, lpp: float | None = None, params=None, method: str = "rk4",
                   rtol: float = 1e-6) -> pd.DataFrame:
-    """Turning diameters over rudder angle x approach speed, simulated as ONE batch (seed 002 studies).
+    """Turning diameters over rudder angle x approach speed, simulated as ONE batch (Hajizadeh et al. studies).
 
     The rps of each approach speed is the steady rps of the model at that speed (:func:`steady_rps`).
 

@@ -4,7 +4,7 @@ Written on Python floats with :mod:`math` functions as this module's globals
 (like :mod:`shipid.models._mmg_equations`); :func:`shipid._jit.rebind` runs
 the same code objects on numpy arrays (the models' batched paths) and, with
 numba installed, compiled (the EKF kernel :mod:`shipid._kernel`).
-See :mod:`shipid.models.response` (seed 002, SPEC.md eq. (3)) and
+See :mod:`shipid.models.response` (Hajizadeh et al., eq. (3)) and
 :mod:`shipid.models.response_nl` for the equations and their symbols.
 
 Jacobians are returned as tuples of their structurally non-zero entries in
@@ -46,7 +46,7 @@ def sgn_nn(z):
 
 # ------------------------------------------------------------------ kcs-response (16 parameters)
 def kcs_rates(psi, uu, v, r, d, n, p):
-    """``(x', y', psi', u', v', r')`` of the seed-002 response model (SPEC.md eq. (3))."""
+    """``(x', y', psi', u', v', r')`` of the response model of Hajizadeh et al. (eq. (3))."""
     a1, a2, a3, a4, a5, a6, a7, a8, a9, b1, b2, b3, b4, c1, c2, c3 = p[:16]
     xd, yd, psid = planar_rates_cs(uu, v, r, cos(psi), sin(psi))
     du = (a1 + a8 * n) * uu + a2 * v * v + a3 * r * r + a4 * d * d + (a5 * r + a6 * d) * v + a7 * r * d + a9 * n * absf(n)

@@ -158,6 +158,16 @@ class Model:
     #: linear and cross-flow terms), so dissipative, i.e. <= 0 in the model's sign convention, for any
     #: conventional hull.  The identifiers can keep them at their physical sign (``sign_bounds``).
     dissipative: ClassVar[tuple[str, ...]] = ()
+    #: Signs that physics fixes under shipid's conventions (x ahead, y to starboard, positive rudder and yaw
+    #: rate to starboard, n > 0 ahead): name -> ``(sign, why, channels, what to do)``.  A fit whose
+    #: well-determined coefficient has the other sign has a data or set-up defect
+    #: (:func:`shipid.identify.verdict.physics_findings`).  Never a comparison with another ship's values.
+    physics_signs: ClassVar[dict[str, tuple]] = {}
+    #: Non-dimensional ranges (ITTC prime: lengths by L, times by L/U; models with non-dimensional
+    #: coefficients as they are) spanned by the published ship sets the project holds: name ->
+    #: ``(low, high, channels, what to do)``; the verdict widens them by
+    #: :data:`shipid.identify.verdict.RANGE_FACTOR`, so they hold at any scale and catch a unit confusion.
+    physics_ranges: ClassVar[dict[str, tuple]] = {}
     #: The fit recipe's defaults for this model (:class:`RecipeDefaults`; the generic rules by default).
     recipe_defaults: ClassVar[RecipeDefaults] = RecipeDefaults()
     #: Package-relative folder of parameter-set JSON files.
@@ -432,3 +442,22 @@ class ComplexStepJacobians:
 
     def _jac_p(self, t, x, u, p):
         return complex_step_jacobian(self._rhs, t, x, u, p, "p")
+
+
+#: What fixes a rudder with the other sign, and one in the wrong unit (shared by the ship models).
+RUDDER_SIGN_FIX = "rudder logged positive to port? pass --rudder-sign -1"
+RUDDER_UNIT_FIX = "is the rudder in the unit the log declares? declare it (--units delta=deg) or convert the column"
+#: A stern rudder (shipid: y to starboard, positive rudder to starboard): its lift pushes the stern to port, so
+#: its sway force is negative and its yaw moment (bow to starboard) positive.
+STERN_RUDDER_SIGNS = {
+    "yaw": (+1, "positive (starboard) rudder must turn the ship to starboard", ("delta",), RUDDER_SIGN_FIX),
+    "sway": (-1, "a stern rudder's sway force is to port for positive (starboard) rudder", ("delta",),
+             RUDDER_SIGN_FIX),
+}
+OWN_DAMPING_SIGNS = {
+    "sway": (-1, "a hull's own sway damping is negative", ("v",),
+             "the fitted model is not physical (missing wind or current, drift beyond its range?): do not predict with it"),
+    "yaw": (-1, "a hull's own yaw damping is negative", ("r",),
+            "the fitted model is not physical (missing wind or current, drift beyond its range?): do not predict with it"),
+}
+

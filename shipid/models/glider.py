@@ -1,4 +1,4 @@
-"""Underwater glider in the vertical plane (seed 004, SPEC.md section 5).
+"""Underwater glider in the vertical plane (Divsalar et al.).
 
 Fossen's 6-DOF form ``M v' + C(v) v + D(v) v + g(eta) = tau`` reduced to
 surge, heave and pitch (``v = p = r = 0``, ``phi = psi = 0``), ``tau = 0``
@@ -83,6 +83,9 @@ External forces (``V^2 = u^2 + w^2``, ``alpha = atan2(w, u)``):
 
 The geometry the paper does not print (fin span, fin position) is stated in
 the parameter JSON with its caveat.
+
+Reference: Divsalar, Shafaghat, Farhadi & Alemian (Babol Noshirvani University of Technology, in Persian):
+parameters affecting the trajectory of a spherical-nose marine glider.
 """
 from __future__ import annotations
 
@@ -101,7 +104,7 @@ _PARAMS = (
 
 
 class GliderModel(Model):
-    """Spherical-nose underwater glider of seed 004, surge/heave/pitch.
+    """Spherical-nose underwater glider of Divsalar et al., surge/heave/pitch.
 
     States ``x, z, theta, u, w, q`` (z positive down = depth); input
     ``delta`` (fin incidence [rad]); 20 parameters (see :attr:`units`).  The
@@ -109,7 +112,7 @@ class GliderModel(Model):
     so the EKF can identify them; the CG offset ``x_g`` is a parameter so a
     batch study can give each member its own value.
 
-    Parameter sets: ``"paper"`` (default; seed 004 table 1 and figures 5-7,
+    Parameter sets: ``"paper"`` (default; Divsalar et al. table 1 and figures 5-7,
     no added mass) and ``"paper-added-mass"`` (same plus prolate-spheroid
     added mass).  Jacobians are central differences evaluated in one
     vectorised call (the equations involve a 3x3 mass-matrix solve and

@@ -83,7 +83,7 @@ import numpy as np
 from .._jit import rebind
 from . import _lowspeed_equations as _eq
 from .base import RecipeDefaults
-from .mmg import SHIP_CHANNEL_UNITS, ShipEquationsModel
+from .mmg import MMG_PHYSICS_RANGES, MMG_PHYSICS_SIGNS, SHIP_CHANNEL_UNITS, ShipEquationsModel
 
 __all__ = ["LowSpeedModel", "LOWSPEED_PARAM_NAMES"]
 
@@ -105,6 +105,9 @@ class LowSpeedModel(ShipEquationsModel):
     """
 
     name = "lowspeed"
+    #: as the MMG model's (the same hull, propeller and rudder terms); no R0 (its resistance is X0F, X0A)
+    physics_signs = {k: v for k, v in MMG_PHYSICS_SIGNS.items() if k != "R0"}
+    physics_ranges = MMG_PHYSICS_RANGES
     param_names = LOWSPEED_PARAM_NAMES
     units = {**SHIP_CHANNEL_UNITS, **{k: "-" for k in LOWSPEED_PARAM_NAMES}, "f_alpha": "1/rad"}
     default_parameter_set = "esso-osaka-prior"

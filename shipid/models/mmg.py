@@ -46,7 +46,7 @@ Rudder, eqs. (17)-(28): ``X_R = -(1 - t_R) F_N sin(delta)``,
 ``Y_R = -(1 + a_H) F_N cos(delta)``,
 ``N_R = -(x_R + a_H x_H) F_N cos(delta)`` with **dimensional**
 ``x_R = x'_R L`` and ``x_H = x'_H L`` (this is where the ``shipmmg`` package
-was wrong, its issue #31), ``F_N = 1/2 rho A_R U_R^2 f_alpha sin(alpha_R)``,
+was wrong: github.com/ShipMMG/shipmmg/issues/31), ``F_N = 1/2 rho A_R U_R^2 f_alpha sin(alpha_R)``,
 ``alpha_R = delta - delta_0 - atan(v_R/u_R)``, ``v_R = U gamma_R beta_R``,
 ``beta_R = beta - l'_R r'`` (``gamma_R`` = ``gammaR_m`` for beta_R < 0,
 ``gammaR_p`` otherwise),
@@ -79,6 +79,7 @@ all columns in one evaluation of the (complex-safe) equations.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Mapping
@@ -87,7 +88,7 @@ import numpy as np
 
 from .._jit import compiled, rebind
 from . import _mmg_equations as _eq
-from .base import Model, RecipeDefaults, batch_shape
+from .base import OWN_DAMPING_SIGNS, RUDDER_SIGN_FIX, RUDDER_UNIT_FIX, Model, RecipeDefaults, batch_shape
 
 __all__ = ["MMGModel", "MMGParticulars", "MMG_PARAM_NAMES", "eq4_mass_matrix", "ShipEquationsModel", "DerivedConstants",
            "resolve_particulars", "components"]
@@ -115,6 +116,19 @@ _PARAM_DOC = {
               "(propeller-induced asymmetry of a single-screw ship; 0 in the published sets)",
 }
 
+
+
+#: Signs physics fixes in the MMG (and low-speed) model: own damping Y'_v, N'_r < 0, resistance R'_0 > 0,
+#: rudder lift gradient f_alpha > 0 (a rudder logged positive to port would need f_alpha < 0).
+MMG_PHYSICS_SIGNS = {
+    "Yv": OWN_DAMPING_SIGNS["sway"], "Nr": OWN_DAMPING_SIGNS["yaw"],
+    "R0": (+1, "a hull's resistance is positive", ("u",),
+           "the fitted model is not physical (missing wind or current?): do not predict with it"),
+    "f_alpha": (+1, "the rudder's lift grows with its angle of attack", ("delta",), RUDDER_SIGN_FIX),
+}
+#: f_alpha of the published sets: KVLCC2 2.747 (Yasukawa & Yoshimura 2015), KCS 2.727 (mmg_kcs.json),
+#: Esso Osaka 2.490 (lowspeed_esso_osaka.json) [1/rad]
+MMG_PHYSICS_RANGES = {"f_alpha": (2.49, 2.75, ("delta",), RUDDER_UNIT_FIX)}
 
 @dataclass(frozen=True)
 class MMGParticulars:
@@ -217,8 +231,6 @@ def eq4_mass_matrix(P: MMGParticulars, mx, my, Jz) -> np.ndarray:
 
 
 def _no_default(f) -> bool:
-    import dataclasses
-
     return f.default is dataclasses.MISSING
 
 
@@ -522,6 +534,8 @@ class MMGModel(ShipEquationsModel):
     #: Y'_v, Y'_vvv (sway), N'_r, N'_rrr (yaw) < 0 (e.g. KVLCC2: -0.315, -1.607, -0.049, -0.013; Yasukawa &
     #: Yoshimura 2015, Table 3)
     dissipative = ("Yv", "Yvvv", "Nr", "Nrrr")
+    physics_signs = MMG_PHYSICS_SIGNS
+    physics_ranges = MMG_PHYSICS_RANGES
     #: The fit recipe estimates the linear and main non-linear hull derivatives, the resistance, the
     #: side-dependent wake correction C_2 (beta_P > 0, < 0: the propeller's wake, hence thrust and rudder
     #: inflow, differs between turns to port and starboard) and the rudder-hull interaction aH, xH (the hull's

@@ -1,11 +1,11 @@
-"""4-DOF planing boat of seed 000 (SPEC.md section 2): surge, sway, roll, yaw.
+"""4-DOF planing boat of Ghorbani et al.: surge, sway, roll, yaw.
 
 States ``x, y, psi, phi, u, v, p, r`` (earth-fixed position [m], heading
 [rad], roll [rad], body-axis surge/sway [m/s], roll/yaw rate [rad/s]);
 inputs ``T`` (total thrust of the two vectored outboards [N]) and ``phi_p``
 (their steering angle [rad], positive pushes the stern to starboard).
 
-Equations (seed 000, eqs. (1)-(5))::
+Equations (Ghorbani et al., eqs. (1)-(5))::
 
     (m - X_udot) u'                 = -k_R R_T(u) + T cos(phi_p) + m v r
     M [v', p', r']^T                = [Y, K, N]^T
@@ -27,7 +27,7 @@ hull of Table 1 tabulated once per hull, or a user table; ``k_R`` scales it.
 
 Sources and assumptions (every value is in ``parameters/planing_table1.json``):
 
-* Table 1 of seed 000: ``m``, ``Ixx``, ``Izz``, beam, length, LCG, deadrise, rho.
+* Table 1 of Ghorbani et al.: ``m``, ``Ixx``, ``Izz``, beam, length, LCG, deadrise, rho.
 * VCG = 0.50 m above keel and thrust line through the CG (``f = 0``,
   ``eps = 0``) for the trim equilibrium: shipid assumptions (not in the
   paper; the paper took ``R_T`` from Maxsurf's Savitsky module, whose planing
@@ -50,6 +50,9 @@ Sources and assumptions (every value is in ``parameters/planing_table1.json``):
   positive down the moment of a side force below the CG is
   ``-z T sin(phi_p)``, so we store ``z_p = -(depth of propeller below CG)``
   to keep the paper's formula and the physics.
+
+Reference: Ghorbani, Salarieh & Assadian (Sharif University of Technology, in Persian): time-optimal
+trajectory design for a high-speed planing craft.
 """
 from __future__ import annotations
 
@@ -62,7 +65,7 @@ from .base import Model
 
 __all__ = ["PlaningBoatModel", "TABLE1_HULL", "slender_body_derivatives"]
 
-#: Hull of seed 000, Table 1, with shipid's VCG/thrust-line assumptions.
+#: Hull of Ghorbani et al., Table 1, with shipid's VCG/thrust-line assumptions.
 TABLE1_HULL = PlaningHull(mass=3600.0, beam=2.018, lcg=2.518, vcg=0.50, deadrise=20.0, length=7.95,
                           epsilon=0.0, f=0.0, rho=1025.0)
 
@@ -135,7 +138,7 @@ def slender_body_derivatives(hull: PlaningHull, speed: float = 9.0, gm: float = 
 
 
 class PlaningBoatModel(Model):
-    """Seed-000 planing boat (4 DOF) with Savitsky resistance.
+    """Planing boat (4 DOF) with Savitsky resistance, time-optimal manoeuvring study.
 
     Parameters
     ----------

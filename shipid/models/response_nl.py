@@ -1,4 +1,4 @@
-"""``response-nl``: the seed-002 response model plus speed-dependent non-linear damping.
+"""``response-nl``: the response model of Hajizadeh et al. plus speed-dependent non-linear damping.
 
 The seed's linear sway/yaw equations cannot represent turning circles and
 zigzags at once (the yaw damping does not grow with drift and yaw rate, and
@@ -55,7 +55,7 @@ import numpy as np
 
 from .._jit import rebind
 from . import _response_equations as _req
-from .base import Model, RecipeDefaults, batch_shape
+from .base import RUDDER_UNIT_FIX, STERN_RUDDER_SIGNS, Model, RecipeDefaults, batch_shape
 from .prime import FroudeScaled
 from .response import PRIME_EXPONENTS as _SEED_EXPONENTS
 from .response import _rows
@@ -95,7 +95,7 @@ _POS = {"x": _req.NL_JX_POS, "p": _req.NL_JP_POS, "u": _req.NL_JU_POS}
 
 
 class ResponseNLModel(FroudeScaled, Model):
-    """Seed-002 response model with speed-dependent non-linear sway/yaw damping (29 coefficients).
+    """The KCS response model with speed-dependent non-linear sway/yaw damping (29 coefficients).
 
     The coefficients are dimensional (SI, as ``kcs-response``) and belong to a
     ship of length ``lpp``; :meth:`to_prime`/:meth:`from_prime` convert them
@@ -131,6 +131,11 @@ class ResponseNLModel(FroudeScaled, Model):
     #: damping of r (c2 r + c5 |u| r + c7 r|r|); each <= 0 keeps dv/dt per v and dr/dt per r (without the
     #: cross terms) negative at every speed from rest
     dissipative = ("b1", "b5", "b6", "c2", "c5", "c7")
+    #: a stern rudder b3 < 0, c3 > 0; thrust a9 > 0 (the own damping is a sum of terms: damping_check)
+    physics_signs = {"b3": STERN_RUDDER_SIGNS["sway"], "c3": STERN_RUDDER_SIGNS["yaw"],
+                     "a9": (+1, "the propeller pushes the ship ahead for n > 0", ("n",), "check the sign of n (--sign n=-1)")}
+    #: as kcs-response's c3 (the seed terms have the same meaning)
+    physics_ranges = {"c3": (0.92, 1.97, ("delta",), RUDDER_UNIT_FIX)}
     #: The fit recipe holds the asymmetry terms b0, c0 at their start (the EKF does not identify them from turns
     #: and zigzags at one rpm: docs/validation.md), and its staged start fits ``kcs-response`` (the 16 terms
     #: this model extends) at the logs' scale first, the non-linear terms starting at 0.

@@ -15,11 +15,13 @@ import sys
 from datetime import datetime, timezone
 from pathlib import Path
 
-
 from .._io import OutputExistsError, atomic_write_text
+from ..identify.result import software_versions
+from ..identify.verdict import plain_message, verdict_of
 from ..validation import LogValidation, load_logs, resolve_model, validate_one
 from . import figures
 from ._markup import _e, _f, _fig, _img, _table  # noqa: F401  (_img: the helpers as one set)
+from .uncertainty import uncertainty_section
 
 __all__ = ["render_report", "write_report"]
 
@@ -60,12 +62,25 @@ def _anchor(i: int) -> str:
 
 
 def _versions_now() -> dict:
-    from ..identify.result import software_versions
-
     return software_versions()
 
 
 # ----------------------------------------------------------------------------- sections
+#: Banner colours per grade (background, border).
+_BANNER = {"consistent": ("#eaf6ea", "#3a8a3a"), "model_error": ("#fdf6e3", "#b58900"),
+           "defect": ("#fbeaea", "#b03030"), "diverged": ("#fbeaea", "#b03030")}
+
+
+def verdict_banner(result) -> str:
+    """The report's opening banner: the fit's grade, each reason as a sentence, and what to do."""
+    v = verdict_of(result)
+    bg, border = _BANNER[v.grade]
+    items = "".join(f"<li>{_e(r)}</li>" for r in v.reasons)
+    return (f"<div class=\"verdict\" id=\"verdict\" style=\"background:{bg};border-left:6px solid {border};"
+            f"padding:6px 12px;margin:8px 0\"><p><b>Verdict: {_e(v.grade.replace('_', ' '))}.</b> {_e(v.advice)}</p>"
+            + (f"<ul>{items}</ul>" if items else "") + "</div>")
+
+
 _ROLE = re.compile(r":[a-z]+:`~?([^`]+)`")
 
 
@@ -104,8 +119,9 @@ def _section_model(result, model) -> str:
     s = result.settings or {}
     rows = [("registered model", _e(result.model)), ("description", _e(doc)),
             ("states", _e(", ".join(model.state_names))), ("inputs", _e(", ".join(model.input_names))),
-            ("method", _e(result.method)), ("fit status", _e(("success" if result.success else "FAILED") +
-                                                              (f": {result.message}" if result.message else ""))),
+            ("method", _e(result.method)), ("verdict", _e(verdict_of(result).grade.replace("_", " "))),
+            ("optimiser", _e(("converged" if result.success else "did not converge") +
+                             (f": {plain_message(result.message)}" if result.message else ""))),
             ("log-likelihood", _f(result.loglik, "{:.6g}")), ("created (UTC)", _e(result.created))]
     for key, label in (("n_passes", "EKF passes"), ("discretisation", "discretisation"), ("substeps", "RK4 substeps"),
                        ("param_walk", "parameter random walk")):
@@ -464,16 +480,6 @@ def default_title(result, model, validations) -> str:
     return f"{ship} — {model_label(result, model)} model on {_data_set(validations)}"
 
 
-def _section_verdict(result) -> str:
-    """The fit's graded verdict (``result.verdict``: grade, reasons) right under the title, when it has one."""
-    verdict = getattr(result, "verdict", None)
-    if verdict is None or not getattr(verdict, "grade", None):
-        return ""
-    reasons = "".join(f"<li>{_e(r)}</li>" for r in (getattr(verdict, "reasons", None) or []))
-    return (f"<div class=\"warn\"><b>Verdict: {_e(verdict.grade.replace('_', ' '))}</b>"
-            + (f"<ul>{reasons}</ul>" if reasons else "") + "</div>")
-
-
 def _median(xs):
     xs = sorted(x for x in xs if x is not None and math.isfinite(x))
     if not xs:
@@ -494,12 +500,16 @@ def plain_summary(result, model, validations, horizons=None) -> str:
               f"the {m} method")
     fitted = (f"fitted by {method} to {n_fit} log(s) ({', '.join(names[:6])}{', ...' if len(names) > 6 else ''})"
               if n_fit else "with no fitted logs recorded")
-    out = [f"This report checks a {model_label(result, model)} model {fitted}, estimating {k} of its {n_par} "
-           "coefficients."]
-    verdict = getattr(result, "verdict", None)
+    label = model_label(result, model)
+    article = "an" if label[:1].lower() in "aeiou" or label.lower().startswith("mmg") else "a"
+    out = [f"This report checks {article} {label} model {fitted}, estimating {k} of its {n_par} coefficients."]
+    try:
+        grade = verdict_of(result).grade
+    except (AttributeError, KeyError, TypeError, ValueError):  # a result the verdict cannot read: consistency only
+        grade = None
     cons = (result.diagnostics or {}).get("consistency") or {}
-    if verdict is not None and getattr(verdict, "grade", None):
-        out.append(f"Its verdict is {verdict.grade.replace('_', ' ')} (box above).")
+    if grade:
+        out.append(f"Its verdict is {grade.replace('_', ' ')} (box above).")
     elif cons:
         out.append("The filter's innovations are consistent with its noise model." if cons.get("consistent", True)
                    else "The filter's innovations are not consistent with its noise model, so the stated "
@@ -514,7 +524,8 @@ def plain_summary(result, model, validations, horizons=None) -> str:
     if track is not None:
         rel = f" ({track / Ls[0]:.2f} ship lengths)" if Ls else ""
         out.append(f"Replayed open loop with each log's own rudder and propeller inputs, it follows the "
-                   f"{len(validations)} log(s) ({len(held)} not used in the fit) with a median track error of "
+                   f"{len(validations)} log(s) ({f'{len(held)} not used in the fit' if held else 'all used in the fit'}) "
+                   "with a median track error of "
                    f"{track:.3g} m{rel}.")
     td = [abs(v.difference("standard").get("tactical_diameter_L") or math.nan) / v.measured.to_dict()
           ["tactical_diameter_L"] * 100 for v in validations if v.manoeuvre == "turning" and v.standard is not None
@@ -569,8 +580,6 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
                        for lg in load_logs(logs, lpp=lpp)]
     extra = []
     if uncertainty:
-        from .uncertainty import uncertainty_section
-
         extra.append(uncertainty_section(res, validations, **uncertainty))
     title = title or default_title(res, model, validations)
     stamp = datetime.now(timezone.utc).isoformat(timespec="seconds")
@@ -580,7 +589,7 @@ def render_report(result, logs, *, identifier=None, title: str | None = None, lp
         ("identifiability", "Identifiability"), ("model", "Model"), ("logs", "Logs"), ("inputs", "Inputs"),
         ("versions", "Software")))
     body = [f"<h1>{_e(title)}</h1>",
-            _section_verdict(res),
+            verdict_banner(res),
             f"<p class=\"intro\">{_e(plain_summary(res, model, validations, horizons))}</p>",
             f"<p class=\"note\">Model <b>{_e(model_label(res, model))}</b> ({_e(res.method)}; "
             f"{'fitted to ' + str(len(res.inputs)) + ' log(s)' if res.inputs else 'no fitted logs recorded'}), "

@@ -5,6 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..uncertainty import METRIC_KEYS, parameter_draws, replay_draws
+from ..uncertainty.posterior import load_samples
+from ..validation.replay import _for_length
 from . import figures
 from ._markup import _e, _f, _fig, _table
 
@@ -84,9 +87,6 @@ def pair_figure(samples, k: int = 4):
 
 def uncertainty_section(res, validations, *, draws: int, seed: int = 0, samples=None) -> str:
     """HTML of the section (see the module docstring); ``res`` a FitResult, ``validations`` LogValidations."""
-    from ..uncertainty import METRIC_KEYS, parameter_draws, replay_draws
-    from ..validation.replay import _for_length
-
     P = parameter_draws(res, draws, seed=seed, samples=samples)
     src = "MCMC samples" if samples is not None else "the fit's Gaussian posterior (full covariance)"
     parts = ["<h2 id=\"uncertainty\">Prediction uncertainty</h2>",
@@ -127,8 +127,6 @@ def uncertainty_section(res, validations, *, draws: int, seed: int = 0, samples=
                      _table(["log", "criterion", "probability", "met", "not evaluated"], imo_rows, left=2))
     parts += figs
     if samples is not None:
-        from ..uncertainty.posterior import load_samples
-
         s = load_samples(samples)
         parts.append(f"<h3>Posterior samples</h3><p class=\"note\">{_e(s.message)}</p>")
         parts.append(_fig(pair_figure(s), "posterior pair plot"))

@@ -7,13 +7,13 @@ power are, given the current and the wind resolved along the leg::
     us, P, w = model.leg(current_along, wind_against)
 
 ``current_along`` [m/s] is the current component along the leg direction
-(``Uc cos psi_rc`` of seed 003: positive = following current);
+(``Uc cos psi_rc`` of Li et al.: positive = following current);
 ``wind_against`` [m/s] is ``Ua cos psi_ra`` with ``psi_ra`` the angle between
 the heading and the direction the wind comes *from* (positive = head wind);
 ``us`` is the speed over ground along the leg [m/s], ``P`` the power [W] and
 ``w`` the speed through the water [m/s].  All arrays broadcast.
 
-:class:`PaperUSVModel` -- seed 003 (SPEC.md section 4), eqs. (8)-(12) at the
+:class:`PaperUSVModel` -- Li et al., eqs. (8)-(12) at the
 fixed 2000 rpm::
 
     Fc = 3.9 w |w|,  w = us - Uc cos psi_rc        (current drag, N)
@@ -48,7 +48,7 @@ __all__ = ["PaperUSVModel", "ModelSpeedPower", "steady_surge_speed"]
 
 @dataclass(frozen=True)
 class PaperUSVModel:
-    """The "Wave Rider" USV of seed 003 at its fixed 2000 rpm (eqs. 8-12).
+    """The "Wave Rider" USV of Li et al. at its fixed 2000 rpm (eqs. 8-12).
 
     Coefficients default to the paper's; change them for another craft.
     ``Fc = kc w|w|``, ``Fw = kw v|v|``, ``Ft = t2 w^2 + t1 w + t0``,

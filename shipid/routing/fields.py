@@ -17,7 +17,7 @@ Fields provided
 * :class:`UniformField` -- constant vector (optionally switched in time by
   :class:`PiecewiseTimeField`).
 * :class:`AffineField` -- ``w = w0 + G @ (xy - xy0)``; :func:`linear_shear`
-  builds the Zermelo-paper current ``w = (k y, 0)`` (seed 001).
+  builds the Zermelo-paper current ``w = (k y, 0)`` (Zwierzewicz).
 * :class:`VortexField` -- Lamb--Oseen vortex (solid-body core, potential
   vortex outside), circulation ``Gamma`` [m^2/s], core radius ``rc`` [m].
 * :class:`GridField` -- gridded ``u, v`` on a rectilinear grid, bilinear in
@@ -132,7 +132,7 @@ class Field:
 
     def plot(self, bbox: Sequence[float], t: float = 0.0, n: int = 21, ax=None, **quiver_kw):
         """Quiver plot over ``bbox = (xmin, xmax, ymin, ymax)`` [m]; returns the axes."""
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         ax = ax or plt.gca()
         xs = np.linspace(bbox[0], bbox[1], n)
@@ -204,7 +204,7 @@ class AffineField(Field):
 
 
 def linear_shear(k: float) -> AffineField:
-    """The Zermelo paper's current (seed 001): east component ``k * y``, no north component.
+    """The Zermelo paper's current (Zwierzewicz): east component ``k * y``, no north component.
 
     In the paper's coordinates (``x1`` north, ``x2`` east, heading from
     ``x1`` towards ``x2`` = nautical course) the current is ``w = (0, k x1)``;

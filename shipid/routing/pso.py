@@ -1,4 +1,5 @@
-"""Energy-optimal USV path planning around circular obstacles by particle swarm optimisation (seed 003).
+# Why one file: the PSO planners (DOPSO, EOPSO, OCPSO), their swarm and the voyage that judges them share one method's problem, cost and geometry (Li et al.).
+"""Energy-optimal USV path planning around circular obstacles by particle swarm optimisation (Li et al.).
 
 Encoding (the paper's "dimension circles")
 ------------------------------------------
@@ -41,14 +42,20 @@ by a :class:`numpy.random.Generator`.  The planners run one swarm per
 left/right class of passing the obstacles (:func:`stratified_init`): the
 feasible set falls apart into such classes, and one swarm over the whole box
 (the paper's set-up, ``stratify=False``) often settles in the wrong one.
+
+Reference: Li, Liao, Liu, Jia, Li & Zhai (Harbin Engineering University, in Chinese): energy-optimal
+path planning of an unmanned surface vehicle by particle swarm optimisation.
 """
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field as dc_field
 from typing import Callable, Sequence
 
 import numpy as np
 import pandas as pd
+from scipy.optimize import differential_evolution
+from tqdm.auto import tqdm
 
 from .._io import check_memory
 from ..results import ResultMixin
@@ -96,7 +103,7 @@ class Obstacle:
 
 @dataclass
 class USVProblem:
-    """A planning problem of seed 003.
+    """A planning problem of Li et al..
 
     Parameters
     ----------
@@ -179,7 +186,7 @@ class USVProblem:
 
     def plot(self, ax=None, circles: bool = True):
         """Obstacles, dimension circles (dotted), start and goal; returns the axes."""
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         ax = ax or plt.gca()
         for o in self.obstacles:
@@ -361,7 +368,7 @@ class PSOResult(ResultMixin):
 
     def plot(self, ax=None):
         """Best objective against iteration; returns the axes."""
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         ax = ax or plt.subplots(figsize=(5, 3))[1]
         ax.plot(np.arange(len(self.history)), self.history)
@@ -520,7 +527,7 @@ class PlanResult(ResultMixin):
 
     def plot(self, ax=None, **kw):
         """Plot the path (north against east); returns the axes."""
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         ax = ax or plt.gca()
         ax.plot(self.points[:, 0], self.points[:, 1], "-s", label=kw.pop("label", self.objective), **kw)
@@ -547,8 +554,6 @@ class PlanResult(ResultMixin):
 
 def side_classes(problem: USVProblem, dims=None) -> list[tuple[int, ...]]:
     """All left/right combinations (+1: polar angle above the obstacle centre's, -1: below) of ``dims``."""
-    import itertools
-
     k = problem.n_dims if dims is None else len(dims)
     return list(itertools.product((-1, 1), repeat=k))
 
@@ -654,8 +659,6 @@ def differential_evolution_check(problem: USVProblem, objective: str = "energy",
     values; no gradient polish.  ``signs`` restricts the search to one
     left/right class (:func:`class_bounds`).  Returns scipy's ``OptimizeResult``.
     """
-    from scipy.optimize import differential_evolution
-
     cost = PathCost(problem, objective, t_env=t_env)
 
     def f(X):  # DE vectorised: X has shape (D, S)
@@ -719,7 +722,7 @@ class Voyage(ResultMixin):
 
     def plot(self, ax=None, **kw):
         """Energy spent [J] against time [s]; returns the axes."""
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         ax = ax or plt.gca()
         ax.plot(self.t, self.energy, **kw)
@@ -829,7 +832,7 @@ class OCPSOResult(ResultMixin):
 
     def plot(self, ax=None, **kw):
         """The initial plan (dotted) and the path sailed (north against east); returns the axes."""
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         ax = ax or plt.gca()
         ax.plot(self.initial.points[:, 0], self.initial.points[:, 1], ":", color="0.5", label="initial plan")
@@ -941,14 +944,14 @@ def forbidden_arcs(problem: USVProblem, prev_point, dim: int, n: int = 3601) -> 
 
 
 # ------------------------------------------------------------ the paper case
-#: Seed 003's start and goal (lon, lat) [deg] near Zhanjiang.
+#: Li et al.'s start and goal (lon, lat) [deg] near Zhanjiang.
 PAPER_START_LONLAT = (110.421910, 21.263390)
 PAPER_GOAL_LONLAT = (110.422070, 21.260650)
 
 
 def paper_scenario(*, time_scale: float = 0.1, kinematics: str = "paper",
                    current_courses_deg: tuple[float, float, float] = (90.0, 0.0, 270.0)) -> USVProblem:
-    """The seed-003 scenario with our stated obstacles and current directions.
+    """The Li et al. scenario with our stated obstacles and current directions.
 
     Start/goal are the paper's (305 m apart, goal almost due south).  Wind
     from the east at 7 m/s; current 1.2 m/s.  The obstacle positions and the
@@ -998,8 +1001,6 @@ def compare_planners(problem: USVProblem, *, rng=0, n_particles: int = 25, max_i
     rng = np.random.default_rng(rng)
     bar, callback = None, None
     if progress:
-        from tqdm.auto import tqdm
-
         n_replan = len(replan_times if replan_times is not None else
                        set(problem.current.breakpoints) | set(problem.wind.breakpoints))
         bar = tqdm(total=int(max_iter) * (3 + n_replan), desc="route (PSO iterations)", leave=False)

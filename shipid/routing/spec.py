@@ -10,7 +10,7 @@ Zermelo::
      "current": FIELD, "solver": "pmp" | "transcription" | "both",
      "units": "si" | "nautical", "n": 40}
 
-PSO (seed 003)::
+PSO (Li et al.)::
 
     {"type": "pso", "start": [x, y] | "start_lonlat": [lon, lat],
      "goal": [x, y] | "goal_lonlat": [lon, lat],
@@ -49,10 +49,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .._io import as_int, as_mapping, as_string, check_keys, read_json, short
+from .._io import as_int, as_mapping, as_number, as_string, check_keys, read_json, short
+from ..identify.result import model_from
+from ..models import get_model
+from .energy import ModelSpeedPower, PaperUSVModel
 from .fields import (AffineField, Field, GridField, PiecewiseTimeField, SumField, UniformField, VortexField,
                      linear_shear)
-from .pso import check_pso_size
+from .pso import Obstacle, USVProblem, check_pso_size, lonlat_to_local
+from .zermelo import ZermeloProblem
 
 __all__ = ["field_from_spec", "load_problem_spec", "zermelo_from_spec", "usv_from_spec", "vessel_from_spec",
            "check_pso_settings", "check_pso_size"]
@@ -71,8 +75,6 @@ def _vec(value, where: str, n: int = 2) -> np.ndarray:
 
 
 def _num(value, where: str, *, low: float | None = None, low_open: bool = False) -> float:
-    from .._io import as_number
-
     return as_number(value, where, low=low, low_open=low_open)
 
 
@@ -201,8 +203,6 @@ def check_pso_settings(spec: dict, where: str) -> dict:
 
 def zermelo_from_spec(spec: dict, where: str = "problem", base_dir: Path | None = None):
     """Build a :class:`~shipid.routing.zermelo.ZermeloProblem` from a ``"type": "zermelo"`` spec."""
-    from .zermelo import ZermeloProblem
-
     units = spec.get("units", "si")
     if units not in ("si", "nautical"):
         raise ValueError(f"{where}.units: expected 'si' or 'nautical', got {short(units, 30)}")
@@ -215,8 +215,6 @@ def zermelo_from_spec(spec: dict, where: str = "problem", base_dir: Path | None 
 
 def vessel_from_spec(spec, where: str = "vessel", base_dir: Path | None = None):
     """Speed-power model from ``{"type": "paper"}`` or ``{"type": "model", ...}`` (module docstring)."""
-    from .energy import ModelSpeedPower, PaperUSVModel
-
     if spec is None:
         return PaperUSVModel()
     as_mapping(spec, where, '{"type": "paper"}')
@@ -226,9 +224,6 @@ def vessel_from_spec(spec, where: str = "vessel", base_dir: Path | None = None):
     check_keys(spec, _VESSEL_KEYS[kind], where)
     if kind == "paper":
         return PaperUSVModel()
-    from ..identify.result import model_from
-    from ..models import get_model
-
     if "result" in spec:
         rpath = Path(as_string(spec["result"], f"{where}.result"))
         if base_dir is not None and not rpath.is_absolute():
@@ -251,8 +246,6 @@ def vessel_from_spec(spec, where: str = "vessel", base_dir: Path | None = None):
 
 def usv_from_spec(spec: dict, where: str = "problem", base_dir: Path | None = None):
     """Build a :class:`~shipid.routing.pso.USVProblem` from a ``"type": "pso"`` spec."""
-    from .pso import Obstacle, USVProblem, lonlat_to_local
-
     origin = None
     if "start_lonlat" in spec:
         origin = tuple(_vec(spec["start_lonlat"], f"{where}.start_lonlat"))

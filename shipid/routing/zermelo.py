@@ -1,6 +1,6 @@
 """Zermelo's navigation problem: time-optimal route of a constant-speed boat in a current.
 
-Problem (seed 001, SPEC.md section 3)::
+Problem (Zwierzewicz)::
 
     x' = V cos(theta) + w_x(t, x, y),   y' = V sin(theta) + w_y(t, x, y),   min t_f
 
@@ -32,6 +32,9 @@ closed-form time ``(cot(u0 - pi) - cot(alpha)) / k`` of the extremal with the
 10.9282 h``.  That extremal does not start at the printed ``A = (-1.86, 3.66)``
 but about 0.01 nm away from it; the extremal through the printed A takes
 10.9157 h with ``u(0) = 344.98 deg`` (see ``docs/routing.md``).
+
+Reference: Zwierzewicz (in Polish): optimal ship control in an area with a variable current -- the
+time-optimal route problem (Zermelo's navigation problem solved by Pontryagin's maximum principle).
 """
 from __future__ import annotations
 
@@ -157,7 +160,7 @@ class ZermeloResult(ResultMixin):
 
     def plot(self, ax=None, **kw):
         """Plot the route (y against x); ``kw`` go to matplotlib's ``plot``.  Returns the axes."""
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         ax = ax or plt.gca()
         ax.plot(self.xy[:, 0], self.xy[:, 1], label=kw.pop("label", f"{self.method}: {self.time:.4g}"), **kw)
@@ -166,7 +169,7 @@ class ZermeloResult(ResultMixin):
 
 
 def paper_problem(units: str = "nautical") -> ZermeloProblem:
-    """The seed-001 example: V = 0.5 kn, w = (0, k x1), k = -0.5 1/h, A = (-1.86, 3.66) nm, target (0, 0).
+    """The Zwierzewicz example: V = 0.5 kn, w = (0, k x1), k = -0.5 1/h, A = (-1.86, 3.66) nm, target (0, 0).
 
     The paper's ``x1`` points north and ``x2`` east (its heading ``u`` from
     ``x1`` towards ``x2`` is the nautical course), so in the east/north frame
@@ -250,7 +253,7 @@ def extremal(problem: ZermeloProblem, theta_f: float, duration: float, n: int = 
 def solve_pmp(problem: ZermeloProblem, *, n_scan: int = 36, t_max: float | None = None, n_steps: int = 60,
               n_candidates: int = 3, tol: float = 1e-9, rtol: float = 1e-10, max_iter: int = 30,
               n_out: int = 201) -> ZermeloResult:
-    """Time-optimal route by Pontryagin's principle and shooting on the final heading (seed 001).
+    """Time-optimal route by Pontryagin's principle and shooting on the final heading (Zwierzewicz).
 
     Parameters
     ----------

@@ -38,8 +38,12 @@ from typing import Any, Sequence
 import numpy as np
 import pandas as pd
 
+from .._io import atomic_write_text, check_memory
 from ..identify.result import as_result
+from ..manoeuvres import metrics, ship_info, turning_circle, zigzag
 from ..results import ResultMixin
+from ..simulate import replay
+from .posterior import load_samples
 
 __all__ = ["ManoeuvreSpec", "parse_manoeuvre", "parameter_draws", "predict_manoeuvres", "ManoeuvrePrediction",
            "summarise_draws", "imo_probability", "METRIC_KEYS", "replay_draws"]
@@ -106,8 +110,6 @@ MANOEUVRE_SAMPLES = 3000
 def check_draws_memory(draws: int, samples: int = MANOEUVRE_SAMPLES, states: int = 8, what: str = "draws") -> None:
     """Refuse ``draws`` whose batched simulations of ``samples`` samples need more memory than
     :func:`shipid._io.memory_limit_bytes` (one line with the estimate, the limit and the option)."""
-    from .._io import check_memory
-
     shown = f"{draws}" if draws < 10**12 else f"{draws:.3g}"
     check_memory(float(draws) * max(samples, 1) * max(states, 1) * _DRAW_BYTES_PER_SAMPLE_STATE,
                  f"{what}={shown} ({max(samples, 1)} samples each)", "use fewer draws (--draws, or 'draws' in a campaign)")
@@ -143,8 +145,6 @@ def parameter_draws(result, draws: int, *, seed=None, samples=None, inflation: f
     model = res.to_model()
     base = model.params.astype(float).copy()
     if samples is not None:
-        from .posterior import load_samples
-
         s = load_samples(samples)
         if s.model != res.model:
             raise ValueError(f"samples are for model '{s.model}', the result for '{res.model}'")
@@ -270,7 +270,7 @@ class ManoeuvrePrediction(ResultMixin):
     def plot(self, ax=None):
         """One panel per manoeuvre with every draw (turning: tracks; zigzag: heading and rudder [deg]);
         returns the axes."""
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         n = len(self.manoeuvres)
         if ax is None:
@@ -306,8 +306,6 @@ class ManoeuvrePrediction(ResultMixin):
         return out
 
     def to_json(self, path, *, force: bool = False) -> Path:
-        from .._io import atomic_write_text
-
         return atomic_write_text(path, json.dumps(self.to_dict(), indent=2, allow_nan=False) + "\n", force=force)
 
 
@@ -396,8 +394,6 @@ def predict_manoeuvres(result, manoeuvres: Sequence = ("turning:35", "zigzag:10/
     -------
     ManoeuvrePrediction
     """
-    from ..manoeuvres import turning_circle, zigzag
-
     res = as_result(result)
     if not 0 < level < 1:
         raise ValueError(f"level must be in (0, 1), got {level!r}")
@@ -420,8 +416,6 @@ def predict_manoeuvres(result, manoeuvres: Sequence = ("turning:35", "zigzag:10/
     for spec in specs:
         spd = None if speed is None else np.full(B, float(speed))
         if spd is None:
-            from ..manoeuvres import ship_info
-
             u0 = ship_info(model).get("design_speed")
             if u0 is None:
                 raise ValueError(f"model '{model.name}': approach speed unknown; pass speed= [m/s]")
@@ -478,9 +472,6 @@ def replay_draws(model, log, params: np.ndarray, *, lpp: float, kind: str, switc
     Returns ``{"<metric>_ci": [low, high], ..., "imo_probability": {...}, "draws": {...},
     "simulation": SimulationResult}``.
     """
-    from ..manoeuvres import metrics
-    from ..simulate import replay
-
     data = log.data if hasattr(log, "data") else log
     if rudder_sign == -1 and "delta" in data.columns:
         data = data.assign(delta=-data["delta"])

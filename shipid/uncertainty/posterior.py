@@ -1,3 +1,4 @@
+# Why one file: the likelihood, the sampler's moves, its convergence checks and the samples' result are one MCMC method.
 """Posterior sampling of model coefficients by MCMC over the output-error likelihood.
 
 The EKF's Gaussian (Laplace) posterior is an approximation; for non-linear,
@@ -21,7 +22,7 @@ centred on the values its first pass started from (``result.settings["prior_mean
 with its prior standard deviations (``result.settings["prior_std"]``, >= 100 % of
 each start value).  A result without a recorded prior (written before the centre
 was recorded, or an output-error refinement) is sampled under a flat prior, with a
-warning: centring the prior on the fit's own estimate, as before session 8, used the
+warning: centring the prior on the fit's own estimate would use the
 data twice (with 16 coefficients it moved posterior means by up to 0.4 sigma,
 docs/uncertainty.md sect. 2).  ``use_prior=False`` samples the likelihood alone.
 
@@ -38,7 +39,10 @@ called converged only when every check passes (:data:`CONVERGENCE`).
 from __future__ import annotations
 
 import json
+import logging
 import os
+import signal
+import threading
 import warnings
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -49,8 +53,11 @@ import pandas as pd
 from scipy.special import ndtri
 from scipy.stats import rankdata
 
+from .._io import atomic_write_text, check_memory, read_json
+from ..identify.data import noise_std_from_data, prepare_logs
 from ..identify.result import as_result
 from ..results import ResultMixin
+from ..simulate import simulate
 
 __all__ = ["sample_posterior", "PosteriorSamples", "load_samples", "split_rhat", "CONVERGENCE",
            "OutputErrorLikelihood"]
@@ -168,8 +175,6 @@ class OutputErrorLikelihood:
 
     def __init__(self, model, logs, names, *, meas_std=None, channels=None, prior_mean=None, prior_std=None,
                  substeps: int = 1, input_hold: str = "foh", x0_states=None):
-        from ..identify.data import noise_std_from_data, prepare_logs
-
         self.model = model
         self.names = list(names)
         self.idx = np.array([model.param_index(n) for n in self.names])
@@ -230,8 +235,6 @@ class OutputErrorLikelihood:
 
     def __call__(self, theta):
         """Log-posterior (up to a constant) of ``theta (B, n_names)`` -> (B,), or of one vector -> float."""
-        from ..simulate import simulate
-
         th = np.asarray(theta, dtype=float)
         single = th.ndim == 1
         th = np.atleast_2d(th)
@@ -321,7 +324,7 @@ class PosteriorSamples(ResultMixin):
 
     def plot(self, ax=None):
         """Histograms of the marginal draws of the (at most six) most correlated coefficients; returns the axes."""
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         names = self.most_correlated(6)
         if ax is None:
@@ -352,8 +355,6 @@ class PosteriorSamples(ResultMixin):
                 "message": self.message, "settings": self.settings, "created": self.created}
 
     def to_json(self, path, *, force: bool = False) -> Path:
-        from .._io import atomic_write_text
-
         return atomic_write_text(path, json.dumps(self.to_dict(), indent=1, allow_nan=True) + "\n", force=force)
 
     @classmethod
@@ -376,8 +377,6 @@ def load_samples(obj) -> PosteriorSamples:
     if isinstance(obj, dict):
         return PosteriorSamples.from_dict(obj)
     if isinstance(obj, (str, os.PathLike)):
-        from .._io import read_json
-
         p = Path(obj)
         if not p.exists():
             raise FileNotFoundError(f"{p}: no such samples file; write it with `shipid sample`")
@@ -392,9 +391,7 @@ def _tau(chain: np.ndarray) -> np.ndarray:
     """emcee's integrated autocorrelation time per parameter of ``chain (n_steps, n_walkers, n_params)``, without
     its multi-line "chain is shorter than 50 tau" log record (the length check of :func:`chain_diagnostics`
     says that in one line)."""
-    import logging
-
-    from emcee.autocorr import integrated_time
+    from emcee.autocorr import integrated_time  # optional (the mcmc extra)
 
     log = logging.getLogger("emcee.autocorr")
     level = log.level
@@ -518,9 +515,6 @@ def _run_mcmc(sampler, state, steps: int, progress):
     """``sampler.run_mcmc(state, steps)`` with Ctrl-C taken between steps: emcee prints a traceback for any
     exception raised inside the likelihood (KeyboardInterrupt included) before passing it on, so the
     interrupt is noted by a handler and raised here, outside the likelihood.  Returns the last state."""
-    import signal
-    import threading
-
     hit: list = []
     previous = None
     if threading.current_thread() is threading.main_thread() and \
@@ -540,8 +534,6 @@ def _run_mcmc(sampler, state, steps: int, progress):
 def _check_sample_size(nw: int, steps: int, burn: int, thin: int, k: int, logs, like) -> None:
     """Refuse before anything is allocated: a thinning that keeps fewer than :data:`MIN_KEPT_STEPS` steps, and
     a run whose chain and batched simulations need more memory than :func:`shipid._io.memory_limit_bytes`."""
-    from .._io import check_memory
-
     kept = -(-(steps - burn) // thin)
     if kept < MIN_KEPT_STEPS:
         raise ValueError(f"thin={thin}: keeps {kept} of the {steps - burn} steps after burn-in (steps={steps}, "
@@ -626,7 +618,7 @@ def sample_posterior(result, logs, *, walkers: int | None = None, steps: int = 2
     PosteriorSamples  (``converged`` False, with the reasons in ``message``, when any check fails)
     """
     try:
-        import emcee
+        import emcee  # optional (the mcmc extra)
     except ImportError:
         raise ValueError("MCMC sampling needs emcee: pip install 'shipid[mcmc]' (or pip install emcee)") from None
     res = as_result(result)

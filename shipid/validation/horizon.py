@@ -14,8 +14,8 @@ from the start sample (exact circular-arc kinematics).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 import warnings
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -24,6 +24,7 @@ from ..identify.data import measured_states
 from ..models.base import Model
 from ..models.kinematics import planar_rates
 from ..results import ResultMixin
+from ..simulate import simulate
 
 __all__ = ["horizon_prediction", "HorizonResult", "DeadReckoning", "dead_reckoning", "DEFAULT_HORIZONS"]
 
@@ -127,7 +128,7 @@ class HorizonResult(ResultMixin):
 
         ``log`` (TrialLog or DataFrame with ``x, y``) replaces the measured track kept in :attr:`tracks`.
         """
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # only when plotting: pyplot takes ~1 s to import
 
         if ax is None:
             _, ax = plt.subplots(figsize=(6, 6))
@@ -227,8 +228,6 @@ def horizon_prediction(model: Model, log, *, horizons=DEFAULT_HORIZONS, start_ev
     if model.nu:
         Ub = pd.DataFrame(Ub.reshape(-1, model.nu)).ffill().to_numpy().reshape(Ub.shape)
     tt = np.arange(nH_eff + 1) * dt
-    from ..simulate import simulate
-
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         sim = simulate(model, X0, tt, Ub, substeps=substeps)

@@ -35,9 +35,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..manoeuvres import metrics as manoeuvre_metrics
-from ..manoeuvres import ship_info
-from ..manoeuvres import standard_manoeuvre, steady_turn
+from ..identify.result import model_from
+from ..logs import read_log, TrialLog
+from ..manoeuvres import metrics as manoeuvre_metrics, ship_info, standard_manoeuvre, steady_turn
 from ..manoeuvres.run_metrics import reported_steady_turn
 from ..models.base import Model
 from ..results import ResultMixin
@@ -234,8 +234,6 @@ def resolve_model(result_or_model) -> tuple[Model, Any]:
     -------
     (Model, FitResult or None)
     """
-    from ..identify.result import model_from
-
     looks_like_file = isinstance(result_or_model, (str, os.PathLike)) and (
         Path(result_or_model).suffix.lower() == ".json" or os.sep in str(result_or_model))
     if looks_like_file and not Path(result_or_model).is_file():  # else a registered model name[:set]
@@ -245,8 +243,6 @@ def resolve_model(result_or_model) -> tuple[Model, Any]:
 
 def load_logs(logs, *, lpp: float | None = None) -> list:
     """TrialLogs from paths (read with :func:`shipid.logs.read_log`) or TrialLog objects."""
-    from ..logs import TrialLog, read_log
-
     if isinstance(logs, (str, os.PathLike, TrialLog)):
         logs = [logs]
     out = []

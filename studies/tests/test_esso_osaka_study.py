@@ -24,7 +24,7 @@ def test_study_fast_mode():
                             "lowspeed + wind + current fitted by type"}
     assert (h.n_starts > 0).all()
     assert all(f["success"] for fold in res.fits.values() for f in fold.values())
-    # round 7's floor diagnosis: its "fold mean" case is the study's own protocol, so it reproduces it
+    # the start-current floor diagnosis: its "fold mean" case is the study's own protocol, so it reproduces it
     from studies.esso_osaka import start_current_floor
 
     fl = start_current_floor(res).set_index(["start", "run_type", "seconds"]).position_error_median_m
@@ -55,7 +55,7 @@ def test_rudder_rate_limit():
 
 
 def test_split_position_error_attributes_each_part():
-    """The diagnosis of the zigzag error (docs/environment.md, session 7): swapping one predicted quantity
+    """The diagnosis of the zigzag error (docs/environment.md): swapping one predicted quantity
     into the measured track gives the error that quantity alone makes."""
     from studies.esso_osaka import split_position_error
 
@@ -76,7 +76,7 @@ def test_split_position_error_attributes_each_part():
 
 
 def test_residual_accelerations_recover_a_missing_side_force():
-    """The round-6 diagnosis (docs/environment.md, session 8) on a synthetic run with a known truth: the run
+    """The residual-acceleration diagnosis (docs/environment.md) on a synthetic run with a known truth: the run
     is simulated with an ahead propeller side force and yaw moment (YPf, NPf) that the "fitted" model lacks;
     the equation error regressed on the model's sensitivities recovers both, and is ~0 for the true model."""
     from types import SimpleNamespace
@@ -111,7 +111,7 @@ def test_residual_accelerations_recover_a_missing_side_force():
 
 
 def test_wind_driven_start_current():
-    """Round 7's candidate D1: the drift factor is the least-squares k of c = k w over runs, and each
+    """The wind-driven start current (scored, not kept): the drift factor is the least-squares k of c = k w over runs, and each
     start's current is k x the mean air velocity of the trailing window (causal)."""
     import pandas as pd
 
@@ -141,7 +141,7 @@ def test_wind_driven_start_current():
 
     with pytest.raises(ValueError, match="current_start"):
         run_study(current_start="measured")
-    assert "CrY" in ESTIMATE  # round 7's confirmed candidate T1 is the study default
+    assert "CrY" in ESTIMATE  # kept by the study's cross-validation: the default
 
 
 def test_current_vs_wind_projects_on_the_mean_air_velocity():
@@ -164,7 +164,7 @@ def test_current_vs_wind_projects_on_the_mean_air_velocity():
 
 
 def test_anemometer_check_recovers_a_sensor_offset_and_gain():
-    """Round 8's data check (docs/environment.md, session 9): a synthetic turning run whose apparent wind is
+    """The anemometer data check (docs/environment.md): a synthetic turning run whose apparent wind is
     measured by an anemometer turned by 20 deg with gain 0.9, the logged true wind converted from it with the
     ship's motion as the logs do; the per-run coefficient of the logged air velocity on the ship's velocity is
     1 - 0.9 e^{i 20 deg}, and 0 for a correct sensor."""
@@ -196,7 +196,7 @@ def test_anemometer_check_recovers_a_sensor_offset_and_gain():
 
 
 def test_path_relative_error_of_a_perfect_model_is_zero_and_the_path_is_measured():
-    """path_relative_error (round 8): a run simulated by the model that predicts it has no error (below 0.1 %
+    """path_relative_error: a run simulated by the model that predicts it has no error (below 0.1 %
     of the path: integration steps), and the path is the distance the logged positions cover in the horizon."""
     from types import SimpleNamespace
 
@@ -232,7 +232,7 @@ def test_path_relative_error_of_a_perfect_model_is_zero_and_the_path_is_measured
 
 
 def test_refine_on_windows_recovers_a_coefficient_with_each_runs_current():
-    """Round 9's refinement (``refine_on_windows``) on two synthetic runs of ``lowspeed`` + a constant current,
+    """The windowed refinement (``refine_on_windows``) on two synthetic runs of ``lowspeed`` + a constant current,
     each run with its own current: from Nr 30 % off it recovers Nr with the runs' own currents; with
     ``current="mean"`` every window starts with the mean current; ``balance`` weighs each run type the same."""
     from types import SimpleNamespace
@@ -263,7 +263,7 @@ def test_refine_on_windows_recovers_a_coefficient_with_each_runs_current():
     w = np.asarray(mean.log_weights)
     assert w.size == 5 + 13 and w[:5].sum() == pytest.approx(w[5:].sum()) and w.sum() == pytest.approx(w.size)
     assert own.log_weights is None
-    # round 10's options: a held coefficient keeps the start model's value while the others are refined; the
+    # the refinement's options: a held coefficient keeps the start model's value while the others are refined; the
     # position-only cost and the robust loss reach the refiner
     held = refine_on_windows(start.with_params({"Yv": 1.1 * float(truth.params_series()["Yv"])}), runs, cur,
                              estimate=("Nr", "Yv"), hold=("Yv",), channels=("x", "y"), loss="soft_l1", max_nfev=20)

@@ -1,4 +1,4 @@
-"""Hold-out validation on the measured MARIN KVLCC2 runs (issues 3 and 12).
+"""Hold-out validation on the measured MARIN KVLCC2 runs.
 
 Fit on tc+-35 and zz+-10 with ``shipid fit`` (the fit recipe, default settings), predict zz+-20 with
 ``shipid validate`` (each model's closed-loop zigzag).  Goals: first overshoot within 2 deg and second
@@ -84,8 +84,8 @@ def test_neutral_rudder_angle_of_the_straight_approaches(runs):
 
 def test_recipe_sampling_step_from_the_time_constants(runs):
     """The MARIN runs (0.135 s) at the mmg KVLCC2 model's fastest time constant (13.7 s at 8 m/s):
-    every 2nd sample (>= 50 steps per time constant for mmg, chosen by leave-one-run-out in session 6; every
-    4th at the other models' 25, the value the study had set by hand)."""
+    every 2nd sample (>= 50 steps per time constant for mmg, chosen by leave-one-run-out, ``ks.LORO_RULE``;
+    every 4th at the other models' 25)."""
     from shipid.models import get_model
 
     full, _ = runs
@@ -217,15 +217,14 @@ def _cli_fit_validate(tmp_path, model, params=None, extra=()):
 @pytest.mark.slow
 def test_cli_mmg_default_recipe_on_the_holdout(tmp_path):
     """README: ``shipid fit tc_35 tc_-35 zz_10 zz_-10 --model mmg -o r.json`` then ``shipid validate r.json
-    zz_20 zz_-20 tc_35 tc_-35``.  The recipe: every 2nd sample (tau 13.7 s, >= 50 steps per time constant:
-    chosen by leave-one-run-out in session 6), delta0 +0.90 deg from the straight approaches, EKF on eight hull
-    terms, R0, the side-dependent wake correction C2p, C2m (LORO round 9, session 9) and the rudder-hull
-    interaction aH, xH (LORO round 11, session 10: worst fold 0.767 against 0.945), metric-augmented refinement at
-    weight 0.1 (round 10 kept it), nothing held by the identifiable subset.  The hold-out was run once after round
-    11's choice was committed.  Measured (session 10, one BLAS thread, as the recipe runs): TD +0.93 % / -2.01 %;
-    held-out zz_20 +2.31 / +4.18 deg, zz_-20 +2.19 / +5.06 deg -- two of the six goals, WORSE than round 9's
-    default (+1.42 / -1.08 %, +1.62 / +2.65, +1.71 / +3.03 deg: five).  The pre-registered rule does not let the
-    hold-out feed back, so the default stays as leave-one-run-out chose it (docs/validation.md, session 10).
+    zz_20 zz_-20 tc_35 tc_-35``.  The recipe: every 2nd sample (tau 13.7 s, >= 50 steps per time constant),
+    delta0 +0.90 deg from the straight approaches, EKF on eight hull terms, R0, the side-dependent wake
+    correction C2p, C2m and the rudder-hull interaction aH, xH, metric-augmented refinement at weight 0.1,
+    nothing held by the identifiable subset -- each chosen by leave-one-run-out within the training runs
+    (``ks.LORO_RULE``; the numbers are in ``studies/kvlcc2.py``).  Measured (one BLAS thread, as the recipe
+    runs): TD +0.93 % / -2.01 %; held-out zz_20 +2.31 / +4.18 deg, zz_-20 +2.19 / +5.06 deg -- two of the six
+    goals; without aH, xH five of six (+1.42 / -1.08 %, +1.62 / +2.65, +1.71 / +3.03 deg).  The rule does not
+    let the hold-out feed back, so the default stays as leave-one-run-out chose it (docs/validation.md).
     The bands are centred on that one measurement, as a regression check."""
     errs, res = _cli_fit_validate(tmp_path, "mmg")
     steps = {s["step"]: s["value"] for s in res.settings["recipe"]}
@@ -245,11 +244,11 @@ def test_cli_mmg_default_recipe_on_the_holdout(tmp_path):
 
 @pytest.mark.slow
 def test_cli_mmg_metric_refinement_on_the_holdout(tmp_path):
-    """The same with ``--refine metrics --metric-weight 1`` (session 4's metric objective, the training metrics
-    at full weight; not the default: leave-one-run-out worst fold 1.885 against 0.945 at weight 0.1 in session
-    9's round 10, 5.34 against 1.96 in session 5).  Measured in session 10 (with C2p, C2m, aH, xH estimated, one
-    BLAS thread): TD +0.09 % / -0.17 %, zz_20 +2.13 / +2.86 deg, zz_-20 +1.66 / +3.85 deg -- three of the six
-    goals (session 9, without aH, xH: all six; a report, not a choice).  Bands centred on that one measurement."""
+    """The same with ``--refine metrics --metric-weight 1`` (the training metrics at full weight; not the
+    default: leave-one-run-out worst fold 1.885 against 0.945 at weight 0.1 with ten estimated coefficients,
+    5.34 against 1.96 with eight).  Measured (C2p, C2m, aH, xH estimated, one BLAS thread): TD +0.09 % /
+    -0.17 %, zz_20 +2.13 / +2.86 deg, zz_-20 +1.66 / +3.85 deg -- three of the six goals (without aH, xH: all
+    six; a report, not a choice).  Bands centred on that one measurement."""
     errs, res = _cli_fit_validate(tmp_path, "mmg", extra=["--refine", "metrics", "--metric-weight", "1"])
     assert res.method == "output-error" and res.success and res.settings["metric_weight"] == 1.0
     assert -0.9 < errs["tc_35"]["TD"] < 1.1                                    # goal met (+0.09 %)
@@ -264,13 +263,12 @@ def test_cli_mmg_metric_refinement_on_the_holdout(tmp_path):
 def test_cli_response_nl_default_recipe_on_the_holdout(tmp_path):
     """``shipid fit <tc+-35, zz+-10> --model response-nl -o r.json`` then ``shipid validate``: the default recipe
     (every 3rd sample, staged start from a kcs-response seed fitted up to 10 deg drift, 26 terms, metrics at
-    weight 0.1, nothing held by the identifiable subset) and, since session 8, the own-damping constraint
-    (step 6b: the unconstrained refinement had b1 +0.0177 and self-excited sway on 17 % of the logged states
-    and at rest; constrained b1 -0.00066, 0 %).  The hold-out was run once, after LORO round 8 (committed
-    before any fold ran; no selection).  Measured in session 8: TD +4.19 % / -5.19 %, zz_20 +2.09 / +0.81 deg,
-    zz_-20 +5.02 / -2.56 deg -- three of the six goals (tc_35, both second overshoots).  Session 6's
-    unconstrained fit met four (+4.19 / -5.03 %, +1.33 / +1.52, +4.18 / -1.88 deg) with its self-excited sway.
-    (A report, not a choice.)  The same answer to the bit with one and two BLAS threads (the recipe runs with
+    weight 0.1, nothing held by the identifiable subset) with the own-damping constraint (step 6b: the
+    unconstrained refinement had b1 +0.0177 and self-excited sway on 17 % of the logged states and at rest;
+    constrained b1 -0.00066, 0 %).  A physical requirement, not chosen by a score.  Measured: TD +4.19 % /
+    -5.19 %, zz_20 +2.09 / +0.81 deg, zz_-20 +5.02 / -2.56 deg -- three of the six goals (tc_35, both second
+    overshoots); the unconstrained fit met four (+4.19 / -5.03 %, +1.33 / +1.52, +4.18 / -1.88 deg) with its
+    self-excited sway.  (A report, not a choice.)  The same answer to the bit with one and two BLAS threads (the recipe runs with
     one)."""
     errs, res = _cli_fit_validate(tmp_path, "response-nl")
     steps = {s["step"]: s["value"] for s in res.settings["recipe"]}
@@ -303,7 +301,7 @@ def test_leave_one_run_out_of_refinements_scores_each_variant_on_one_ekf_stage()
 
 
 def test_leave_one_run_out_of_recipes_shares_ekf_stages_between_variants_with_the_same_fit_options():
-    """studies.kvlcc2.leave_one_run_out_recipes (session 6's round) on the bundled KCS logs, one fold:
+    """studies.kvlcc2.leave_one_run_out_recipes on the bundled KCS logs, one fold:
     variants with the same ``fit`` options share one EKF stage (with nothing held by the identifiable subset,
     switching it off changes nothing), another sampling step is another EKF stage; one row per variant."""
     from shipid.datasets import bundled_kcs_logs
@@ -319,4 +317,4 @@ def test_leave_one_run_out_of_recipes_shares_ekf_stages_between_variants_with_th
     assert list(tab["variant"]) == list(variants) and set(tab["left_out"]) == {"kcs_zz_p20_rpm"}
     assert np.all(np.isfinite(tab["error"])) and list(tab["held"]) == [[], [], []]
     assert tab["error"].iloc[1] == tab["error"].iloc[0] and tab["error"].iloc[2] != tab["error"].iloc[0]
-    assert ks.RECIPE_VARIANTS_6["default"] == {"fit": {}, "refine": {"mode": "metrics"}} and "0.01" in ks.LORO_RULE_6
+    assert ks.RECIPE_CANDIDATES["default"] == {"fit": {}, "refine": {"mode": "metrics"}} and "0.01" in ks.LORO_RULE
