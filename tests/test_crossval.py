@@ -150,18 +150,18 @@ def test_cli_crossval_and_fit_cross_validate(tmp_path, capsys):
 
 
 def test_validate_says_why_a_closed_loop_metric_is_missing():
-    """A model whose rudder barely turns it never reaches the zigzag's check angle: the closed-loop prediction runs
+    """A model whose rudder does not turn it never reaches the zigzag's check angle: the closed-loop prediction runs
     to its limit (3 times the measured run, or the simulator's own) and the entry says why."""
     from shipid.validation import DURATION_MULTIPLE, validate_one
 
     truth = shipid.get_model("kcs-response", "synthetic-truth")
     p = truth.params.copy()
-    p[truth.param_index("c3")] *= 1e-3
+    p[truth.param_index("c3")] = p[truth.param_index("b3")] = 0.0  # the rudder neither yaws nor sways the ship
     weak = truth.with_params(p)
     v = validate_one(weak, read_log(REPO / "data" / "kcs_zz_m10.csv"), lpp=4.36)
     miss = {m["metric"]: m["reason"] for m in v.standard_missing}
     assert set(miss) == {"overshoot1_deg", "overshoot2_deg"}
-    assert "check angle 10 deg" in miss["overshoot1_deg"] and "no first overshoot" in miss["overshoot1_deg"]
+    assert "never changed by half the check angle 10 deg" in miss["overshoot1_deg"]
     assert f"{DURATION_MULTIPLE:g} times the measured run's" in miss["overshoot1_deg"]
     assert v.to_dict()["standard_missing"] == v.standard_missing
     good = validate_one(truth, read_log(REPO / "data" / "kcs_zz_m10.csv"), lpp=4.36)
