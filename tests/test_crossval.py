@@ -82,16 +82,14 @@ def test_cross_validation_of_the_true_model_is_accurate(kcs_cv):
 
 
 def test_a_failed_fold_is_reported_and_the_others_complete(monkeypatch):
-    import shipid.identify as ident
-
-    real = ident.fit_logs
+    real = cvm.fit_logs
 
     def fails_without_tc(logs, *a, **k):
         if not any(lg.name == "kcs_tc_p35" for lg in logs):
             raise ValueError("this fold cannot be fitted")
         return real(logs, *a, **k)
 
-    monkeypatch.setattr(ident, "fit_logs", fails_without_tc)
+    monkeypatch.setattr(cvm, "fit_logs", fails_without_tc)
     cv = shipid.cross_validate(KCS, "kcs-response", folds=2, lpp=4.36, fit_options=CHEAP)
     assert not cv.success and len(cv.failed) == 1 and "cannot be fitted" in cv.failed[0]["error"]
     assert "kcs_tc_p35" in cv.failed[0]["left_out"]
