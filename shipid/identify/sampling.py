@@ -9,7 +9,7 @@ import warnings
 import numpy as np
 
 from ..logs import TrialLog
-from .verdict import time_constant_at
+from .plausibility import time_constant_at
 
 __all__ = ["choose_sampling", "fastest_time_constant", "common_grid", "linear_sway_yaw", "linear_window", "LINEAR_DRIFT_DEG", "SAMPLES_PER_TAU"]
 
