@@ -82,16 +82,14 @@ def test_cross_validation_of_the_true_model_is_accurate(kcs_cv):
 
 
 def test_a_failed_fold_is_reported_and_the_others_complete(monkeypatch):
-    import shipid.identify as ident
-
-    real = ident.fit_logs
+    real = cvm.fit_logs
 
     def fails_without_tc(logs, *a, **k):
         if not any(lg.name == "kcs_tc_p35" for lg in logs):
             raise ValueError("this fold cannot be fitted")
         return real(logs, *a, **k)
 
-    monkeypatch.setattr(ident, "fit_logs", fails_without_tc)
+    monkeypatch.setattr(cvm, "fit_logs", fails_without_tc)
     cv = shipid.cross_validate(KCS, "kcs-response", folds=2, lpp=4.36, fit_options=CHEAP)
     assert not cv.success and len(cv.failed) == 1 and "cannot be fitted" in cv.failed[0]["error"]
     assert "kcs_tc_p35" in cv.failed[0]["left_out"]
@@ -150,18 +148,18 @@ def test_cli_crossval_and_fit_cross_validate(tmp_path, capsys):
 
 
 def test_validate_says_why_a_closed_loop_metric_is_missing():
-    """A model whose rudder barely turns it never reaches the zigzag's check angle: the closed-loop prediction runs
+    """A model whose rudder does not turn it never reaches the zigzag's check angle: the closed-loop prediction runs
     to its limit (3 times the measured run, or the simulator's own) and the entry says why."""
     from shipid.validation import DURATION_MULTIPLE, validate_one
 
     truth = shipid.get_model("kcs-response", "synthetic-truth")
     p = truth.params.copy()
-    p[truth.param_index("c3")] *= 1e-3
+    p[truth.param_index("c3")] = p[truth.param_index("b3")] = 0.0  # the rudder neither yaws nor sways the ship
     weak = truth.with_params(p)
     v = validate_one(weak, read_log(REPO / "data" / "kcs_zz_m10.csv"), lpp=4.36)
     miss = {m["metric"]: m["reason"] for m in v.standard_missing}
     assert set(miss) == {"overshoot1_deg", "overshoot2_deg"}
-    assert "check angle 10 deg" in miss["overshoot1_deg"] and "no first overshoot" in miss["overshoot1_deg"]
+    assert "never changed by half the check angle 10 deg" in miss["overshoot1_deg"]
     assert f"{DURATION_MULTIPLE:g} times the measured run's" in miss["overshoot1_deg"]
     assert v.to_dict()["standard_missing"] == v.standard_missing
     good = validate_one(truth, read_log(REPO / "data" / "kcs_zz_m10.csv"), lpp=4.36)

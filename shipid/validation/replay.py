@@ -399,6 +399,7 @@ def _standard(model: Model, log, res: LogValidation) -> None:
                 "rudder_rate_deg_s": None if rate is None else math.degrees(rate), "lpp": res.lpp}
     if m.manoeuvre != "turning":
         settings["switch_deg"] = float(m.switch_deg)
+    t_max, duration = math.nan, math.nan
     try:
         t_max, duration = standard_time_limit(m, log, res.lpp)
         settings["t_max_s"] = t_max
@@ -408,6 +409,15 @@ def _standard(model: Model, log, res: LogValidation) -> None:
                                      t_max=t_max if math.isfinite(t_max) and t_max > 0 else None)
     except ValueError as exc:
         res.notes.append(f"closed-loop manoeuvre not available: {exc}")
+        md = m.to_dict()
+        if "never changed by" in str(exc) and math.isfinite(t_max):
+            why = (f"the model's heading never changed by half the check angle {float(m.switch_deg):g} deg within "
+                   f"{t_max:.0f} s ({DURATION_MULTIPLE:g} times the measured run's {duration:.0f} s, or the "
+                   "simulator's limit)")
+        else:
+            why = f"the closed-loop manoeuvre could not be run: {exc}"
+        res.standard_missing += [{"metric": k, "reason": why} for k in STANDARD_METRICS.get(m.manoeuvre, ())
+                                 if _num(md.get(k)) is not None]
         return
     settings["n_rps"] = float(run.settings["n"].iloc[0]) if "n" in run.settings else None
     if not run.success:
