@@ -3,8 +3,8 @@
 1. The folds x candidates of a model choice (``shipid fit --model auto``'s cross-validation,
    :func:`shipid.crossval.choose_model`) on 2 Dask worker processes against the same members serially
    (goal >= 1.7x on 2 free cores).  Cold: the Dask half includes the cluster start and each worker's first
-   calls (imports, loading the compiled kernels); the serial half runs first, in this process, after one
-   warm-up fold.  The two halves' numbers are compared to the bit.
+   calls (imports, loading the compiled kernels from numba's cache); the serial half runs first, in this
+   process, after a warm-up that runs every candidate once.  The two halves' numbers are compared to the bit.
 2. The share of each stage of a fold in the serial half (CPU seconds, this process): the EKF stage, the
    output-error refinement (its residuals and Jacobian columns: one batched simulation of the nominal and all
    perturbed parameter sets per Jacobian, the closed-loop metric residuals one batch of parameter sets per
@@ -99,9 +99,8 @@ def main(argv=None) -> int:
     logs, cands, fit_options, folds = _setup(a.data, folds)
     print(f"load before: {os.getloadavg()[0]:.2f} (1 min), {os.cpu_count()} CPUs; data {a.data}, {len(logs)} logs")
     kw = dict(folds=folds, fit_options=fit_options)
-    # warm-up: one fold of the first candidate (imports, compiled kernels), not timed
-    choose_model(logs[:2] if len(logs) > 2 else logs, [cands[0]] if cands else None, folds="loro",
-                 fit_options=fit_options)
+    # warm-up of this process: every candidate on two logs (imports, compiled kernels of each model), not timed
+    choose_model(logs[:2], cands, folds="loro", fit_options=fit_options)
     stages = _Stages()
     stages.install()
     t0, c0 = time.perf_counter(), time.process_time()

@@ -17,7 +17,7 @@ which give the same values (``tests/test_mmg.py`` compares both).
 
 Compiled code is cached on disk by numba (``__pycache__`` beside the source,
 numba's user cache directory, or ``NUMBA_CACHE_DIR``), so only the first run
-compiles (about 20-35 s for a ship model's filter, said once on stderr by
+compiles (up to about a minute for a ship model's filter, said once on stderr by
 :func:`compile_notice`; later runs load it in well under a second).  numba invalidates a cached function when *its*
 source file changes, not when a helper in another file does: the tests
 compare the compiled and pure paths, so a stale cache shows there; delete
@@ -94,9 +94,9 @@ def fallback_notice() -> None:
                          "about 3-8x slower); pip install numba to compile")
 
 
-#: Measured compile time of a ship model's filter with an empty cache (2-core machine, numba 0.68):
-#: kcs-response ~20 s, mmg ~30 s (``benchmarks/bench_fit_cold_warm.py`` prints it); the notice rounds up.
-COMPILE_SECONDS = 30
+#: Compile time of a ship model's filter with an empty cache, said by the notice: the README's KVLCC2 ``mmg`` fit
+#: took 84.5 s of CPU cold and 20.7 s warm (``benchmarks/bench_fit_cold_warm.py``, numba 0.68), so ~64 s compiling.
+COMPILE_SECONDS = 60
 
 
 def compile_notice(dispatcher, what: str, seconds: float = COMPILE_SECONDS) -> bool:

@@ -220,14 +220,15 @@ def test_force_removes_a_failed_members_old_result(tmp_path, capsys):
 
 
 def test_members_carry_the_fits_verdict(tmp_path, capsys):
-    """A fit that `shipid fit` grades a defect (exit 3: here a log whose v has the wrong sign) is flagged, not ok;
+    """A fit that `shipid fit` grades a defect (exit 3: here a log whose rudder is in rad/57.3, which the reader
+    cannot see and the rudder's yaw coefficient shows) is flagged, not ok;
     the summary counts ok / flagged / failed and the exit status is 3."""
     import pandas as pd
 
     lines = (DATA / "kcs_zz_m10.csv").read_text().splitlines()
     head = [ln for ln in lines if ln.startswith("#")]
     df = pd.read_csv(DATA / "kcs_zz_m10.csv", comment="#")
-    df["v [m/s]"] = -df["v [m/s]"]
+    df["delta [rad]"] = df["delta [rad]"] / 57.3
     flip = tmp_path / "vflip.csv"
     flip.write_text("\n".join(head) + "\n" + df.to_csv(index=False))
     p = _campaign(tmp_path, [{"name": "good", "logs": [str(DATA / "kcs_zz_m10.csv")], "passes": 1},
@@ -235,7 +236,7 @@ def test_members_carry_the_fits_verdict(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["campaign", str(p), "-o", str(out), "--workers", "1"]) == 3
     text = capsys.readouterr().out
-    assert "good: ok" in text and "vflip: flagged: " in text and "--sign v=-1" in text
+    assert "good: ok" in text and "vflip: flagged: " in text and "--units delta=deg" in text
     assert "2 members: 1 ok, 1 flagged, 0 failed" in text
     s = json.loads((out / "campaign.json").read_text())
     st = {m["name"]: m for m in s["members"]}

@@ -291,7 +291,7 @@ def test_models_kcs_equation_text_matches_the_model():
     x = rng.normal(size=6)
     u = rng.normal(size=2)
     env = {**dict(zip(m.param_names, m.params)), **dict(zip(m.state_names, x)), **dict(zip(m.input_names, u))}
-    text = PARAMETER_NOTES["kcs-response"].split(" (the KCS")[0]
+    text = PARAMETER_NOTES["kcs-response"].rsplit(" (", 1)[0]
     got = {}
     for eq in text.split(";"):
         lhs, rhs = eq.split("=")

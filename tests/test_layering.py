@@ -25,7 +25,7 @@ FLOORS = [
     ("environment", ("environment",)),
     ("manoeuvres", ("manoeuvres",)),
     ("synthetic logs", ("synthetic",)),
-    ("results", ("identify.result", "identify.verdict")),
+    ("results", ("identify.result", "identify.verdict", "identify.plausibility")),
     ("identification", ("identify",)),
     ("validation", ("validation",)),
     ("uncertainty", ("uncertainty",)),

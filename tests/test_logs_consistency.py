@@ -250,3 +250,18 @@ def test_earth_fixed_velocities_are_named_even_when_body_axes_fit_loosely(name):
     assert f[0].values["error_earth"] < 0.5 * f[0].values["error_body"]
     ok = [x for x in check_consistency(_log_of(frame)).findings if x.check == "velocity_frame"]
     assert [x.level for x in ok] == ["info"]
+
+
+@pytest.mark.parametrize("name", ["kcs_zz_m10.csv", "kcs_tc_p35.csv", "mmg_kcs_tc_m25_rpm.csv"])
+def test_sway_velocity_logged_port_positive_is_named(name):
+    """v negated: the body-axis track integrates with -v to half the error or better: an error naming --sign v=-1
+    (a model fit cannot tell it from model-form error: a response model fitted to another model's logs also gets
+    the rudder's sway term b3 with the other sign); as logged: no such finding."""
+    from shipid.logs import check_consistency
+
+    frame = _frame(name)
+    res = check_consistency(_log_of(frame.assign(v=-frame["v"])))
+    f = [x for x in res.findings if x.check == "velocity_frame"]
+    assert len(f) == 1 and f[0].level == "error" and f[0].message.endswith("(CLI: --sign v=-1)"), res
+    ok = check_consistency(_log_of(frame))
+    assert not [x for x in ok.findings if "other sign" in x.message]

@@ -243,3 +243,18 @@ def test_simulate_is_the_module_and_callable():
     a = shipid.simulate(m, np.array([0, 0, 0, 1.0, 0, 0]), t, np.tile([0.1, 10.0], (5, 1)))
     b = shipid.simulate.simulate(m, np.array([0, 0, 0, 1.0, 0, 0]), t, np.tile([0.1, 10.0], (5, 1)))
     np.testing.assert_array_equal(a.x, b.x)
+
+
+def test_fit_cards_carry_the_grade_and_an_unfitted_identifier_says_so(ekf):
+    from shipid.identify import EKFIdentifier
+    from shipid.identify.recipe import RecipeFit
+
+    from shipid.results import verdict_grade
+
+    for r in (ekf, ekf.result(), RecipeFit(ekf=ekf)):  # each its own grade (a recipe judges its logs too)
+        grade = verdict_grade(r)
+        assert grade in ("consistent", "model_error", "defect", "diverged")
+        assert f"verdict <b>{grade}</b>" in r._repr_html_() and r.summary().attrs["verdict"] == grade
+    bare = EKFIdentifier(get_model("kcs-response"))
+    h = bare._repr_html_()
+    assert bare.success is False and "not fitted" in h and len(h) < HTML_LIMIT

@@ -157,8 +157,13 @@ def test_physics_findings_name_the_channel_and_the_option_and_hold_at_any_scale(
                                "to starboard: rudder logged positive to port? pass --rudder-sign -1")
     vflip = dict(coef, b3=-coef["b3"])   # the sway term alone: v's sign, not the rudder's
     f = physics_findings(m, vflip, std, prior, speed=1.5)
-    assert [x["coefficient"] for x in f] == ["b3"] and f[0]["channels"] == ["v"]
-    assert f[0]["message"].endswith("while c3 has the rudder's sign: v logged positive to port? pass --sign v=-1")
+    assert [x["coefficient"] for x in f] == ["b3"] and f[0]["channels"] == ["v"] and f[0]["grade"] == "model_error"
+    assert f[0]["message"].endswith("while c3 has the rudder's sign: the sway equation misses the logs, or v is "
+                                    "logged positive to port (--sign v=-1)")
+    assert assess(consistency={}, physics=f).grade == "model_error"
+    doubt = [{"kind": "log_velocity_frame_doubt", "grade": "note", "channels": ["u", "v"], "option": "",
+              "message": "u, v agree with neither the body-axis nor the earth-fixed reading of the track"}]
+    assert assess(consistency={}, physics=f, logs_found=doubt).grade == "defect"
     scaled = dict(coef, c3=57.3 * coef["c3"])
     f = physics_findings(m, scaled, std, prior, speed=1.5)
     assert [x["kind"] for x in f] == ["physics_range"] and "--units delta=deg" in f[0]["message"]

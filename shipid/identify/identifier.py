@@ -18,6 +18,7 @@ from ..simulate import simulate
 from .data import LogArrays, frozen_mask, noise_std_from_data, prepare_logs, resolution_std
 from .diagnostics import consistency, identifiability
 from .ekf import INPUT_HOLDS, EKFOutput, EKFProblem, bf_smooth, gain_covariance, rts_smooth, run_ekf
+from .verdict import verdict_from_identifier
 from .initial import equation_error_fit
 from .result import FitResult
 
@@ -781,8 +782,6 @@ class EKFIdentifier(ResultMixin):
         self._check_fitted()
         v = self.__dict__.get("_verdict_cache")
         if v is None:
-            from .verdict import verdict_from_identifier
-
             v = self._verdict_cache = verdict_from_identifier(self)
         return v
 

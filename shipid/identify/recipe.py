@@ -76,7 +76,9 @@ from .diagnostics import damping_check
 from .identifier import EKFIdentifier
 from .refine import AUTO_REFINE, METRIC_TOL, METRIC_WEIGHT, REFINE_MODES, _kinds, metric_residuals, refine_fit
 from .sampling import (LINEAR_DRIFT_DEG, MIN_WINDOW_SAMPLES, SAMPLES_PER_TAU, _every, _log_step, every_kth,
+                       fastest_time_constant,
                        _lpp_of, choose_sampling, common_grid, linear_sway_yaw, linear_window)
+from .verdict import verdict_from_recipe
 
 __all__ = ["fit_logs", "RecipeFit", "neutral_rudder_angle", "approach_segment", "choose_sampling", "common_grid",
            "linear_sway_yaw", "linear_window", "LINEAR_DRIFT_DEG",
@@ -207,8 +209,6 @@ class RecipeFit(ResultMixin):
                 res.message = f"EKF stage failed ({self.ekf.message_}); refinement: {res.message}"
         if self.logs:
             res.diagnostics["damping"] = damping_check(self.final.to_model(), self.logs)
-        from .verdict import verdict_from_recipe
-
         res.verdict = self.__dict__["_verdict"] = verdict_from_recipe(self, res)
         return res
 
@@ -220,8 +220,6 @@ class RecipeFit(ResultMixin):
 def _sampling_check(model, logs) -> dict:
     """The logs' sample interval and the start model's fastest time constant at their speed (empty when
     unknown): the verdict calls a log that samples the ship's fastest motion fewer than twice decimated."""
-    from .sampling import fastest_time_constant
-
     try:
         tau = fastest_time_constant(model, logs)[0]
         return {"log_step": float(_log_step(logs)), "time_constant": float(tau)}

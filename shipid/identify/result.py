@@ -16,6 +16,7 @@ from .._io import (as_bool, as_mapping, as_number, as_string, atomic_write_text,
 from .._version import __version__
 from ..models import available_models, get_model, Model
 from ..results import ResultMixin, coefficient_table, plot_coefficients, verdict_grade
+from .verdict import Verdict
 
 __all__ = ["FitResult", "load_result", "as_result", "model_from", "software_versions", "diagnostics_to_json", "fitted_ship"]
 
@@ -227,8 +228,6 @@ class FitResult(ResultMixin):
 
 def _verdict(doc: dict, source: str):
     """The result document's verdict (None when it has none: written before verdicts existed)."""
-    from .verdict import Verdict
-
     v = doc.get("verdict")
     if v is None:
         return None

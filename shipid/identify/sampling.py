@@ -9,7 +9,7 @@ import warnings
 import numpy as np
 
 from ..logs import TrialLog
-from ..manoeuvres import steady_rps
+from .plausibility import time_constant_at
 
 __all__ = ["choose_sampling", "fastest_time_constant", "common_grid", "linear_sway_yaw", "linear_window", "LINEAR_DRIFT_DEG", "SAMPLES_PER_TAU"]
 
@@ -81,8 +81,6 @@ def fastest_time_constant(model, logs) -> tuple[float, float, str]:
     """``(tau [s], U [m/s], where U comes from)``: the fastest time constant of ``model``'s surge, sway and yaw
     (its Jacobian's largest decay rate) in straight running at the logs' approach speed U (or the median speed
     of logs that start from rest), with the propeller rate that holds that speed.  ValueError when unknown."""
-    from .verdict import time_constant_at
-
     U, speed_why = _speed_scale(logs)  # the approach speed, or the median speed of logs that start from rest
     if not U > 0:
         raise ValueError(speed_why)

@@ -1,3 +1,4 @@
+# Why one file: the graded verdict, the checks behind each grade and the exit status derived from it share one set of thresholds and reasons.
 """The graded verdict of a fit: is the data sound, and how wrong is the model on these runs?
 
 Every fit result carries a :class:`Verdict` with one of four grades:
@@ -27,7 +28,9 @@ Every fit result carries a :class:`Verdict` with one of four grades:
       rudder, rudder lift and thrust positive), or whose non-dimensional value lies outside
       ``Model.physics_ranges`` (the span of the published ship sets widened by :data:`RANGE_FACTOR`, chosen so
       that a degree/radian confusion, a factor 57.3, always leaves it): a linear-in-the-input term absorbs a
-      sign or scale error of its input exactly, with white innovations, so only physics can see it;
+      sign or scale error of its input exactly, with white innovations, so only physics can see it.  (The
+      rudder's sway term alone with the other sign, its yaw term right, is model error: a response model
+      fitted to logs of the MMG model gets it; a defect only when the channel checks doubt u, v);
     * a log step longer than half the start model's fastest time constant at the logs' speed (fewer than two
       samples per time constant: the sampling theorem's limit for the fastest motion the model has; a log
       decimated or time in the wrong unit);
@@ -54,9 +57,14 @@ commands (campaigns, cross-validation folds) import it so that every command gra
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from ..logs.consistency import check_consistency
+from ..simulate import replay
+from .plausibility import RANGE_FACTOR, logs_speed, physics_findings, prime_value, time_constant_at
 
 __all__ = ["CONSISTENCY_RULES", "Verdict", "GRADES", "EXIT_STATUS", "exit_status", "verdict_of", "assess", "physics_findings",
            "RANGE_FACTOR", "warning_line", "clip", "time_constant_at", "verdict_from_identifier", "verdict_from_recipe", "plain_message"]
@@ -89,11 +97,6 @@ ADVICE = {
                 "values, then fit again.",
 }
 
-#: Factor by which a declared non-dimensional range (the span of the published sets) is widened on both
-#: sides.  With the widest declared span (max/min 2.14, the rudder's yaw term across the four published
-#: response-model images), a window of span 2.14 * 5**2 = 53.5 < 57.3: a value inside it multiplied or
-#: divided by 57.3 (degrees taken as radians or back) always falls outside.
-RANGE_FACTOR = 5.0
 
 #: Unit in which each channel's replay error is shown, with its factor from SI.
 _USER_UNITS = {"x": ("m", 1.0), "y": ("m", 1.0), "psi": ("deg", 180.0 / math.pi), "u": ("m/s", 1.0),
@@ -252,118 +255,6 @@ def _numbers_line(v: Verdict) -> str:
     return out
 
 
-# --------------------------------------------------------------------------- physics plausibility
-def time_constant_at(model, speed: float) -> float:
-    """The fastest time constant [s] of ``model``'s surge, sway and yaw (its Jacobian's largest decay rate) in
-    straight running at ``speed`` [m/s], with the propeller rate that holds that speed.  ValueError when it has
-    no decaying mode."""
-    from ..manoeuvres import steady_rps
-
-    n = float(steady_rps(model, speed)[0]) if "n" in model.input_names else 0.0
-    x = np.zeros(model.nx)
-    x[model.state_index("u")] = speed
-    u = np.zeros(model.nu)
-    if "n" in model.input_names:
-        u[model.input_index("n")] = n
-    J = np.asarray(model.jac_x(0.0, x, u), dtype=float)
-    dyn = [model.state_index(s) for s in ("u", "v", "r") if s in model.state_names]
-    rates = np.abs(np.linalg.eigvals(J[np.ix_(dyn, dyn)]).real)
-    rates = rates[rates > 0]
-    if not rates.size:
-        raise ValueError("no decaying mode")
-    return 1.0 / float(rates.max())
-
-
-
-def logs_speed(arrays_or_logs) -> float:
-    """Median speed through the water [m/s] of the logged samples moving ahead (``hypot(u, v)``), from
-    TrialLogs or the identifier's arrays (``.Y`` with channel names ``.meas``); NaN when unknown."""
-    speeds = []
-    for a in arrays_or_logs:
-        try:
-            u = np.asarray(a["u"], dtype=float)
-            v = np.asarray(a["v"], dtype=float) if "v" in getattr(a, "channels", ()) else np.zeros_like(u)
-        except (KeyError, TypeError, ValueError):
-            continue
-        s = np.hypot(u, np.where(np.isfinite(v), v, 0.0))
-        speeds.append(s[np.isfinite(s) & (u > 0)])
-    s = np.concatenate(speeds) if speeds else np.zeros(0)
-    return float(np.median(s)) if s.size else float("nan")
-
-
-def prime_value(model, name: str, value: float, speed: float) -> float:
-    """``value`` of coefficient ``name`` in the ITTC prime system (lengths by L, times by L/U).
-
-    A model with dimensional coefficients (``prime_exponents``: SI dimension m^a s^b) divides by
-    ``L^a (L/U)^b`` with ``L`` its length and ``U`` = ``speed`` (the logs' median speed); the speed, not
-    the Froude prime's ``sqrt(L/g)``, because a force proportional to the speed squared then has one
-    value at every speed.  A model whose coefficients are already non-dimensional returns ``value``."""
-    exps = getattr(model, "prime_exponents", None) or {}
-    if name not in exps:
-        return float(value)
-    L = getattr(model, "lpp", None)
-    if not (L and np.isfinite(speed) and speed > 0):
-        return float("nan")
-    a, b = exps[name]
-    return float(value) / (L ** a * (L / speed) ** b)
-
-
-def physics_findings(model, coef: dict, coef_std: dict, prior_std: dict, speed: float) -> list[dict]:
-    """Coefficients the data determine that contradict physics: the sign in ``model.physics_signs`` or the
-    non-dimensional range in ``model.physics_ranges`` (widened by :data:`RANGE_FACTOR`).
-
-    A coefficient counts when its posterior standard deviation is below half its prior standard deviation
-    and it is more than 3 of them from zero.  Returns findings (dicts with ``kind``, ``channels``,
-    ``option``, ``message``, ``coefficient``).
-    """
-    signs = getattr(model, "physics_signs", None) or {}
-    ranges = getattr(model, "physics_ranges", None) or {}
-    out = []
-    for name in set(signs) | set(ranges):
-        th, sd, ps = coef.get(name), coef_std.get(name), prior_std.get(name)
-        if th is None or sd is None or not (np.isfinite(th) and np.isfinite(sd) and sd > 0):
-            continue
-        if ps is not None and np.isfinite(ps) and not sd < 0.5 * ps:
-            continue
-        if not abs(th) > 3 * sd:
-            continue
-        sign, why, chans, option = signs.get(name, (0, "", (), ""))
-        if sign and th * sign < 0:
-            own = not set(chans) & {"delta", "n"}   # a state's own damping or resistance: model-form error can do it
-            out.append({"kind": "unphysical" if own else "physics_sign", "grade": "model_error" if own else "defect",
-                        "coefficient": name, "channels": list(chans), "option": option,
-                        "message": f"{name} = {th:.3g} +- {sd:.2g} is {'negative' if th < 0 else 'positive'} but "
-                                   f"{why}{(': ' + option) if option else ''}"})
-            continue
-        if name in ranges:
-            lo, hi, chans_r, option_r = ranges[name]
-            pv = prime_value(model, name, th, speed)
-            if not np.isfinite(pv) or pv == 0:
-                continue
-            a_lo, a_hi = sorted((abs(lo), abs(hi)))
-            if abs(pv) > a_hi * RANGE_FACTOR or abs(pv) < a_lo / RANGE_FACTOR:
-                out.append({"kind": "physics_range", "grade": "defect", "coefficient": name, "channels": list(chans_r),
-                            "option": option_r,
-                            "message": f"{name} = {th:.3g} ({name}' = {pv:.3g} non-dimensional) is "
-                                       f"{'above' if abs(pv) > a_hi * RANGE_FACTOR else 'below'} the published "
-                                       f"ships' {a_lo:.2g}-{a_hi:.2g} by more than {RANGE_FACTOR:g}x: "
-                                       f"{option_r}"})
-    # a stern rudder's sway term with the wrong sign while its yaw term has the right one: the rudder's sign is
-    # fine (it would flip both), the sway velocity's is not
-    from ..models.base import STERN_RUDDER_SIGNS
-
-    sway = [n for n in signs if signs[n] is STERN_RUDDER_SIGNS["sway"]]
-    yaw = [n for n in signs if signs[n] is STERN_RUDDER_SIGNS["yaw"]]
-    wrong = {f["coefficient"] for f in out if f["kind"] == "physics_sign"}
-    if yaw and not wrong & set(yaw) and yaw[0] in coef:
-        for f in out:
-            if f["coefficient"] in sway and f["kind"] == "physics_sign":
-                f.update(channels=["v"], option="--sign v=-1",
-                         message=f["message"].split(": ")[0] + f" while {yaw[0]} has the rudder's sign: v logged "
-                                 "positive to port? pass --sign v=-1")
-    return sorted(out, key=lambda f: f["coefficient"])
-
-
 # --------------------------------------------------------------------------- the verdict
 def _group(findings: list[dict]) -> list[str]:
     """One reason per kind of finding: the first finding's message, the channels of all."""
@@ -435,8 +326,6 @@ def _consistency_findings(cons: dict, rules: dict) -> list[dict]:
 def log_findings(logs) -> list[dict]:
     """Channel-consistency errors of the logs (:func:`shipid.logs.check_consistency`, the result the reader
     kept, else run here) as verdict findings, one per check kind."""
-    from ..logs.consistency import check_consistency
-
     out = []
     for lg in logs or []:
         res = getattr(lg, "consistency", None)
@@ -446,6 +335,9 @@ def log_findings(logs) -> list[dict]:
             except Exception:  # noqa: BLE001 -- a check that cannot run on this log has no finding
                 continue
         for f in res.findings:
+            if f.level == "warning" and f.check == "velocity_frame":   # supporting evidence only (a note)
+                out.append({"kind": "log_velocity_frame_doubt", "grade": "note", "channels": list(f.channels),
+                            "option": "", "message": f.message})
             if f.level != "error":
                 continue
             out.append({"kind": f"log_{f.check}", "grade": "defect", "channels": list(f.channels),
@@ -464,10 +356,6 @@ def replay_numbers(model, logs, lpp=None, meas_std=None) -> tuple[dict, dict, li
     """Replay ``model`` on every log (its recorded inputs, from its first samples) and return
     ``(channels, track, runs)`` of :class:`Verdict`: RMSE per channel in user units, the fraction of the
     logged variance left unexplained, the track RMSE in m and ship lengths, the runs worst first."""
-    import warnings
-
-    from ..simulate import replay
-
     sq: dict = {}
     var: dict = {}
     cnt: dict = {}
@@ -557,7 +445,7 @@ def assess(*, consistency: dict | None, diverged: bool = False, message: str = "
     r = dict(CONSISTENCY_RULES)
     r.update(rules or {})
     channels, track, runs = dict(channels or {}), dict(track or {}), list(runs or [])
-    findings = [dict(f, grade="defect") for f in (logs_found or [])]
+    findings = [dict(f, grade=f.get("grade", "defect")) for f in (logs_found or [])]
     step, tau = (sampling or {}).get("log_step"), (sampling or {}).get("time_constant")
     if step and tau and step > 0.5 * tau:
         findings.append({"kind": "sampling", "grade": "defect", "channels": [], "option": "",
@@ -571,6 +459,10 @@ def assess(*, consistency: dict | None, diverged: bool = False, message: str = "
             return Verdict("defect", _group(findings) + [text], findings + [div], channels, track, runs)
         return Verdict("diverged", [text], [div], channels, track, runs)
     findings += [dict(f, grade=f.get("grade", "defect")) for f in (physics or [])]
+    if any(f["kind"] == "log_velocity_frame_doubt" for f in findings):
+        for f in findings:   # the sway term's sign and a doubt about u, v from the channels: v's sign
+            if f["kind"] == "sway_sign":
+                f["grade"] = "defect"
     if damping and damping.get("physical") is False:
         what = [s for s in ("v", "r") if (damping.get(s) or {}).get("fraction_positive") not in (None, 0.0)
                 and damping[s]["fraction_positive"] > 0.01]

@@ -476,7 +476,15 @@ def _check_velocity_frame(c: _Ctx) -> None:
     lag = min(body, key=body.get)
     uv = f"{c.col('u')}, {c.col('v')}"
     uf, vf = (a[ok] for a in (c.get("u"), c.get("v")))
-    integrate(u=uf, v=vf, ubs=vf * cs - uf * sn, vbs=vf * sn + uf * cs)
+    integrate(u=uf, v=vf, ubs=vf * cs - uf * sn, vbs=vf * sn + uf * cs, unx=u * cs + v * sn, uny=u * sn - v * cs)
+    # v with the other sign (positive to port): the body-axis track with -v, against the one with v
+    e_vneg = min(err("unx", "uny", g) for g in lags)
+    if e_vneg <= _FRAME_GOOD and e_vneg < 0.5 * body[lag]:
+        c.add("error", "velocity_frame", ("v",),
+              f"{c.col('v')} has the other sign: with -v the body-axis velocities integrate to the track of x, y "
+              f"(median error {100 * e_vneg:.0f} %), with v as logged worse ({100 * body[lag]:.0f} %): pass signs "
+              "{'v': -1} (CLI: --sign v=-1)", error_body=body[lag], error_v_negated=e_vneg, lag_samples=lag)
+        return
     if body[lag] <= _FRAME_GOOD:
         # both hypotheses: earth-fixed u, v that integrate to the track clearly better (half the error) are
         # earth-fixed, however small the body-axis error (on a course that turns little the two readings differ

@@ -161,12 +161,12 @@ class Model:
     #: Signs that physics fixes under shipid's conventions (x ahead, y to starboard, positive rudder and yaw
     #: rate to starboard, n > 0 ahead): name -> ``(sign, why, channels, what to do)``.  A fit whose
     #: well-determined coefficient has the other sign has a data or set-up defect
-    #: (:func:`shipid.identify.verdict.physics_findings`).  Never a comparison with another ship's values.
+    #: (:func:`shipid.identify.plausibility.physics_findings`).  Never a comparison with another ship's values.
     physics_signs: ClassVar[dict[str, tuple]] = {}
     #: Non-dimensional ranges (ITTC prime: lengths by L, times by L/U; models with non-dimensional
     #: coefficients as they are) spanned by the published ship sets the project holds: name ->
     #: ``(low, high, channels, what to do)``; the verdict widens them by
-    #: :data:`shipid.identify.verdict.RANGE_FACTOR`, so they hold at any scale and catch a unit confusion.
+    #: :data:`shipid.identify.plausibility.RANGE_FACTOR`, so they hold at any scale and catch a unit confusion.
     physics_ranges: ClassVar[dict[str, tuple]] = {}
     #: The fit recipe's defaults for this model (:class:`RecipeDefaults`; the generic rules by default).
     recipe_defaults: ClassVar[RecipeDefaults] = RecipeDefaults()

@@ -503,10 +503,13 @@ def plain_summary(result, model, validations, horizons=None) -> str:
     label = model_label(result, model)
     article = "an" if label[:1].lower() in "aeiou" or label.lower().startswith("mmg") else "a"
     out = [f"This report checks {article} {label} model {fitted}, estimating {k} of its {n_par} coefficients."]
-    verdict = getattr(result, "verdict", None)
+    try:
+        grade = verdict_of(result).grade
+    except (AttributeError, KeyError, TypeError, ValueError):  # a result the verdict cannot read: consistency only
+        grade = None
     cons = (result.diagnostics or {}).get("consistency") or {}
-    if verdict is not None and getattr(verdict, "grade", None):
-        out.append(f"Its verdict is {verdict.grade.replace('_', ' ')} (box above).")
+    if grade:
+        out.append(f"Its verdict is {grade.replace('_', ' ')} (box above).")
     elif cons:
         out.append("The filter's innovations are consistent with its noise model." if cons.get("consistent", True)
                    else "The filter's innovations are not consistent with its noise model, so the stated "
