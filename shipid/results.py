@@ -75,7 +75,7 @@ def plot_series(axs, t, frame: pd.DataFrame, names, units: dict, **kw) -> None:
 
 
 def coefficient_table(value: pd.Series, std: pd.Series) -> pd.DataFrame:
-    """The coefficient table of a fit: ``value``, ``std``, ``rel_std_%`` (of |value|), and the 95 % interval
+    """The coefficient table of a fit: ``value``, ``std``, ``rel_std_%`` (of the absolute value), and the 95 % interval
     ``ci95_low``/``ci95_high`` (value -/+ 1.96 std), one row per estimated coefficient."""
     v, sd = value.astype(float), std.astype(float)
     return pd.DataFrame({"value": v, "std": sd, "rel_std_%": 100 * sd / v.abs().where(v.abs() > 0),
