@@ -27,8 +27,11 @@ def _trimmed(log, start, stop, name):
 
 @pytest.fixture(scope="module")
 def kcs_cv():
-    """kcs-response (which made the bundled logs) cross-validated on them, 2 folds, EKF stage only."""
-    return shipid.cross_validate(KCS, "kcs-response", folds=2, lpp=4.36, fit_options=CHEAP)
+    """kcs-response (which made the bundled logs) cross-validated on them, 2 folds, EKF stage only.  The logs
+    were made by this model, so it holds beyond the small-drift range the recipe keeps for measured runs
+    (``max_drift_deg=None``: the turning logs are used whole)."""
+    return shipid.cross_validate(KCS, "kcs-response", folds=2, lpp=4.36,
+                                 fit_options={**CHEAP, "max_drift_deg": None})
 
 
 def test_copies_are_left_out_and_overlapping_runs_share_a_fold():
