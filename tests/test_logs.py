@@ -487,7 +487,7 @@ def test_from_arrays_runs_the_same_validation():
 def test_to_csv_round_trip(tmp_path):
     df = frame(n=80, dt=0.1)
     ship = ShipParticulars(lpp=4.36, beam=0.61, name="KCS model", scale=52.67, extra={"source": "SPEC"})
-    psi_wrapped = np.mod(df.psi + 3.1, 2 * np.pi) - np.pi
+    psi_wrapped = np.mod(df.psi + np.pi, 2 * np.pi) - np.pi
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         log = TrialLog.from_arrays(df.time, name="tc35 run 2", ship=ship, x=df.x, y=df.y, psi=psi_wrapped,
