@@ -195,7 +195,7 @@ def _units_row_conflict(d):
 # name -> (file text, message expected on stderr[, CLI options])
 REFUSED = {
     "speeds in knots, undeclared": (lambda d: _speeds(d, 1 / KN),
-                                    r"are 1\.944 x the speed along the track of x, y: u, v look like knots: "
+                                    r"are 1\.94\d x the speed along the track of x, y: u, v look like knots: "
                                     r"declare .* \(CLI: --units u=kn,v=kn\)"),
     "speeds in km/h, undeclared": (lambda d: _speeds(d, 3.6), r"u, v look like km/h: .*--units u=km/h,v=km/h"),
     "time in ms, undeclared": (_ms, r"time looks like milliseconds: .*--units time=ms"),

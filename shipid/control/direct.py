@@ -36,7 +36,7 @@ from .shooting import _MS
 __all__ = ["solve_direct"]
 
 
-def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int | None = None, max_iter: int = 500,
+def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int | None = None, max_iter: int | None = None,
                  ftol: float = 1e-9, tol: float = 1e-2, U0: np.ndarray | None = None,
                  tf0: float | None = None, progress: bool = False) -> ControlResult:
     """Solve ``problem`` by multiple shooting.
@@ -52,10 +52,11 @@ def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int | N
         Shooting segments (default ``problem.shooting_segments``) (reduced to a divisor of ``n_intervals``); each holds
         ``n_intervals / n_segments`` control intervals.  Path bounds are imposed
         at every RK4 node.
-    max_iter : int
-        Iteration limit (SLSQP, IPOPT; trust-constr gets ten times as many).  Default 500: paper
-        scenario 3 needs 339 SLSQP iterations on an AMD EPYC (300, the default before, stopped it at a
-        scaled violation of 0.0148).
+    max_iter : int, optional
+        Iteration limit (trust-constr gets ten times as many).  Default 500 for SLSQP and trust-constr
+        (paper scenario 3 needs 339 SLSQP iterations; 300 stopped it at a scaled violation of 0.0148), and
+        :func:`~shipid.control.ipopt.solve_ipopt`'s own default for IPOPT, whose interior-point iterations
+        are cheaper and more numerous.
     ftol : float
         SLSQP's objective tolerance (trust-constr: ``gtol``/``xtol``).
     tol : float
@@ -68,7 +69,9 @@ def solve_direct(problem: Problem, *, method: str = "slsqp", n_segments: int | N
     if method not in ("slsqp", "trust-constr", "ipopt"):
         raise ValueError(f"solve_direct: method must be 'slsqp', 'trust-constr' or 'ipopt', got {method!r}")
     if method == "ipopt":
-        return solve_ipopt(problem, n_segments=n_segments, max_iter=max_iter, tol=tol, U0=U0, tf0=tf0)
+        return solve_ipopt(problem, n_segments=n_segments, tol=tol, U0=U0, tf0=tf0,
+                           **({} if max_iter is None else {"max_iter": max_iter}))
+    max_iter = 500 if max_iter is None else int(max_iter)
     nseg = problem.shooting_segments if n_segments is None else n_segments
     check_problem_size(problem.model, problem.n_intervals, problem.substeps, problem.name, n_segments=nseg)
     t0 = time.perf_counter()
