@@ -158,8 +158,9 @@ def test_cli_fit_carries_the_logs_particulars_through_refinement(tmp_path, capsy
     # sway/yaw re-identified, surge kept from the (scaled) start: a 260 s zigzag does not determine the surge terms
     code = main(["fit", str(short), "--model", "kcs-response", "--estimate", "b1,b2,b3,b4,c1,c2,c3", "--passes", "1",
                  "--refine", "--every", "1", "--no-progress", "-o", str(out)])
-    assert code in (0, 1)  # 1: the refinement hit its iteration limit (said so); the result is written either way
     res = load_result(out)
+    # 3: the refinement hit its evaluation limit, which the verdict names; the result is written either way
+    assert code == 0 or (code == 3 and any("did not converge" in r for r in res.verdict.reasons))
     assert res.method == "output-error"
     assert res.model_options["lpp"] == 320.0 and res.ship["lpp"] == 320.0 and res.ship["name"] == "KVLCC2"
     assert res.model_options["design_speed"] == pytest.approx(7.974)  # the logs' particulars
