@@ -449,7 +449,8 @@ def _fit_logs(logs, model, params, *, lpp, estimate, fixed, start, neutral, free
     def step(name, value, reason):
         steps.append({"step": name, "value": value, "reason": reason})
         if log is not None:
-            log(f"recipe: {name}: {value} -- {reason}")
+            shown = f"{value:.4g}" if isinstance(value, float) else value  # a line for people: 4 digits
+            log(f"recipe: {name}: {shown} -- {reason}")
 
     logs = _repeated_runs(logs, drop_repeated, step)
     L = _lpp_of(logs, lpp)

@@ -212,7 +212,7 @@ def test_mcmc_column_16_coefficients():
     from pathlib import Path
 
     spec = importlib.util.spec_from_file_location(
-        "run_mcmc16", Path(__file__).resolve().parents[1] / "benchmarks" / "run_mcmc16_coverage.py")
+        "run_mcmc16", Path(__file__).resolve().parents[1] / "run_mcmc16_coverage.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     r = coverage_study(n_replicates=8, draws=100, seed=2026, refine="output-error", mcmc_replicates=8,

@@ -59,11 +59,15 @@ def test_sensor_noise_column_machinery():
 @pytest.mark.slow
 def test_sensor_noise_covariance_is_calibrated_on_100_replicates():
     """100 replicates (seed 2026, all 16 coefficients, about 3 CPU-minutes): the EKF posterior as reported covers
-    0.98-1.00 (12 of 16 at 1.00); its covariance re-evaluated under sensor noise only covers 0.90-0.99 for every
-    coefficient with a z spread of 0.75-1.25.  The band was written after python -m studies.diag_ekf_actual_covariance
-    had measured 0.90-0.99 and 0.80-1.11 on these replicates: a regression check of that result, not a prediction."""
+    0.98-1.00 (12 of 16 at 1.00); its covariance re-evaluated under sensor noise only covers 0.89-1.00 for every
+    coefficient with a z spread of 0.75-1.25 (python -m studies.diag_ekf_actual_covariance); each coverage is judged
+    against the binomial spread of 100 replicates of a calibrated 95 % interval."""
     r = coverage_study(n_replicates=100, draws=0, seed=2026, refine="ekf-sensor-noise")
     t = r.table.set_index("quantity")
     assert r.n_failed == 0 and len(t) == 16
-    assert t["coverage"].between(0.90, 0.99).all(), t
+    # calibrated within sampling error: each coverage of 100 replicates inside the binomial band of a 95 % interval
+    # at a family-wise 1 % over the 16 coefficients
+    from scipy.stats import binom
+    lo, hi = binom.ppf([0.005 / 16, 1 - 0.005 / 16], 100, 0.95) / 100
+    assert t["coverage"].between(lo, hi).all(), (lo, hi, t)
     assert t["z_std"].between(0.75, 1.25).all(), t
