@@ -247,17 +247,17 @@ def test_cli_mmg_default_recipe_on_the_holdout(tmp_path):
 def test_cli_mmg_metric_refinement_on_the_holdout(tmp_path):
     """The same with ``--refine metrics --metric-weight 1`` (the training metrics at full weight; not the
     default: leave-one-run-out worst fold 1.885 against 0.945 at weight 0.1 with ten estimated coefficients,
-    5.34 against 1.96 with eight).  Measured (C2p, C2m, aH, xH estimated, one BLAS thread): TD +0.09 % /
-    -0.17 %, zz_20 +2.13 / +2.86 deg, zz_-20 +1.66 / +3.85 deg -- three of the six goals (without aH, xH: all
-    six; a report, not a choice).  Bands centred on that one measurement."""
+    5.34 against 1.96 with eight).  Measured (C2p, C2m, aH, xH estimated, one BLAS thread): TD +0.10 % /
+    -0.18 %, zz_20 +2.65 / +3.55 deg, zz_-20 +2.07 / +4.71 deg -- two of the six goals (a report, not a
+    choice).  Bands centred on that one measurement."""
     errs, res = _cli_fit_validate(tmp_path, "mmg", extra=["--refine", "metrics", "--metric-weight", "1"])
     assert res.method == "output-error" and res.success and res.settings["metric_weight"] == 1.0
     assert -0.9 < errs["tc_35"]["TD"] < 1.1                                    # goal met (+0.09 %)
     assert -1.2 < errs["tc_-35"]["TD"] < 0.8                                   # goal met (-0.17 %)
-    assert 1.6 < errs["zz_20"]["overshoot1_deg"] < 2.6                         # goal missed (+2.13)
-    assert 2.2 < errs["zz_20"]["overshoot2_deg"] < 3.5                         # goal met (+2.86)
-    assert 1.1 < errs["zz_-20"]["overshoot1_deg"] < 2.2                        # goal met (+1.66)
-    assert 3.2 < errs["zz_-20"]["overshoot2_deg"] < 4.5                        # goal missed (+3.85)
+    assert 2.1 < errs["zz_20"]["overshoot1_deg"] < 3.1                         # goal missed (+2.65)
+    assert 2.9 < errs["zz_20"]["overshoot2_deg"] < 4.2                         # goal missed (+3.55)
+    assert 1.5 < errs["zz_-20"]["overshoot1_deg"] < 2.6                        # goal missed (+2.07)
+    assert 4.1 < errs["zz_-20"]["overshoot2_deg"] < 5.3                        # goal missed (+4.71)
 
 
 @pytest.mark.slow
@@ -266,22 +266,23 @@ def test_cli_response_nl_default_recipe_on_the_holdout(tmp_path):
     (every 3rd sample, staged start from a kcs-response seed fitted up to 10 deg drift, 26 terms, metrics at
     weight 0.1, nothing held by the identifiable subset) with the own-damping constraint (step 6b: the
     unconstrained refinement had b1 +0.0177 and self-excited sway on 17 % of the logged states and at rest;
-    constrained b1 -0.00066, 0 %).  A physical requirement, not chosen by a score.  Measured: TD +4.19 % /
-    -5.19 %, zz_20 +2.09 / +0.81 deg, zz_-20 +5.02 / -2.56 deg -- three of the six goals (tc_35, both second
-    overshoots); the unconstrained fit met four (+4.19 / -5.03 %, +1.33 / +1.52, +4.18 / -1.88 deg) with its
-    self-excited sway.  (A report, not a choice.)  The same answer to the bit with one and two BLAS threads (the recipe runs with
+    constrained b1 < 0).  A physical requirement, not chosen by a score.  Measured, starting from the
+    stern-rudder kcs-response set: TD +4.26 % / -5.10 %, zz_20 +0.85 / +7.95 deg, zz_-20 +4.00 / +4.09 deg -- two
+    of the six goals (tc_35, zz_20's first overshoot).  The refinement is ill-conditioned on these runs: the
+    start set moves its optimum (a3 -1896 from the earlier start set, +2848 from this one).  (A report, not a
+    choice.)  The same answer to the bit with one and two BLAS threads (the recipe runs with
     one)."""
     errs, res = _cli_fit_validate(tmp_path, "response-nl")
     steps = {s["step"]: s["value"] for s in res.settings["recipe"]}
     assert steps["refinement"] == "metrics" and res.method == "output-error" and res.success
     assert steps["sampling"] == 3 and res.settings["held"] == []
     assert steps["physical damping"] is True and res.coef["b1"] < 0
-    assert 3.2 < errs["tc_35"]["TD"] < 5.2                                     # goal met (+4.19 %)
-    assert -6.2 < errs["tc_-35"]["TD"] < -4.2                                  # goal missed at its edge (-5.19 %)
-    assert 1.1 < errs["zz_20"]["overshoot1_deg"] < 3.1                         # goal missed (+2.09)
-    assert -0.2 < errs["zz_20"]["overshoot2_deg"] < 1.8                        # goal met (+0.81)
-    assert 4.0 < errs["zz_-20"]["overshoot1_deg"] < 6.0                        # goal missed (+5.02)
-    assert -3.5 < errs["zz_-20"]["overshoot2_deg"] < -1.6                      # goal met (-2.56)
+    assert 3.2 < errs["tc_35"]["TD"] < 5.2                                     # goal met (+4.26 %)
+    assert -6.2 < errs["tc_-35"]["TD"] < -4.2                                  # goal missed at its edge (-5.10 %)
+    assert -0.2 < errs["zz_20"]["overshoot1_deg"] < 1.8                        # goal met (+0.85)
+    assert 7.0 < errs["zz_20"]["overshoot2_deg"] < 9.0                         # goal missed (+7.95)
+    assert 3.0 < errs["zz_-20"]["overshoot1_deg"] < 5.0                        # goal missed (+4.00)
+    assert 3.1 < errs["zz_-20"]["overshoot2_deg"] < 5.1                        # goal missed (+4.09)
 
 
 def test_leave_one_run_out_of_refinements_scores_each_variant_on_one_ekf_stage():
