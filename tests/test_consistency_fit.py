@@ -99,7 +99,8 @@ def _swapped(logs):  # v and r columns swapped
     (_units, "physics_range", "defect", "--units delta=deg"), (_sign, "physics_sign", "defect", "--rudder-sign -1"),
     (_decimated, "sampling", "defect", "full-rate"),
     pytest.param(_noise, "innovations_large", "model_error", "", marks=pytest.mark.slow),
-    pytest.param(_swapped, "physics_sign", "defect", "", marks=pytest.mark.slow)]  # v, r swapped: signs physics rules out,
+    # v and r swapped: coefficient signs that physics rules out
+    pytest.param(_swapped, "physics_sign", "defect", "", marks=pytest.mark.slow)],
     ids=lambda v: getattr(v, "__name__", "")[1:] if callable(v) else None)
 def test_each_wrong_physics_case_is_flagged(kcs_truth, kcs_logs, case, kind, grade, needle):
     """The verdict grades the cases a model-form error cannot produce as defects naming the option that
