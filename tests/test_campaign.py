@@ -297,9 +297,10 @@ def test_a_scheduler_that_never_answers_is_an_error_in_stated_time(monkeypatch):
 
 
 # --------------------------------------------------------------------------- nothing finished is lost
-def _kill_campaign(tmp_path, p, out, sig, after: int, delay: float):
+def _kill_campaign(tmp_path, p, out, sig, after: int, delay: float, must_kill: bool = False):
     """Run the campaign CLI in a child; send ``sig`` ``delay`` s after it reported its ``after``-th finished
-    member (0: after start-up); returns the members it reported finished."""
+    member (0: after start-up); returns the members it reported finished. With ``must_kill``, a run that
+    ended before the signal fails the test (it would have tested nothing)."""
     import os
     import subprocess
     import sys
@@ -331,19 +332,29 @@ def _kill_campaign(tmp_path, p, out, sig, after: int, delay: float):
     if proc.poll() is None:
         os.kill(proc.pid, sig)
     proc.wait(timeout=600)
+    if must_kill:
+        assert proc.returncode == -sig, f"the campaign ended (exit {proc.returncode}) before the signal reached it"
     for th in threads:
         th.join(timeout=60)
     assert "Traceback" not in "".join(err), err
     return list(said)
 
 
-def _kill_and_resume(tmp_path, sig, after, delay, ref=None):
+def _three_members(tmp_path) -> Path:
+    """Three short fits; the second also propagates 80 draws through a turning circle, so it runs about a
+    second, long enough for a kill sent just after the first member finished to land inside it."""
     logs = _short_logs(tmp_path)
+    fits = [{"name": n, "logs": [logs["kcs_zz_m10"]], "passes": 1, "estimate": EST[:4 + i]}
+            for i, n in enumerate(["a", "b", "c"])]
+    fits[1].update(draws=80, manoeuvres=["turning:35"])
+    return _campaign(tmp_path, fits)
+
+
+def _kill_and_resume(tmp_path, sig, after, delay, ref=None, must_kill=False):
     names = ["a", "b", "c"]
-    p = _campaign(tmp_path, [{"name": n, "logs": [logs["kcs_zz_m10"]], "passes": 1, "estimate": EST[:4 + i]}
-                             for i, n in enumerate(names)])
+    p = _three_members(tmp_path)
     out = tmp_path / f"out-{sig}-{after}-{delay:.2f}"
-    done = _kill_campaign(tmp_path, p, out, sig, after, delay)
+    done = _kill_campaign(tmp_path, p, out, sig, after, delay, must_kill)
     kept = {n: (out / n / "result.json").read_bytes() for n in done}  # every member said finished has its file
     assert main(["campaign", str(p), "-o", str(out), "--workers", "1", "--resume", "--no-progress"]) == 0
     for n in names:
@@ -361,9 +372,9 @@ def _kill_and_resume(tmp_path, sig, after, delay, ref=None):
 def test_sigkill_then_resume_loses_no_finished_member(tmp_path, capsys):
     import signal
 
-    done = _kill_and_resume(tmp_path, signal.SIGKILL, 1, 0.05)  # killed as the second member runs
+    done = _kill_and_resume(tmp_path, signal.SIGKILL, 1, 0.05, must_kill=True)  # killed as the second member runs
     capsys.readouterr()
-    assert len(done) in (1, 2)
+    assert done == ["a"]
 
 
 @pytest.mark.slow
@@ -373,10 +384,8 @@ def test_kills_at_random_points_then_resume(tmp_path, capsys):
     import random
     import signal
 
-    logs = _short_logs(tmp_path)
     ref = tmp_path / "ref"
-    p = _campaign(tmp_path, [{"name": n, "logs": [logs["kcs_zz_m10"]], "passes": 1, "estimate": EST[:4 + i]}
-                             for i, n in enumerate(["a", "b", "c"])])
+    p = _three_members(tmp_path)
     assert main(["campaign", str(p), "-o", str(ref), "--workers", "1", "--no-progress"]) == 0
     rng = random.Random(29)
     seen = set()
