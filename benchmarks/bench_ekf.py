@@ -9,7 +9,7 @@ what differs is the filter machinery around them.  Prints microseconds per
 EKF step, total time, and the throughput of one batched run over B logs,
 each as a ratio to the filterpy loop measured in the same run, on two clocks:
 the process's CPU time (fair on a shared machine) and wall time.  Rows for the
-compiled kernel (numba, ``shipid[fast]``) and for the numpy path
+compiled kernel (numba) and for the numpy path
 (``shipid._jit.disabled()``), the arithmetic floor of a 22-state step
 (~2 nz^3 flops ~ 5 us on one core), and, in fresh subprocesses, the first-call
 compile time (empty numba cache) and the start time with the cache filled.

@@ -4,7 +4,7 @@ current states), on the compiled EKF kernel and on the numpy path, as ratios mea
 The same synthetic logs (shipid.environment.synthetic.environment_log, a known wind and current) are
 fitted twice with the same settings: the plain ``lowspeed`` model estimating hydrodynamic coefficients,
 and ``with_environment(lowspeed, wind, current="constant")`` estimating the same coefficients plus three
-wind components and the two current states; each once compiled (numba, ``shipid[fast]``; a warm-up fit
+wind components and the two current states; each once compiled (numba; a warm-up fit
 compiles first and is not timed) and once on the numpy path (``shipid._jit.disabled()``: the path every
 fit took before the models declared their equations to the kernel).
 

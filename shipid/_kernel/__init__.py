@@ -1,4 +1,4 @@
-"""Compiled numerics (numba, ``shipid[fast]``): the RK4 map with its tangent, the EKF filter step, the
+"""Compiled numerics (numba): the RK4 map with its tangent, the EKF filter step, the
 RTS smoother's recursion and the open-loop RK4 replay, compiled together with a model's equations.
 
 It sits below both users, :mod:`shipid.identify.ekf` (the filter and smoother drivers

@@ -32,6 +32,20 @@ def _first_line(obj) -> str:
     return doc.splitlines()[0].rstrip(".") if doc else ""
 
 
+#: Width the listing is wrapped to (continuation lines indented under their label).
+WIDTH = 100
+
+
+def _say(text: str, indent: int) -> None:
+    """Print ``text`` wrapped to :data:`WIDTH` columns, continuation lines indented ``indent + 4``; a no-break
+    space (U+00A0) joins words that stay on one line and prints as a space."""
+    import textwrap
+
+    out = textwrap.fill(text, WIDTH, initial_indent=" " * indent, subsequent_indent=" " * (indent + 4),
+                        break_on_hyphens=False, break_long_words=False)
+    print(out.replace("\u00a0", " "))
+
+
 def _models(args) -> int:
     from .. import models
 
@@ -41,17 +55,17 @@ def _models(args) -> int:
         units = getattr(m, "units", {}) or {}
 
         def label(n):
-            return f"{n} [{units[n]}]" if units.get(n) else n
+            return f"{n}\u00a0[{units[n]}]".replace(" ", "\u00a0") if units.get(n) else n  # kept on one line
 
-        print(f"{name}: {_first_line(cls)}")
+        _say(f"{name}: {_first_line(cls)}", 0)
         for kind, names in (("states", m.state_names), ("inputs", m.input_names)):
             mean = {**MEANINGS, **MODEL_MEANINGS.get(name, {})}
-            print(f"  {kind}: " + ", ".join(f"{label(n)} {mean[n]}" if n in mean else label(n) for n in names))
-        print(f"  parameters ({m.np}): {', '.join(label(n) for n in m.param_names)}")
+            _say(f"{kind}: " + ", ".join(f"{label(n)} {mean[n]}" if n in mean else label(n) for n in names), 2)
+        _say(f"parameters ({m.np}): {', '.join(label(n) for n in m.param_names)}", 2)
         if name in PARAMETER_NOTES:
-            print(f"    {PARAMETER_NOTES[name]}")
-        print(f"    (equations and sources: help({cls.__module__}.{cls.__name__}))")
+            _say(PARAMETER_NOTES[name], 4)
+        _say(f"(equations and sources: help({cls.__module__}.{cls.__name__}))", 4)
         sets = cls.parameter_sets()
         if sets:
-            print(f"  parameter sets: {', '.join(sets)}")
+            _say(f"parameter sets: {', '.join(sets)}", 2)
     return 0

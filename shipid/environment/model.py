@@ -23,7 +23,7 @@ from a log or a model basin).  With ``"ground"`` the relative velocity is ``(u, 
 time derivative of the rotated current term is added to ``u', v'``.
 
 The equations are one scalar source, :mod:`shipid.environment._equations`, bound to the base model's
-own equations module: numpy arrays here, and compiled by numba (``shipid[fast]``) for batched right-hand
+own equations module: numpy arrays here, and compiled by numba for batched right-hand
 sides and inside the EKF kernel (:mod:`shipid._kernel`; the model declares the kernel protocol
 like ``mmg``).  Jacobians: complex step through the whole wrapper (base equations, wind and current terms),
 exact to rounding; compiled in the kernel.

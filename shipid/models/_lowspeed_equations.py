@@ -4,7 +4,7 @@ Written on Python floats with the :mod:`math` functions and the branch helpers t
 globals, which makes the module itself the one-sample backend.  :func:`shipid._jit.rebind` runs the
 same code objects on other globals: numpy's functions (batched arrays, real or complex -- the branch
 helpers of :data:`NUMPY` take their branches from the real part, so complex-step Jacobians run on
-them too) and, with numba installed, compiled real and complex sets (``shipid[fast]``).  See
+them too) and, with numba (installed with shipid where it has wheels), compiled real and complex sets.  See
 :mod:`shipid.models.lowspeed` for the model, the symbols and the references; ``c`` is the sequence of
 constants of :func:`derived`.
 

@@ -4,7 +4,7 @@ Written on Python floats with the :mod:`math` functions that are this
 module's globals, which makes the module itself the one-sample backend.
 :func:`shipid._jit.rebind` runs the same code objects on other globals:
 numpy's functions (batched arrays), complex-step-safe ones (Jacobians), and,
-with numba installed, compiled (``shipid[fast]``).  See
+with numba (installed with shipid where it has wheels), compiled.  See
 :mod:`shipid.models.mmg` for the model, the symbols and the equation numbers;
 ``c`` is the sequence of constants of :meth:`MMGModel._derived
 <shipid.models.mmg.MMGModel._derived>`.

@@ -72,7 +72,7 @@ non-dimensional with ``1/2 rho L d`` (forces, per velocity squared) and ``1/2 rh
 added masses as in ``mmg``; the model is Froude-scalable (``lpp=``, :meth:`LowSpeedModel.scaled`).
 
 The equations are one scalar source, :mod:`shipid.models._lowspeed_equations`, run on Python floats,
-on numpy arrays (real and complex), and compiled by numba when installed (``shipid[fast]``), also inside
+on numpy arrays (real and complex), and compiled by numba (installed with shipid where it has wheels), also inside
 the EKF kernel (:mod:`shipid._kernel`).  Jacobians: complex step through that source (compiled,
 or vectorised numpy), exact to rounding.
 """
@@ -109,7 +109,7 @@ class LowSpeedModel(ShipEquationsModel):
     physics_signs = {k: v for k, v in MMG_PHYSICS_SIGNS.items() if k != "R0"}
     physics_ranges = MMG_PHYSICS_RANGES
     param_names = LOWSPEED_PARAM_NAMES
-    units = {**SHIP_CHANNEL_UNITS, **{k: "-" for k in LOWSPEED_PARAM_NAMES}, "f_alpha": "1/rad"}
+    units = {**SHIP_CHANNEL_UNITS, **{k: "-" for k in LOWSPEED_PARAM_NAMES}, "f_alpha": "1/rad", "delta0": "rad"}
     default_parameter_set = "esso-osaka-prior"
     #: The fit recipe's defaults, each set or chosen by cross-validation on the Esso Osaka 3 m model's outdoor
     #: runs (studies/esso_osaka.py, docs/environment.md).  Estimated: the hull's resistance, linear sway/yaw and
