@@ -70,7 +70,7 @@ class _Stages:
         setattr(owner, name, timed)
 
     def install(self):
-        import shipid.validation as hz  # (the name a fold imports)
+        import shipid.crossval as hz  # (a fold calls the name crossval imported)
         import shipid.validation.replay as val
         from shipid.identify.batch import OutputErrorRefiner
         from shipid.identify.identifier import EKFIdentifier
@@ -111,12 +111,17 @@ def main(argv=None) -> int:
         par = choose_model(logs, cands, engine=eng, **kw)
         t_par = time.perf_counter() - t0
         t_start = eng.stats.get("start", float("nan"))
+        member_cpu = sum(eng.stats.get("member_cpu") or [float("nan")])
     n = sum(len(cv.folds) for cv in serial.results)
     print(f"members (folds x candidates): {n}; chosen: {serial.best.candidate if serial.success else 'none'}")
     print(f"serial:            {t_serial:8.1f} s wall, {c_serial:8.1f} s CPU")
     print(f"{a.workers} Dask workers (cold): {t_par:8.1f} s wall (cluster start {t_start:.1f} s)")
     print(f"ratio serial / {a.workers} workers: {t_serial / t_par:.2f}x (goal 1.7x on 2 free cores)")
     print(f"identical to the bit: {_strip(serial) == _strip(par)}")
+    # what bounds the ratio: members running side by side each take more CPU than one alone (shared caches and
+    # memory bandwidth; on a virtual machine, whatever else its host runs), plus each worker's first calls
+    print(f"members' CPU on the workers / serial CPU: {member_cpu / c_serial:.2f}x (each worker's first calls "
+          f"included; the ratio cannot exceed {a.workers * c_serial / member_cpu:.2f}x)")
     total = sum(stages.cpu.values())
     print("share of the serial CPU per stage:")
     for k, v in stages.cpu.items():
