@@ -197,6 +197,30 @@ def test_cli_prints_findings_and_can_turn_them_off(tmp_path, capsys):
     assert main(["log", str(p), "--rudder-sign", "-1"]) == 0
 
 
+def test_cli_says_a_finding_shared_by_several_logs_once(tmp_path, capsys):
+    """Three logs with GNSS freezes, one of them also with spikes: one line for the freezes (count and the first
+    log's words), the spikes of the one log as they are; `shipid log` still lists every finding of every log."""
+    from shipid.cli import main
+
+    df = _frame("kcs_tc_p35.csv")
+    x, y = df.x.to_numpy().copy(), df.y.to_numpy().copy()
+    for k in range(50, len(df) - 10, 40):
+        x[k + 1:k + 4] = x[k]
+        y[k + 1:k + 4] = y[k]
+    u = df.u.to_numpy().copy()
+    u[[120, 340, 560, 780, 905]] += 0.5
+    paths = [_write(tmp_path, f"run{i}.csv", df.assign(x=x, y=y, u=u if i == 2 else df.u)) for i in range(3)]
+    assert main(["log", *map(str, paths)]) == 0
+    cap = capsys.readouterr()
+    err = cap.err.strip().splitlines()
+    freeze = [ln for ln in err if "freeze on" in ln]
+    assert len(freeze) == 1 and freeze[0].startswith("shipid log: warning: 3 of 3 logs (GNSS positions freeze; "
+                                                     "`shipid log FILE` lists each), the first: `run0.csv`"), err
+    assert [ln for ln in err if "single-sample spikes" in ln and "`run2.csv`" in ln and " of 3 logs" not in ln], err
+    assert len(err) == 2, err
+    assert all(f"`run{i}.csv`: positions 'x'" in cap.out for i in range(3))
+
+
 # ------------------------------------------------------------------ whole-log rudder sign, both velocity frames
 def _log_of(frame, name="case"):
     from shipid.logs import TrialLog

@@ -158,6 +158,7 @@ def read_logs(paths, args) -> list:
     from ..logs.sensors import SensorWarning
 
     logs = []
+    by_check: dict = {}
     for path in paths:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("ignore", UserWarning)
@@ -166,10 +167,30 @@ def read_logs(paths, args) -> list:
         for w in caught:  # what the reader found without the channel checks (a cut last row, look-alikes)
             if issubclass(w.category, SensorWarning):
                 warnings.warn(str(w.message), UserWarning, stacklevel=2)
-        # consistency warnings (GNSS freezes, a loose yaw rate, rpm?) matter to every command: one line each
         for f in (logs[-1].consistency.warnings if logs[-1].consistency is not None else []):
-            warnings.warn(f.message, UserWarning, stacklevel=2)
+            by_check.setdefault(f.check, []).append((len(logs) - 1, f))
+    # consistency warnings (GNSS freezes, a loose yaw rate, rpm?) matter to every command: a finding of one log
+    # is said as it is; one that several logs share, once, with their count and the first log's words
+    for check, found in by_check.items():
+        n = len({i for i, _ in found})
+        if n == 1:
+            for _, f in found:
+                warnings.warn(f.message, UserWarning, stacklevel=2)
+        else:
+            what = CHECK_WORDS.get(check, check.replace("_", " "))
+            warnings.warn(f"{n} of {len(logs)} logs ({what}; `shipid log FILE` lists each), the first: "
+                          f"{found[0][1].message}", UserWarning, stacklevel=2)
     return logs
+
+
+#: Plain words for the consistency checks, for a finding that several logs share.
+CHECK_WORDS = {
+    "position_freeze": "GNSS positions freeze", "yaw_rate_scale": "gyro scale", "yaw_rate": "yaw rate against heading",
+    "glitches": "single-sample spikes", "velocity_frame": "velocities against the track",
+    "rudder_sign": "rudder sign", "propeller": "propeller rate", "propeller_dead": "propeller channel still",
+    "truncated_row": "last row cut short",
+    "header_lookalike": "look-alike header characters",
+}
 
 
 
