@@ -34,7 +34,7 @@ import pandas as pd
 
 from .campaign import Engine
 from .environment.cli import APPARENT_WIND, environment_model, true_wind_at_edge, wind_geometry
-from .environment.model import WIND_INPUTS
+from .environment.model import WIND_INPUTS, takes_environment
 from .identify import fit_logs, model_from
 from .logs.overlap import drop_contained, repeated_samples
 from .models import available_models, get_model, model_class
@@ -183,7 +183,18 @@ def candidates_for(logs, *, lpp: float | None = None, wind: str | None = None, c
                            "(give --wind FILE.json and --current)")
         else:
             why.append("no wind or current part: not every log carries wind")
-    return [Candidate(c.model, c.params, c.wind or wind, c.current or current) for c in given], why
+    out = [Candidate(c.model, c.params, c.wind or wind, c.current or current) for c in given]
+    cannot = [c.model for c in out if (c.wind or c.current) and not takes_environment(model_class(c.model))]
+    if cannot:
+        names = ", ".join(dict.fromkeys(cannot))
+        out = [c for c in out if c.model not in cannot]
+        if not out:
+            raise ValueError(f"{names}: cannot take a wind or current part (only mmg and lowspeed can); leave out "
+                             "--wind/--current or name mmg or lowspeed")
+        are = "are not candidates" if ", " in names else "is not a candidate"
+        why.append(f"{names} {are}: the candidates get wind and current parts, and these can be added to mmg and "
+                   "lowspeed only")
+    return out, why
 
 
 def _lpp(logs) -> float | None:

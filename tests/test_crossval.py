@@ -111,6 +111,13 @@ def test_candidates_rule():
     astern.loc[: len(astern) // 10, "n"] = -5.0
     cands, why = cvm.candidates_for([TrialLog(astern, name="astern", ship=logs[0].ship)] + logs[1:])
     assert cands[-1].model == "lowspeed" and "astern" in why[0]
+    # with wind and current parts only the models that can carry them stay candidates (a response model's folds
+    # would all fail)
+    cands, why = cvm.candidates_for(logs, wind="kcs", current="constant")
+    assert [c.model for c in cands] == ["mmg"] and cands[0].wind == "kcs"
+    assert "kcs-response, response-nl are not candidates" in why[-1]
+    with pytest.raises(ValueError, match="kcs-response: cannot take a wind or current part"):
+        cvm.candidates_for(logs, current="constant", given=[cvm.Candidate("kcs-response")])
     assert [c.label for c in cvm.parse_candidates("auto:mmg:kvlcc2,response-nl")] == ["mmg:kvlcc2", "response-nl"]
     assert cvm.parse_candidates("auto") is None
     with pytest.raises(ValueError, match="unknown model 'nope'"):

@@ -41,11 +41,18 @@ from ..models.mmg import DerivedConstants, ShipEquationsModel, components
 from . import _equations as _eqe
 from .wind import WIND_PARAM_NAMES, WindForce
 
-__all__ = ["EnvironmentModel", "with_environment", "CURRENT_KINDS", "WIND_INPUTS", "CURRENT_STATES"]
+__all__ = ["EnvironmentModel", "with_environment", "takes_environment", "CURRENT_KINDS", "WIND_INPUTS", "CURRENT_STATES"]
 
 CURRENT_KINDS = (None, "constant", "random-walk")
 WIND_INPUTS = ("wind_speed_true", "wind_dir_true")
 CURRENT_STATES = ("cx", "cy")
+
+
+def takes_environment(model) -> bool:
+    """Whether a ship model (instance or class) can carry wind and current parts: a 3-DOF model with a mass
+    matrix (``mmg``, ``lowspeed``); the response models (``kcs-response``, ``response-nl``) cannot."""
+    cls = model if isinstance(model, type) else type(model)
+    return issubclass(cls, ShipEquationsModel)
 
 
 def with_environment(model: Model, *, wind=None, current: str | None = None, velocities: str = "ground",
@@ -91,7 +98,7 @@ class EnvironmentModel(DerivedConstants, ComplexStepJacobians, Model):
                  base_params=None):
         if isinstance(base, str):
             base = get_model(base, base_params, **dict(base_options or {}))
-        if not isinstance(base, ShipEquationsModel):
+        if not takes_environment(base):
             raise ValueError(f"with_environment: base must be a 3-DOF ship model with a mass matrix (mmg, lowspeed), got "
                              f"{getattr(base, 'name', type(base).__name__)!r}")
         if tuple(base.state_names[:6]) != ("x", "y", "psi", "u", "v", "r"):
