@@ -735,7 +735,8 @@ class ModelChoice(ResultMixin):
                    "blowups": int(sum(r["blowups"] for r in cv.runs)),
                    "missing": int(sum(len(r["missing"]) for r in cv.runs))}
             for k in ("tactical_diameter_pct", "overshoot1_deg", "overshoot2_deg", "position_30s_m"):
-                row[k] = s.loc[k, "median"] if k in s.index else None
+                m = s.loc[k, "median"] if k in s.index else None
+                row[k] = float(m) if m is not None else math.nan  # NaN: no run measures it
             rows.append(row)
         return pd.DataFrame(rows).set_index("candidate")
 

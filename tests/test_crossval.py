@@ -133,6 +133,29 @@ def test_choose_model_ranks_by_the_rule():
     assert "chose kcs-response" in choice.message
 
 
+def test_choice_table_shows_a_metric_no_run_measures_as_a_dash(capsys):
+    """Runs without standard manoeuvres (outdoor runs from rest): the table's manoeuvre columns are NaN, printed
+    as "-" (not None), and null in the JSON."""
+    from types import SimpleNamespace
+
+    import pandas as pd
+
+    from shipid.commands.fit import print_choice
+
+    summ = pd.DataFrame({"median": [None, 0.27]}, index=pd.Index(["tactical_diameter_pct", "position_30s_m"]))
+    cv = SimpleNamespace(candidate="lowspeed", score={"score": 1.08, "worst_run": "zz", "worst": 3.9}, failed=[],
+                         runs=[{"blowups": 0, "missing": []}], summary=lambda: summ, to_dict=lambda starts: {})
+    choice = cvm.ModelChoice(results=[cv])
+    tab = choice.summary()
+    assert np.isnan(tab.loc["lowspeed", "tactical_diameter_pct"]) and np.isnan(tab.loc["lowspeed", "overshoot1_deg"])
+    assert tab.loc["lowspeed", "position_30s_m"] == 0.27
+    print_choice(choice)
+    out = capsys.readouterr().out
+    assert "None" not in out and "NaN" not in out and " - " in out
+    row = choice.to_dict()["table"][0]
+    assert row["tactical_diameter_pct"] is None and row["position_30s_m"] == 0.27
+
+
 def test_cli_crossval_and_fit_cross_validate(tmp_path, capsys):
     from shipid.cli import main
 

@@ -258,7 +258,7 @@ def print_choice(choice) -> None:
     with pd.option_context("display.float_format", "{:.3g}".format, "display.width", 160):
         print("cross-validated candidates (score: mean over left-out runs of the errors over their goals, "
               "docs/choosing_a_model.md):")
-        print(choice.summary().to_string())
+        print(choice.summary().to_string(na_rep="-"))  # "-": no left-out run measures that metric
     print(f"model choice: {choice.message}")
 
 
