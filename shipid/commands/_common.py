@@ -296,3 +296,16 @@ def units_header(frame, model=None, units=None):
     if out.index.name is not None:
         out.index = out.index.rename(label(out.index.name))
     return out
+
+
+def output_command(sub, name, handler, help, description, *, positional, output_help, output_metavar=None,
+                   force_help="overwrite an existing output"):
+    """A sub-command that writes one output (``sample``, ``campaign``): its positional arguments
+    (``(name, metavar, help[, nargs])``), the required ``-o/--output`` and ``--force``."""
+    p = sub.add_parser(name, help=help, description=description)
+    for dest, metavar, text, *nargs in positional:
+        p.add_argument(dest, metavar=metavar, help=text, **({"nargs": nargs[0]} if nargs else {}))
+    p.add_argument("-o", "--output", required=True, metavar=output_metavar, help=output_help)
+    p.add_argument("--force", action="store_true", help=force_help)
+    p.set_defaults(handler=handler)
+    return p

@@ -4,12 +4,11 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from ._common import add_progress_option, progress_on
-from .sample import _command
+from ._common import add_progress_option, output_command, progress_on
 
 
 def register(sub) -> None:
-    c = _command(sub, "campaign", _campaign,
+    c = output_command(sub, "campaign", _campaign,
                  "run the fits and sweeps of a campaign file (JSON/YAML) on Dask workers",
                  "Run many fits, each with its own logs and settings, and sweeps (turning-diameter grids, glider "
                  "launch factorials) from a campaign file; an embedded LocalCluster of --workers processes by "

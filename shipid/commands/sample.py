@@ -1,24 +1,11 @@
 """``shipid sample``: the MCMC posterior of a fit's coefficients (the logic is in :mod:`shipid.uncertainty`)."""
 from __future__ import annotations
 
-from ._common import add_log_options, add_progress_option, progress_on, read_logs_for_result
-
-
-def _command(sub, name, handler, help, description, *, positional, output_help, output_metavar=None,
-             force_help="overwrite an existing output"):
-    """A sub-command that writes one output (``sample``, ``campaign``): its positional arguments (``(name, metavar, help[, nargs])``),
-    the required ``-o/--output`` and ``--force``."""
-    p = sub.add_parser(name, help=help, description=description)
-    for dest, metavar, text, *nargs in positional:
-        p.add_argument(dest, metavar=metavar, help=text, **({"nargs": nargs[0]} if nargs else {}))
-    p.add_argument("-o", "--output", required=True, metavar=output_metavar, help=output_help)
-    p.add_argument("--force", action="store_true", help=force_help)
-    p.set_defaults(handler=handler)
-    return p
+from ._common import add_log_options, add_progress_option, output_command, progress_on, read_logs_for_result
 
 
 def register(sub) -> None:
-    p = _command(sub, "sample", _sample,
+    p = output_command(sub, "sample", _sample,
                  "sample the posterior of a fit's coefficients by MCMC (emcee) -> samples JSON",
                  "Sample the posterior of the estimated coefficients of RESULT.json over the output-error likelihood "
                  "of the logs (noise levels and the EKF's prior from the fit), started from the EKF posterior; reports "

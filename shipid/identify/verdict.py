@@ -293,33 +293,32 @@ def _consistency_findings(cons: dict, rules: dict) -> list[dict]:
         if ch in (cons.get("dynamic_channels") or []) and rr is not None and rr > rules.get("replay_factor", 3.0):
             miss.append((ch, rr))
     out = []
-    if small:
-        chans = [c for c, _ in small]
-        out.append({"kind": "noise_overstated", "grade": "note", "channels": chans,
-                    "option": "--meas-std",
-                    "message": f"innovations of {', '.join(chans)} are {_fmt(min(m for _, m in small))}-"
-                               f"{_fmt(max(m for _, m in small))} of the noise model's: the noise levels are "
-                               "conservative (declared, or estimated from samples that include the motion)"})
-    if large:
-        chans = [c for c, _ in large]
-        out.append({"kind": "innovations_large", "grade": "model_error", "channels": chans, "option": "",
-                    "message": f"innovations of {', '.join(chans)} are {_fmt(min(m for _, m in large))}-"
-                               f"{_fmt(max(m for _, m in large))} times the noise model's variance"})
-    if colour:
-        chans = [c for c, _ in colour]
-        out.append({"kind": "innovations_coloured", "grade": "model_error", "channels": chans, "option": "",
-                    "message": f"innovations of {', '.join(chans)} are not white (largest autocorrelation "
-                               f"{max(r for _, r in colour):.2f}): the model leaves a systematic part of the motion"})
-    if gated:
-        chans = [c for c, _ in gated]
-        out.append({"kind": "gated", "grade": "model_error", "channels": chans, "option": "",
-                    "message": f"{100 * max(g for _, g in gated):.0f} % of the measurements of {', '.join(chans)} "
-                               "were rejected by the innovation gate (outliers or a model far from the data)"})
-    if miss:
-        chans = [c for c, _ in miss]
-        out.append({"kind": "replay_miss", "grade": "model_error", "channels": chans, "option": "",
-                    "message": f"the replayed model misses {', '.join(chans)} by up to "
-                               f"{max(r for _, r in miss):.3g} noise standard deviations (RMS)"})
+
+    def add(kind, grade, found, message, option=""):
+        if found:
+            out.append({"kind": kind, "grade": grade, "channels": [c for c, _ in found], "option": option,
+                        "message": message})
+
+    def chans(found):
+        return ", ".join(c for c, _ in found)
+
+    def span(found):
+        return f"{_fmt(min(v for _, v in found))}-{_fmt(max(v for _, v in found))}" if found else ""
+
+    add("noise_overstated", "note", small,
+        f"innovations of {chans(small)} are {span(small)} of the noise model's: the noise levels are "
+        "conservative (declared, or estimated from samples that include the motion)", option="--meas-std")
+    add("innovations_large", "model_error", large,
+        f"innovations of {chans(large)} are {span(large)} times the noise model's variance")
+    add("innovations_coloured", "model_error", colour,
+        f"innovations of {chans(colour)} are not white (largest autocorrelation "
+        f"{max((r for _, r in colour), default=0.0):.2f}): the model leaves a systematic part of the motion")
+    add("gated", "model_error", gated,
+        f"{100 * max((g for _, g in gated), default=0.0):.0f} % of the measurements of {chans(gated)} "
+        "were rejected by the innovation gate (outliers or a model far from the data)")
+    add("replay_miss", "model_error", miss,
+        f"the replayed model misses {chans(miss)} by up to {max((r for _, r in miss), default=0.0):.3g} noise "
+        "standard deviations (RMS)")
     return out
 
 
